@@ -1,0 +1,1 @@
+//! Scene targets (filled in below).
