@@ -1,1 +1,498 @@
-//! Scene targets (filled in below).
+//! Scene targets and their spectral radiance.
+//!
+//! Geometry follows ../spec/capture-format.md: a target **fills the sensor exactly**, scene
+//! coordinates are image-plane coordinates with x to the right and y down from the sensor
+//! centre, and outside the sensor the target continues (so blur near the border is defined).
+//! A target is rendered on a [`SamplingGrid`] of square cells centred on the optical axis;
+//! each cell holds the exact area average of the target over the cell where that is
+//! available in closed form (patches, edges, lines, ramps), otherwise a 4×4 supersample.
+use crate::colorimetry::luminance_weight_for_photons;
+use crate::constants::PhysicalConstants;
+use crate::error::CoreError;
+use crate::image::{SceneRadiance, SpectralBasis, SpectralImage};
+use crate::spectrum::Spectrum;
+use rayon::prelude::*;
+
+/// Where a target is sampled: `rows × cols` square cells of side `pitch_m`, centred on the
+/// optical axis, for a sensor of `sensor_width_m × sensor_height_m` (the target's extent).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SamplingGrid {
+    /// Cell rows.
+    pub rows: usize,
+    /// Cell columns.
+    pub cols: usize,
+    /// Cell side (m).
+    pub pitch_m: f64,
+    /// Width of the area the target fills (the sensor), m.
+    pub sensor_width_m: f64,
+    /// Height of the area the target fills (the sensor), m.
+    pub sensor_height_m: f64,
+}
+
+impl SamplingGrid {
+    /// A grid for a sensor of `rows × cols` pixels of pitch `pixel_pitch_m`, with `oversample`
+    /// cells per pixel side and `margin_px` extra pixels of scene on every side.
+    pub fn for_sensor(
+        rows: usize,
+        cols: usize,
+        pixel_pitch_m: f64,
+        oversample: usize,
+        margin_px: usize,
+    ) -> Self {
+        let os = oversample.max(1);
+        SamplingGrid {
+            rows: (rows + 2 * margin_px) * os,
+            cols: (cols + 2 * margin_px) * os,
+            pitch_m: pixel_pitch_m / os as f64,
+            sensor_width_m: cols as f64 * pixel_pitch_m,
+            sensor_height_m: rows as f64 * pixel_pitch_m,
+        }
+    }
+
+    /// x (m) of the left edge of column `c`.
+    fn x0(&self, c: usize) -> f64 {
+        (c as f64 - self.cols as f64 / 2.0) * self.pitch_m
+    }
+    /// y (m) of the top edge of row `r`.
+    fn y0(&self, r: usize) -> f64 {
+        (r as f64 - self.rows as f64 / 2.0) * self.pitch_m
+    }
+}
+
+/// A test target with its spectra in photon units (photons/(s·sr·m²·nm)).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Target {
+    /// No light.
+    Dark,
+    /// One spectrum everywhere.
+    Uniform {
+        /// radiance
+        radiance: Spectrum,
+    },
+    /// A `rows × cols` chart tiling the sensor (spec `patches`).
+    Patches {
+        /// chart rows
+        rows: usize,
+        /// chart columns
+        cols: usize,
+        /// side of a patch as a fraction of its cell's side
+        patch_fraction: f64,
+        /// radiance between patches
+        background: Spectrum,
+        /// rows·cols radiances, row-major
+        patches: Vec<Spectrum>,
+    },
+    /// Two half-planes; the light side is x·cos a + y·sin a > 0 (spec `slanted_edge`).
+    SlantedEdge {
+        /// dark side radiance
+        dark: Spectrum,
+        /// light side radiance
+        light: Spectrum,
+        /// edge angle (degrees), clockwise as displayed
+        angle_deg: f64,
+    },
+    /// A band cube resampled to fill the sensor (spec `image`); borders repeat outside.
+    Image {
+        /// the radiance cube (any basis), its own rows × cols
+        radiance: SpectralImage,
+    },
+    /// Horizontal intensity ramp from `min` at the left edge to `max` at the right edge.
+    Ramp {
+        /// spectrum at intensity 1
+        radiance: Spectrum,
+        /// intensity at the left edge
+        min: f64,
+        /// intensity at the right edge
+        max: f64,
+    },
+    /// Sinusoidal grating whose frequency grows linearly from 0 at the left edge to
+    /// `max_cycles_per_pixel` at the right edge: 0.5 (1 + contrast cos φ(x)).
+    FrequencySweep {
+        /// spectrum at intensity 1
+        radiance: Spectrum,
+        /// highest frequency at the right edge (cycles per pixel; 0.5 = Nyquist)
+        max_cycles_per_pixel: f64,
+        /// pixel pitch (m) the frequency refers to
+        pixel_pitch_m: f64,
+        /// Michelson contrast
+        contrast: f64,
+    },
+    /// Square points of side `point_size_m` on a regular grid of spacing `spacing_m`, the
+    /// central point on the optical axis.
+    PointArray {
+        /// point radiance
+        radiance: Spectrum,
+        /// background radiance
+        background: Spectrum,
+        /// point spacing (m)
+        spacing_m: f64,
+        /// point side (m)
+        point_size_m: f64,
+    },
+    /// Horizontal and vertical lines of width `line_width_m` every `spacing_m`, one pair
+    /// through the optical axis.
+    GridLines {
+        /// line radiance
+        radiance: Spectrum,
+        /// background radiance
+        background: Spectrum,
+        /// line spacing (m)
+        spacing_m: f64,
+        /// line width (m)
+        line_width_m: f64,
+    },
+}
+
+/// Length of the overlap of [a0, a1] and [b0, b1].
+fn overlap(a0: f64, a1: f64, b0: f64, b1: f64) -> f64 {
+    (a1.min(b1) - a0.max(b0)).max(0.0)
+}
+
+/// Fraction of each cell along one axis covered by the union of intervals `k·spacing + [lo, hi]`.
+fn periodic_coverage(c0: f64, c1: f64, spacing: f64, lo: f64, hi: f64) -> f64 {
+    let k0 = ((c0 - hi) / spacing).floor() as i64;
+    let k1 = ((c1 - lo) / spacing).ceil() as i64;
+    let mut s = 0.0;
+    for k in k0..=k1 {
+        let o = k as f64 * spacing;
+        s += overlap(c0, c1, o + lo, o + hi);
+    }
+    (s / (c1 - c0)).min(1.0)
+}
+
+/// Area of the part of the axis-aligned square [x0,x1]×[y0,y1] where n·p > 0
+/// (Sutherland–Hodgman clip of the square by the half-plane, then the shoelace formula).
+fn half_plane_area(x0: f64, x1: f64, y0: f64, y1: f64, nx: f64, ny: f64) -> f64 {
+    let poly = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)];
+    let mut out: Vec<(f64, f64)> = Vec::with_capacity(6);
+    for i in 0..4 {
+        let p = poly[i];
+        let q = poly[(i + 1) % 4];
+        let dp = nx * p.0 + ny * p.1;
+        let dq = nx * q.0 + ny * q.1;
+        if dp > 0.0 {
+            out.push(p);
+        }
+        if (dp > 0.0) != (dq > 0.0) {
+            let t = dp / (dp - dq);
+            out.push((p.0 + t * (q.0 - p.0), p.1 + t * (q.1 - p.1)));
+        }
+    }
+    let n = out.len();
+    if n < 3 {
+        return 0.0;
+    }
+    let mut a = 0.0;
+    for i in 0..n {
+        let (xa, ya) = out[i];
+        let (xb, yb) = out[(i + 1) % n];
+        a += xa * yb - xb * ya;
+    }
+    0.5 * a.abs()
+}
+
+fn plane_from_fn(g: &SamplingGrid, f: impl Fn(f64, f64, f64, f64) -> f32 + Sync) -> Vec<f32> {
+    let mut p = vec![0f32; g.rows * g.cols];
+    p.par_chunks_mut(g.cols).enumerate().for_each(|(r, row)| {
+        let (y0, y1) = (g.y0(r), g.y0(r + 1));
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = f(g.x0(c), g.x0(c + 1), y0, y1);
+        }
+    });
+    p
+}
+
+/// Render a target on a sampling grid as a spectral image (photons/(s·sr·m²·nm)).
+pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage, CoreError> {
+    let (w, h) = (g.sensor_width_m, g.sensor_height_m);
+    let n = g.rows * g.cols;
+    let single = |s: &Spectrum, plane: Vec<f32>| {
+        SpectralImage::from_single_spectrum(g.rows, g.cols, s.clone(), plane)
+    };
+    Ok(match target {
+        Target::Dark => single(&Spectrum::constant(0.0), vec![0.0; n]),
+        Target::Uniform { radiance } => single(radiance, vec![1.0; n]),
+        Target::Patches { rows, cols, patch_fraction, background, patches } => {
+            if patches.len() != rows * cols {
+                return Err(CoreError::Target(format!(
+                    "patches lists {} spectra, rows·cols = {}",
+                    patches.len(),
+                    rows * cols
+                )));
+            }
+            let (cw, ch) = (w / *cols as f64, h / *rows as f64);
+            let (pw, ph) = (cw * patch_fraction, ch * patch_fraction);
+            let mut planes = Vec::with_capacity(patches.len() + 1);
+            let mut bg = vec![1f32; n];
+            for pr in 0..*rows {
+                for pc in 0..*cols {
+                    let cx = -w / 2.0 + (pc as f64 + 0.5) * cw;
+                    let cy = -h / 2.0 + (pr as f64 + 0.5) * ch;
+                    let (px0, px1, py0, py1) =
+                        (cx - pw / 2.0, cx + pw / 2.0, cy - ph / 2.0, cy + ph / 2.0);
+                    let a = g.pitch_m * g.pitch_m;
+                    let plane = plane_from_fn(g, |x0, x1, y0, y1| {
+                        (overlap(x0, x1, px0, px1) * overlap(y0, y1, py0, py1) / a) as f32
+                    });
+                    bg.iter_mut().zip(&plane).for_each(|(b, p)| *b -= p);
+                    planes.push(plane);
+                }
+            }
+            bg.iter_mut().for_each(|b| *b = b.max(0.0));
+            let mut basis = patches.clone();
+            basis.push(background.clone());
+            planes.push(bg);
+            SpectralImage::new(g.rows, g.cols, SpectralBasis::Spectra(basis), planes)?
+        }
+        Target::SlantedEdge { dark, light, angle_deg } => {
+            let a = angle_deg.to_radians();
+            let (nx, ny) = (a.cos(), a.sin());
+            let area = g.pitch_m * g.pitch_m;
+            let lightp = plane_from_fn(g, |x0, x1, y0, y1| {
+                (half_plane_area(x0, x1, y0, y1, nx, ny) / area).clamp(0.0, 1.0) as f32
+            });
+            let darkp = lightp.iter().map(|v| 1.0 - v).collect();
+            SpectralImage::new(
+                g.rows,
+                g.cols,
+                SpectralBasis::Spectra(vec![dark.clone(), light.clone()]),
+                vec![darkp, lightp],
+            )?
+        }
+        Target::Image { radiance } => resample_image(radiance, g),
+        Target::Ramp { radiance, min, max } => {
+            let plane = plane_from_fn(g, |x0, x1, _, _| {
+                // exact cell average of the clamped linear ramp (piecewise linear in x)
+                let f = |x: f64| {
+                    let t = ((x + w / 2.0) / w).clamp(0.0, 1.0);
+                    min + (max - min) * t
+                };
+                let m = 8;
+                (0..m)
+                    .map(|k| f(x0 + (x1 - x0) * (k as f64 + 0.5) / m as f64))
+                    .sum::<f64>() as f32
+                    / m as f32
+            });
+            single(radiance, plane)
+        }
+        Target::FrequencySweep { radiance, max_cycles_per_pixel, pixel_pitch_m, contrast } => {
+            // φ(x) = π f_max u² / p · W with u ∈ [0,1] across the sensor: local frequency
+            // f(u) = f_max·u cycles/pixel.
+            let fmax = max_cycles_per_pixel / pixel_pitch_m; // cycles per m at the right edge
+            let plane = plane_from_fn(g, |x0, x1, _, _| {
+                let m = 4;
+                (0..m)
+                    .map(|k| {
+                        let x = x0 + (x1 - x0) * (k as f64 + 0.5) / m as f64;
+                        let s = (x + w / 2.0).clamp(0.0, w);
+                        let phase = std::f64::consts::PI * fmax * s * s / w;
+                        0.5 * (1.0 + contrast * (2.0 * phase).cos())
+                    })
+                    .sum::<f64>() as f32
+                    / m as f32
+            });
+            single(radiance, plane)
+        }
+        Target::PointArray { radiance, background, spacing_m, point_size_m } => {
+            let (s, half) = (*spacing_m, point_size_m / 2.0);
+            let pts = plane_from_fn(g, |x0, x1, y0, y1| {
+                (periodic_coverage(x0, x1, s, -half, half) * periodic_coverage(y0, y1, s, -half, half))
+                    as f32
+            });
+            let bg = pts.iter().map(|v| 1.0 - v).collect();
+            SpectralImage::new(
+                g.rows,
+                g.cols,
+                SpectralBasis::Spectra(vec![radiance.clone(), background.clone()]),
+                vec![pts, bg],
+            )?
+        }
+        Target::GridLines { radiance, background, spacing_m, line_width_m } => {
+            let (s, half) = (*spacing_m, line_width_m / 2.0);
+            let lines = plane_from_fn(g, |x0, x1, y0, y1| {
+                let cx = periodic_coverage(x0, x1, s, -half, half);
+                let cy = periodic_coverage(y0, y1, s, -half, half);
+                (1.0 - (1.0 - cx) * (1.0 - cy)) as f32
+            });
+            let bg = lines.iter().map(|v| 1.0 - v).collect();
+            SpectralImage::new(
+                g.rows,
+                g.cols,
+                SpectralBasis::Spectra(vec![radiance.clone(), background.clone()]),
+                vec![lines, bg],
+            )?
+        }
+    })
+}
+
+/// Bilinear resampling of an image so that it fills the sensor; outside, the border repeats.
+fn resample_image(src: &SpectralImage, g: &SamplingGrid) -> SpectralImage {
+    let (w, h) = (g.sensor_width_m, g.sensor_height_m);
+    let (sr, sc) = (src.rows as f64, src.cols as f64);
+    let planes = src
+        .planes
+        .par_iter()
+        .map(|p| {
+            let mut out = vec![0f32; g.rows * g.cols];
+            for r in 0..g.rows {
+                let y = (g.y0(r) + 0.5 * g.pitch_m + h / 2.0) / h * sr - 0.5;
+                let y = y.clamp(0.0, sr - 1.0);
+                let (yi, fy) = (y.floor() as usize, (y - y.floor()) as f32);
+                let yj = (yi + 1).min(src.rows - 1);
+                for c in 0..g.cols {
+                    let x = (g.x0(c) + 0.5 * g.pitch_m + w / 2.0) / w * sc - 0.5;
+                    let x = x.clamp(0.0, sc - 1.0);
+                    let (xi, fx) = (x.floor() as usize, (x - x.floor()) as f32);
+                    let xj = (xi + 1).min(src.cols - 1);
+                    let a = p[yi * src.cols + xi] * (1.0 - fx) + p[yi * src.cols + xj] * fx;
+                    let b = p[yj * src.cols + xi] * (1.0 - fx) + p[yj * src.cols + xj] * fx;
+                    out[r * g.cols + c] = a * (1.0 - fy) + b * fy;
+                }
+            }
+            out
+        })
+        .collect();
+    SpectralImage { rows: g.rows, cols: g.cols, basis: src.basis.clone(), planes }
+}
+
+/// Mean luminance (cd/m²) of the scene over the cells whose centres lie inside a
+/// `width_m × height_m` window centred on the axis (the whole image if None).
+pub fn mean_luminance(
+    scene: &SceneRadiance,
+    window_m: Option<(f64, f64)>,
+    c: &PhysicalConstants,
+) -> f64 {
+    let img = &scene.radiance;
+    let lum = img.integrate_against(&luminance_weight_for_photons(c));
+    let p = scene.sample_pitch_m;
+    let (mut s, mut n) = (0.0f64, 0usize);
+    for r in 0..img.rows {
+        let y = (r as f64 + 0.5 - img.rows as f64 / 2.0) * p;
+        for col in 0..img.cols {
+            let x = (col as f64 + 0.5 - img.cols as f64 / 2.0) * p;
+            if let Some((ww, hh)) = window_m {
+                if x.abs() > ww / 2.0 || y.abs() > hh / 2.0 {
+                    continue;
+                }
+            }
+            s += lum[r * img.cols + col] as f64;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        0.0
+    } else {
+        s / n as f64
+    }
+}
+
+/// Scale the scene so its mean luminance (over `window_m`) is `target_cd_m2`; returns the
+/// factor applied. A black scene is left unchanged.
+pub fn scale_to_mean_luminance(
+    scene: &mut SceneRadiance,
+    target_cd_m2: f64,
+    window_m: Option<(f64, f64)>,
+    c: &PhysicalConstants,
+) -> f64 {
+    let now = mean_luminance(scene, window_m, c);
+    if now <= 0.0 {
+        return 1.0;
+    }
+    let k = target_cd_m2 / now;
+    scene.scale(k);
+    k
+}
+
+/// Blackbody spectral radiance (W/(sr·m²·nm)) at temperature `kelvin`, sampled at 1 nm over
+/// `[lo_nm, hi_nm]`: Planck's law L = c1 / (π λ⁵ (exp(c2/(λT)) − 1)) · 1e-9 with
+/// c1 = 2πhc², c2 = hc/k.
+pub fn blackbody_energy(kelvin: f64, lo_nm: f64, hi_nm: f64, c1: f64, c2: f64) -> Spectrum {
+    let n = (hi_nm - lo_nm).round().max(1.0) as usize;
+    let w: Vec<f64> = (0..=n).map(|i| lo_nm + (hi_nm - lo_nm) * i as f64 / n as f64).collect();
+    let v = w.iter().map(|&nm| blackbody_value(kelvin, nm, c1, c2)).collect();
+    Spectrum::Sampled { wavelength_nm: w, values: v }
+}
+
+/// One value of [`blackbody_energy`].
+pub fn blackbody_value(kelvin: f64, nm: f64, c1: f64, c2: f64) -> f64 {
+    let l = nm * 1e-9;
+    c1 / (l.powi(5) * ((c2 / (l * kelvin)).exp() - 1.0)) * 1e-9 / std::f64::consts::PI
+}
+
+/// Planck radiation constants (c1 = 2πhc² W·m², c2 = hc/k m·K), CODATA 2018.
+pub const PLANCK_C1: f64 = 3.741_771_852e-16;
+/// Second radiation constant (m·K).
+pub const PLANCK_C2: f64 = 1.438_776_877e-2;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn half_plane_area_is_exact() {
+        // vertical edge through the middle of a unit square
+        assert_relative_eq!(half_plane_area(-0.5, 0.5, -0.5, 0.5, 1.0, 0.0), 0.5, epsilon = 1e-12);
+        // 45° diagonal through the centre: half
+        let a = std::f64::consts::FRAC_1_SQRT_2;
+        assert_relative_eq!(half_plane_area(-0.5, 0.5, -0.5, 0.5, a, a), 0.5, epsilon = 1e-12);
+        // x + y > 0 over [-0.25, 0.75]²: all but the corner triangle of legs 0.5 → 1 - 0.125
+        let tri = half_plane_area(-0.25, 0.75, -0.25, 0.75, a, a);
+        assert_relative_eq!(tri, 0.875, epsilon = 1e-12);
+        assert_relative_eq!(half_plane_area(0.0, 1.0, 0.0, 1.0, 1.0, 0.0), 1.0, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn patches_cover_cells_exactly() {
+        let g = SamplingGrid::for_sensor(40, 60, 1e-6, 1, 0);
+        let t = Target::Patches {
+            rows: 4,
+            cols: 6,
+            patch_fraction: 0.5,
+            background: Spectrum::constant(0.0),
+            patches: (0..24).map(|i| Spectrum::constant(i as f64)).collect(),
+        };
+        let img = render_target(&t, &g).unwrap();
+        // each patch covers 5×5 = 25 px² of its 10×10 cell
+        for k in 0..24 {
+            let s: f32 = img.planes[k].iter().sum();
+            assert_relative_eq!(s, 25.0, epsilon = 1e-4);
+        }
+        // partition of unity
+        for i in 0..g.rows * g.cols {
+            let s: f32 = img.planes.iter().map(|p| p[i]).sum();
+            assert_relative_eq!(s, 1.0, epsilon = 1e-5);
+        }
+    }
+
+    #[test]
+    fn slanted_edge_orientation_matches_spec() {
+        // at 0°, light on the right; at +10°, the top leans right: at the top row the edge is
+        // at x > 0 ... light side x cos a + y sin a > 0, y negative at the top → x > -y tan a
+        let g = SamplingGrid::for_sensor(20, 20, 1e-6, 1, 0);
+        let light = Spectrum::constant(1.0);
+        let dark = Spectrum::constant(0.0);
+        let img = render_target(&Target::SlantedEdge { dark: dark.clone(), light: light.clone(), angle_deg: 0.0 }, &g).unwrap();
+        assert_eq!(img.planes[1][5 * 20 + 15], 1.0);
+        assert_eq!(img.planes[1][5 * 20 + 4], 0.0);
+        let img = render_target(&Target::SlantedEdge { dark, light, angle_deg: 10.0 }, &g).unwrap();
+        let first_light = |r: usize| (0..20).position(|c| img.planes[1][r * 20 + c] > 0.5).unwrap();
+        assert!(first_light(0) > first_light(19), "top of edge leans right");
+    }
+
+    #[test]
+    fn grid_lines_and_points_coverage() {
+        let g = SamplingGrid::for_sensor(20, 20, 1e-6, 1, 0);
+        let t = Target::GridLines {
+            radiance: Spectrum::constant(1.0),
+            background: Spectrum::constant(0.0),
+            spacing_m: 10e-6,
+            line_width_m: 1e-6,
+        };
+        let img = render_target(&t, &g).unwrap();
+        // the line through the axis at x ∈ [-0.5, 0.5] µm covers half of columns 9 and 10
+        assert_relative_eq!(img.planes[0][3 * 20 + 9], 0.5, epsilon = 1e-6);
+        assert_relative_eq!(img.planes[0][3 * 20 + 10], 0.5, epsilon = 1e-6);
+        assert_relative_eq!(img.planes[0][3 * 20 + 5], 0.0, epsilon = 1e-6);
+    }
+}
