@@ -1,1 +1,12 @@
+//! # camsim
+//!
+//! The `camsim` command and its library: input files (camera + capture-set format of
+//! ../spec/capture-format.md), and the commands that run the pipeline stages
+//! (`camsim-core` → `camsim-optics` → `camsim-sensor`).
+#![deny(missing_docs)]
 
+pub mod config;
+pub mod error;
+pub mod frames;
+pub mod simulate;
+pub mod targets;

@@ -1,1 +1,5 @@
-
+//! camsim's integration tests: one test binary (ripgrep style), one module per concern.
+mod cli;
+mod oracles;
+mod statistics;
+mod util;

@@ -23,9 +23,7 @@ pub fn read_npy(path: &Path) -> Result<NpyArray, String> {
         (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
     };
     let header = String::from_utf8_lossy(&bytes[hstart..hstart + hlen]).to_string();
-    if header.contains("'fortran_order': True") {
-        return Err(format!("{}: Fortran order not supported", path.display()));
-    }
+    let fortran = header.contains("'fortran_order': True");
     let descr = header.split("'descr':").nth(1).and_then(|s| s.split('\'').nth(1)).unwrap_or("");
     let shape_txt = header
         .split("'shape':")
@@ -48,5 +46,31 @@ pub fn read_npy(path: &Path) -> Result<NpyArray, String> {
     if n != data.len() {
         return Err(format!("{}: shape {:?} but {} values", path.display(), shape, data.len()));
     }
+    let data = if fortran { fortran_to_c(&shape, &data) } else { data };
     Ok(NpyArray { shape, data })
+}
+
+/// Reorder column-major (Fortran) data into row-major (C) order.
+fn fortran_to_c(shape: &[usize], data: &[f64]) -> Vec<f64> {
+    let nd = shape.len();
+    let mut out = vec![0.0; data.len()];
+    let mut idx = vec![0usize; nd];
+    for v in out.iter_mut() {
+        // idx is the C-order multi-index of this output element
+        let mut f = 0usize;
+        let mut stride = 1usize;
+        for d in 0..nd {
+            f += idx[d] * stride;
+            stride *= shape[d];
+        }
+        *v = data[f];
+        for d in (0..nd).rev() {
+            idx[d] += 1;
+            if idx[d] < shape[d] {
+                break;
+            }
+            idx[d] = 0;
+        }
+    }
+    out
 }

@@ -496,3 +496,22 @@ mod tests {
         assert_relative_eq!(img.planes[0][3 * 20 + 5], 0.0, epsilon = 1e-6);
     }
 }
+
+/// ISETCam-compatible mean luminance: the image expanded to bands on `grid`, energy per band
+/// = photons·hc/λ, and 683 Σ_λ E ȳ Δλ (Riemann sum on a regular grid), averaged over pixels.
+pub fn mean_luminance_riemann(
+    scene: &SceneRadiance,
+    grid: &crate::spectrum::WavelengthGrid,
+    c: &PhysicalConstants,
+) -> f64 {
+    let cmf = crate::data::cie1931_xyz().expect("embedded CIE XYZ");
+    let step = grid.step_nm().unwrap_or(1.0);
+    let weights: Vec<f64> = grid
+        .wavelength_nm
+        .iter()
+        .map(|&w| crate::constants::LUMINOUS_EFFICACY_LM_PER_W * cmf[1].eval(w) * step / c.photons_per_joule(w))
+        .collect();
+    let bands = scene.radiance.to_bands(grid);
+    let lum = bands.combine(&weights);
+    lum.iter().map(|v| *v as f64).sum::<f64>() / lum.len() as f64
+}

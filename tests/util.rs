@@ -1,0 +1,24 @@
+//! Helpers shared by the integration tests.
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// ../shared/oracles/isetcam
+pub fn oracle_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/oracles/isetcam")
+}
+
+/// A parsed oracle case.
+pub fn case(id: &str) -> Value {
+    let p = oracle_dir().join("cases").join(format!("{id}.json"));
+    serde_json::from_str(&std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).unwrap()
+}
+
+/// The `values` of an inline array.
+pub fn values(v: &Value) -> Vec<f64> {
+    v["values"].as_array().expect("values").iter().map(|x| x.as_f64().unwrap()).collect()
+}
+
+/// The camsim binary built for these tests.
+pub fn camsim() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_camsim"))
+}
