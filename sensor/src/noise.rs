@@ -1,0 +1,360 @@
+//! Steps 3–7 of the baseline forward model: electrons, noise, volts, ADC.
+use crate::poisson::PoissonSampler;
+use crate::{ElectronRate, FixedPattern, SensorModel, Shot};
+use camsim_core::rng::stream;
+use camsim_core::RawFrame;
+use rand::RngExt;
+use rand_distr::StandardNormal;
+use rayon::prelude::*;
+
+/// First stream id of every fixed-pattern stream: `stream(seed, &[FIXED_PATTERN_TAG, kind, …])`
+/// with kind 0 = PRNU (per row), 1 = DSNU (per row), 2 = column offsets.
+pub const FIXED_PATTERN_TAG: u64 = 0x4650_4E5F_5441_4721; // "FPN_TAG!"
+
+/// Draws the fixed per-pixel patterns of a camera: `1 + P_i` with `P_i ~ N(0, prnu²)` (step 4),
+/// `D_i ~ N(0, dsnu²)` (step 5) and, with column FPN, one N(0, σ²) offset per column. The
+/// patterns depend only on `seed` and the sensor size (one stream per row), not on the thread
+/// count; the noise switches are applied later, in [`expose`].
+pub fn fixed_pattern(sensor: &SensorModel, seed: u64) -> FixedPattern {
+    let (rows, cols) = (sensor.rows, sensor.cols);
+    let per_row = |kind: u64, sigma: f64, base: f32| -> Vec<f32> {
+        let mut out = vec![base; rows * cols];
+        if sigma > 0.0 {
+            out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
+                let mut rng = stream(seed, &[FIXED_PATTERN_TAG, kind, r as u64]);
+                for o in row.iter_mut() {
+                    let z: f64 = rng.sample(StandardNormal);
+                    *o = (base as f64 + sigma * z) as f32;
+                }
+            });
+        }
+        out
+    };
+    // Step 4: PRNU gain 1 + P_i, P_i ~ N(0, (prnu_percent/100)²).
+    let prnu_gain = per_row(0, sensor.prnu_sigma_percent / 100.0, 1.0);
+    // Step 5: DSNU offset D_i ~ N(0, dsnu²) volts.
+    let dsnu_v = per_row(1, sensor.dsnu_sigma_v, 0.0);
+    let col_sigma = sensor.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+    let column_offset_v = if col_sigma > 0.0 {
+        let mut rng = stream(seed, &[FIXED_PATTERN_TAG, 2]);
+        (0..cols)
+            .map(|_| (col_sigma * rng.sample::<f64, _>(StandardNormal)) as f32)
+            .collect()
+    } else {
+        vec![0.0; cols]
+    };
+    FixedPattern {
+        prnu_gain,
+        dsnu_v,
+        column_offset_v,
+    }
+}
+
+/// Per-shot constants of steps 3–7.
+struct Chain {
+    t: f64,
+    dark_e: f64,
+    well: f64,
+    g: f64,
+    gain: f64,
+    offset: f64,
+    swing: f64,
+    dn_per_v: f64,
+    black: f64,
+    max_dn: f64,
+}
+
+impl Chain {
+    fn new(sensor: &SensorModel, shot: &Shot) -> Self {
+        Chain {
+            t: shot.exposure_s,
+            // Step 3: d = t · dark_voltage / conversion_gain.
+            dark_e: shot.exposure_s * sensor.dark_voltage_v_per_s / sensor.conversion_gain_v_per_e,
+            well: sensor.well_capacity_e,
+            g: sensor.conversion_gain_v_per_e,
+            gain: shot.analog_gain,
+            offset: sensor.analog_offset_v,
+            swing: sensor.voltage_swing_v,
+            dn_per_v: sensor.dn_per_output_v(),
+            black: sensor.black_level_dn,
+            max_dn: sensor.max_dn(),
+        }
+    }
+
+    /// Step 6: u = gain · v + offset, clipped above at the swing.
+    #[inline]
+    fn output_v(&self, v: f64) -> f64 {
+        (self.gain * v + self.offset).min(self.swing)
+    }
+
+    /// Step 7 without rounding: u / swing · (2^bits − 1) + black, clamped to [0, 2^bits − 1].
+    #[inline]
+    fn dn(&self, u: f64) -> f64 {
+        (u * self.dn_per_v + self.black).clamp(0.0, self.max_dn)
+    }
+
+    /// Expected output voltage u of a pixel with electron rate `rate` (all random terms at
+    /// their means).
+    #[inline]
+    fn expected_u(&self, rate: f64) -> f64 {
+        // Steps 2–4: n = min(e + d, well); step 5: v = n·g.
+        let n = (rate * self.t + self.dark_e).min(self.well);
+        self.output_v(n * self.g)
+    }
+}
+
+fn check_rate(sensor: &SensorModel, rate: &ElectronRate) {
+    assert!(
+        rate.rows == sensor.rows
+            && rate.cols == sensor.cols
+            && rate.electrons_per_s.len() == sensor.rows * sensor.cols,
+        "electron rate is {}×{} but the sensor is {}×{}",
+        rate.rows,
+        rate.cols,
+        sensor.rows,
+        sensor.cols
+    );
+}
+
+/// Expected output voltage u (step 6) of every pixel: P = D = r = 0, n = min(e + d, well).
+pub fn expected_volts(sensor: &SensorModel, rate: &ElectronRate, shot: &Shot) -> Vec<f32> {
+    check_rate(sensor, rate);
+    let ch = Chain::new(sensor, shot);
+    rate.electrons_per_s
+        .par_iter()
+        .map(|&r| ch.expected_u(r as f64) as f32)
+        .collect()
+}
+
+/// The expected (noise-free) image of a shot in DN: steps 2–7 with every random term at its
+/// mean (P = D = r = 0, n = min(e + d, well)) and no rounding; fixed patterns are left out.
+pub fn expected_dn(sensor: &SensorModel, rate: &ElectronRate, shot: &Shot) -> Vec<f32> {
+    check_rate(sensor, rate);
+    let ch = Chain::new(sensor, shot);
+    rate.electrons_per_s
+        .par_iter()
+        .map(|&r| ch.dn(ch.expected_u(r as f64)) as f32)
+        .collect()
+}
+
+/// Simulates one frame of a shot (steps 3–7). Row `r` draws from
+/// `stream(seed, &[stream…, r])`, so a frame is bit-identical whatever the thread count;
+/// `stream` is `[shot index, frame index]`.
+///
+/// Per pixel: `n = min(Poisson(e(1+P) + d), well)` (a switched-off shot or dark term enters at
+/// its mean), `v = n g + D + column offset + r (+ reset noise without CDS)`,
+/// `u = min(gain · v + offset, swing)`, `DN = clamp(round(u/swing · (2^bits−1) + black))`.
+pub fn expose(
+    sensor: &SensorModel,
+    rate: &ElectronRate,
+    shot: &Shot,
+    fixed: &FixedPattern,
+    seed: u64,
+    stream_ids: &[u64],
+) -> RawFrame {
+    check_rate(sensor, rate);
+    let (rows, cols) = (sensor.rows, sensor.cols);
+    let sw = sensor.noise;
+    if sw.prnu {
+        assert_eq!(fixed.prnu_gain.len(), rows * cols, "PRNU pattern size");
+    }
+    if sw.dsnu {
+        assert_eq!(fixed.dsnu_v.len(), rows * cols, "DSNU pattern size");
+    }
+    let ch = Chain::new(sensor, shot);
+    let read_sigma = if sw.read { sensor.read_noise_v } else { 0.0 };
+    // Reset (kTC) noise: cancelled by CDS, else a new N(0, σ²) per pixel and frame (step 5).
+    let reset_sigma = sensor
+        .reset_noise
+        .filter(|r| !r.cds)
+        .map_or(0.0, |r| r.sigma_v);
+    let zero_cols = vec![0f32; cols];
+    let col_off: &[f32] = if sensor.column_fpn.is_some() && fixed.column_offset_v.len() == cols {
+        &fixed.column_offset_v
+    } else {
+        &zero_cols
+    };
+    let mut dn = vec![0u16; rows * cols];
+    dn.par_chunks_mut(cols).enumerate().for_each(|(r, out)| {
+        let mut ids = Vec::with_capacity(stream_ids.len() + 1);
+        ids.extend_from_slice(stream_ids);
+        ids.push(r as u64);
+        let mut rng = stream(seed, &ids);
+        let mut pois = PoissonSampler::default();
+        let base = r * cols;
+        let rates = &rate.electrons_per_s[base..base + cols];
+        for (c, o) in out.iter_mut().enumerate() {
+            // Step 2: mean photo-electrons e = rate · t.
+            let mut e = rates[c] as f64 * ch.t;
+            // Step 4: PRNU scales the signal (never negative).
+            if sw.prnu {
+                e = (e * fixed.prnu_gain[base + c] as f64).max(0.0);
+            }
+            // Step 4: n ~ Poisson(e(1+P) + d); a switched-off term enters at its mean.
+            let n = match (sw.shot, sw.dark) {
+                (true, true) => pois.sample(&mut rng, e + ch.dark_e),
+                (true, false) => pois.sample(&mut rng, e) + ch.dark_e,
+                (false, true) => e + pois.sample(&mut rng, ch.dark_e),
+                (false, false) => e + ch.dark_e,
+            };
+            // Step 4: clipped at the well capacity.
+            let n = n.min(ch.well);
+            // Step 5: v = n·g + D + column offset + r (+ reset noise).
+            let mut v = n * ch.g + col_off[c] as f64;
+            if sw.dsnu {
+                v += fixed.dsnu_v[base + c] as f64;
+            }
+            if read_sigma > 0.0 {
+                v += read_sigma * rng.sample::<f64, _>(StandardNormal);
+            }
+            if reset_sigma > 0.0 {
+                v += reset_sigma * rng.sample::<f64, _>(StandardNormal);
+            }
+            // Steps 6–7: output volts, rounding, clamping.
+            let u = ch.output_v(v);
+            // Clamp first, then round half up by truncation (non-negative, so this equals
+            // round-half-away-from-zero; avoids a libm call per pixel).
+            *o = ((u * ch.dn_per_v + ch.black).clamp(0.0, ch.max_dn) + 0.5) as u16;
+        }
+    });
+    RawFrame {
+        rows,
+        cols,
+        adc_bits: sensor.adc_bits,
+        dn: dn,
+    }
+}
+
+/// Exposure (s) at which the expected output voltage of the brightest pixel reaches
+/// `target_fraction_of_swing · swing` (camera's analog gain and offset; dark current
+/// included): `t = (f·swing − offset) / (gain · (g · rate_max + dark_voltage))`.
+///
+/// If the brightest pixel's well fills before that voltage is reached, the time at which it
+/// fills is returned instead (longer exposures cannot raise it). Returns `f64::INFINITY` when
+/// no signal accrues (dark field without dark current) and 0 when the offset alone already
+/// reaches the target.
+pub fn auto_exposure_s(
+    sensor: &SensorModel,
+    rate: &ElectronRate,
+    target_fraction_of_swing: f64,
+) -> f64 {
+    check_rate(sensor, rate);
+    let r_max = rate
+        .electrons_per_s
+        .iter()
+        .fold(0f64, |m, &r| m.max(r as f64));
+    let g = sensor.conversion_gain_v_per_e;
+    // Electrons per second in the brightest pixel, photo + dark (steps 2–3).
+    let e_per_s = r_max + sensor.dark_voltage_v_per_s / g;
+    let need_v = target_fraction_of_swing * sensor.voltage_swing_v - sensor.analog_offset_v;
+    if need_v <= 0.0 {
+        return 0.0;
+    }
+    if e_per_s <= 0.0 {
+        return f64::INFINITY;
+    }
+    // Step 5–6: u = gain · n · g + offset.
+    let t = need_v / (sensor.analog_gain * g * e_per_s);
+    let t_well = sensor.well_capacity_e / e_per_s;
+    t.min(t_well)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_util::mono;
+    use crate::NoiseSwitches;
+    use approx::assert_relative_eq;
+
+    fn flat(s: &SensorModel, r: f32) -> ElectronRate {
+        ElectronRate {
+            rows: s.rows,
+            cols: s.cols,
+            electrons_per_s: vec![r; s.rows * s.cols],
+        }
+    }
+
+    #[test]
+    fn expected_dn_closed_form() {
+        let s = mono(2, 3);
+        let rate = flat(&s, 1e5);
+        let shot = Shot {
+            exposure_s: 0.01,
+            analog_gain: 2.0,
+        };
+        // e = 1000, d = 0.01·1e-3/1e-4 = 0.1; u = 2·1000.1·1e-4 = 0.20002 V
+        let want = 0.20002 * 4095.0 + 64.0;
+        for v in expected_dn(&s, &rate, &shot) {
+            assert_relative_eq!(v as f64, want, max_relative = 1e-6);
+        }
+        // Well clip: 1e9 e/s · 0.01 s ≫ well → n = 10000 → u = min(2·1, 1) = swing.
+        let e = expected_dn(&s, &flat(&s, 1e9), &shot);
+        assert_eq!(e[0], 4095.0);
+        let shot1 = Shot {
+            exposure_s: 0.01,
+            analog_gain: 0.5,
+        };
+        let e = expected_dn(&s, &flat(&s, 1e9), &shot1);
+        assert_relative_eq!(e[0] as f64, 0.5 * 1.0 * 4095.0 + 64.0, max_relative = 1e-6);
+    }
+
+    #[test]
+    fn noiseless_frame_is_rounded_expected_image() {
+        let mut s = mono(4, 5);
+        s.noise = NoiseSwitches::none();
+        let rate = ElectronRate {
+            rows: 4,
+            cols: 5,
+            electrons_per_s: (0..20).map(|i| 1e4 * i as f32 + 3.3).collect(),
+        };
+        let shot = Shot::new(&s, 0.037);
+        let fp = fixed_pattern(&s, 1);
+        let f = expose(&s, &rate, &shot, &fp, 1, &[0, 0]);
+        let e = expected_dn(&s, &rate, &shot);
+        for (a, b) in f.dn.iter().zip(&e) {
+            assert_eq!(*a as f32, b.round());
+        }
+    }
+
+    #[test]
+    fn auto_exposure_hits_target() {
+        let s = mono(3, 3);
+        let mut rate = flat(&s, 2e4);
+        rate.electrons_per_s[4] = 5e4;
+        let t = auto_exposure_s(&s, &rate, 0.5);
+        let e = expected_volts(&s, &rate, &Shot::new(&s, t));
+        assert_relative_eq!(e[4] as f64, 0.5, max_relative = 1e-6);
+        // The well (10000 e ≈ 1 V at g = 1e-4) limits a 0.99 target: 0.99 V < 1 V still OK.
+        let mut s2 = s.clone();
+        s2.well_capacity_e = 3000.0;
+        let t2 = auto_exposure_s(&s2, &rate, 0.9);
+        assert_relative_eq!(t2, 3000.0 / (5e4 + 10.0), max_relative = 1e-12);
+    }
+
+    #[test]
+    fn fixed_pattern_statistics_and_reproducibility() {
+        let mut s = mono(200, 300);
+        s.column_fpn = Some(crate::ColumnFpn {
+            offset_sigma_v: 2e-3,
+        });
+        let a = fixed_pattern(&s, 5);
+        let b = fixed_pattern(&s, 5);
+        assert_eq!(a, b);
+        assert_ne!(a, fixed_pattern(&s, 6));
+        let n = a.prnu_gain.len() as f64;
+        let m = a.prnu_gain.iter().map(|&x| x as f64).sum::<f64>() / n;
+        let sd = (a
+            .prnu_gain
+            .iter()
+            .map(|&x| (x as f64 - m).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        assert!((m - 1.0).abs() < 4.0 * 0.01 / n.sqrt());
+        assert!((sd / 0.01 - 1.0).abs() < 4.0 * (0.5 / n).sqrt());
+        let sd_d = (a.dsnu_v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>() / n).sqrt();
+        assert!((sd_d / 1e-3 - 1.0).abs() < 4.0 * (0.5 / n).sqrt());
+        assert_eq!(a.column_offset_v.len(), 300);
+        assert!(a.column_offset_v.iter().any(|&x| x != 0.0));
+    }
+}
