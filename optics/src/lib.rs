@@ -1,1 +1,391 @@
-//! placeholder
+//! # camsim-optics
+//!
+//! The optics stage of the ISET pipeline (Farrell, Catrysse & Wandell, "Digital camera
+//! simulation", Applied Optics 2012, §2.B): scene spectral radiance
+//! ([`SceneRadiance`], photons/(s·sr·m²·nm)) → spectral irradiance at the sensor
+//! ([`SensorIrradiance`], photons/(s·m²·nm)) on the same grid, centred on the optical axis.
+//!
+//! [`form_image`] applies, in order:
+//! 1. the camera equation (Eq. 1) `E = π T(λ) L / (4 N² (1+|m|)²)` ([`camera_equation_factor`]);
+//! 2. relative illumination (off-axis falloff), e.g. `cos⁴θ`, `tan θ = r/f`;
+//! 3. the optical blur: the diffraction-limited OTF (Eq. 3, per wavelength band, by FFT,
+//!    Eqs. 4–6), a Gaussian or pillbox PSF (wavelength independent, applied to the planes of
+//!    the linear model), sampled per-wavelength PSFs ([`PsfSet`]) or a wavefront PSF with
+//!    Zernike defocus;
+//! 4. an optional Gaussian diffuser (§3.A: FWHM = pixel width).
+//!
+//! The baseline follows the project spec (capture-format.md, step 1). ISETCam conventions are
+//! available as explicit options ([`CameraEquation::IsetCam`],
+//! [`RelativeIllumination::IsetCam`], [`Padding::Zero`]) to reproduce its oracles; they are
+//! never the default.
+#![deny(missing_docs)]
+
+mod error;
+mod fft;
+mod formulas;
+mod kernels;
+mod psf_set;
+
+pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
+pub use error::OpticsError;
+pub use formulas::{
+    airy_first_zero_m, airy_first_zero_rad, airy_psf, bessel_j1, camera_equation_factor,
+    camera_equation_factor_isetcam, diffraction_otf, magnification, relative_illumination_cos4,
+    relative_illumination_isetcam, sigma_from_fwhm, thin_lens_image_distance_m,
+};
+pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
+pub use psf_set::PsfSet;
+
+use camsim_core::SpectralImage;
+use error::check_positive;
+use fft::{FftConvolver, Finish, Transfer};
+use rayon::prelude::*;
+
+/// Off-axis relative illumination R(x).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RelativeIllumination {
+    /// R = 1.
+    None,
+    /// R = cos⁴θ with tan θ = r / f (r: distance from the image centre, f: focal length).
+    #[default]
+    Cos4,
+    /// ISETCam's `'cos4th'` formula ([`relative_illumination_isetcam`]) with the focal length
+    /// as image distance and the thin-lens magnification. Compatibility only.
+    IsetCam,
+}
+
+/// Which camera equation (Eq. 1) converts radiance to irradiance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CameraEquation {
+    /// `π T / (4 N² (1+|m|)²)`; the diffraction cutoff uses the working f-number `N (1+|m|)`.
+    /// Exactly `π T / (4N²)` and cutoff `1/(λN)` for an object at infinity.
+    #[default]
+    Baseline,
+    /// ISETCam: `π T / (1 + 4 N² (1+|m|)²)`, cutoff `1/(λN)` (focal length, not image
+    /// distance). Compatibility only.
+    IsetCam,
+}
+
+/// How the image is continued outside its borders before blurring.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Padding {
+    /// Edge replication (the target "continues" outside): no dark fringe at the borders, and a
+    /// uniform scene stays uniform. FFTs are padded by at least the PSF support and rounded up
+    /// to sizes 2^a3^b5^c.
+    #[default]
+    Replicate,
+    /// ISETCam (`oiPad` + `opticsOTF`): zero photons, `round(rows/8)` rows and `round(cols/8)`
+    /// columns each side, FFT at exactly that size with ISETCam's `unitFrequencyList`
+    /// frequency grid, `abs()` after the inverse FFT. Compatibility only.
+    Zero,
+}
+
+/// The optical blur.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum Blur {
+    /// No blur (pinhole-like ideal imaging).
+    None,
+    /// Diffraction-limited OTF of the f-number per wavelength band (Eq. 3).
+    #[default]
+    Diffraction,
+    /// Wavelength-independent Gaussian PSF of standard deviation `sigma_um`.
+    Gaussian {
+        /// σ in µm in the image plane.
+        sigma_um: f64,
+    },
+    /// Wavelength-independent uniform disk ("pillbox") PSF of diameter `width_um`.
+    Pillbox {
+        /// Disk diameter in µm.
+        width_um: f64,
+    },
+    /// Sampled per-wavelength PSFs ([`PsfSet`]).
+    Psf(PsfSet),
+    /// Circular pupil with Zernike defocus ([`wavefront_psf`]), per wavelength band.
+    Wavefront {
+        /// Zernike Z(2,0) coefficient = RMS wavefront error (µm).
+        defocus_um: f64,
+        /// Pupil samples across the diameter (16..=4096; 128 is ample for |defocus| < λ).
+        pupil_samples: usize,
+    },
+}
+
+/// A Gaussian diffuser (e.g. an optical low-pass filter), wavelength independent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Diffuser {
+    /// Full width at half maximum (µm); paper §3.A uses the pixel width.
+    pub fwhm_um: f64,
+}
+
+/// A lens: f-number, focal length, transmittance, off-axis falloff and blur.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OpticsModel {
+    /// f-number N = f / D.
+    pub f_number: f64,
+    /// Focal length (m).
+    pub focal_length_m: f64,
+    /// Lens transmittance T(λ).
+    pub transmittance: Spectrum,
+    /// Off-axis relative illumination.
+    pub relative_illumination: RelativeIllumination,
+    /// Camera-equation convention.
+    pub camera_equation: CameraEquation,
+    /// Optical blur.
+    pub blur: Blur,
+    /// Optional diffuser applied after the blur.
+    pub diffuser: Option<Diffuser>,
+    /// Border handling for blurs.
+    pub padding: Padding,
+}
+
+impl OpticsModel {
+    /// A diffraction-limited lens with the baseline conventions: T = 1, cos⁴ falloff,
+    /// replicate padding, no diffuser.
+    pub fn diffraction_limited(f_number: f64, focal_length_m: f64) -> Self {
+        OpticsModel {
+            f_number,
+            focal_length_m,
+            transmittance: Spectrum::constant(1.0),
+            relative_illumination: RelativeIllumination::Cos4,
+            camera_equation: CameraEquation::Baseline,
+            blur: Blur::Diffraction,
+            diffuser: None,
+            padding: Padding::Replicate,
+        }
+    }
+
+    /// Check every parameter; errors name the offending value.
+    pub fn validate(&self) -> Result<(), OpticsError> {
+        check_positive("f_number", self.f_number, false)?;
+        check_positive("focal_length_m", self.focal_length_m, false)?;
+        if let Some((w, v)) = self.transmittance.first_negative() {
+            return Err(OpticsError::InvalidParameter {
+                name: "transmittance",
+                value: v,
+                reason: if w > 0.0 {
+                    "must be >= 0 (negative sample)"
+                } else {
+                    "must be >= 0"
+                },
+            });
+        }
+        match &self.blur {
+            Blur::None | Blur::Diffraction | Blur::Psf(_) => {}
+            Blur::Gaussian { sigma_um } => check_positive("blur sigma_um", *sigma_um, true)?,
+            Blur::Pillbox { width_um } => check_positive("blur width_um", *width_um, true)?,
+            Blur::Wavefront {
+                defocus_um,
+                pupil_samples,
+            } => {
+                if !defocus_um.is_finite() {
+                    return Err(OpticsError::InvalidParameter {
+                        name: "defocus_um",
+                        value: *defocus_um,
+                        reason: "must be finite",
+                    });
+                }
+                if !(16..=4096).contains(pupil_samples) {
+                    return Err(OpticsError::InvalidParameter {
+                        name: "pupil_samples",
+                        value: *pupil_samples as f64,
+                        reason: "must be between 16 and 4096",
+                    });
+                }
+            }
+        }
+        if let Some(d) = &self.diffuser {
+            check_positive("diffuser fwhm_um", d.fwhm_um, true)?;
+        }
+        Ok(())
+    }
+
+    /// Magnification m = −image_distance/d for the object distance (0 at infinity).
+    pub fn magnification(&self, object_distance_m: Option<f64>) -> f64 {
+        magnification(self.focal_length_m, object_distance_m)
+    }
+}
+
+/// Form the optical image: radiance → irradiance at the sensor (see the crate docs for the
+/// steps). `bands` is the wavelength grid on which wavelength-dependent blurs (diffraction,
+/// PSF sets, wavefront) are computed; the result is then a band image on `bands`. With a
+/// wavelength-independent blur (or none) the scene's linear model is kept (its planes are
+/// filtered directly). The output has the scene's sample pitch.
+pub fn form_image(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+) -> Result<SensorIrradiance, OpticsError> {
+    optics.validate()?;
+    let dx = scene.sample_pitch_m;
+    check_positive("sample_pitch_m", dx, false)?;
+    if let Some(d) = scene.object_distance_m {
+        if !(d.is_finite() && d > optics.focal_length_m) {
+            return Err(OpticsError::InvalidParameter {
+                name: "object_distance_m",
+                value: d,
+                reason: "must be finite and larger than the focal length (a real image)",
+            });
+        }
+    }
+    if bands.is_empty() {
+        return Err(OpticsError::Scene("empty wavelength grid".into()));
+    }
+    let (rows, cols) = (scene.radiance.rows, scene.radiance.cols);
+    if rows == 0 || cols == 0 {
+        return Err(OpticsError::Scene(format!("empty image {rows}×{cols}")));
+    }
+    let n = optics.f_number;
+    let m = optics.magnification(scene.object_distance_m);
+    let mut img = scene.radiance.clone();
+
+    // 1. Camera equation (Eq. 1) and lens transmittance.
+    let (k, n_eff) = match optics.camera_equation {
+        CameraEquation::Baseline => (camera_equation_factor(n, m), n * (1.0 + m.abs())),
+        CameraEquation::IsetCam => (camera_equation_factor_isetcam(n, m), n),
+    };
+    let k = match &optics.transmittance {
+        Spectrum::Affine {
+            offset,
+            slope_per_nm,
+        } if *slope_per_nm == 0.0 => k * offset,
+        t => {
+            img.scale_spectrally(t);
+            k
+        }
+    };
+
+    // 2. Relative illumination R(x), folded with the scalar factor into one spatial map.
+    let yc = (rows as f64 - 1.0) / 2.0;
+    let xc = (cols as f64 - 1.0) / 2.0;
+    let f = optics.focal_length_m;
+    match optics.relative_illumination {
+        RelativeIllumination::None => img.scale(k),
+        ri => {
+            // ISETCam evaluates the diagonal on the padded optical image.
+            let (pr, pc) = match optics.padding {
+                Padding::Zero => (
+                    rows + 2 * fft::isetcam_pad(rows),
+                    cols + 2 * fft::isetcam_pad(cols),
+                ),
+                Padding::Replicate => (rows, cols),
+            };
+            let diag = dx * ((pr * pr + pc * pc) as f64).sqrt();
+            let mut map = vec![0f32; rows * cols];
+            map.par_chunks_mut(cols).enumerate().for_each(|(i, row)| {
+                let y = (i as f64 - yc) * dx;
+                for (j, v) in row.iter_mut().enumerate() {
+                    let x = (j as f64 - xc) * dx;
+                    let r = match ri {
+                        RelativeIllumination::Cos4 => {
+                            relative_illumination_cos4((x * x + y * y).sqrt(), f)
+                        }
+                        _ => relative_illumination_isetcam(x, y, f, n, m, diag),
+                    };
+                    *v = (k * r) as f32;
+                }
+            });
+            img.scale_spatially(&map);
+        }
+    }
+
+    // 3. Blur.
+    let band_finish = match optics.padding {
+        Padding::Zero => Finish::Abs,
+        Padding::Replicate => Finish::NonNegative,
+    };
+    match &optics.blur {
+        Blur::None => {}
+        Blur::Diffraction => {
+            img = into_bands(img, bands);
+            let lmax = bands.wavelength_nm.iter().cloned().fold(0.0, f64::max) * 1e-9;
+            // Airy tail: ~1 % of the energy lies beyond 20 λN.
+            let margin = ((20.0 * lmax * n_eff / dx).ceil() as usize).clamp(2, 1024);
+            let conv = FftConvolver::new(rows, cols, dx, optics.padding, margin, margin);
+            let wl = bands.wavelength_nm.clone();
+            img.planes.par_iter_mut().zip(wl.par_iter()).for_each_init(
+                || (conv.workspace(), vec![0f32; rows * cols]),
+                |(ws, out), (p, &w)| {
+                    let t = Transfer::Diffraction {
+                        lambda_n_m: w * 1e-9 * n_eff,
+                    };
+                    conv.convolve(p, &t, band_finish, ws, out);
+                    p.copy_from_slice(out);
+                },
+            );
+        }
+        Blur::Gaussian { sigma_um } => {
+            let kern = gaussian_kernel_1d(sigma_um * 1e-6, dx);
+            kernels::separable_convolve(&mut img.planes, rows, cols, &kern, optics.padding);
+        }
+        Blur::Pillbox { width_um } => {
+            let psf = pillbox_psf(width_um * 1e-6, dx);
+            convolve_planes_with(&mut img, optics.padding, Finish::Keep, |_| psf.clone())?;
+        }
+        Blur::Psf(set) => {
+            img = into_bands(img, bands);
+            let wl = bands.wavelength_nm.clone();
+            convolve_planes_with(&mut img, optics.padding, band_finish, |b| {
+                set.resampled(wl[b], dx)
+            })?;
+        }
+        Blur::Wavefront {
+            defocus_um,
+            pupil_samples,
+        } => {
+            img = into_bands(img, bands);
+            let wl = bands.wavelength_nm.clone();
+            let psfs: Vec<SampledPsf> = wl
+                .iter()
+                .map(|&w| wavefront_psf(w, n_eff, *defocus_um, *pupil_samples, dx))
+                .collect::<Result<_, _>>()?;
+            convolve_planes_with(&mut img, optics.padding, band_finish, |b| psfs[b].clone())?;
+        }
+    }
+
+    // 4. Diffuser (Gaussian, FWHM → σ).
+    if let Some(d) = &optics.diffuser {
+        let kern = gaussian_kernel_1d(sigma_from_fwhm(d.fwhm_um * 1e-6), dx);
+        kernels::separable_convolve(&mut img.planes, rows, cols, &kern, optics.padding);
+    }
+
+    Ok(SensorIrradiance {
+        irradiance: img,
+        sample_pitch_m: dx,
+    })
+}
+
+/// The image as a band cube on `bands` (moved, not copied, when it already is one).
+fn into_bands(img: SpectralImage, bands: &WavelengthGrid) -> SpectralImage {
+    match &img.basis {
+        camsim_core::SpectralBasis::Bands(g) if g == bands => img,
+        _ => img.to_bands(bands),
+    }
+}
+
+/// Convolve every plane `b` of `img` with `psf_of(b)` by FFT (one padded grid for all).
+fn convolve_planes_with(
+    img: &mut SpectralImage,
+    padding: Padding,
+    finish: Finish,
+    psf_of: impl Fn(usize) -> SampledPsf + Sync,
+) -> Result<(), OpticsError> {
+    let (rows, cols) = (img.rows, img.cols);
+    let psfs: Vec<SampledPsf> = (0..img.planes.len()).into_par_iter().map(&psf_of).collect();
+    let mr = psfs.iter().map(|p| p.half_rows).max().unwrap_or(0).max(1);
+    let mc = psfs.iter().map(|p| p.half_cols).max().unwrap_or(0).max(1);
+    let conv = FftConvolver::new(rows, cols, psfs[0].pitch_m, padding, mr, mc);
+    img.planes
+        .par_iter_mut()
+        .zip(psfs.par_iter())
+        .for_each_init(
+            || (conv.workspace(), vec![0f32; rows * cols]),
+            |(ws, out), (p, psf)| {
+                let h = conv.kernel_spectrum(psf, ws);
+                conv.convolve(p, &Transfer::Spectrum(&h), finish, ws, out);
+                p.copy_from_slice(out);
+            },
+        );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;
