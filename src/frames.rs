@@ -75,7 +75,7 @@ pub fn write_png16(path: &Path, frame: &RawFrame) -> Result<(), CliError> {
         let mut enc = png::Encoder::new(w, frame.cols as u32, frame.rows as u32);
         enc.set_color(png::ColorType::Grayscale);
         enc.set_depth(png::BitDepth::Sixteen);
-        enc.set_compression(png::Compression::Fast);
+        enc.set_compression(png::Compression::Fastest);
         let mut wr = enc.write_header().map_err(std::io::Error::other)?;
         wr.write_image_data(&bytes).map_err(std::io::Error::other)?;
         wr.finish().map_err(std::io::Error::other)?;

@@ -8,5 +8,7 @@
 pub mod config;
 pub mod error;
 pub mod frames;
+pub mod plots;
+pub mod scene_cmd;
 pub mod simulate;
 pub mod targets;

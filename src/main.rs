@@ -35,6 +35,23 @@ enum Command {
         #[arg(long)]
         expected: bool,
     },
+    /// Write one shot's scene radiance and sensor irradiance as spectral EXR (+ a JSON summary).
+    Scene {
+        /// captures.json
+        captures: PathBuf,
+        /// The shot id.
+        #[arg(long)]
+        shot: String,
+        /// Replace the camera named in the capture set.
+        #[arg(long)]
+        camera: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Also report the round-trip error of a linear model with this many basis spectra.
+        #[arg(long)]
+        basis: Option<usize>,
+    },
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
@@ -48,6 +65,12 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let opts = SimulateOptions { out_dir: out, seed, expected, progress: true };
             let summary = simulate(&set, &opts)?;
             eprintln!("camsim: wrote {} file(s) to {}", summary.files.len(), opts.out_dir.display());
+            Ok(())
+        }
+        Command::Scene { captures, shot, camera, out, basis } => {
+            let set = load_captures(&captures, camera.as_deref())?;
+            let report = camsim::scene_cmd::write_scene(&set, &shot, &out, basis)?;
+            println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
             Ok(())
         }
     }

@@ -6,7 +6,7 @@ use crate::error::CliError;
 use crate::frames;
 use camsim_core::constants::SI;
 use camsim_core::exr_io::write_single_channel_exr;
-use camsim_core::image::{Plane, SceneRadiance};
+use camsim_core::image::{Plane, SceneRadiance, SensorIrradiance};
 use camsim_core::scene::{render_target, scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};
@@ -78,14 +78,15 @@ pub fn sampling_for(optics: &OpticsModel, sensor: &SensorModel, grid: &Wavelengt
     (oversample.unwrap_or(os.clamp(1, 4)), margin)
 }
 
-/// Mean electron rate of every pixel for one target (optics + pixel integration).
-pub fn shot_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<ElectronRate, CliError> {
+/// The scene radiance of one shot's target, sampled for the camera's optics (with margin).
+pub fn shot_scene(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<SceneRadiance, CliError> {
     let cam = &set.camera;
     let s = &cam.sensor;
     let shot = &set.shots[shot_index];
     let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
     let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin);
-    let radiance = render_target(&shot.target.target, &g).map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
+    let radiance = render_target(&shot.target.target, &g)
+        .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
     let mut scene = SceneRadiance {
         radiance,
         sample_pitch_m: g.pitch_m,
@@ -96,8 +97,18 @@ pub fn shot_electron_rate(set: &CaptureSet, shot_index: usize, grid: &Wavelength
     if let Some(l) = shot.target.mean_luminance_cd_m2 {
         scale_to_mean_luminance(&mut scene, l, Some((g.sensor_width_m, g.sensor_height_m)), &SI);
     }
-    let irradiance = form_image(&cam.optics, &scene, grid).map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
-    Ok(electron_rate(s, &irradiance))
+    Ok(scene)
+}
+
+/// Sensor irradiance of one shot (scene → optics stage).
+pub fn shot_irradiance(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<SensorIrradiance, CliError> {
+    let scene = shot_scene(set, shot_index, grid)?;
+    form_image(&set.camera.optics, &scene, grid).map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+}
+
+/// Mean electron rate of every pixel for one target (optics + pixel integration).
+pub fn shot_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<ElectronRate, CliError> {
+    Ok(electron_rate(&set.camera.sensor, &shot_irradiance(set, shot_index, grid)?))
 }
 
 /// Run the simulation and write its outputs; on any error nothing is left in the output folder.
@@ -144,7 +155,16 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
+    let profile = std::env::var_os("CAMSIM_PROFILE").is_some();
+    let mut tick = std::time::Instant::now();
+    let mut lap = |what: &str| {
+        if profile {
+            eprintln!("camsim: {what}: {:.3} s", tick.elapsed().as_secs_f64());
+            tick = std::time::Instant::now();
+        }
+    };
     let fixed = fixed_pattern(sensor, opts.seed);
+    lap("fixed pattern");
     let mut cache: HashMap<&str, ElectronRate> = HashMap::new();
     let mut summary = SimulateSummary::default();
     std::fs::create_dir_all(staging).map_err(|e| CliError::output(staging, e))?;
@@ -152,6 +172,7 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
         bar.set_message(shot.id.clone());
         if !cache.contains_key(shot.target_key.as_str()) {
             let rate = shot_electron_rate(set, si, &grid)?;
+            lap("scene + optics + pixel integration");
             cache.insert(shot.target_key.as_str(), rate);
         }
         let rate = &cache[shot.target_key.as_str()];
@@ -171,12 +192,14 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
         } else {
             for (fi, f) in shot.frames.iter().enumerate() {
                 let frame = expose(sensor, rate, &sh, &fixed, opts.seed, &[si as u64, fi as u64]);
+                lap("expose");
                 let rel = PathBuf::from(f);
                 let dst = staging.join(&rel);
                 if let Some(parent) = dst.parent() {
                     std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
                 }
                 frames::write_png16(&dst, &frame)?;
+                lap("write PNG");
                 summary.files.push(rel);
                 bar.inc(1);
             }

@@ -53,57 +53,56 @@ pub fn box_weights(
 /// ([`camsim_core::SpectralImage::integrate_against`]); spectra are never expanded.
 pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> ElectronRate {
     let img = &irradiance.irradiance;
-    let maps: Vec<Option<Vec<f32>>> = channel_maps(sensor, |qe| img.integrate_against(qe));
-    let wy = box_weights(
-        img.rows,
-        irradiance.sample_pitch_m,
-        sensor.rows,
-        sensor.pixel_pitch_m,
-    );
-    let wx = box_weights(
-        img.cols,
-        irradiance.sample_pitch_m,
-        sensor.cols,
-        sensor.pixel_pitch_m,
-    );
-    // Step 2: p² · FF converts photons/(s·m²) into electrons/s.
+    // Exact spectral integrals ∫ QE_c(λ) B_k(λ) dλ of every channel c and basis term k: the
+    // channel's irradiance map is Σ_k w[c][k] a_k(x) (no full-resolution maps are built).
+    let weights: Vec<Option<Vec<(usize, f64)>>> = (0..sensor.channel_qe.len())
+        .map(|c| {
+            let used = sensor.cfa.tile.iter().flatten().any(|&t| t == c);
+            used.then(|| {
+                img.term_integrals(&sensor.channel_qe[c])
+                    .into_iter()
+                    .enumerate()
+                    .filter(|(_, w)| *w != 0.0)
+                    .collect()
+            })
+        })
+        .collect();
+    let wy = box_weights(img.rows, irradiance.sample_pitch_m, sensor.rows, sensor.pixel_pitch_m);
+    let wx = box_weights(img.cols, irradiance.sample_pitch_m, sensor.cols, sensor.pixel_pitch_m);
     let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
-    let (oi_cols, n_ch) = (img.cols, maps.len());
+    let (oi_cols, n_ch) = (img.cols, weights.len());
     let mut out = vec![0f32; sensor.rows * sensor.cols];
-    out.par_chunks_mut(sensor.cols)
-        .enumerate()
-        .for_each(|(r, row_out)| {
-            // Row pass: lines[c][j] = Σ_y w_y · map_c[y, j] for the channels of this row.
-            let mut lines: Vec<Vec<f64>> = vec![Vec::new(); n_ch];
+    out.par_chunks_mut(sensor.cols).enumerate().for_each_init(
+        || vec![Vec::<f64>::new(); n_ch],
+        |lines, (r, row_out)| {
             let tile_row = &sensor.cfa.tile[r % sensor.cfa.tile_rows()];
+            lines.iter_mut().for_each(|l| l.clear());
             for &c in tile_row {
-                if lines[c].is_empty() {
-                    let m = maps[c].as_ref().expect("map of a channel in the tile");
-                    let mut line = vec![0f64; oi_cols];
-                    for &(y, w) in &wy[r] {
-                        let src = &m[y * oi_cols..(y + 1) * oi_cols];
-                        line.iter_mut()
-                            .zip(src)
-                            .for_each(|(l, s)| *l += w * *s as f64);
+                if !lines[c].is_empty() {
+                    continue;
+                }
+                let wc = weights[c].as_ref().expect("weights of a channel in the tile");
+                // Row average over the cells of pixel row r (y box weights), per channel.
+                let line = &mut lines[c];
+                line.resize(oi_cols, 0.0);
+                for &(y, w) in &wy[r] {
+                    for &(term, wk) in wc {
+                        let src = &img.planes[term][y * oi_cols..(y + 1) * oi_cols];
+                        let f = w * wk;
+                        line.iter_mut().zip(src).for_each(|(l, s)| *l += f * *s as f64);
                     }
-                    lines[c] = line;
                 }
             }
-            // Column pass at each pixel of its own channel.
             for (col, o) in row_out.iter_mut().enumerate() {
                 let line = &lines[tile_row[col % tile_row.len()]];
                 let e: f64 = wx[col].iter().map(|&(x, w)| w * line[x]).sum();
                 *o = (k * e) as f32;
             }
-        });
-    ElectronRate {
-        rows: sensor.rows,
-        cols: sensor.cols,
-        electrons_per_s: out,
-    }
+        },
+    );
+    ElectronRate { rows: sensor.rows, cols: sensor.cols, electrons_per_s: out }
 }
 
-/// Spectral maps (one per channel that appears in the CFA tile; None for unused channels).
 pub(crate) fn channel_maps(
     sensor: &SensorModel,
     f: impl Fn(&camsim_core::Spectrum) -> Vec<f32> + Sync,
