@@ -18,6 +18,15 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the whole pipeline on one scene and write a report (no CONFIG: the paper's §3
+    /// setup — Table 1 camera, Macbeth chart under tungsten at 61 cd/m²).
+    Run {
+        /// A run configuration (docs/run.md); omit for the embedded default.
+        config: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, default_value = "out/run")]
+        out: PathBuf,
+    },
     /// Simulate every frame of a capture set (or, with --expected, each shot's expected image).
     Simulate {
         /// captures.json
@@ -65,6 +74,14 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let opts = SimulateOptions { out_dir: out, seed, expected, progress: true };
             let summary = simulate(&set, &opts)?;
             eprintln!("camsim: wrote {} file(s) to {}", summary.files.len(), opts.out_dir.display());
+            Ok(())
+        }
+        Command::Run { config, out } => {
+            let summary = camsim::run::run(config.as_deref(), &out, true)?;
+            if let Some(de) = summary.get("delta_e_2000") {
+                eprintln!("camsim: mean ΔE2000 = {:.2}", de["mean"].as_f64().unwrap_or(f64::NAN));
+            }
+            eprintln!("camsim: wrote {} (open report.html)", out.display());
             Ok(())
         }
         Command::Scene { captures, shot, camera, out, basis } => {

@@ -1,5 +1,6 @@
 //! camsim's integration tests: one test binary (ripgrep style), one module per concern.
 mod cli;
 mod oracles;
+mod run;
 mod statistics;
 mod util;

@@ -24,7 +24,7 @@ pub mod summary;
 
 pub use color_difference::{delta_e_2000, delta_e_2000_weighted, delta_e_94, Ciede2000Weights};
 pub use error::MetricsError;
-pub use patches::{cfa_channel_mask, patch_stats, ChartLayout, PatchStats};
+pub use patches::{cfa_channel_mask, patch_sample_rect, patch_stats, ChartLayout, PatchStats};
 pub use scielab::{scielab, scielab_with_options, DeltaEFormula, ScielabOptions, ScielabResult};
 pub use sfr::{
     slanted_edge_mtf, slanted_edge_mtf_with_options, EdgeMtf, EdgeMtfOptions, EdgeOrientation,
