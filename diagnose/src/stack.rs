@@ -1,0 +1,184 @@
+//! Per-shot pixel statistics over the frames of a shot: per-pixel mean, per-pixel temporal
+//! variance (sample variance over frames, exact in integer arithmetic) and clipping counts.
+use camsim_core::RawFrame;
+use rayon::prelude::*;
+
+/// Statistics of one shot.
+#[derive(Debug, Clone)]
+pub(crate) struct Stack {
+    /// Frames in the shot.
+    pub n_frames: usize,
+    /// Per-pixel mean over frames (DN).
+    pub mean: Vec<f64>,
+    /// Per-pixel sample variance over frames (DN², N − 1); None with one frame.
+    pub var: Option<Vec<f64>>,
+    /// Per channel: fraction of pixel-frames at 0 DN.
+    pub clip_lo: Vec<f64>,
+    /// Per channel: fraction of pixel-frames at the ADC maximum.
+    pub clip_hi: Vec<f64>,
+}
+
+impl Stack {
+    /// Largest clipped fraction (low or high) of the channels.
+    pub fn worst_clip(&self) -> f64 {
+        self.clip_lo
+            .iter()
+            .chain(&self.clip_hi)
+            .fold(0.0f64, |a, &b| a.max(b))
+    }
+}
+
+/// Channel index of every pixel (row-major) and pixel count per channel.
+#[derive(Debug, Clone)]
+pub(crate) struct ChannelMap {
+    pub rows: usize,
+    pub cols: usize,
+    pub channel: Vec<u8>,
+    pub n_channels: usize,
+}
+
+impl ChannelMap {
+    pub fn new(sensor: &camsim_sensor::SensorModel) -> Self {
+        let (rows, cols) = (sensor.rows, sensor.cols);
+        let channel = (0..rows * cols)
+            .map(|i| sensor.cfa.channel_at(i / cols, i % cols) as u8)
+            .collect();
+        ChannelMap {
+            rows,
+            cols,
+            channel,
+            n_channels: sensor.channel_qe.len().max(1),
+        }
+    }
+}
+
+/// Computes a shot's statistics; the frames must all be `rows × cols` (checked by the caller).
+pub(crate) fn stack(frames: &[RawFrame], map: &ChannelMap, max_dn: u16) -> Stack {
+    let (rows, cols) = (map.rows, map.cols);
+    let n = frames.len();
+    let nch = map.n_channels;
+    let mut mean = vec![0f64; rows * cols];
+    let mut var = vec![0f64; rows * cols];
+    let counts = mean
+        .par_chunks_mut(cols)
+        .zip(var.par_chunks_mut(cols))
+        .enumerate()
+        .map(|(r, (m_row, v_row))| {
+            let mut sum = vec![0u64; cols];
+            let mut sumsq = vec![0u64; cols];
+            let mut lo = vec![0usize; nch];
+            let mut hi = vec![0usize; nch];
+            let ch_row = &map.channel[r * cols..(r + 1) * cols];
+            for f in frames {
+                let src = &f.dn[r * cols..(r + 1) * cols];
+                for c in 0..cols {
+                    let x = src[c] as u64;
+                    sum[c] += x;
+                    sumsq[c] += x * x;
+                    if src[c] == 0 {
+                        lo[ch_row[c] as usize] += 1;
+                    } else if src[c] >= max_dn {
+                        hi[ch_row[c] as usize] += 1;
+                    }
+                }
+            }
+            let nf = n as f64;
+            for c in 0..cols {
+                m_row[c] = sum[c] as f64 / nf;
+            }
+            if n >= 2 {
+                let nn = n as u128;
+                for c in 0..cols {
+                    // Exact: N Σx² − (Σx)² in integers.
+                    let num = nn * sumsq[c] as u128 - (sum[c] as u128) * (sum[c] as u128);
+                    v_row[c] = num as f64 / (nf * (nf - 1.0));
+                }
+            }
+            (lo, hi)
+        })
+        .reduce(
+            || (vec![0usize; nch], vec![0usize; nch]),
+            |(mut a, mut b), (c, d)| {
+                a.iter_mut().zip(c).for_each(|(x, y)| *x += y);
+                b.iter_mut().zip(d).for_each(|(x, y)| *x += y);
+                (a, b)
+            },
+        );
+    let mut per_ch = vec![0usize; nch];
+    for &c in &map.channel {
+        per_ch[c as usize] += 1;
+    }
+    let frac = |v: Vec<usize>| -> Vec<f64> {
+        v.iter()
+            .zip(&per_ch)
+            .map(|(&k, &p)| {
+                if p == 0 {
+                    0.0
+                } else {
+                    k as f64 / (p * n) as f64
+                }
+            })
+            .collect()
+    };
+    Stack {
+        n_frames: n,
+        mean,
+        var: (n >= 2).then_some(var),
+        clip_lo: frac(counts.0),
+        clip_hi: frac(counts.1),
+    }
+}
+
+/// Mean, sample variance and fourth central moment of the values `f(i)` over the pixel
+/// indices where `keep(i)` (parallel, two passes).
+pub(crate) fn moments(
+    n_pix: usize,
+    keep: impl Fn(usize) -> bool + Sync,
+    f: impl Fn(usize) -> f64 + Sync,
+) -> (usize, f64, f64, f64) {
+    let (cnt, s) = (0..n_pix)
+        .into_par_iter()
+        .filter(|&i| keep(i))
+        .map(|i| (1usize, f(i)))
+        .reduce(|| (0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    if cnt < 2 {
+        return (cnt, f64::NAN, f64::NAN, f64::NAN);
+    }
+    let m = s / cnt as f64;
+    let (s2, s4) = (0..n_pix)
+        .into_par_iter()
+        .filter(|&i| keep(i))
+        .map(|i| {
+            let d = f(i) - m;
+            let d2 = d * d;
+            (d2, d2 * d2)
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (cnt, m, s2 / (cnt - 1) as f64, s4 / cnt as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stack_is_exact() {
+        let map = ChannelMap {
+            rows: 1,
+            cols: 3,
+            channel: vec![0, 0, 0],
+            n_channels: 1,
+        };
+        let fr = |v: [u16; 3]| RawFrame {
+            rows: 1,
+            cols: 3,
+            adc_bits: 12,
+            dn: v.to_vec(),
+        };
+        let s = stack(&[fr([1, 0, 4095]), fr([3, 0, 4095])], &map, 4095);
+        assert_eq!(s.mean, vec![2.0, 0.0, 4095.0]);
+        assert_eq!(s.var.unwrap(), vec![2.0, 0.0, 0.0]);
+        assert!((s.clip_lo[0] - 1.0 / 3.0).abs() < 1e-12);
+        assert!((s.clip_hi[0] - 1.0 / 3.0).abs() < 1e-12);
+    }
+}
