@@ -8,7 +8,9 @@
 pub mod config;
 pub mod error;
 pub mod frames;
+pub mod calibrate_cmd;
 pub mod plots;
+pub mod raw_input;
 pub mod report;
 pub mod run;
 pub mod scene_cmd;

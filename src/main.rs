@@ -44,6 +44,18 @@ enum Command {
         #[arg(long)]
         expected: bool,
     },
+    /// Estimate the sensor's parameters from a capture set (Appendix A/B, photon transfer);
+    /// writes DIR/fitted_camera.json, calibration.json and report.html.
+    Calibrate {
+        /// captures.json
+        captures: PathBuf,
+        /// Replace the camera named in the capture set (the believed camera).
+        #[arg(long)]
+        camera: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Write one shot's scene radiance and sensor irradiance as spectral EXR (+ a JSON summary).
     Scene {
         /// captures.json
@@ -80,6 +92,19 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let summary = camsim::run::run(config.as_deref(), &out, true)?;
             if let Some(de) = summary.get("delta_e_2000") {
                 eprintln!("camsim: mean ΔE2000 = {:.2}", de["mean"].as_f64().unwrap_or(f64::NAN));
+            }
+            eprintln!("camsim: wrote {} (open report.html)", out.display());
+            Ok(())
+        }
+        Command::Calibrate { captures, camera, out } => {
+            let set = load_captures(&captures, camera.as_deref())?;
+            let summary = camsim::calibrate_cmd::run_calibrate(&set, &out, true)?;
+            for k in ["black_level_dn", "dark_voltage_v_per_s", "read_noise_v", "dsnu_sigma_v", "prnu_sigma_percent", "conversion_gain_v_per_e", "full_well_e"] {
+                let v = &summary[k];
+                match v["status"].as_str() {
+                    Some("estimated") => eprintln!("camsim: {k} = {:.5e} ± {:.2e}", v["value"].as_f64().unwrap_or(f64::NAN), v["std_error"].as_f64().unwrap_or(f64::NAN)),
+                    _ => eprintln!("camsim: {k}: not estimable: {}", v["reason"].as_str().unwrap_or("")),
+                }
             }
             eprintln!("camsim: wrote {} (open report.html)", out.display());
             Ok(())

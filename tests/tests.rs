@@ -1,4 +1,5 @@
 //! camsim's integration tests: one test binary (ripgrep style), one module per concern.
+mod calibrate;
 mod cli;
 mod oracles;
 mod run;
