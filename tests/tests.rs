@@ -2,6 +2,7 @@
 mod calibrate;
 mod cli;
 mod oracles;
+mod real_data;
 mod run;
 mod statistics;
 mod util;
