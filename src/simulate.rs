@@ -10,8 +10,9 @@ use camsim_core::image::{Plane, SceneRadiance, SensorIrradiance};
 use camsim_core::scene::{render_target, scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};
-use camsim_sensor::{electron_rate, expected_dn, expose, fixed_pattern, ElectronRate, SensorModel, Shot};
+use camsim_sensor::{electron_rate, expected_dn, expose_with, fixed_pattern, ElectronRate, FixedPattern, PatternSource, SensorModel, Shot};
 use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -108,7 +109,89 @@ pub fn shot_irradiance(set: &CaptureSet, shot_index: usize, grid: &WavelengthGri
 
 /// Mean electron rate of every pixel for one target (optics + pixel integration).
 pub fn shot_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<ElectronRate, CliError> {
+    if let Some(rate) = uniform_electron_rate(set, shot_index, grid)? {
+        return Ok(rate);
+    }
     Ok(electron_rate(&set.camera.sensor, &shot_irradiance(set, shot_index, grid)?))
+}
+
+/// Fast path of [`shot_electron_rate`] for a uniform (or dark) target seen without blur,
+/// diffuser or oversampling: the irradiance is then one spectrum times the relative
+/// illumination R(x), so the rate of pixel (i, j) of channel c is `K_c · R(x_ij)` with
+/// `K_c = p² · FF · ∫ QE_c(λ) E_axis(λ) dλ`. `E_axis` comes from the ordinary scene and optics
+/// stages run on a single sample on the axis (R = 1 there), with the same luminance scaling;
+/// R is evaluated at the pixel centres, as the general path does for one sample per pixel
+/// (whose box average over its own cell is that sample). No full-size planes are built.
+/// Returns None when the fast path does not apply.
+fn uniform_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<Option<ElectronRate>, CliError> {
+    use camsim_core::scene::Target;
+    use camsim_optics::RelativeIllumination;
+    let cam = &set.camera;
+    let s = &cam.sensor;
+    let shot = &set.shots[shot_index];
+    if !matches!(shot.target.target, Target::Uniform { .. } | Target::Dark) {
+        return Ok(None);
+    }
+    if !matches!(cam.optics.relative_illumination, RelativeIllumination::Cos4 | RelativeIllumination::None) {
+        return Ok(None);
+    }
+    if !matches!(cam.optics.blur, Blur::None) || cam.optics.diffuser.is_some() {
+        return Ok(None);
+    }
+    let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
+    if (os, margin) != (1, 0) {
+        return Ok(None);
+    }
+    // The scene on the sensor's grid, but only its sample on the axis (a uniform target has
+    // the same value everywhere, and so the same mean luminance over the sensor).
+    let full = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin);
+    let g = SamplingGrid { rows: 1, cols: 1, ..full };
+    let radiance = render_target(&shot.target.target, &g)
+        .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
+    let mut scene = SceneRadiance {
+        radiance,
+        sample_pitch_m: g.pitch_m,
+        object_distance_m: None,
+        illuminant: shot.target.illuminant.clone(),
+        depth_m: None,
+    };
+    if let Some(l) = shot.target.mean_luminance_cd_m2 {
+        scale_to_mean_luminance(&mut scene, l, Some((g.sensor_width_m, g.sensor_height_m)), &SI);
+    }
+    let irr = form_image(&cam.optics, &scene, grid).map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
+    let img = &irr.irradiance;
+    // Step 2 on the axis: K_c = p² · FF · Σ_k (∫ QE_c B_k dλ) a_k.
+    let area = s.pixel_pitch_m * s.pixel_pitch_m * s.fill_factor;
+    let k_c: Vec<f64> = s
+        .channel_qe
+        .iter()
+        .map(|qe| area * img.term_integrals(qe).iter().zip(&img.planes).map(|(w, p)| w * p[0] as f64).sum::<f64>())
+        .collect();
+    // R = cos⁴θ = (f² / (f² + r²))², tan θ = r / f (camsim_optics::relative_illumination_cos4),
+    // at the pixel centres ((j − (cols−1)/2)·dx, (i − (rows−1)/2)·dx); R = 1 without fall-off.
+    let cos4 = cam.optics.relative_illumination == RelativeIllumination::Cos4;
+    let (f, dx) = (cam.optics.focal_length_m, irr.sample_pitch_m);
+    let f2 = f * f;
+    let (yc, xc) = ((s.rows as f64 - 1.0) / 2.0, (s.cols as f64 - 1.0) / 2.0);
+    let x2: Vec<f64> = (0..s.cols).map(|c| ((c as f64 - xc) * dx).powi(2)).collect();
+    // K of each column for every tile row.
+    let k_rows: Vec<Vec<f64>> = s.cfa.tile.iter().map(|t| (0..s.cols).map(|c| k_c[t[c % t.len()]]).collect()).collect();
+    let mut out = vec![0f32; s.rows * s.cols];
+    out.par_chunks_mut(s.cols).enumerate().for_each(|(r, row)| {
+        let k = &k_rows[r % k_rows.len()];
+        if cos4 {
+            let fy = f2 + ((r as f64 - yc) * dx).powi(2);
+            for ((o, &k), &x2) in row.iter_mut().zip(k).zip(&x2) {
+                let c2 = f2 / (fy + x2);
+                *o = (k * (c2 * c2)) as f32;
+            }
+        } else {
+            for (o, &k) in row.iter_mut().zip(k) {
+                *o = k as f32;
+            }
+        }
+    });
+    Ok(Some(ElectronRate { rows: s.rows, cols: s.cols, electrons_per_s: out }))
 }
 
 /// Run the simulation and write its outputs; on any error nothing is left in the output folder.
@@ -163,8 +246,10 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
             tick = std::time::Instant::now();
         }
     };
-    let fixed = fixed_pattern(sensor, opts.seed);
-    lap("fixed pattern");
+    // Fixed patterns: one frame draws them row by row inside the frame loop (same values,
+    // no full-size maps); several frames share the maps, built once on first use.
+    let total_frames: usize = if opts.expected { 0 } else { set.shots.iter().map(|s| s.frames.len()).sum() };
+    let mut fixed: Option<FixedPattern> = None;
     let mut cache: HashMap<&str, ElectronRate> = HashMap::new();
     let mut summary = SimulateSummary::default();
     std::fs::create_dir_all(staging).map_err(|e| CliError::output(staging, e))?;
@@ -191,7 +276,16 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
             bar.inc(1);
         } else {
             for (fi, f) in shot.frames.iter().enumerate() {
-                let frame = expose(sensor, rate, &sh, &fixed, opts.seed, &[si as u64, fi as u64]);
+                let pattern = if total_frames <= 1 {
+                    PatternSource::Seeded(opts.seed)
+                } else {
+                    if fixed.is_none() {
+                        fixed = Some(fixed_pattern(sensor, opts.seed));
+                        lap("fixed pattern");
+                    }
+                    PatternSource::Maps(fixed.as_ref().expect("built above"))
+                };
+                let frame = expose_with(sensor, rate, &sh, pattern, opts.seed, &[si as u64, fi as u64]);
                 lap("expose");
                 let rel = PathBuf::from(f);
                 let dst = staging.join(&rel);
@@ -212,4 +306,64 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
 /// Used by tests: the photon spectrum of a W spectrum with the baseline constants.
 pub fn photons(s: &Spectrum) -> Spectrum {
     s.energy_to_photons(&SI)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn write(dir: &Path, optics: serde_json::Value, shots: serde_json::Value) -> CaptureSet {
+        let camera = json!({
+            "name": "t",
+            "optics": optics,
+            "sensor": {"rows": 37, "cols": 52, "pixel_pitch_um": 2.2, "fill_factor": 0.6, "cfa": ["gr", "bg"],
+                       "channels": {"r": {"wavelength_nm": [400, 550, 700], "values": [0.05, 0.2, 0.6]},
+                                    "g": {"wavelength_nm": [400, 520, 600, 700], "values": [0.1, 0.7, 0.3, 0.05]},
+                                    "b": {"wavelength_nm": [400, 450, 700], "values": [0.6, 0.5, 0.02]}},
+                       "well_capacity_e": 20000, "conversion_gain_v_per_e": 5.0e-5, "voltage_swing_v": 1.0,
+                       "adc_bits": 12, "black_level_dn": 64.0, "dark_voltage_v_per_s": 1.0e-3,
+                       "read_noise_v": 1.0e-3, "dsnu_sigma_v": 1.0e-3, "prnu_sigma_percent": 1.0}
+        });
+        std::fs::write(dir.join("camera.json"), camera.to_string()).unwrap();
+        std::fs::write(dir.join("captures.json"), json!({"camera": "camera.json", "shots": shots}).to_string()).unwrap();
+        crate::config::load_captures(&dir.join("captures.json"), None).unwrap()
+    }
+
+    #[test]
+    fn uniform_fast_path_matches_general_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let shots = json!([
+            {"id": "a", "exposure_s": 0.01, "frames": ["a.png"],
+             "target": {"kind": "uniform", "radiance": {"wavelength_nm": [400, 500, 700], "values": [0.002, 0.004, 0.001]}}},
+            {"id": "b", "exposure_s": 0.01, "frames": ["b.png"],
+             "target": {"kind": "uniform", "radiance": 0.003, "mean_luminance_cd_m2": 50.0}},
+            {"id": "c", "exposure_s": 0.01, "frames": ["c.png"], "target": {"kind": "dark"}}
+        ]);
+        for ri in ["cos4", "none"] {
+            // A short focal length makes the cos⁴ fall-off across this small sensor large.
+            let optics = json!({"f_number": 2.8, "focal_length_mm": 0.05, "transmittance": 0.9,
+                                "relative_illumination": ri, "blur": {"kind": "none"}});
+            let set = write(dir.path(), optics, shots.clone());
+            let grid = wavelength_grid(&set);
+            for si in 0..3 {
+                let fast = uniform_electron_rate(&set, si, &grid).unwrap().expect("fast path applies");
+                let general = electron_rate(&set.camera.sensor, &shot_irradiance(&set, si, &grid).unwrap());
+                assert_eq!((fast.rows, fast.cols), (general.rows, general.cols));
+                let (lo, hi) = general.electrons_per_s.iter().fold((f32::MAX, 0f32), |(a, b), &v| (a.min(v), b.max(v)));
+                if si < 2 && ri == "cos4" {
+                    assert!(lo < 0.9 * hi, "fall-off visible: {lo} {hi}");
+                }
+                for (i, (a, b)) in fast.electrons_per_s.iter().zip(&general.electrons_per_s).enumerate() {
+                    let (a, b) = (*a as f64, *b as f64);
+                    assert!((a - b).abs() <= 1e-6 * b.abs(), "{ri} shot {si} pixel {i}: {a} vs {b}");
+                }
+            }
+        }
+        // Not applicable with blur.
+        let optics = json!({"f_number": 2.8, "focal_length_mm": 3.0, "relative_illumination": "cos4",
+                            "blur": {"kind": "gaussian", "sigma_um": 1.0}});
+        let set = write(dir.path(), optics, shots);
+        assert!(uniform_electron_rate(&set, 0, &wavelength_grid(&set)).unwrap().is_none());
+    }
 }

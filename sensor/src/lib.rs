@@ -22,6 +22,8 @@
 
 mod integrate;
 pub mod isetcam;
+pub mod normal;
+pub mod pixel_rng;
 mod noise;
 pub mod poisson;
 
@@ -31,7 +33,8 @@ use thiserror::Error;
 pub use camsim_core::{RawFrame, SensorIrradiance};
 pub use integrate::{box_weights, electron_rate};
 pub use noise::{
-    auto_exposure_s, expected_dn, expected_volts, expose, fixed_pattern, FIXED_PATTERN_TAG,
+    auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern, PatternSource,
+    FIXED_PATTERN_TAG,
 };
 
 /// Errors of the sensor stage.

@@ -1,10 +1,10 @@
 //! Steps 3–7 of the baseline forward model: electrons, noise, volts, ADC.
+use crate::normal::Ziggurat;
+use crate::pixel_rng::PixelRng;
 use crate::poisson::PoissonSampler;
 use crate::{ElectronRate, FixedPattern, SensorModel, Shot};
 use camsim_core::rng::stream;
 use camsim_core::RawFrame;
-use rand::RngExt;
-use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 /// First stream id of every fixed-pattern stream: `stream(seed, &[FIXED_PATTERN_TAG, kind, …])`
@@ -20,13 +20,9 @@ pub fn fixed_pattern(sensor: &SensorModel, seed: u64) -> FixedPattern {
     let per_row = |kind: u64, sigma: f64, base: f32| -> Vec<f32> {
         let mut out = vec![base; rows * cols];
         if sigma > 0.0 {
-            out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
-                let mut rng = stream(seed, &[FIXED_PATTERN_TAG, kind, r as u64]);
-                for o in row.iter_mut() {
-                    let z: f64 = rng.sample(StandardNormal);
-                    *o = (base as f64 + sigma * z) as f32;
-                }
-            });
+            out.par_chunks_mut(cols)
+                .enumerate()
+                .for_each(|(r, row)| pattern_row(seed, kind, r, sigma, base, row));
         }
         out
     };
@@ -34,19 +30,10 @@ pub fn fixed_pattern(sensor: &SensorModel, seed: u64) -> FixedPattern {
     let prnu_gain = per_row(0, sensor.prnu_sigma_percent / 100.0, 1.0);
     // Step 5: DSNU offset D_i ~ N(0, dsnu²) volts.
     let dsnu_v = per_row(1, sensor.dsnu_sigma_v, 0.0);
-    let col_sigma = sensor.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
-    let column_offset_v = if col_sigma > 0.0 {
-        let mut rng = stream(seed, &[FIXED_PATTERN_TAG, 2]);
-        (0..cols)
-            .map(|_| (col_sigma * rng.sample::<f64, _>(StandardNormal)) as f32)
-            .collect()
-    } else {
-        vec![0.0; cols]
-    };
     FixedPattern {
         prnu_gain,
         dsnu_v,
-        column_offset_v,
+        column_offset_v: column_offsets(sensor, seed),
     }
 }
 
@@ -137,6 +124,45 @@ pub fn expected_dn(sensor: &SensorModel, rate: &ElectronRate, shot: &Shot) -> Ve
         .collect()
 }
 
+/// Where [`expose`] takes the fixed per-pixel patterns from.
+#[derive(Debug, Clone, Copy)]
+pub enum PatternSource<'a> {
+    /// Precomputed maps ([`fixed_pattern`]).
+    Maps(&'a FixedPattern),
+    /// Drawn row by row, inside the frame loop, from the same per-row streams that
+    /// [`fixed_pattern`]`(sensor, seed)` uses: bit-identical values without the full-size maps
+    /// (cheaper for a frame or two; for many frames of one camera the maps are reused).
+    Seeded(u64),
+}
+
+/// One row of PRNU gains `1 + P_i` or DSNU offsets `D_i` (kind 0 / 1), exactly as
+/// [`fixed_pattern`] draws row `r`.
+#[inline]
+fn pattern_row(seed: u64, kind: u64, r: usize, sigma: f64, base: f32, row: &mut [f32]) {
+    if sigma > 0.0 {
+        let mut rng = PixelRng::from_stream(stream(seed, &[FIXED_PATTERN_TAG, kind, r as u64]));
+        let zig = Ziggurat::new();
+        for o in row.iter_mut() {
+            *o = (base as f64 + sigma * zig.sample(&mut rng)) as f32;
+        }
+    } else {
+        row.fill(base);
+    }
+}
+
+/// Column offsets as [`fixed_pattern`] draws them (zeros without column FPN).
+fn column_offsets(sensor: &SensorModel, seed: u64) -> Vec<f32> {
+    let col_sigma = sensor.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+    if col_sigma > 0.0 {
+        let mut rng = stream(seed, &[FIXED_PATTERN_TAG, 2]);
+        (0..sensor.cols)
+            .map(|_| (col_sigma * crate::normal::standard_normal(&mut rng)) as f32)
+            .collect()
+    } else {
+        vec![0.0; sensor.cols]
+    }
+}
+
 /// Simulates one frame of a shot (steps 3–7). Row `r` draws from
 /// `stream(seed, &[stream…, r])`, so a frame is bit-identical whatever the thread count;
 /// `stream` is `[shot index, frame index]`.
@@ -152,76 +178,252 @@ pub fn expose(
     seed: u64,
     stream_ids: &[u64],
 ) -> RawFrame {
+    expose_with(sensor, rate, shot, PatternSource::Maps(fixed), seed, stream_ids)
+}
+
+/// [`expose`] with the fixed patterns from `pattern`: `PatternSource::Seeded(s)` gives the
+/// same frame as `expose(…, &fixed_pattern(sensor, s), …)` without building the maps.
+pub fn expose_with(
+    sensor: &SensorModel,
+    rate: &ElectronRate,
+    shot: &Shot,
+    pattern: PatternSource<'_>,
+    seed: u64,
+    stream_ids: &[u64],
+) -> RawFrame {
     check_rate(sensor, rate);
     let (rows, cols) = (sensor.rows, sensor.cols);
     let sw = sensor.noise;
-    if sw.prnu {
-        assert_eq!(fixed.prnu_gain.len(), rows * cols, "PRNU pattern size");
-    }
-    if sw.dsnu {
-        assert_eq!(fixed.dsnu_v.len(), rows * cols, "DSNU pattern size");
-    }
-    let ch = Chain::new(sensor, shot);
-    let read_sigma = if sw.read { sensor.read_noise_v } else { 0.0 };
-    // Reset (kTC) noise: cancelled by CDS, else a new N(0, σ²) per pixel and frame (step 5).
-    let reset_sigma = sensor
-        .reset_noise
-        .filter(|r| !r.cds)
-        .map_or(0.0, |r| r.sigma_v);
+    let seeded_cols;
+    let col_off: &[f32] = match pattern {
+        PatternSource::Maps(fixed) => {
+            if sw.prnu {
+                assert_eq!(fixed.prnu_gain.len(), rows * cols, "PRNU pattern size");
+            }
+            if sw.dsnu {
+                assert_eq!(fixed.dsnu_v.len(), rows * cols, "DSNU pattern size");
+            }
+            &fixed.column_offset_v
+        }
+        PatternSource::Seeded(s) => {
+            seeded_cols = column_offsets(sensor, s);
+            &seeded_cols
+        }
+    };
     let zero_cols = vec![0f32; cols];
-    let col_off: &[f32] = if sensor.column_fpn.is_some() && fixed.column_offset_v.len() == cols {
-        &fixed.column_offset_v
+    let col_off: &[f32] = if sensor.column_fpn.is_some() && col_off.len() == cols {
+        col_off
     } else {
         &zero_cols
     };
+    let k = Kernel {
+        ch: Chain::new(sensor, shot),
+        sw,
+        read_sigma: if sw.read { sensor.read_noise_v } else { 0.0 },
+        // Reset (kTC) noise: cancelled by CDS, else a new N(0, σ²) per pixel and frame (step 5).
+        reset_sigma: sensor
+            .reset_noise
+            .filter(|r| !r.cds)
+            .map_or(0.0, |r| r.sigma_v),
+    };
+    let prnu_sigma = sensor.prnu_sigma_percent / 100.0;
     let mut dn = vec![0u16; rows * cols];
-    dn.par_chunks_mut(cols).enumerate().for_each(|(r, out)| {
-        let mut ids = Vec::with_capacity(stream_ids.len() + 1);
-        ids.extend_from_slice(stream_ids);
-        ids.push(r as u64);
-        let mut rng = stream(seed, &ids);
-        let mut pois = PoissonSampler::default();
-        let base = r * cols;
-        let rates = &rate.electrons_per_s[base..base + cols];
-        for (c, o) in out.iter_mut().enumerate() {
-            // Step 2: mean photo-electrons e = rate · t.
-            let mut e = rates[c] as f64 * ch.t;
-            // Step 4: PRNU scales the signal (never negative).
-            if sw.prnu {
-                e = (e * fixed.prnu_gain[base + c] as f64).max(0.0);
-            }
-            // Step 4: n ~ Poisson(e(1+P) + d); a switched-off term enters at its mean.
-            let n = match (sw.shot, sw.dark) {
-                (true, true) => pois.sample(&mut rng, e + ch.dark_e),
-                (true, false) => pois.sample(&mut rng, e) + ch.dark_e,
-                (false, true) => e + pois.sample(&mut rng, ch.dark_e),
-                (false, false) => e + ch.dark_e,
+    dn.par_chunks_mut(cols).enumerate().for_each_init(
+        RowBuffers::default,
+        |bufs, (r, out)| {
+            let mut ids = Vec::with_capacity(stream_ids.len() + 1);
+            ids.extend_from_slice(stream_ids);
+            ids.push(r as u64);
+            let mut rng = PixelRng::from_stream(stream(seed, &ids));
+            let base = r * cols;
+            let rates = &rate.electrons_per_s[base..base + cols];
+            let RowBuffers { prnu: pbuf, dsnu: dbuf, electrons, volts } = bufs;
+            let (prnu, dsnu): (Option<&[f32]>, Option<&[f32]>) = match pattern {
+                PatternSource::Maps(f) => (
+                    sw.prnu.then(|| &f.prnu_gain[base..base + cols]),
+                    sw.dsnu.then(|| &f.dsnu_v[base..base + cols]),
+                ),
+                PatternSource::Seeded(s) => {
+                    if sw.prnu {
+                        pbuf.resize(cols, 0.0);
+                        pattern_row(s, 0, r, prnu_sigma, 1.0, pbuf);
+                    }
+                    if sw.dsnu {
+                        dbuf.resize(cols, 0.0);
+                        pattern_row(s, 1, r, sensor.dsnu_sigma_v, 0.0, dbuf);
+                    }
+                    (sw.prnu.then_some(&pbuf[..]), sw.dsnu.then_some(&dbuf[..]))
+                }
             };
-            // Step 4: clipped at the well capacity.
-            let n = n.min(ch.well);
-            // Step 5: v = n·g + D + column offset + r (+ reset noise).
-            let mut v = n * ch.g + col_off[c] as f64;
-            if sw.dsnu {
-                v += fixed.dsnu_v[base + c] as f64;
-            }
-            if read_sigma > 0.0 {
-                v += read_sigma * rng.sample::<f64, _>(StandardNormal);
-            }
-            if reset_sigma > 0.0 {
-                v += reset_sigma * rng.sample::<f64, _>(StandardNormal);
-            }
-            // Steps 6–7: output volts, rounding, clamping.
-            let u = ch.output_v(v);
-            // Clamp first, then round half up by truncation (non-negative, so this equals
-            // round-half-away-from-zero; avoids a libm call per pixel).
-            *o = ((u * ch.dn_per_v + ch.black).clamp(0.0, ch.max_dn) + 0.5) as u16;
-        }
-    });
+            electrons.resize(cols, 0.0);
+            volts.resize(cols, 0.0);
+            k.row(rates, prnu, dsnu, col_off, &mut rng, electrons, volts, out);
+        },
+    );
     RawFrame {
         rows,
         cols,
         adc_bits: sensor.adc_bits,
-        dn: dn,
+        dn,
+    }
+}
+
+/// Per-thread row buffers of [`expose_with`].
+#[derive(Default)]
+struct RowBuffers {
+    prnu: Vec<f32>,
+    dsnu: Vec<f32>,
+    electrons: Vec<f64>,
+    volts: Vec<f64>,
+}
+
+/// Whether the CPU has AVX2 and BMI1/2 (checked once).
+#[cfg(target_arch = "x86_64")]
+fn avx2() -> bool {
+    static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *HAS.get_or_init(|| {
+        std::is_x86_feature_detected!("avx2")
+            && std::is_x86_feature_detected!("bmi1")
+            && std::is_x86_feature_detected!("bmi2")
+    })
+}
+
+/// Per-frame constants of the pixel loop of [`expose`].
+struct Kernel {
+    ch: Chain,
+    sw: crate::NoiseSwitches,
+    read_sigma: f64,
+    reset_sigma: f64,
+}
+
+impl Kernel {
+    /// One row of DN from its electron rates, PRNU gains and DSNU offsets (None: switched off).
+    ///
+    /// The row is done in passes so that the random draws run in tight loops and the
+    /// arithmetic vectorises: (1) mean electrons, (2) electrons n (all Poisson draws of the
+    /// row, in column order), (3) temporal voltage noise (then all read-noise normals, each
+    /// followed by its reset-noise normal), (4) volts → DN.
+    #[allow(clippy::too_many_arguments)]
+    fn row(
+        &self,
+        rates: &[f32],
+        prnu: Option<&[f32]>,
+        dsnu: Option<&[f32]>,
+        col_off: &[f32],
+        rng: &mut PixelRng,
+        n: &mut [f64],
+        noise: &mut [f64],
+        out: &mut [u16],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU supports the features the function is compiled for.
+            unsafe { self.row_avx2(rates, prnu, dsnu, col_off, rng, n, noise, out) };
+            return;
+        }
+        self.row_impl(rates, prnu, dsnu, col_off, rng, n, noise, out);
+    }
+
+    /// [`Kernel::row_impl`] compiled for AVX2/BMI2: wider vectors in the arithmetic passes
+    /// and shorter generator code. IEEE arithmetic is the same with and without these
+    /// instructions (no fused multiply-add is used), so the results are bit-identical.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,bmi1,bmi2")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn row_avx2(
+        &self,
+        rates: &[f32],
+        prnu: Option<&[f32]>,
+        dsnu: Option<&[f32]>,
+        col_off: &[f32],
+        rng: &mut PixelRng,
+        n: &mut [f64],
+        noise: &mut [f64],
+        out: &mut [u16],
+    ) {
+        self.row_impl(rates, prnu, dsnu, col_off, rng, n, noise, out);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn row_impl(
+        &self,
+        rates: &[f32],
+        prnu: Option<&[f32]>,
+        dsnu: Option<&[f32]>,
+        col_off: &[f32],
+        rng: &mut PixelRng,
+        n: &mut [f64],
+        noise: &mut [f64],
+        out: &mut [u16],
+    ) {
+        let (ch, sw) = (&self.ch, self.sw);
+        // (1) Step 2: mean photo-electrons e = rate · t; step 4: PRNU scales the signal (never
+        // negative).
+        match prnu {
+            Some(p) => n
+                .iter_mut()
+                .zip(rates)
+                .zip(p)
+                .for_each(|((e, &r), &g)| *e = (r as f64 * ch.t * g as f64).max(0.0)),
+            None => n
+                .iter_mut()
+                .zip(rates)
+                .for_each(|(e, &r)| *e = r as f64 * ch.t),
+        }
+        // (2) Step 4: n ~ Poisson(e(1+P) + d), a switched-off term at its mean; clipped at the
+        // well capacity.
+        let mut pois = PoissonSampler::default();
+        let (d, well) = (ch.dark_e, ch.well);
+        match (sw.shot, sw.dark) {
+            (true, true) => n
+                .iter_mut()
+                .for_each(|e| *e = pois.sample(rng, *e + d).min(well)),
+            (true, false) => n
+                .iter_mut()
+                .for_each(|e| *e = (pois.sample(rng, *e) + d).min(well)),
+            (false, true) => n
+                .iter_mut()
+                .for_each(|e| *e = (*e + pois.sample(rng, d)).min(well)),
+            (false, false) => n.iter_mut().for_each(|e| *e = (*e + d).min(well)),
+        }
+        // (3) Step 5: read noise r (+ reset noise without CDS), volts.
+        let zig = Ziggurat::new();
+        let standard_normal = |rng: &mut PixelRng| zig.sample(rng);
+        match (self.read_sigma > 0.0, self.reset_sigma > 0.0) {
+            (true, true) => noise.iter_mut().for_each(|v| {
+                let r = self.read_sigma * standard_normal(rng);
+                *v = r + self.reset_sigma * standard_normal(rng);
+            }),
+            (true, false) => noise
+                .iter_mut()
+                .for_each(|v| *v = self.read_sigma * standard_normal(rng)),
+            (false, true) => noise
+                .iter_mut()
+                .for_each(|v| *v = self.reset_sigma * standard_normal(rng)),
+            (false, false) => noise.fill(0.0),
+        }
+        // (4) Step 5: v = n·g + column offset + D + r; steps 6–7: output volts, rounding,
+        // clamping. Clamp first, then round half up by truncation (non-negative, so this equals
+        // round-half-away-from-zero; avoids a libm call per pixel).
+        let quantise = |n: f64, col: f32, dsnu: f64, r: f64| -> u16 {
+            let v = n * ch.g + col as f64 + dsnu + r;
+            let u = ch.output_v(v);
+            // In [0, 65535.5] after the clamp: `as i32` is exact and vectorises.
+            ((u * ch.dn_per_v + ch.black).clamp(0.0, ch.max_dn) + 0.5) as i32 as u16
+        };
+        match dsnu {
+            Some(ds) => {
+                for c in 0..out.len() {
+                    out[c] = quantise(n[c], col_off[c], ds[c] as f64, noise[c]);
+                }
+            }
+            None => {
+                for c in 0..out.len() {
+                    out[c] = quantise(n[c], col_off[c], 0.0, noise[c]);
+                }
+            }
+        }
     }
 }
 

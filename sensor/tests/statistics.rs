@@ -97,9 +97,11 @@ fn poisson_gof(samples: &[f64], model_mean: f64) -> f64 {
 #[test]
 fn poisson_sampler_chi_square_goodness_of_fit() {
     // H0: the sampler draws Poisson(mean). Reject at α = 1e-3 per mean. The inversion branch
-    // (3), PTRS (30, 3000) and a large mean (2e5) are covered.
+    // (3, 9.99), algorithm PD just above its threshold (10, 10.5: steps S, Q and E often run,
+    // and candidates K < 10 use the exact small-K probabilities), mid (30, 1900.3, 3000) and
+    // large means (2e5) are covered.
     let n = 200_000;
-    for (i, &mean) in [3.0, 30.0, 3000.0, 2e5].iter().enumerate() {
+    for (i, &mean) in [3.0, 9.99, 10.0, 10.5, 30.0, 1900.3, 3000.0, 2e5].iter().enumerate() {
         let mut rng = camsim_core::rng::stream(11, &[i as u64]);
         let x: Vec<f64> = (0..n).map(|_| sample_poisson(&mut rng, mean)).collect();
         let p = poisson_gof(&x, mean);
@@ -113,10 +115,84 @@ fn poisson_sampler_chi_square_goodness_of_fit() {
             "mean {mean}: mean {m}"
         );
     }
+    // A sampler reused across alternating means (its per-mean cache is refreshed on every
+    // call) draws the right mixture: each mean's draws fit separately.
+    let mut rng = camsim_core::rng::stream(13, &[]);
+    let mut ps = camsim_sensor::poisson::PoissonSampler::default();
+    let means = [12.5, 2000.0, 4.0];
+    let mut xs = vec![Vec::with_capacity(n); 3];
+    for i in 0..3 * n {
+        xs[i % 3].push(ps.sample(&mut rng, means[i % 3]));
+    }
+    for (x, &mean) in xs.iter().zip(&means) {
+        let p = poisson_gof(x, mean);
+        assert!(p > 1e-3, "alternating, mean {mean}: chi-square p = {p}");
+    }
     // Power: the same test rejects a 1.7 % error in the mean (30 drawn, 30.5 modelled).
     let mut rng = camsim_core::rng::stream(12, &[]);
     let x: Vec<f64> = (0..n).map(|_| sample_poisson(&mut rng, 30.0)).collect();
     assert!(poisson_gof(&x, 30.5) < 1e-3);
+}
+
+#[test]
+fn ziggurat_normal_chi_square_goodness_of_fit() {
+    // H0: standard_normal draws N(0, 1). 4e6 draws in 0.05-wide bins over [−4.5, 4.5] (the
+    // layer edges of the ziggurat fall inside bins, and the tail method takes over at 3.654),
+    // the two tails beyond ±4.5 in their own bins; α = 1e-3. Also the mean, the variance and
+    // the tail masses beyond ±3.654 (where the tail algorithm acts) within 5 standard errors.
+    use camsim_sensor::normal::standard_normal;
+    let n = 4_000_000usize;
+    let mut rng = camsim_sensor::pixel_rng::PixelRng::from_stream(camsim_core::rng::stream(21, &[]));
+    let x: Vec<f64> = (0..n).map(|_| standard_normal(&mut rng)).collect();
+    let nd = Normal::new(0.0, 1.0).unwrap();
+    let w = 0.05;
+    let nb = (9.0 / w) as usize; // 180 bins over [−4.5, 4.5]
+    let mut obs = vec![0f64; nb + 2];
+    for &v in &x {
+        let i = if v < -4.5 {
+            0
+        } else if v >= 4.5 {
+            nb + 1
+        } else {
+            1 + (((v + 4.5) / w) as usize).min(nb - 1)
+        };
+        obs[i] += 1.0;
+    }
+    let mut probs = vec![nd.cdf(-4.5)];
+    probs.extend((0..nb).map(|b| {
+        let a = -4.5 + w * b as f64;
+        nd.cdf(a + w) - nd.cdf(a)
+    }));
+    probs.push(nd.sf(4.5));
+    let p = chi_square_p(&obs, &probs, n as f64);
+    assert!(p > 1e-3, "normal chi-square p = {p}");
+    let (m, v) = mean_var(x.iter().copied());
+    assert!(m.abs() < 5.0 / (n as f64).sqrt(), "mean {m}");
+    assert!((v - 1.0).abs() < 5.0 * (2.0 / n as f64).sqrt(), "var {v}");
+    let r = 3.654_152_885_361_008_8;
+    let pt = nd.sf(r);
+    let se = (pt * (1.0 - pt) / n as f64).sqrt();
+    for (name, count) in [
+        ("upper", x.iter().filter(|&&v| v > r).count()),
+        ("lower", x.iter().filter(|&&v| v < -r).count()),
+    ] {
+        let f = count as f64 / n as f64;
+        assert!((f - pt).abs() < 5.0 * se, "{name} tail {f} vs {pt}");
+    }
+    // Power: a 1 % error in σ is rejected by the same test.
+    let y: Vec<f64> = x.iter().map(|v| v * 1.01).collect();
+    let mut obs2 = vec![0f64; nb + 2];
+    for &v in &y {
+        let i = if v < -4.5 {
+            0
+        } else if v >= 4.5 {
+            nb + 1
+        } else {
+            1 + (((v + 4.5) / w) as usize).min(nb - 1)
+        };
+        obs2[i] += 1.0;
+    }
+    assert!(chi_square_p(&obs2, &probs, n as f64) < 1e-3);
 }
 
 #[test]
@@ -420,6 +496,51 @@ fn frames_are_bit_identical_across_thread_counts() {
     let f3 = expose(&s, &rate, &shot, &fp1, 42, &[3, 2]);
     assert_ne!(f1, f3);
     assert_eq!(f1, expose(&s, &rate, &shot, &fp1, 42, &[3, 1]));
+}
+
+#[test]
+fn seeded_patterns_give_the_same_frames_as_the_maps() {
+    // expose_with(PatternSource::Seeded(s)) draws the PRNU/DSNU rows inside the frame loop
+    // from the streams of fixed_pattern(sensor, s): frames must be bit-identical to those made
+    // with the maps, for every switch combination, at 1 and 2 threads, and another pattern
+    // seed must give another frame.
+    let mut s = mono(67, 129);
+    s.column_fpn = Some(ColumnFpn {
+        offset_sigma_v: 1e-3,
+    });
+    s.reset_noise = Some(ResetNoise {
+        sigma_v: 1e-3,
+        cds: false,
+    });
+    let rate = ElectronRate {
+        rows: 67,
+        cols: 129,
+        electrons_per_s: (0..67 * 129).map(|i| (i % 300) as f32 * 700.0).collect(),
+    };
+    let shot = Shot::new(&s, 0.02);
+    let fp = fixed_pattern(&s, 5);
+    for bits in 0..32u32 {
+        s.noise = NoiseSwitches {
+            shot: bits & 1 != 0,
+            dark: bits & 2 != 0,
+            read: bits & 4 != 0,
+            dsnu: bits & 8 != 0,
+            prnu: bits & 16 != 0,
+        };
+        let maps = expose(&s, &rate, &shot, &fp, 9, &[0, 1]);
+        for threads in [1, 2] {
+            let seeded = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| expose_with(&s, &rate, &shot, PatternSource::Seeded(5), 9, &[0, 1]));
+            assert_eq!(seeded, maps, "switches {:?}, {threads} threads", s.noise);
+        }
+        if s.noise.dsnu || s.noise.prnu {
+            let other = expose_with(&s, &rate, &shot, PatternSource::Seeded(6), 9, &[0, 1]);
+            assert_ne!(other, maps, "switches {:?}", s.noise);
+        }
+    }
 }
 
 #[test]
