@@ -206,26 +206,12 @@ pub fn simulate(set: &CaptureSet, opts: &SimulateOptions) -> Result<SimulateSumm
             }
         }
     }
-    let out = &opts.out_dir;
-    let created_out = !out.exists();
-    std::fs::create_dir_all(out).map_err(|e| CliError::output(out, e))?;
-    let staging = out.join(format!(".camsim-staging-{}", std::process::id()));
-    let result = run_into(set, opts, &staging);
-    let result = result.and_then(|summary| {
-        for rel in &summary.files {
-            let dst = out.join(rel);
-            if let Some(parent) = dst.parent() {
-                std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
-            }
-            std::fs::rename(staging.join(rel), &dst).map_err(|e| CliError::output(&dst, e))?;
-        }
-        Ok(summary)
-    });
-    let _ = std::fs::remove_dir_all(&staging);
-    if result.is_err() && created_out {
-        let _ = std::fs::remove_dir_all(out);
-    }
-    result
+    let mut summary = SimulateSummary::default();
+    crate::staging::with_staging(&opts.out_dir, |staging| {
+        summary = run_into(set, opts, staging)?;
+        Ok(summary.files.clone())
+    })?;
+    Ok(summary)
 }
 
 fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<SimulateSummary, CliError> {
@@ -252,7 +238,6 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
     let mut fixed: Option<FixedPattern> = None;
     let mut cache: HashMap<&str, ElectronRate> = HashMap::new();
     let mut summary = SimulateSummary::default();
-    std::fs::create_dir_all(staging).map_err(|e| CliError::output(staging, e))?;
     for (si, shot) in set.shots.iter().enumerate() {
         bar.set_message(shot.id.clone());
         if !cache.contains_key(shot.target_key.as_str()) {
