@@ -3,14 +3,22 @@
 use std::{env, fs, path::Path};
 
 fn walk(dir: &Path, root: &Path, out: &mut Vec<String>) {
-    let mut entries: Vec<_> = fs::read_dir(dir).expect("read data dir").flatten().collect();
+    let mut entries: Vec<_> = fs::read_dir(dir)
+        .expect("read data dir")
+        .flatten()
+        .collect();
     entries.sort_by_key(|e| e.path());
     for e in entries {
         let p = e.path();
         if p.is_dir() {
             walk(&p, root, out);
         } else if p.extension().and_then(|s| s.to_str()) == Some("json") {
-            out.push(p.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/"));
+            out.push(
+                p.strip_prefix(root)
+                    .unwrap()
+                    .to_string_lossy()
+                    .replace('\\', "/"),
+            );
         }
     }
 }

@@ -9,7 +9,9 @@ use crate::raw_input::read_frame;
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_core::spectrum::Spectrum;
-use camsim_diagnose::{calibrate, CalibrationOptions, CalibrationResult, CalibrationShot, Outcome, ShotKind};
+use camsim_diagnose::{
+    calibrate, CalibrationOptions, CalibrationResult, CalibrationShot, Outcome, ShotKind,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -23,9 +25,13 @@ fn shot_kind(t: &Target) -> Option<ShotKind> {
         Target::Uniform { radiance } => {
             let (lo, hi) = radiance.support_nm();
             if hi - lo <= NARROWBAND_MAX_SPAN_NM {
-                Some(ShotKind::Narrowband { radiance: radiance.clone() })
+                Some(ShotKind::Narrowband {
+                    radiance: radiance.clone(),
+                })
             } else {
-                Some(ShotKind::Flat { radiance: radiance.clone() })
+                Some(ShotKind::Flat {
+                    radiance: radiance.clone(),
+                })
             }
         }
         _ => None,
@@ -33,21 +39,38 @@ fn shot_kind(t: &Target) -> Option<ShotKind> {
 }
 
 /// Load every frame of the calibration shots (dark and uniform targets).
-pub fn load_shots(set: &CaptureSet, progress: bool) -> Result<(Vec<CalibrationShot>, Vec<String>), CliError> {
+pub fn load_shots(
+    set: &CaptureSet,
+    progress: bool,
+) -> Result<(Vec<CalibrationShot>, Vec<String>), CliError> {
     let n: usize = set.shots.iter().map(|s| s.frames.len()).sum();
-    let bar = if progress { ProgressBar::new(n as u64) } else { ProgressBar::hidden() };
-    bar.set_style(ProgressStyle::with_template("{spinner} reading frames [{bar:30}] {pos}/{len}").unwrap_or_else(|_| ProgressStyle::default_bar()).progress_chars("=> "));
+    let bar = if progress {
+        ProgressBar::new(n as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} reading frames [{bar:30}] {pos}/{len}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
     let mut shots = Vec::new();
     let mut skipped = Vec::new();
     for s in &set.shots {
         let Some(kind) = shot_kind(&s.target.target) else {
-            skipped.push(format!("{}: not a dark or uniform target, not used for calibration", s.id));
+            skipped.push(format!(
+                "{}: not a dark or uniform target, not used for calibration",
+                s.id
+            ));
             continue;
         };
         let exposure_s = match s.exposure {
             crate::config::Exposure::Fixed(t) => t,
             crate::config::Exposure::Auto(_) => {
-                skipped.push(format!("{}: auto_exposure has no known exposure time, not used", s.id));
+                skipped.push(format!(
+                    "{}: auto_exposure has no known exposure time, not used",
+                    s.id
+                ));
                 continue;
             }
         };
@@ -60,21 +83,39 @@ pub fn load_shots(set: &CaptureSet, progress: bool) -> Result<(Vec<CalibrationSh
             // PNG/TIFF containers hold DN as stored: check they fit the camera's ADC
             let max_dn = (1u32 << set.camera.sensor.adc_bits) - 1;
             if let Some(v) = frame.dn.iter().find(|&&v| v as u32 > max_dn) {
-                return Err(CliError::input(&path, format!("value {v} DN exceeds the camera's {}-bit ADC range (max {max_dn})", set.camera.sensor.adc_bits)));
+                return Err(CliError::input(
+                    &path,
+                    format!(
+                        "value {v} DN exceeds the camera's {}-bit ADC range (max {max_dn})",
+                        set.camera.sensor.adc_bits
+                    ),
+                ));
             }
             frame.adc_bits = set.camera.sensor.adc_bits;
             frames.push(frame);
             bar.inc(1);
         }
-        shots.push(CalibrationShot { id: s.id.clone(), kind, exposure_s, analog_gain: s.analog_gain, frames });
+        shots.push(CalibrationShot {
+            id: s.id.clone(),
+            kind,
+            exposure_s,
+            analog_gain: s.analog_gain,
+            frames,
+        });
     }
     bar.finish_and_clear();
     Ok((shots, skipped))
 }
 
-fn fitted_camera_json(camera_path: &Path, r: &CalibrationResult, names: &[String]) -> Result<Value, CliError> {
-    let text = std::fs::read_to_string(camera_path).map_err(|e| CliError::input(camera_path, format!("cannot read: {e}")))?;
-    let mut cam: Value = serde_json::from_str(&text).map_err(|e| CliError::input(camera_path, format!("invalid: {e}")))?;
+fn fitted_camera_json(
+    camera_path: &Path,
+    r: &CalibrationResult,
+    names: &[String],
+) -> Result<Value, CliError> {
+    let text = std::fs::read_to_string(camera_path)
+        .map_err(|e| CliError::input(camera_path, format!("cannot read: {e}")))?;
+    let mut cam: Value = serde_json::from_str(&text)
+        .map_err(|e| CliError::input(camera_path, format!("invalid: {e}")))?;
     let s = &mut cam["sensor"];
     let mut set = |k: &str, v: Option<f64>| {
         if let Some(v) = v {
@@ -91,7 +132,8 @@ fn fitted_camera_json(camera_path: &Path, r: &CalibrationResult, names: &[String
     if let Some(q) = r.channel_qe.get() {
         for ch in &q.channels {
             if names.contains(&ch.name) {
-                cam["sensor"]["channels"][&ch.name] = json!({"wavelength_nm": q.wavelength_nm, "values": ch.qe});
+                cam["sensor"]["channels"][&ch.name] =
+                    json!({"wavelength_nm": q.wavelength_nm, "values": ch.qe});
             }
         }
     }
@@ -109,7 +151,9 @@ fn outcome_row(name: &str, o: &Outcome<camsim_diagnose::Estimate>) -> String {
 }
 
 fn html_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 /// Run the calibration and write its outputs into `out` (all or nothing).
@@ -134,22 +178,38 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
             st.join(n)
         };
         let p = put("fitted_camera.json");
-        std::fs::write(&p, serde_json::to_string_pretty(&fitted).expect("json")).map_err(|e| CliError::output(&p, e))?;
+        std::fs::write(&p, serde_json::to_string_pretty(&fitted).expect("json"))
+            .map_err(|e| CliError::output(&p, e))?;
         let p = put("calibration.json");
-        std::fs::write(&p, serde_json::to_string_pretty(&summary).expect("json")).map_err(|e| CliError::output(&p, e))?;
+        std::fs::write(&p, serde_json::to_string_pretty(&summary).expect("json"))
+            .map_err(|e| CliError::output(&p, e))?;
         let mut figures: Vec<(String, String)> = Vec::new();
         // photon-transfer curve per channel (unit-gain DN)
         let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
         for ch in &sensor.channel_names {
-            let mut pts: Vec<(f64, f64)> = result.ptc.iter().filter(|p| &p.channel == ch).map(|p| (p.unit_gain_mean, p.unit_gain_variance)).collect();
+            let mut pts: Vec<(f64, f64)> = result
+                .ptc
+                .iter()
+                .filter(|p| &p.channel == ch)
+                .map(|p| (p.unit_gain_mean, p.unit_gain_variance))
+                .collect();
             pts.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
             if pts.len() >= 2 {
                 series.push((format!("channel {ch}"), pts));
             }
         }
         if !series.is_empty() {
-            plots::line_plot(&put("photon_transfer.png"), "Photon transfer: temporal variance vs mean", &series, ("mean signal (DN, unit gain)", "variance (DN²)"))?;
-            figures.push(("photon_transfer.png".into(), "Photon-transfer curve (EMVA 1288): slope = conversion gain in DN per electron".into()));
+            plots::line_plot(
+                &put("photon_transfer.png"),
+                "Photon transfer: temporal variance vs mean",
+                &series,
+                ("mean signal (DN, unit gain)", "variance (DN²)"),
+            )?;
+            figures.push((
+                "photon_transfer.png".into(),
+                "Photon-transfer curve (EMVA 1288): slope = conversion gain in DN per electron"
+                    .into(),
+            ));
         }
         // dark signal vs exposure
         let mut dark: Vec<(f64, f64)> = shots
@@ -157,40 +217,102 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
             .filter(|s| matches!(s.kind, ShotKind::Dark) && !s.frames.is_empty())
             .map(|s| {
                 let n: usize = s.frames.iter().map(|f| f.dn.len()).sum();
-                let m = s.frames.iter().flat_map(|f| f.dn.iter()).map(|&d| d as f64).sum::<f64>() / n.max(1) as f64;
+                let m = s
+                    .frames
+                    .iter()
+                    .flat_map(|f| f.dn.iter())
+                    .map(|&d| d as f64)
+                    .sum::<f64>()
+                    / n.max(1) as f64;
                 (s.exposure_s, m)
             })
             .collect();
         dark.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
         if dark.len() >= 2 {
-            plots::line_plot(&put("dark_signal.png"), "Mean dark signal vs exposure", &[("dark shots".into(), dark)], ("exposure (s)", "mean dark signal (DN)"))?;
-            figures.push(("dark_signal.png".into(), "Dark signal growth: slope = dark voltage (Appendix A)".into()));
+            plots::line_plot(
+                &put("dark_signal.png"),
+                "Mean dark signal vs exposure",
+                &[("dark shots".into(), dark)],
+                ("exposure (s)", "mean dark signal (DN)"),
+            )?;
+            figures.push((
+                "dark_signal.png".into(),
+                "Dark signal growth: slope = dark voltage (Appendix A)".into(),
+            ));
         }
         // DSNU: histogram of the frame-averaged shortest dark
-        if let Some(s) = shots.iter().filter(|s| matches!(s.kind, ShotKind::Dark) && !s.frames.is_empty()).min_by(|a, b| a.exposure_s.partial_cmp(&b.exposure_s).unwrap_or(std::cmp::Ordering::Equal)) {
+        if let Some(s) = shots
+            .iter()
+            .filter(|s| matches!(s.kind, ShotKind::Dark) && !s.frames.is_empty())
+            .min_by(|a, b| {
+                a.exposure_s
+                    .partial_cmp(&b.exposure_s)
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            })
+        {
             let n = s.frames.len() as f64;
-            let mean: Vec<f64> = (0..s.frames[0].dn.len()).map(|i| s.frames.iter().map(|f| f.dn[i] as f64).sum::<f64>() / n).collect();
-            plots::histogram(&put("dsnu_histogram.png"), &format!("Frame-averaged dark ({}), DSNU", s.id), &mean, 40, "DN")?;
-            figures.push(("dsnu_histogram.png".into(), "Fixed-pattern offsets: histogram of the frame-averaged shortest dark".into()));
-            let (lo, hi) = mean.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, v| (a.0.min(*v), a.1.max(*v)));
-            let rgb: Vec<u8> = mean.iter().flat_map(|v| {
-                let g = (((v - lo) / (hi - lo).max(1e-12)) * 255.0).round() as u8;
-                [g, g, g]
-            }).collect();
-            plots::rgb8_png(&put("dsnu_map.png"), &rgb, s.frames[0].rows, s.frames[0].cols)?;
-            figures.push(("dsnu_map.png".into(), "DSNU map (frame-averaged shortest dark, stretched)".into()));
+            let mean: Vec<f64> = (0..s.frames[0].dn.len())
+                .map(|i| s.frames.iter().map(|f| f.dn[i] as f64).sum::<f64>() / n)
+                .collect();
+            plots::histogram(
+                &put("dsnu_histogram.png"),
+                &format!("Frame-averaged dark ({}), DSNU", s.id),
+                &mean,
+                40,
+                "DN",
+            )?;
+            figures.push((
+                "dsnu_histogram.png".into(),
+                "Fixed-pattern offsets: histogram of the frame-averaged shortest dark".into(),
+            ));
+            let (lo, hi) = mean
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |a, v| {
+                    (a.0.min(*v), a.1.max(*v))
+                });
+            let rgb: Vec<u8> = mean
+                .iter()
+                .flat_map(|v| {
+                    let g = (((v - lo) / (hi - lo).max(1e-12)) * 255.0).round() as u8;
+                    [g, g, g]
+                })
+                .collect();
+            plots::rgb8_png(
+                &put("dsnu_map.png"),
+                &rgb,
+                s.frames[0].rows,
+                s.frames[0].cols,
+            )?;
+            figures.push((
+                "dsnu_map.png".into(),
+                "DSNU map (frame-averaged shortest dark, stretched)".into(),
+            ));
         }
         // QE curves with ±1σ bands
         if let Some(q) = result.channel_qe.get() {
             let mut series = Vec::new();
             for ch in &q.channels {
-                let pts = |k: f64| q.wavelength_nm.iter().zip(ch.qe.iter().zip(&ch.std_error)).map(|(w, (v, e))| (*w, v + k * e)).collect::<Vec<_>>();
+                let pts = |k: f64| {
+                    q.wavelength_nm
+                        .iter()
+                        .zip(ch.qe.iter().zip(&ch.std_error))
+                        .map(|(w, (v, e))| (*w, v + k * e))
+                        .collect::<Vec<_>>()
+                };
                 series.push((format!("{} fitted", ch.name), pts(0.0)));
                 series.push((format!("{} ±1σ", ch.name), pts(1.0)));
                 series.push((format!("{} −1σ", ch.name), pts(-1.0)));
             }
-            plots::line_plot(&put("spectral_qe.png"), "Channel spectral QE (Appendix B)", &series, ("wavelength (nm)", "QE (electrons / photon)"))?;
-            figures.push(("spectral_qe.png".into(), "Recovered combined QE per channel with ±1σ bands".into()));
+            plots::line_plot(
+                &put("spectral_qe.png"),
+                "Channel spectral QE (Appendix B)",
+                &series,
+                ("wavelength (nm)", "QE (electrons / photon)"),
+            )?;
+            figures.push((
+                "spectral_qe.png".into(),
+                "Recovered combined QE per channel with ±1σ bands".into(),
+            ));
         }
         // report
         let mut h = String::from("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>camsim calibration</title><style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}figure{display:inline-block;margin:8px;vertical-align:top}figure img{max-width:520px;border:1px solid #ccc}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}</style></head><body>");
@@ -210,17 +332,28 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
         }
         h.push_str("</table>");
         if let Some(hp) = result.hot_pixels.get() {
-            h.push_str(&format!("<p>Hot pixels: {} above {:.3e} ({})</p>", hp.pixels.len(), hp.threshold, html_escape(&hp.quantity)));
+            h.push_str(&format!(
+                "<p>Hot pixels: {} above {:.3e} ({})</p>",
+                hp.pixels.len(),
+                hp.threshold,
+                html_escape(&hp.quantity)
+            ));
         }
         for r in &result.rejected_shots {
-            h.push_str(&format!("<p>Rejected shot {}: {}</p>", html_escape(&r.id), html_escape(&r.reason)));
+            h.push_str(&format!(
+                "<p>Rejected shot {}: {}</p>",
+                html_escape(&r.id),
+                html_escape(&r.reason)
+            ));
         }
         for s in &skipped {
             h.push_str(&format!("<p>Skipped: {}</p>", html_escape(s)));
         }
         h.push_str("<h2>Figures</h2>");
         for (f, c) in &figures {
-            h.push_str(&format!("<figure><img src=\"{f}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>"));
+            h.push_str(&format!(
+                "<figure><img src=\"{f}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>"
+            ));
         }
         h.push_str("</body></html>\n");
         let p = put("report.html");

@@ -19,7 +19,9 @@ pub struct SpectrumValue(pub Spectrum);
 impl<'de> Deserialize<'de> for SpectrumValue {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let v = Value::deserialize(d)?;
-        spectrum_from_value(&v).map(SpectrumValue).map_err(D::Error::custom)
+        spectrum_from_value(&v)
+            .map(SpectrumValue)
+            .map_err(D::Error::custom)
     }
 }
 
@@ -42,12 +44,17 @@ fn spectrum_from_value(v: &Value) -> Result<Spectrum, String> {
                     .ok_or_else(|| format!("`{key}` must be a list of numbers"))?;
                 a.iter()
                     .enumerate()
-                    .map(|(i, x)| x.as_f64().ok_or_else(|| format!("`{key}[{i}]` is not a number")))
+                    .map(|(i, x)| {
+                        x.as_f64()
+                            .ok_or_else(|| format!("`{key}[{i}]` is not a number"))
+                    })
                     .collect()
             };
             Spectrum::sampled(list("wavelength_nm")?, list("values")?).map_err(|e| e.to_string())
         }
-        _ => Err("a spectrum must be a number or {\"wavelength_nm\": [...], \"values\": [...]}".into()),
+        _ => Err(
+            "a spectrum must be a number or {\"wavelength_nm\": [...], \"values\": [...]}".into(),
+        ),
     }
 }
 
@@ -337,7 +344,8 @@ pub struct CaptureSet {
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::input(path, format!("cannot read: {e}")))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| CliError::input(path, format!("cannot read: {e}")))?;
     serde_json::from_str(&text).map_err(|e| CliError::input(path, format!("invalid: {e}")))
 }
 
@@ -350,12 +358,22 @@ fn check(path: &Path, ok: bool, key: &str, msg: impl std::fmt::Display) -> Resul
 }
 
 fn positive(path: &Path, key: &str, v: f64) -> Result<f64, CliError> {
-    check(path, v.is_finite() && v > 0.0, key, format!("must be a positive number, got {v}"))?;
+    check(
+        path,
+        v.is_finite() && v > 0.0,
+        key,
+        format!("must be a positive number, got {v}"),
+    )?;
     Ok(v)
 }
 
 fn non_negative(path: &Path, key: &str, v: f64) -> Result<f64, CliError> {
-    check(path, v.is_finite() && v >= 0.0, key, format!("must be ≥ 0, got {v}"))?;
+    check(
+        path,
+        v.is_finite() && v >= 0.0,
+        key,
+        format!("must be ≥ 0, got {v}"),
+    )?;
     Ok(v)
 }
 
@@ -370,9 +388,16 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
     let o = &raw.optics;
     let f_number = positive(path, "optics.f_number", o.f_number)?;
     let focal_length_m = positive(path, "optics.focal_length_mm", o.focal_length_mm)? * 1e-3;
-    let transmittance = o.transmittance.clone().map(|s| s.0).unwrap_or(Spectrum::constant(1.0));
+    let transmittance = o
+        .transmittance
+        .clone()
+        .map(|s| s.0)
+        .unwrap_or(Spectrum::constant(1.0));
     if let Some((w, v)) = transmittance.first_negative() {
-        return Err(CliError::input(path, format!("optics.transmittance: negative value {v} at {w} nm")));
+        return Err(CliError::input(
+            path,
+            format!("optics.transmittance: negative value {v} at {w} nm"),
+        ));
     }
     let relative_illumination = match o.relative_illumination.as_deref().unwrap_or("cos4") {
         "cos4" => RelativeIllumination::Cos4,
@@ -411,7 +436,12 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         }),
     };
     if let Some(d) = o.object_distance_m {
-        check(path, d.is_finite() && d > focal_length_m, "optics.object_distance_m", format!("must exceed the focal length, got {d}"))?;
+        check(
+            path,
+            d.is_finite() && d > focal_length_m,
+            "optics.object_distance_m",
+            format!("must exceed the focal length, got {d}"),
+        )?;
     }
     let optics = OpticsModel {
         f_number,
@@ -424,7 +454,11 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         padding: Padding::Replicate,
     };
     let sensor = sensor_from_file(path, &raw.sensor)?;
-    Ok(Camera { name: raw.name.unwrap_or_else(|| "camera".into()), optics, sensor })
+    Ok(Camera {
+        name: raw.name.unwrap_or_else(|| "camera".into()),
+        optics,
+        sensor,
+    })
 }
 
 fn blur_from_file(path: &Path, dir: &Path, b: &BlurFile) -> Result<Blur, CliError> {
@@ -451,11 +485,19 @@ fn blur_from_file(path: &Path, dir: &Path, b: &BlurFile) -> Result<Blur, CliErro
     ];
     for (k, p) in present {
         if p && !allowed.contains(&k) {
-            return Err(CliError::input(path, format!("optics.blur.{k}: not used by blur kind \"{}\"", b.kind)));
+            return Err(CliError::input(
+                path,
+                format!("optics.blur.{k}: not used by blur kind \"{}\"", b.kind),
+            ));
         }
     }
     let need = |k: &str, v: Option<f64>| -> Result<f64, CliError> {
-        v.ok_or_else(|| CliError::input(path, format!("optics.blur.{k}: required for blur kind \"{}\"", b.kind)))
+        v.ok_or_else(|| {
+            CliError::input(
+                path,
+                format!("optics.blur.{k}: required for blur kind \"{}\"", b.kind),
+            )
+        })
     };
     Ok(match b.kind.as_str() {
         "none" => Blur::None,
@@ -478,16 +520,44 @@ fn blur_from_file(path: &Path, dir: &Path, b: &BlurFile) -> Result<Blur, CliErro
 }
 
 fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError> {
-    check(path, s.rows > 0 && s.cols > 0, "sensor.rows/cols", format!("must be positive, got {}×{}", s.rows, s.cols))?;
-    check(path, (1..=16).contains(&s.adc_bits), "sensor.adc_bits", format!("must be 1–16 (frames are 16-bit PNG), got {}", s.adc_bits))?;
+    check(
+        path,
+        s.rows > 0 && s.cols > 0,
+        "sensor.rows/cols",
+        format!("must be positive, got {}×{}", s.rows, s.cols),
+    )?;
+    check(
+        path,
+        (1..=16).contains(&s.adc_bits),
+        "sensor.adc_bits",
+        format!("must be 1–16 (frames are 16-bit PNG), got {}", s.adc_bits),
+    )?;
     let ff = s.fill_factor.unwrap_or(1.0);
-    check(path, ff > 0.0 && ff <= 1.0, "sensor.fill_factor", format!("must be in (0, 1], got {ff}"))?;
-    check(path, !s.cfa.is_empty(), "sensor.cfa", "needs at least one row")?;
+    check(
+        path,
+        ff > 0.0 && ff <= 1.0,
+        "sensor.fill_factor",
+        format!("must be in (0, 1], got {ff}"),
+    )?;
+    check(
+        path,
+        !s.cfa.is_empty(),
+        "sensor.cfa",
+        "needs at least one row",
+    )?;
     let width = s.cfa[0].chars().count();
     let names: Vec<String> = s.channels.keys().cloned().collect();
     let mut tile = Vec::new();
     for (i, row) in s.cfa.iter().enumerate() {
-        check(path, row.chars().count() == width && width > 0, "sensor.cfa", format!("row {i} \"{row}\" has {} letters; every row needs {width}", row.chars().count()))?;
+        check(
+            path,
+            row.chars().count() == width && width > 0,
+            "sensor.cfa",
+            format!(
+                "row {i} \"{row}\" has {} letters; every row needs {width}",
+                row.chars().count()
+            ),
+        )?;
         let mut r = Vec::new();
         for ch in row.chars() {
             let k = names.iter().position(|n| n == &ch.to_string()).ok_or_else(|| {
@@ -499,9 +569,17 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
     }
     for (n, q) in &s.channels {
         if let Some((w, v)) = q.0.first_negative() {
-            return Err(CliError::input(path, format!("sensor.channels.{n}: negative QE {v} at {w} nm")));
+            return Err(CliError::input(
+                path,
+                format!("sensor.channels.{n}: negative QE {v} at {w} nm"),
+            ));
         }
-        check(path, n.chars().count() == 1, &format!("sensor.channels.{n}"), "channel names must be single letters (they are used in sensor.cfa)")?;
+        check(
+            path,
+            n.chars().count() == 1,
+            &format!("sensor.channels.{n}"),
+            "channel names must be single letters (they are used in sensor.cfa)",
+        )?;
     }
     let noise = s.noise.as_ref();
     let sw = |f: fn(&NoiseFile) -> Option<bool>| noise.and_then(f).unwrap_or(true);
@@ -514,16 +592,28 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
         channel_names: names,
         channel_qe: s.channels.values().map(|v| v.0.clone()).collect(),
         well_capacity_e: positive(path, "sensor.well_capacity_e", s.well_capacity_e)?,
-        conversion_gain_v_per_e: positive(path, "sensor.conversion_gain_v_per_e", s.conversion_gain_v_per_e)?,
+        conversion_gain_v_per_e: positive(
+            path,
+            "sensor.conversion_gain_v_per_e",
+            s.conversion_gain_v_per_e,
+        )?,
         voltage_swing_v: positive(path, "sensor.voltage_swing_v", s.voltage_swing_v)?,
         analog_gain: positive(path, "sensor.analog_gain", s.analog_gain.unwrap_or(1.0))?,
         analog_offset_v: s.analog_offset_v.unwrap_or(0.0),
         adc_bits: s.adc_bits,
         black_level_dn: s.black_level_dn.unwrap_or(0.0),
-        dark_voltage_v_per_s: non_negative(path, "sensor.dark_voltage_v_per_s", s.dark_voltage_v_per_s.unwrap_or(0.0))?,
+        dark_voltage_v_per_s: non_negative(
+            path,
+            "sensor.dark_voltage_v_per_s",
+            s.dark_voltage_v_per_s.unwrap_or(0.0),
+        )?,
         read_noise_v: non_negative(path, "sensor.read_noise_v", s.read_noise_v.unwrap_or(0.0))?,
         dsnu_sigma_v: non_negative(path, "sensor.dsnu_sigma_v", s.dsnu_sigma_v.unwrap_or(0.0))?,
-        prnu_sigma_percent: non_negative(path, "sensor.prnu_sigma_percent", s.prnu_sigma_percent.unwrap_or(0.0))?,
+        prnu_sigma_percent: non_negative(
+            path,
+            "sensor.prnu_sigma_percent",
+            s.prnu_sigma_percent.unwrap_or(0.0),
+        )?,
         noise: NoiseSwitches {
             shot: sw(|n| n.shot),
             dark: sw(|n| n.dark),
@@ -532,7 +622,9 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
             prnu: sw(|n| n.prnu),
         },
         column_fpn: match &s.column_fpn {
-            Some(c) => Some(ColumnFpn { offset_sigma_v: non_negative(path, "sensor.column_fpn.sigma_v", c.sigma_v)? }),
+            Some(c) => Some(ColumnFpn {
+                offset_sigma_v: non_negative(path, "sensor.column_fpn.sigma_v", c.sigma_v)?,
+            }),
             None => None,
         },
         reset_noise: match &s.reset_noise {
@@ -550,31 +642,76 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
 /// Read and validate a capture set; `camera_override` replaces the camera it names.
 pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<CaptureSet, CliError> {
     let raw: CapturesFile = read_json(path)?;
-    let dir = path.parent().map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p }).unwrap_or(Path::new(".")).to_path_buf();
+    let dir = path
+        .parent()
+        .map(|p| {
+            if p.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                p
+            }
+        })
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
     let camera_path = match camera_override {
         Some(p) => p.to_path_buf(),
         None => dir.join(&raw.camera),
     };
     let camera = load_camera(&camera_path)?;
-    check(path, !raw.shots.is_empty(), "shots", "the capture set has no shots")?;
+    check(
+        path,
+        !raw.shots.is_empty(),
+        "shots",
+        "the capture set has no shots",
+    )?;
     let mut shots = Vec::with_capacity(raw.shots.len());
     let mut ids = std::collections::HashSet::new();
     for (i, s) in raw.shots.iter().enumerate() {
         let key = format!("shots[{i}] ({})", s.id);
-        check(path, !s.id.is_empty() && !s.id.contains(['/', '\\']) && s.id != "." && s.id != "..", &key, "id must be a non-empty file name")?;
+        check(
+            path,
+            !s.id.is_empty() && !s.id.contains(['/', '\\']) && s.id != "." && s.id != "..",
+            &key,
+            "id must be a non-empty file name",
+        )?;
         check(path, ids.insert(s.id.clone()), &key, "duplicate shot id")?;
         let exposure = match (s.exposure_s, s.auto_exposure) {
-            (Some(t), None) => Exposure::Fixed(non_negative(path, &format!("{key}.exposure_s"), t)?),
+            (Some(t), None) => {
+                Exposure::Fixed(non_negative(path, &format!("{key}.exposure_s"), t)?)
+            }
             (None, Some(f)) => {
-                check(path, f > 0.0 && f <= 1.0, &format!("{key}.auto_exposure"), format!("must be a fraction of the swing in (0, 1], got {f}"))?;
+                check(
+                    path,
+                    f > 0.0 && f <= 1.0,
+                    &format!("{key}.auto_exposure"),
+                    format!("must be a fraction of the swing in (0, 1], got {f}"),
+                )?;
                 Exposure::Auto(f)
             }
-            (Some(_), Some(_)) => return Err(CliError::input(path, format!("{key}: give exposure_s or auto_exposure, not both"))),
-            (None, None) => return Err(CliError::input(path, format!("{key}.exposure_s: required"))),
+            (Some(_), Some(_)) => {
+                return Err(CliError::input(
+                    path,
+                    format!("{key}: give exposure_s or auto_exposure, not both"),
+                ))
+            }
+            (None, None) => {
+                return Err(CliError::input(path, format!("{key}.exposure_s: required")))
+            }
         };
-        let analog_gain = positive(path, &format!("{key}.analog_gain"), s.analog_gain.unwrap_or(camera.sensor.analog_gain))?;
+        let analog_gain = positive(
+            path,
+            &format!("{key}.analog_gain"),
+            s.analog_gain.unwrap_or(camera.sensor.analog_gain),
+        )?;
         for (j, f) in s.frames.iter().enumerate() {
-            check(path, !f.is_empty() && !Path::new(f).is_absolute() && !f.split(['/', '\\']).any(|c| c == ".."), &format!("{key}.frames[{j}]"), format!("\"{f}\" must be a relative path inside the capture folder"))?;
+            check(
+                path,
+                !f.is_empty()
+                    && !Path::new(f).is_absolute()
+                    && !f.split(['/', '\\']).any(|c| c == ".."),
+                &format!("{key}.frames[{j}]"),
+                format!("\"{f}\" must be a relative path inside the capture folder"),
+            )?;
         }
         let target = crate::targets::target_from_value(&s.target, &dir, &camera.sensor)
             .map_err(|m| CliError::input(path, format!("{key}.target{m}")))?;
@@ -593,9 +730,21 @@ pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<Capt
             .map_err(|e| CliError::input(path, format!("simulation.wavelength_nm: {e}")))?;
     }
     if let Some(o) = simulation.oversample {
-        check(path, (1..=16).contains(&o), "simulation.oversample", format!("must be 1–16, got {o}"))?;
+        check(
+            path,
+            (1..=16).contains(&o),
+            "simulation.oversample",
+            format!("must be 1–16, got {o}"),
+        )?;
     }
-    Ok(CaptureSet { path: path.to_path_buf(), dir, camera, camera_path, shots, simulation })
+    Ok(CaptureSet {
+        path: path.to_path_buf(),
+        dir,
+        camera,
+        camera_path,
+        shots,
+        simulation,
+    })
 }
 
 /// Energy (W) spectra → photons with the SI constants.

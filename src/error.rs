@@ -30,15 +30,24 @@ pub enum CliError {
 impl CliError {
     /// An input error about `path`.
     pub fn input(path: &Path, msg: impl std::fmt::Display) -> Self {
-        CliError::Input { path: path.to_path_buf(), msg: msg.to_string() }
+        CliError::Input {
+            path: path.to_path_buf(),
+            msg: msg.to_string(),
+        }
     }
     /// An output error about `path`.
     pub fn output(path: &Path, msg: impl std::fmt::Display) -> Self {
-        CliError::Output { path: path.to_path_buf(), msg: msg.to_string() }
+        CliError::Output {
+            path: path.to_path_buf(),
+            msg: msg.to_string(),
+        }
     }
     /// The message on one line.
     pub fn one_line(&self) -> String {
-        self.to_string().split_whitespace().collect::<Vec<_>>().join(" ")
+        self.to_string()
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ")
     }
 }
 

@@ -21,9 +21,12 @@ pub struct FrameInfo {
 
 /// Read a PNG header.
 pub fn png_info(path: &Path) -> Result<FrameInfo, CliError> {
-    let f = File::open(path).map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
+    let f =
+        File::open(path).map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
     let dec = png::Decoder::new(BufReader::new(f));
-    let r = dec.read_info().map_err(|e| CliError::input(path, format!("not a readable PNG: {e}")))?;
+    let r = dec
+        .read_info()
+        .map_err(|e| CliError::input(path, format!("not a readable PNG: {e}")))?;
     let i = r.info();
     Ok(FrameInfo {
         cols: i.width as usize,
@@ -39,29 +42,52 @@ pub fn check_frame(path: &Path, rows: usize, cols: usize) -> Result<(), CliError
     if !i.greyscale || i.bit_depth != 16 {
         return Err(CliError::input(
             path,
-            format!("frame must be a single-channel 16-bit PNG, found {}-bit {}", i.bit_depth, if i.greyscale { "greyscale" } else { "colour" }),
+            format!(
+                "frame must be a single-channel 16-bit PNG, found {}-bit {}",
+                i.bit_depth,
+                if i.greyscale { "greyscale" } else { "colour" }
+            ),
         ));
     }
     if i.rows != rows || i.cols != cols {
-        return Err(CliError::input(path, format!("frame is {}×{} (rows×cols) but the sensor is {rows}×{cols}", i.rows, i.cols)));
+        return Err(CliError::input(
+            path,
+            format!(
+                "frame is {}×{} (rows×cols) but the sensor is {rows}×{cols}",
+                i.rows, i.cols
+            ),
+        ));
     }
     Ok(())
 }
 
 /// Read a 16-bit greyscale PNG frame.
 pub fn read_png16(path: &Path) -> Result<RawFrame, CliError> {
-    let f = File::open(path).map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
+    let f =
+        File::open(path).map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
     let mut r = png::Decoder::new(BufReader::new(f))
         .read_info()
         .map_err(|e| CliError::input(path, format!("not a readable PNG: {e}")))?;
     let info = r.info().clone();
     if info.bit_depth != png::BitDepth::Sixteen || info.color_type != png::ColorType::Grayscale {
-        return Err(CliError::input(path, "frame must be a single-channel 16-bit PNG"));
+        return Err(CliError::input(
+            path,
+            "frame must be a single-channel 16-bit PNG",
+        ));
     }
     let mut buf = vec![0u8; r.output_buffer_size().unwrap_or(0)];
-    r.next_frame(&mut buf).map_err(|e| CliError::input(path, format!("corrupt PNG: {e}")))?;
-    let dn = buf.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect();
-    Ok(RawFrame { rows: info.height as usize, cols: info.width as usize, adc_bits: 16, dn })
+    r.next_frame(&mut buf)
+        .map_err(|e| CliError::input(path, format!("corrupt PNG: {e}")))?;
+    let dn = buf
+        .chunks_exact(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect();
+    Ok(RawFrame {
+        rows: info.height as usize,
+        cols: info.width as usize,
+        adc_bits: 16,
+        dn,
+    })
 }
 
 /// Write a frame as a 16-bit greyscale PNG, atomically ([`encode_png16`]).
@@ -94,7 +120,8 @@ pub fn encode_png16(frame: &RawFrame) -> Vec<u8> {
     let n_blocks = raw_len.div_ceil(STORED_MAX).max(1);
     let payload = |i: usize| STORED_MAX.min(raw_len - i * STORED_MAX);
     // IDAT chunk i: [zlib header (first)] + stored-block header + payload + [Adler-32 (last)].
-    let data_len = |i: usize| (i == 0) as usize * 2 + 5 + payload(i) + (i + 1 == n_blocks) as usize * 4;
+    let data_len =
+        |i: usize| (i == 0) as usize * 2 + 5 + payload(i) + (i + 1 == n_blocks) as usize * 4;
     let head = 8 + 25; // signature + IHDR
     let total = head + (0..n_blocks).map(|i| 12 + data_len(i)).sum::<usize>() + 12;
     let mut out = vec![0u8; total];
@@ -188,7 +215,10 @@ fn fill_scanlines(dst: &mut [u8], start: usize, row_len: usize, dn: &[u16], cols
         }
         let pairs = (end - pos) / 2;
         let k0 = (pos - 1) / 2;
-        for (b, v) in seg[j..j + 2 * pairs].chunks_exact_mut(2).zip(&line[k0..k0 + pairs]) {
+        for (b, v) in seg[j..j + 2 * pairs]
+            .chunks_exact_mut(2)
+            .zip(&line[k0..k0 + pairs])
+        {
             b.copy_from_slice(&v.to_be_bytes());
         }
         j += 2 * pairs;
@@ -236,7 +266,11 @@ fn crc32(data: &[u8]) -> u32 {
         for i in 0..256u32 {
             let mut c = i;
             for _ in 0..8 {
-                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
             }
             t[0][i as usize] = c;
         }
@@ -284,7 +318,10 @@ mod tests {
         for split in [0, 1, 5552, 12_345, 39_999, 40_000] {
             let (a1, b1) = adler32_parts(&data[..split]);
             let (a2, b2) = adler32_parts(&data[split..]);
-            assert_eq!(adler32_combine(a1, b1, a2, b2, data.len() - split), adler32_parts(&data));
+            assert_eq!(
+                adler32_combine(a1, b1, a2, b2, data.len() - split),
+                adler32_parts(&data)
+            );
         }
     }
 
@@ -292,11 +329,24 @@ mod tests {
     fn png16_round_trips_through_a_reference_decoder() {
         // Sizes around the stored-block limit (rows straddling blocks, a row longer than a
         // block, a single pixel), extreme values.
-        for &(rows, cols) in &[(1usize, 1usize), (3, 5), (97, 331), (40, 32_768), (2, 40_000)] {
-            let dn: Vec<u16> = (0..rows * cols).map(|i| (i as u32).wrapping_mul(2_654_435_761) as u16).collect();
+        for &(rows, cols) in &[
+            (1usize, 1usize),
+            (3, 5),
+            (97, 331),
+            (40, 32_768),
+            (2, 40_000),
+        ] {
+            let dn: Vec<u16> = (0..rows * cols)
+                .map(|i| (i as u32).wrapping_mul(2_654_435_761) as u16)
+                .collect();
             let mut dn = dn;
             dn[0] = 0xFFFF;
-            let frame = RawFrame { rows, cols, adc_bits: 16, dn };
+            let frame = RawFrame {
+                rows,
+                cols,
+                adc_bits: 16,
+                dn,
+            };
             let dir = tempfile::tempdir().unwrap();
             let p = dir.path().join("f.png");
             write_png16(&p, &frame).unwrap();
@@ -307,11 +357,17 @@ mod tests {
             let mut r = dec.read_info().unwrap();
             let mut buf = vec![0u8; r.output_buffer_size().unwrap()];
             r.next_frame(&mut buf).unwrap();
-            let back: Vec<u16> = buf.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect();
+            let back: Vec<u16> = buf
+                .chunks_exact(2)
+                .map(|c| u16::from_be_bytes([c[0], c[1]]))
+                .collect();
             assert_eq!(back, frame.dn, "{rows}×{cols}");
             assert_eq!(read_png16(&p).unwrap().dn, frame.dn);
             let info = png_info(&p).unwrap();
-            assert_eq!((info.rows, info.cols, info.bit_depth, info.greyscale), (rows, cols, 16, true));
+            assert_eq!(
+                (info.rows, info.cols, info.bit_depth, info.greyscale),
+                (rows, cols, 16, true)
+            );
         }
     }
 }

@@ -5,10 +5,10 @@
 //! (`camsim-core` → `camsim-optics` → `camsim-sensor`).
 #![deny(missing_docs)]
 
+pub mod calibrate_cmd;
 pub mod config;
 pub mod error;
 pub mod frames;
-pub mod calibrate_cmd;
 pub mod plots;
 pub mod raw_input;
 pub mod report;

@@ -7,7 +7,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "camsim", version, about = "Physically based digital camera simulator")]
+#[command(
+    name = "camsim",
+    version,
+    about = "Physically based digital camera simulator"
+)]
 struct Cli {
     /// Worker threads (default: all cores).
     #[arg(long, global = true)]
@@ -77,42 +81,91 @@ enum Command {
 
 fn run(cli: Cli) -> Result<(), CliError> {
     if let Some(n) = cli.threads {
-        rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global().map_err(|e| CliError::Other(e.to_string()))?;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .map_err(|e| CliError::Other(e.to_string()))?;
     }
     match cli.command {
-        Command::Simulate { captures, camera, out, seed, expected } => {
+        Command::Simulate {
+            captures,
+            camera,
+            out,
+            seed,
+            expected,
+        } => {
             let set = load_captures(&captures, camera.as_deref())?;
             let seed = seed.or(set.simulation.seed).unwrap_or(0);
-            let opts = SimulateOptions { out_dir: out, seed, expected, progress: true };
+            let opts = SimulateOptions {
+                out_dir: out,
+                seed,
+                expected,
+                progress: true,
+            };
             let summary = simulate(&set, &opts)?;
-            eprintln!("camsim: wrote {} file(s) to {}", summary.files.len(), opts.out_dir.display());
+            eprintln!(
+                "camsim: wrote {} file(s) to {}",
+                summary.files.len(),
+                opts.out_dir.display()
+            );
             Ok(())
         }
         Command::Run { config, out } => {
             let summary = camsim::run::run(config.as_deref(), &out, true)?;
             if let Some(de) = summary.get("delta_e_2000") {
-                eprintln!("camsim: mean ΔE2000 = {:.2}", de["mean"].as_f64().unwrap_or(f64::NAN));
+                eprintln!(
+                    "camsim: mean ΔE2000 = {:.2}",
+                    de["mean"].as_f64().unwrap_or(f64::NAN)
+                );
             }
             eprintln!("camsim: wrote {} (open report.html)", out.display());
             Ok(())
         }
-        Command::Calibrate { captures, camera, out } => {
+        Command::Calibrate {
+            captures,
+            camera,
+            out,
+        } => {
             let set = load_captures(&captures, camera.as_deref())?;
             let summary = camsim::calibrate_cmd::run_calibrate(&set, &out, true)?;
-            for k in ["black_level_dn", "dark_voltage_v_per_s", "read_noise_v", "dsnu_sigma_v", "prnu_sigma_percent", "conversion_gain_v_per_e", "full_well_e"] {
+            for k in [
+                "black_level_dn",
+                "dark_voltage_v_per_s",
+                "read_noise_v",
+                "dsnu_sigma_v",
+                "prnu_sigma_percent",
+                "conversion_gain_v_per_e",
+                "full_well_e",
+            ] {
                 let v = &summary[k];
                 match v["status"].as_str() {
-                    Some("estimated") => eprintln!("camsim: {k} = {:.5e} ± {:.2e}", v["value"].as_f64().unwrap_or(f64::NAN), v["std_error"].as_f64().unwrap_or(f64::NAN)),
-                    _ => eprintln!("camsim: {k}: not estimable: {}", v["reason"].as_str().unwrap_or("")),
+                    Some("estimated") => eprintln!(
+                        "camsim: {k} = {:.5e} ± {:.2e}",
+                        v["value"].as_f64().unwrap_or(f64::NAN),
+                        v["std_error"].as_f64().unwrap_or(f64::NAN)
+                    ),
+                    _ => eprintln!(
+                        "camsim: {k}: not estimable: {}",
+                        v["reason"].as_str().unwrap_or("")
+                    ),
                 }
             }
             eprintln!("camsim: wrote {} (open report.html)", out.display());
             Ok(())
         }
-        Command::Scene { captures, shot, camera, out, basis } => {
+        Command::Scene {
+            captures,
+            shot,
+            camera,
+            out,
+            basis,
+        } => {
             let set = load_captures(&captures, camera.as_deref())?;
             let report = camsim::scene_cmd::write_scene(&set, &shot, &out, basis)?;
-            println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&report).unwrap_or_default()
+            );
             Ok(())
         }
     }

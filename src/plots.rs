@@ -29,9 +29,11 @@ where
         let tmp_png = tmp.with_extension("tmp.png");
         let res = {
             let root = BitMapBackend::new(&tmp_png, (W, H)).into_drawing_area();
-            root.fill(&WHITE).map_err(|e| std::io::Error::other(e.to_string()))?;
+            root.fill(&WHITE)
+                .map_err(|e| std::io::Error::other(e.to_string()))?;
             f(root.clone()).map_err(std::io::Error::other)?;
-            root.present().map_err(|e| std::io::Error::other(e.to_string()))
+            root.present()
+                .map_err(|e| std::io::Error::other(e.to_string()))
         };
         res?;
         std::fs::rename(&tmp_png, tmp)
@@ -60,7 +62,13 @@ fn range(v: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
 }
 
 /// A bar chart, one bar per label.
-pub fn bar_chart(path: &Path, title: &str, labels: &[String], values: &[f64], y_label: &str) -> Result<(), CliError> {
+pub fn bar_chart(
+    path: &Path,
+    title: &str,
+    labels: &[String],
+    values: &[f64],
+    y_label: &str,
+) -> Result<(), CliError> {
     let (lo, hi) = range(values.iter().copied().chain([0.0]), 0.05);
     draw(path, |root| {
         let mut ch = ChartBuilder::on(&root)
@@ -79,7 +87,10 @@ pub fn bar_chart(path: &Path, title: &str, labels: &[String], values: &[f64], y_
             .draw()
             .map_err(e)?;
         ch.draw_series(values.iter().enumerate().map(|(i, v)| {
-            Rectangle::new([(i as f64 + 0.15, 0.0), (i as f64 + 0.85, *v)], BLUE.mix(0.7).filled())
+            Rectangle::new(
+                [(i as f64 + 0.15, 0.0), (i as f64 + 0.85, *v)],
+                BLUE.mix(0.7).filled(),
+            )
         }))
         .map_err(e)?;
         Ok(())
@@ -87,7 +98,13 @@ pub fn bar_chart(path: &Path, title: &str, labels: &[String], values: &[f64], y_
 }
 
 /// A histogram of `values` with `bins` bins.
-pub fn histogram(path: &Path, title: &str, values: &[f64], bins: usize, x_label: &str) -> Result<(), CliError> {
+pub fn histogram(
+    path: &Path,
+    title: &str,
+    values: &[f64],
+    bins: usize,
+    x_label: &str,
+) -> Result<(), CliError> {
     let (lo, hi) = range(values.iter().copied().chain([0.0]), 0.0);
     let w = (hi - lo) / bins as f64;
     let mut counts = vec![0usize; bins];
@@ -104,10 +121,17 @@ pub fn histogram(path: &Path, title: &str, values: &[f64], bins: usize, x_label:
             .y_label_area_size(50)
             .build_cartesian_2d(lo..hi, 0f64..ymax)
             .map_err(e)?;
-        ch.configure_mesh().x_desc(x_label).y_desc("count").draw().map_err(e)?;
+        ch.configure_mesh()
+            .x_desc(x_label)
+            .y_desc("count")
+            .draw()
+            .map_err(e)?;
         ch.draw_series(counts.iter().enumerate().map(|(i, c)| {
             let x0 = lo + i as f64 * w;
-            Rectangle::new([(x0, 0.0), (x0 + w * 0.95, *c as f64)], RED.mix(0.6).filled())
+            Rectangle::new(
+                [(x0, 0.0), (x0 + w * 0.95, *c as f64)],
+                RED.mix(0.6).filled(),
+            )
         }))
         .map_err(e)?;
         Ok(())
@@ -133,22 +157,40 @@ pub fn scatter(
             .y_label_area_size(60)
             .build_cartesian_2d(lo..hi, lo..hi)
             .map_err(e)?;
-        ch.configure_mesh().x_desc(axis_labels.0).y_desc(axis_labels.1).draw().map_err(e)?;
+        ch.configure_mesh()
+            .x_desc(axis_labels.0)
+            .y_desc(axis_labels.1)
+            .draw()
+            .map_err(e)?;
         if diagonal {
-            ch.draw_series(LineSeries::new([(lo, lo), (hi, hi)], BLACK.mix(0.5))).map_err(e)?;
+            ch.draw_series(LineSeries::new([(lo, lo), (hi, hi)], BLACK.mix(0.5)))
+                .map_err(e)?;
         }
         ch.draw_series(x.iter().zip(y).enumerate().map(|(i, (a, b))| {
-            let c = colors.and_then(|c| c.get(i)).map(|c| RGBColor(c[0], c[1], c[2])).unwrap_or(BLUE);
+            let c = colors
+                .and_then(|c| c.get(i))
+                .map(|c| RGBColor(c[0], c[1], c[2]))
+                .unwrap_or(BLUE);
             Circle::new((*a, *b), 6, ShapeStyle::from(&c).filled())
         }))
         .map_err(e)?;
-        ch.draw_series(x.iter().zip(y).map(|(a, b)| Circle::new((*a, *b), 6, BLACK.stroke_width(1)))).map_err(e)?;
+        ch.draw_series(
+            x.iter()
+                .zip(y)
+                .map(|(a, b)| Circle::new((*a, *b), 6, BLACK.stroke_width(1))),
+        )
+        .map_err(e)?;
         Ok(())
     })
 }
 
 /// Line plot of named series.
-pub fn line_plot(path: &Path, title: &str, series: &[(String, Vec<(f64, f64)>)], axis_labels: (&str, &str)) -> Result<(), CliError> {
+pub fn line_plot(
+    path: &Path,
+    title: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+    axis_labels: (&str, &str),
+) -> Result<(), CliError> {
     let (x0, x1) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)), 0.0);
     let (y0, y1) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)), 0.05);
     let palette = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
@@ -160,7 +202,11 @@ pub fn line_plot(path: &Path, title: &str, series: &[(String, Vec<(f64, f64)>)],
             .y_label_area_size(60)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(e)?;
-        ch.configure_mesh().x_desc(axis_labels.0).y_desc(axis_labels.1).draw().map_err(e)?;
+        ch.configure_mesh()
+            .x_desc(axis_labels.0)
+            .y_desc(axis_labels.1)
+            .draw()
+            .map_err(e)?;
         for (i, (name, pts)) in series.iter().enumerate() {
             let c = palette[i % palette.len()];
             ch.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
@@ -169,7 +215,11 @@ pub fn line_plot(path: &Path, title: &str, series: &[(String, Vec<(f64, f64)>)],
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], c.stroke_width(2)));
         }
         if series.len() > 1 {
-            ch.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(e)?;
+            ch.configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(e)?;
         }
         Ok(())
     })
@@ -205,16 +255,24 @@ pub struct FigureCheck {
 /// Decode a PNG and summarise it (to check a figure really shows something).
 pub fn check_figure(path: &Path) -> Result<FigureCheck, CliError> {
     let f = std::fs::File::open(path).map_err(|e| CliError::input(path, e))?;
-    let mut r = png::Decoder::new(std::io::BufReader::new(f)).read_info().map_err(|e| CliError::input(path, e))?;
+    let mut r = png::Decoder::new(std::io::BufReader::new(f))
+        .read_info()
+        .map_err(|e| CliError::input(path, e))?;
     let mut buf = vec![0u8; r.output_buffer_size().unwrap_or(0)];
-    let info = r.next_frame(&mut buf).map_err(|e| CliError::input(path, e))?;
+    let info = r
+        .next_frame(&mut buf)
+        .map_err(|e| CliError::input(path, e))?;
     let ch = info.color_type.samples();
     let px = &buf[..info.buffer_size()];
     let mut set = std::collections::HashSet::new();
     let mut non_white = 0usize;
     let n = px.len() / ch;
     for p in px.chunks_exact(ch) {
-        let rgb = if ch >= 3 { [p[0], p[1], p[2]] } else { [p[0], p[0], p[0]] };
+        let rgb = if ch >= 3 {
+            [p[0], p[1], p[2]]
+        } else {
+            [p[0], p[0], p[0]]
+        };
         if rgb != [255, 255, 255] {
             non_white += 1;
         }

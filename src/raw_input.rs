@@ -7,7 +7,11 @@ use std::path::Path;
 
 /// Read one recorded frame (PNG: 16-bit greyscale; TIFF: 8- or 16-bit greyscale).
 pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     match ext.as_str() {
         "png" => read_png16(path),
         "tif" | "tiff" => {
@@ -17,14 +21,30 @@ pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
                 .map_err(|e| CliError::input(path, format!("not a readable TIFF: {e}")))?;
             let (cols, rows) = (img.width() as usize, img.height() as usize);
             let (dn, bits) = match img {
-                image::DynamicImage::ImageLuma8(b) => (b.into_raw().into_iter().map(u16::from).collect(), 8),
+                image::DynamicImage::ImageLuma8(b) => {
+                    (b.into_raw().into_iter().map(u16::from).collect(), 8)
+                }
                 image::DynamicImage::ImageLuma16(b) => (b.into_raw(), 16),
                 other => {
-                    return Err(CliError::input(path, format!("frame must be a single-channel greyscale mosaic, found {:?}", other.color())))
+                    return Err(CliError::input(
+                        path,
+                        format!(
+                            "frame must be a single-channel greyscale mosaic, found {:?}",
+                            other.color()
+                        ),
+                    ))
                 }
             };
-            Ok(RawFrame { rows, cols, adc_bits: bits, dn })
+            Ok(RawFrame {
+                rows,
+                cols,
+                adc_bits: bits,
+                dn,
+            })
         }
-        other => Err(CliError::input(path, format!("unsupported frame format \".{other}\" (expected .png or .tif)"))),
+        other => Err(CliError::input(
+            path,
+            format!("unsupported frame format \".{other}\" (expected .png or .tif)"),
+        )),
     }
 }

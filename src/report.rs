@@ -3,11 +3,17 @@
 use serde_json::Value;
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 fn num(v: &Value, key: &str) -> String {
-    v.get(key).and_then(Value::as_f64).map(|x| format!("{x:.4}")).unwrap_or_else(|| "–".into())
+    v.get(key)
+        .and_then(Value::as_f64)
+        .map(|x| format!("{x:.4}"))
+        .unwrap_or_else(|| "–".into())
 }
 
 /// The report of `camsim run`.
@@ -19,37 +25,96 @@ pub fn run_report_html(summary: &Value, figures: &[(&str, &str)]) -> String {
     h.push_str("<p>Scene → optics → sensor → processor → display, after Farrell, Catrysse &amp; Wandell, <i>Digital camera simulation</i>, Applied Optics 2012 (§3).</p>");
     h.push_str("<h2>Settings</h2><table>");
     let rows = [
-        ("camera", summary["camera"].as_str().unwrap_or("").to_string()),
-        ("configuration", summary["config"].as_str().unwrap_or("").to_string()),
-        ("scene mean luminance (cd/m²)", num(summary, "scene_mean_luminance_cd_m2")),
+        (
+            "camera",
+            summary["camera"].as_str().unwrap_or("").to_string(),
+        ),
+        (
+            "configuration",
+            summary["config"].as_str().unwrap_or("").to_string(),
+        ),
+        (
+            "scene mean luminance (cd/m²)",
+            num(summary, "scene_mean_luminance_cd_m2"),
+        ),
         ("exposure (s)", num(summary, "exposure_s")),
         ("raw mean (DN)", num(summary, "raw_mean_dn")),
-        ("demosaic", summary["processor"]["demosaic"].as_str().unwrap_or("").to_string()),
-        ("white balance", summary["processor"]["white_balance"].as_str().unwrap_or("").to_string()),
-        ("colour correction fitted on", summary["processor"]["ccm_fitted_on"].as_str().unwrap_or("").to_string()),
-        ("display", summary["display"]["name"].as_str().unwrap_or("").to_string()),
+        (
+            "demosaic",
+            summary["processor"]["demosaic"]
+                .as_str()
+                .unwrap_or("")
+                .to_string(),
+        ),
+        (
+            "white balance",
+            summary["processor"]["white_balance"]
+                .as_str()
+                .unwrap_or("")
+                .to_string(),
+        ),
+        (
+            "colour correction fitted on",
+            summary["processor"]["ccm_fitted_on"]
+                .as_str()
+                .unwrap_or("")
+                .to_string(),
+        ),
+        (
+            "display",
+            summary["display"]["name"]
+                .as_str()
+                .unwrap_or("")
+                .to_string(),
+        ),
     ];
     for (k, v) in rows {
-        h.push_str(&format!("<tr><th style=\"text-align:left\">{}</th><td style=\"text-align:left\">{}</td></tr>", esc(k), esc(&v)));
+        h.push_str(&format!(
+            "<tr><th style=\"text-align:left\">{}</th><td style=\"text-align:left\">{}</td></tr>",
+            esc(k),
+            esc(&v)
+        ));
     }
     h.push_str("</table>");
     if summary.get("delta_e_2000").is_some() {
         h.push_str("<h2>Colour accuracy</h2><table><tr><th></th><th>mean</th><th>median</th><th>95th pct</th><th>max</th></tr>");
         for (name, key) in [("ΔE2000", "delta_e_2000"), ("ΔE*ab (1976)", "delta_e_76")] {
             let d = &summary[key];
-            h.push_str(&format!("<tr><th>{name}</th><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>", num(d, "mean"), num(d, "median"), num(d, "p95"), num(d, "max")));
+            h.push_str(&format!(
+                "<tr><th>{name}</th><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                num(d, "mean"),
+                num(d, "median"),
+                num(d, "p95"),
+                num(d, "max")
+            ));
         }
         h.push_str("</table>");
     }
     h.push_str("<h2>Figures</h2>");
     for (file, caption) in figures {
-        h.push_str(&format!("<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>", esc(file), esc(caption), esc(caption)));
+        h.push_str(&format!(
+            "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
+            esc(file),
+            esc(caption),
+            esc(caption)
+        ));
     }
     if let Some(snr) = summary.get("patch_snr") {
         h.push_str("<h2>Per-patch SNR (dB, raw)</h2><table><tr><th>patch</th><th>R</th><th>G</th><th>B</th></tr>");
         for i in 0..24 {
-            let cell = |c: &str| snr[c][i]["snr_db"].as_f64().map(|x| format!("{x:.1}")).unwrap_or_default();
-            h.push_str(&format!("<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>", i + 1, cell("r"), cell("g"), cell("b")));
+            let cell = |c: &str| {
+                snr[c][i]["snr_db"]
+                    .as_f64()
+                    .map(|x| format!("{x:.1}"))
+                    .unwrap_or_default()
+            };
+            h.push_str(&format!(
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                i + 1,
+                cell("r"),
+                cell("g"),
+                cell("b")
+            ));
         }
         h.push_str("</table>");
     }

@@ -13,14 +13,17 @@ use crate::staging::with_staging;
 use crate::targets::target_from_value;
 use camsim_core::colorimetry::{xyz_to_lab, Xyz};
 use camsim_core::constants::SI;
-use camsim_core::exr_io::{bands_energy_to_photons, write_spectral_exr, IRRADIANCE_UNITS, RADIANCE_UNITS};
+use camsim_core::exr_io::{
+    bands_energy_to_photons, write_spectral_exr, IRRADIANCE_UNITS, RADIANCE_UNITS,
+};
 use camsim_core::image::SpectralImage;
 use camsim_core::scene::{mean_luminance, Target};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_display::{show, DigitalImage, DisplayModel};
 use camsim_isp::{
-    demosaic, fit_color_correction, macbeth_sensor_rgb, macbeth_target_linear_srgb, srgb_decode, to_srgb16, to_srgb8,
-    ColorMatrix, DemosaicMethod, Mosaic, RgbImage, WhiteBalance, XYZ_TO_LINEAR_SRGB,
+    demosaic, fit_color_correction, macbeth_sensor_rgb, macbeth_target_linear_srgb, srgb_decode,
+    to_srgb16, to_srgb8, ColorMatrix, DemosaicMethod, Mosaic, RgbImage, WhiteBalance,
+    XYZ_TO_LINEAR_SRGB,
 };
 use camsim_metrics::{delta_e_2000, delta_e_stats, patch_sample_rect, patch_stats, ChartLayout};
 use camsim_sensor::{electron_rate, expose, fixed_pattern, Shot as SensorShot};
@@ -119,33 +122,55 @@ struct Run {
 
 fn load(config: Option<&Path>) -> Result<Run, CliError> {
     let (path, text) = match config {
-        Some(p) => (p.to_path_buf(), std::fs::read_to_string(p).map_err(|e| bad(p, format!("cannot read: {e}")))?),
-        None => (PathBuf::from("<embedded default run>"), DEFAULT_CONFIG.to_string()),
+        Some(p) => (
+            p.to_path_buf(),
+            std::fs::read_to_string(p).map_err(|e| bad(p, format!("cannot read: {e}")))?,
+        ),
+        None => (
+            PathBuf::from("<embedded default run>"),
+            DEFAULT_CONFIG.to_string(),
+        ),
     };
-    let raw: RunFile = serde_json::from_str(&text).map_err(|e| bad(&path, format!("invalid: {e}")))?;
+    let raw: RunFile =
+        serde_json::from_str(&text).map_err(|e| bad(&path, format!("invalid: {e}")))?;
     let dir = match config {
-        Some(p) => p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
+        Some(p) => p
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."))
+            .to_path_buf(),
         None => PathBuf::from("."),
     };
     // camera: default Table 1, a path, or inline
     let (camera_path, camera_file): (PathBuf, CameraFile) = match &raw.camera {
-        None => (PathBuf::from("<embedded Table 1 camera>"), serde_json::from_str(TABLE1_CAMERA).expect("embedded camera")),
+        None => (
+            PathBuf::from("<embedded Table 1 camera>"),
+            serde_json::from_str(TABLE1_CAMERA).expect("embedded camera"),
+        ),
         Some(Value::String(p)) => {
             let cp = dir.join(p);
-            let t = std::fs::read_to_string(&cp).map_err(|e| bad(&cp, format!("cannot read: {e}")))?;
+            let t =
+                std::fs::read_to_string(&cp).map_err(|e| bad(&cp, format!("cannot read: {e}")))?;
             let f = serde_json::from_str(&t).map_err(|e| bad(&cp, format!("invalid: {e}")))?;
             (cp, f)
         }
-        Some(v) => (path.clone(), serde_json::from_value(v.clone()).map_err(|e| bad(&path, format!("camera: {e}")))?),
+        Some(v) => (
+            path.clone(),
+            serde_json::from_value(v.clone()).map_err(|e| bad(&path, format!("camera: {e}")))?,
+        ),
     };
     let camera = camera_from_file(&camera_path, camera_file)?;
-    let target = target_from_value(&raw.target, &dir, &camera.sensor).map_err(|m| bad(&path, format!("target{m}")))?;
+    let target = target_from_value(&raw.target, &dir, &camera.sensor)
+        .map_err(|m| bad(&path, format!("target{m}")))?;
     let exposure = match (raw.exposure_s, raw.auto_exposure) {
         (Some(t), None) if t >= 0.0 && t.is_finite() => Exposure::Fixed(t),
         (None, a) => {
             let f = a.unwrap_or(0.9);
             if !(f > 0.0 && f <= 1.0) {
-                return Err(bad(&path, format!("auto_exposure: must be in (0, 1], got {f}")));
+                return Err(bad(
+                    &path,
+                    format!("auto_exposure: must be in (0, 1], got {f}"),
+                ));
             }
             Exposure::Auto(f)
         }
@@ -160,7 +185,8 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         .parse()
         .map_err(|e| bad(&path, format!("processor.demosaic: {e}")))?;
     let white_balance = p.white_balance.unwrap_or_else(|| "known_illuminant".into());
-    if !["none", "grey_world", "white_patch", "known_illuminant"].contains(&white_balance.as_str()) {
+    if !["none", "grey_world", "white_patch", "known_illuminant"].contains(&white_balance.as_str())
+    {
         return Err(bad(&path, format!("processor.white_balance: unknown value \"{white_balance}\" (expected none, grey_world, white_patch or known_illuminant)")));
     }
     let color_correction = p.color_correction.unwrap_or_else(|| "macbeth_d65".into());
@@ -169,22 +195,38 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
     }
     let white_level = p.white_level.unwrap_or(0.9);
     if !(white_level > 0.0 && white_level <= 1.0) {
-        return Err(bad(&path, format!("processor.white_level: must be in (0, 1], got {white_level}")));
+        return Err(bad(
+            &path,
+            format!("processor.white_level: must be in (0, 1], got {white_level}"),
+        ));
     }
     let output_bits = p.output_bits.unwrap_or(8);
     if output_bits != 8 && output_bits != 16 {
-        return Err(bad(&path, format!("processor.output_bits: must be 8 or 16, got {output_bits}")));
+        return Err(bad(
+            &path,
+            format!("processor.output_bits: must be 8 or 16, got {output_bits}"),
+        ));
     }
     let d = raw.display.unwrap_or_default();
-    let display = DisplayModel::load(d.name.as_deref().unwrap_or("lcdExample")).map_err(|e| bad(&path, format!("display.name: {e}")))?;
+    let display = DisplayModel::load(d.name.as_deref().unwrap_or("lcdExample"))
+        .map_err(|e| bad(&path, format!("display.name: {e}")))?;
     let samples_per_pixel = d.samples_per_pixel.unwrap_or(1);
     if !(1..=32).contains(&samples_per_pixel) {
-        return Err(bad(&path, format!("display.samples_per_pixel: must be 1–32, got {samples_per_pixel}")));
+        return Err(bad(
+            &path,
+            format!("display.samples_per_pixel: must be 1–32, got {samples_per_pixel}"),
+        ));
     }
     let names = &camera.sensor.channel_names;
     for ch in ["r", "g", "b"] {
         if !names.iter().any(|n| n == ch) {
-            return Err(bad(&camera_path, format!("sensor.channels: `camsim run` needs channels r, g and b (have {})", names.join(", "))));
+            return Err(bad(
+                &camera_path,
+                format!(
+                    "sensor.channels: `camsim run` needs channels r, g and b (have {})",
+                    names.join(", ")
+                ),
+            ));
         }
     }
     let shot = crate::config::Shot {
@@ -223,7 +265,10 @@ fn xyz_weights_photons() -> [Spectrum; 3] {
         let (lo, hi) = c.support_nm();
         let n = (hi - lo).round() as usize;
         let w: Vec<f64> = (0..=n).map(|i| lo + i as f64).collect();
-        let v = w.iter().map(|&x| 683.0 * c.eval(x) / SI.photons_per_joule(x)).collect();
+        let v = w
+            .iter()
+            .map(|&x| 683.0 * c.eval(x) / SI.photons_per_joule(x))
+            .collect();
         Spectrum::sampled(w, v).expect("valid")
     })
 }
@@ -232,7 +277,11 @@ fn xyz_weights_photons() -> [Spectrum; 3] {
 /// percentile of Y maps to 1.
 fn preview_rgb8(img: &SpectralImage) -> Vec<u8> {
     let w = xyz_weights_photons();
-    let [x, y, z] = [img.integrate_against(&w[0]), img.integrate_against(&w[1]), img.integrate_against(&w[2])];
+    let [x, y, z] = [
+        img.integrate_against(&w[0]),
+        img.integrate_against(&w[1]),
+        img.integrate_against(&w[2]),
+    ];
     let mut ys: Vec<f32> = y.clone();
     ys.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
     let top = ys[((ys.len() as f64) * 0.99) as usize].max(1e-30) as f64;
@@ -250,7 +299,13 @@ fn preview_rgb8(img: &SpectralImage) -> Vec<u8> {
 
 /// The part of a scene-grid image that covers the sensor, averaged to one sample per pixel
 /// (the grid has `os` samples per pixel side and `margin` extra pixels on every side).
-fn to_sensor_pixels(img: &SpectralImage, os: usize, margin: usize, rows: usize, cols: usize) -> SpectralImage {
+fn to_sensor_pixels(
+    img: &SpectralImage,
+    os: usize,
+    margin: usize,
+    rows: usize,
+    cols: usize,
+) -> SpectralImage {
     if os == 1 && margin == 0 && img.rows == rows && img.cols == cols {
         return img.clone();
     }
@@ -276,7 +331,12 @@ fn to_sensor_pixels(img: &SpectralImage, os: usize, margin: usize, rows: usize, 
             out
         })
         .collect();
-    SpectralImage { rows, cols, basis: img.basis.clone(), planes }
+    SpectralImage {
+        rows,
+        cols,
+        basis: img.basis.clone(),
+        planes,
+    }
 }
 
 fn rgb_index(names: &[String]) -> [usize; 3] {
@@ -286,7 +346,11 @@ fn rgb_index(names: &[String]) -> [usize; 3] {
 
 fn srgb_to_xyz(rgb: [f64; 3]) -> [f64; 3] {
     // inverse of IEC 61966-2-1's XYZ → linear sRGB
-    let m = [[0.4124564, 0.3575761, 0.1804375], [0.2126729, 0.7151522, 0.0721750], [0.0193339, 0.1191920, 0.9503041]];
+    let m = [
+        [0.4124564, 0.3575761, 0.1804375],
+        [0.2126729, 0.7151522, 0.0721750],
+        [0.0193339, 0.1191920, 0.9503041],
+    ];
     [0, 1, 2].map(|i| m[i][0] * rgb[0] + m[i][1] * rgb[1] + m[i][2] * rgb[2])
 }
 
@@ -306,8 +370,16 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     let set = &r.set;
     let cam = &set.camera;
     let sensor = &cam.sensor;
-    let bar = if progress { ProgressBar::new(7) } else { ProgressBar::hidden() };
-    bar.set_style(ProgressStyle::with_template("{spinner} run [{bar:30}] {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()).progress_chars("=> "));
+    let bar = if progress {
+        ProgressBar::new(7)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} run [{bar:30}] {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
     let mut files: Vec<PathBuf> = Vec::new();
     let mut put = |name: &str| -> PathBuf {
         files.push(PathBuf::from(name));
@@ -318,12 +390,22 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     // 1. Scene
     bar.set_message("scene");
     let grid = wavelength_grid(set);
-    let exr_grid = WavelengthGrid::regular(grid.wavelength_nm[0], grid.wavelength_nm[grid.len() - 1], 10.0).expect("grid");
+    let exr_grid = WavelengthGrid::regular(
+        grid.wavelength_nm[0],
+        grid.wavelength_nm[grid.len() - 1],
+        10.0,
+    )
+    .expect("grid");
     let scene = shot_scene(set, 0, &grid)?;
-    let window = (sensor.cols as f64 * sensor.pixel_pitch_m, sensor.rows as f64 * sensor.pixel_pitch_m);
+    let window = (
+        sensor.cols as f64 * sensor.pixel_pitch_m,
+        sensor.rows as f64 * sensor.pixel_pitch_m,
+    );
     let scene_luminance = mean_luminance(&scene, Some(window), &SI);
-    let (os, margin) = crate::simulate::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
-    let mut rad_w = to_sensor_pixels(&scene.radiance, os, margin, sensor.rows, sensor.cols).to_bands(&exr_grid);
+    let (os, margin) =
+        crate::simulate::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
+    let mut rad_w =
+        to_sensor_pixels(&scene.radiance, os, margin, sensor.rows, sensor.cols).to_bands(&exr_grid);
     bands_energy_to_photons(&mut rad_w, &SI, true);
     let p = put("scene_radiance.exr");
     write_spectral_exr(&p, &rad_w, RADIANCE_UNITS, None).map_err(|e| out_err(&p, &e))?;
@@ -334,8 +416,10 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 
     // 2. Optics
     bar.set_message("optics");
-    let irr = camsim_optics::form_image(&cam.optics, &scene, &grid).map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
-    let mut irr_w = to_sensor_pixels(&irr.irradiance, os, margin, sensor.rows, sensor.cols).to_bands(&exr_grid);
+    let irr = camsim_optics::form_image(&cam.optics, &scene, &grid)
+        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
+    let mut irr_w =
+        to_sensor_pixels(&irr.irradiance, os, margin, sensor.rows, sensor.cols).to_bands(&exr_grid);
     bands_energy_to_photons(&mut irr_w, &SI, true);
     let p = put("sensor_irradiance.exr");
     write_spectral_exr(&p, &irr_w, IRRADIANCE_UNITS, None).map_err(|e| out_err(&p, &e))?;
@@ -348,75 +432,127 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         Exposure::Fixed(t) => t,
         Exposure::Auto(f) => camsim_sensor::auto_exposure_s(sensor, &rate, f),
     };
-    let shot = SensorShot { exposure_s, analog_gain: set.shots[0].analog_gain };
+    let shot = SensorShot {
+        exposure_s,
+        analog_gain: set.shots[0].analog_gain,
+    };
     let fixed = fixed_pattern(sensor, r.seed);
     let raw = expose(sensor, &rate, &shot, &fixed, r.seed, &[0, 0]);
     let p = put("raw.png");
     crate::frames::write_png16(&p, &raw)?;
     let max_dn = (1u32 << sensor.adc_bits) - 1;
-    let raw8: Vec<u8> = raw.dn.iter().flat_map(|&d| {
-        let v = ((d as f64 / max_dn as f64).clamp(0.0, 1.0).sqrt() * 255.0).round() as u8;
-        [v, v, v]
-    }).collect();
+    let raw8: Vec<u8> = raw
+        .dn
+        .iter()
+        .flat_map(|&d| {
+            let v = ((d as f64 / max_dn as f64).clamp(0.0, 1.0).sqrt() * 255.0).round() as u8;
+            [v, v, v]
+        })
+        .collect();
     let p = put("raw_preview.png");
     plots::rgb8_png(&p, &raw8, raw.rows, raw.cols)?;
     bar.inc(1);
 
     // 4. Processor
     bar.set_message("processor");
-    let mosaic = Mosaic::from_raw(&raw, sensor.cfa.tile.clone(), sensor.channel_names.clone(), sensor.black_level_dn, max_dn as f64)
-        .map_err(|e| CliError::Other(format!("processor: {e}")))?;
-    let mut rgb = demosaic(&mosaic, r.demosaic).map_err(|e| CliError::input(&set.path, format!("processor.demosaic: {e}")))?;
+    let mosaic = Mosaic::from_raw(
+        &raw,
+        sensor.cfa.tile.clone(),
+        sensor.channel_names.clone(),
+        sensor.black_level_dn,
+        max_dn as f64,
+    )
+    .map_err(|e| CliError::Other(format!("processor: {e}")))?;
+    let mut rgb = demosaic(&mosaic, r.demosaic)
+        .map_err(|e| CliError::input(&set.path, format!("processor.demosaic: {e}")))?;
     let idx = rgb_index(&sensor.channel_names);
     let qe_rgb: Vec<Spectrum> = idx.iter().map(|&i| sensor.channel_qe[i].clone()).collect();
     let scene_illuminant = set.shots[0].target.illuminant.clone().unwrap_or_else(|| {
-        camsim_core::data::illuminant("D65").expect("D65").energy_to_photons(&SI)
+        camsim_core::data::illuminant("D65")
+            .expect("D65")
+            .energy_to_photons(&SI)
     });
     let wb = match r.white_balance.as_str() {
         "grey_world" => WhiteBalance::GreyWorld,
         "white_patch" => WhiteBalance::WhitePatch,
-        "known_illuminant" => WhiteBalance::Gains(camsim_isp::illuminant_gains(&qe_rgb, &scene_illuminant).map_err(|e| CliError::Other(format!("white balance: {e}")))?),
+        "known_illuminant" => WhiteBalance::Gains(
+            camsim_isp::illuminant_gains(&qe_rgb, &scene_illuminant)
+                .map_err(|e| CliError::Other(format!("white balance: {e}")))?,
+        ),
         _ => WhiteBalance::None,
     };
-    let wb_gains = wb.apply(&mut rgb).map_err(|e| CliError::Other(format!("white balance: {e}")))?;
+    let wb_gains = wb
+        .apply(&mut rgb)
+        .map_err(|e| CliError::Other(format!("white balance: {e}")))?;
     // The chart geometry when the target is a 4 × 6 chart (macbeth or patches).
     let chart = match &set.shots[0].target.target {
-        Target::Patches { rows: 4, cols: 6, patch_fraction, .. } => Some(ChartLayout { chart_rows: 4, chart_cols: 6, patch_fraction: *patch_fraction, margin_fraction: 0.2 }),
+        Target::Patches {
+            rows: 4,
+            cols: 6,
+            patch_fraction,
+            ..
+        } => Some(ChartLayout {
+            chart_rows: 4,
+            chart_cols: 6,
+            patch_fraction: *patch_fraction,
+            margin_fraction: 0.2,
+        }),
         _ => None,
     };
     let patch_means = |img: &RgbImage, layout: &ChartLayout| -> Vec<[f64; 3]> {
-        (0..24).map(|i| {
-            let rect = patch_sample_rect(img.rows, img.cols, layout, i / 6, i % 6);
-            let mut s = [0.0f64; 3];
-            let mut n = 0.0f64;
-            for y in rect.row0..rect.row1 {
-                for x in rect.col0..rect.col1 {
-                    let v = img.at(y, x);
-                    for c in 0..3 { s[c] += v[c] as f64; }
-                    n += 1.0;
+        (0..24)
+            .map(|i| {
+                let rect = patch_sample_rect(img.rows, img.cols, layout, i / 6, i % 6);
+                let mut s = [0.0f64; 3];
+                let mut n = 0.0f64;
+                for y in rect.row0..rect.row1 {
+                    for x in rect.col0..rect.col1 {
+                        let v = img.at(y, x);
+                        for c in 0..3 {
+                            s[c] += v[c] as f64;
+                        }
+                        n += 1.0;
+                    }
                 }
-            }
-            s.map(|v| v / n.max(1.0))
-        }).collect()
+                s.map(|v| v / n.max(1.0))
+            })
+            .collect()
     };
     let d65 = camsim_core::data::illuminant("D65").expect("D65");
-    let targets = macbeth_target_linear_srgb(&d65, r.white_level).map_err(|e| CliError::Other(format!("colour targets: {e}")))?;
+    let targets = macbeth_target_linear_srgb(&d65, r.white_level)
+        .map_err(|e| CliError::Other(format!("colour targets: {e}")))?;
     // Paper §3: 3×3 matrix by least squares from the sensor's Macbeth values to the D65 sRGB targets.
     let (ccm, ccm_source) = if r.color_correction == "none" {
         (ColorMatrix::identity(), "none")
     } else if let Some(layout) = &chart {
         let sensor_vals = patch_means(&rgb, layout);
-        (fit_color_correction(&sensor_vals, &targets).map_err(|e| CliError::Other(format!("colour correction: {e}")))?, "chart in the image")
+        (
+            fit_color_correction(&sensor_vals, &targets)
+                .map_err(|e| CliError::Other(format!("colour correction: {e}")))?,
+            "chart in the image",
+        )
     } else {
         // no chart in the image: fit on the camera's noise-free spectral responses to the chart
-        let mut v = macbeth_sensor_rgb(&qe_rgb, &scene_illuminant).map_err(|e| CliError::Other(format!("colour correction: {e}")))?;
+        let mut v = macbeth_sensor_rgb(&qe_rgb, &scene_illuminant)
+            .map_err(|e| CliError::Other(format!("colour correction: {e}")))?;
         let g: Vec<f64> = v.iter().map(|p| p.map(|x| x)).map(|p| p[1]).collect();
         let white_g = g[camsim_isp::MACBETH_WHITE_INDEX].max(1e-30);
-        let img_white = rgb.data.iter().map(|p| p[1] as f64).fold(0.0, f64::max).max(1e-30);
+        let img_white = rgb
+            .data
+            .iter()
+            .map(|p| p[1] as f64)
+            .fold(0.0, f64::max)
+            .max(1e-30);
         for p in v.iter_mut() {
-            for c in 0..3 { p[c] *= wb_gains[c] * img_white / white_g; }
+            for c in 0..3 {
+                p[c] *= wb_gains[c] * img_white / white_g;
+            }
         }
-        (fit_color_correction(&v, &targets).map_err(|e| CliError::Other(format!("colour correction: {e}")))?, "camera's spectral responses")
+        (
+            fit_color_correction(&v, &targets)
+                .map_err(|e| CliError::Other(format!("colour correction: {e}")))?,
+            "camera's spectral responses",
+        )
     };
     ccm.apply_image(&mut rgb);
     let rendered8 = to_srgb8(&rgb);
@@ -431,9 +567,13 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 
     // 5. Display (Eq. 8)
     bar.set_message("display");
-    let digital: Vec<[u16; 3]> = rendered8.chunks_exact(3).map(|c| [c[0] as u16, c[1] as u16, c[2] as u16]).collect();
+    let digital: Vec<[u16; 3]> = rendered8
+        .chunks_exact(3)
+        .map(|c| [c[0] as u16, c[1] as u16, c[2] as u16])
+        .collect();
     let dimg = DigitalImage::from_rgb(rgb.rows, rgb.cols, 8, &digital);
-    let disp = show(&r.display, &dimg, r.samples_per_pixel).map_err(|e| CliError::Other(format!("display: {e}")))?;
+    let disp = show(&r.display, &dimg, r.samples_per_pixel)
+        .map_err(|e| CliError::Other(format!("display: {e}")))?;
     let disp_bands = disp.radiance.to_bands(&exr_grid);
     let p = put("display_radiance.exr");
     write_spectral_exr(&p, &disp_bands, RADIANCE_UNITS, None).map_err(|e| out_err(&p, &e))?;
@@ -455,20 +595,38 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         "display": {"name": r.display.name, "samples_per_pixel": r.samples_per_pixel},
     });
     let mut figures: Vec<(&str, &str)> = vec![
-        ("scene_preview.png", "Scene (sRGB preview of the spectral radiance)"),
+        (
+            "scene_preview.png",
+            "Scene (sRGB preview of the spectral radiance)",
+        ),
         ("raw_preview.png", "Raw mosaic (square-root display of DN)"),
         ("rendered.png", "Rendered sRGB"),
     ];
     if let Some(layout) = &chart {
         // per-patch SNR of the raw data, per channel (paper Fig. 4)
-        let tile_strings: Vec<String> = sensor.cfa.tile.iter().map(|row| row.iter().map(|&c| sensor.channel_names[c].clone()).collect()).collect();
-        let data: Vec<f32> = raw.dn.iter().map(|&d| d as f32 - sensor.black_level_dn as f32).collect();
+        let tile_strings: Vec<String> = sensor
+            .cfa
+            .tile
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .map(|&c| sensor.channel_names[c].clone())
+                    .collect()
+            })
+            .collect();
+        let data: Vec<f32> = raw
+            .dn
+            .iter()
+            .map(|&d| d as f32 - sensor.black_level_dn as f32)
+            .collect();
         let mut snr = serde_json::Map::new();
         let mut g_snr = Vec::new();
         for ch in ["r", "g", "b"] {
             let t: Vec<&str> = tile_strings.iter().map(|s| s.as_str()).collect();
-            let mask = camsim_metrics::cfa_channel_mask(&t, ch.chars().next().unwrap()).map_err(|e| CliError::Other(e.to_string()))?;
-            let stats = patch_stats(&data, raw.rows, raw.cols, layout, mask).map_err(|e| CliError::Other(format!("patch statistics: {e}")))?;
+            let mask = camsim_metrics::cfa_channel_mask(&t, ch.chars().next().unwrap())
+                .map_err(|e| CliError::Other(e.to_string()))?;
+            let stats = patch_stats(&data, raw.rows, raw.cols, layout, mask)
+                .map_err(|e| CliError::Other(format!("patch statistics: {e}")))?;
             let v: Vec<Value> = stats.iter().map(|s| json!({"mean_dn": s.mean, "std_dn": s.std, "snr_db": s.snr_db, "pixels": s.count})).collect();
             if ch == "g" {
                 g_snr = stats.iter().map(|s| s.snr_db).collect();
@@ -477,22 +635,65 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         }
         report["patch_snr"] = Value::Object(snr);
         let labels: Vec<String> = (1..=24).map(|i| i.to_string()).collect();
-        plots::bar_chart(&put("patch_snr.png"), "Per-patch SNR, green channel (raw)", &labels, &g_snr, "SNR (dB)")?;
-        figures.push(("patch_snr.png", "Per-patch SNR of the green pixels (raw DN)"));
+        plots::bar_chart(
+            &put("patch_snr.png"),
+            "Per-patch SNR, green channel (raw)",
+            &labels,
+            &g_snr,
+            "SNR (dB)",
+        )?;
+        figures.push((
+            "patch_snr.png",
+            "Per-patch SNR of the green pixels (raw DN)",
+        ));
         // ΔE between desired (D65 sRGB targets) and rendered (output codes decoded), paper Figs. 5–6
-        let rendered_lin = RgbImage { rows: rgb.rows, cols: rgb.cols, data: rendered8.chunks_exact(3).map(|c| [0, 1, 2].map(|k| srgb_decode(c[k] as f64 / 255.0) as f32)).collect() };
+        let rendered_lin = RgbImage {
+            rows: rgb.rows,
+            cols: rgb.cols,
+            data: rendered8
+                .chunks_exact(3)
+                .map(|c| [0, 1, 2].map(|k| srgb_decode(c[k] as f64 / 255.0) as f32))
+                .collect(),
+        };
         let rendered_means = patch_means(&rendered_lin, layout);
         let white = srgb_to_xyz([1.0, 1.0, 1.0]);
-        let white = Xyz { x: white[0], y: white[1], z: white[2] };
-        let lab = |v: [f64; 3]| { let x = srgb_to_xyz(v); xyz_to_lab(Xyz { x: x[0], y: x[1], z: x[2] }, white) };
-        let de2000: Vec<f64> = (0..24).map(|i| delta_e_2000(lab(targets[i]), lab(rendered_means[i]))).collect();
-        let de76: Vec<f64> = (0..24).map(|i| camsim_core::colorimetry::delta_e_76(lab(targets[i]), lab(rendered_means[i]))).collect();
+        let white = Xyz {
+            x: white[0],
+            y: white[1],
+            z: white[2],
+        };
+        let lab = |v: [f64; 3]| {
+            let x = srgb_to_xyz(v);
+            xyz_to_lab(
+                Xyz {
+                    x: x[0],
+                    y: x[1],
+                    z: x[2],
+                },
+                white,
+            )
+        };
+        let de2000: Vec<f64> = (0..24)
+            .map(|i| delta_e_2000(lab(targets[i]), lab(rendered_means[i])))
+            .collect();
+        let de76: Vec<f64> = (0..24)
+            .map(|i| camsim_core::colorimetry::delta_e_76(lab(targets[i]), lab(rendered_means[i])))
+            .collect();
         let s2000 = delta_e_stats(&de2000).map_err(|e| CliError::Other(e.to_string()))?;
         let s76 = delta_e_stats(&de76).map_err(|e| CliError::Other(e.to_string()))?;
         report["delta_e_2000"] = json!({"mean": s2000.mean, "median": s2000.median, "p95": s2000.p95, "max": s2000.max, "per_patch": de2000});
         report["delta_e_76"] = json!({"mean": s76.mean, "median": s76.median, "p95": s76.p95, "max": s76.max, "per_patch": de76});
-        plots::histogram(&put("delta_e_histogram.png"), &format!("ΔE2000, desired vs rendered (mean {:.2})", s2000.mean), &de2000, 12, "ΔE2000")?;
-        figures.push(("delta_e_histogram.png", "Histogram of ΔE2000 over the 24 patches (paper Fig. 6)"));
+        plots::histogram(
+            &put("delta_e_histogram.png"),
+            &format!("ΔE2000, desired vs rendered (mean {:.2})", s2000.mean),
+            &de2000,
+            12,
+            "ΔE2000",
+        )?;
+        figures.push((
+            "delta_e_histogram.png",
+            "Histogram of ΔE2000 over the 24 patches (paper Fig. 6)",
+        ));
         let enc = |v: f64| camsim_isp::srgb_encode(v.clamp(0.0, 1.0)) * 255.0;
         let (mut xs, mut ys, mut cs) = (Vec::new(), Vec::new(), Vec::new());
         let chan_col = [[220u8, 30, 30], [30, 160, 30], [30, 60, 220]];
@@ -503,15 +704,34 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                 cs.push(chan_col[c]);
             }
         }
-        plots::scatter(&put("srgb_scatter.png"), "Desired vs rendered sRGB (R, G, B of each patch)", &xs, &ys, Some(&cs), ("desired sRGB (0–255)", "rendered sRGB (0–255)"), true)?;
-        figures.push(("srgb_scatter.png", "Desired (D65 targets) vs rendered sRGB values (paper Fig. 5)"));
+        plots::scatter(
+            &put("srgb_scatter.png"),
+            "Desired vs rendered sRGB (R, G, B of each patch)",
+            &xs,
+            &ys,
+            Some(&cs),
+            ("desired sRGB (0–255)", "rendered sRGB (0–255)"),
+            true,
+        )?;
+        figures.push((
+            "srgb_scatter.png",
+            "Desired (D65 targets) vs rendered sRGB values (paper Fig. 5)",
+        ));
         report["patches"] = json!((0..24).map(|i| json!({"desired_linear_srgb": targets[i], "rendered_linear_srgb": rendered_means[i]})).collect::<Vec<_>>());
     }
     bar.inc(1);
 
     // 7. Report
     bar.set_message("report");
-    report["files"] = json!(["scene_radiance.exr", "sensor_irradiance.exr", "raw.png", "rendered.png", "display_radiance.exr", "summary.json", "report.html"]);
+    report["files"] = json!([
+        "scene_radiance.exr",
+        "sensor_irradiance.exr",
+        "raw.png",
+        "rendered.png",
+        "display_radiance.exr",
+        "summary.json",
+        "report.html"
+    ]);
     report["figures"] = json!(figures.iter().map(|f| f.0).collect::<Vec<_>>());
     let text = serde_json::to_string_pretty(&report).expect("json");
     let p = put("summary.json");
@@ -534,6 +754,7 @@ fn write_rgb16(path: &Path, data: &[u16], rows: usize, cols: usize) -> Result<()
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Sixteen);
     let mut w = enc.write_header().map_err(|e| CliError::output(path, e))?;
-    w.write_image_data(&bytes).map_err(|e| CliError::output(path, e))?;
+    w.write_image_data(&bytes)
+        .map_err(|e| CliError::output(path, e))?;
     w.finish().map_err(|e| CliError::output(path, e))
 }

@@ -10,7 +10,10 @@ use camsim_core::image::{Plane, SceneRadiance, SensorIrradiance};
 use camsim_core::scene::{render_target, scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};
-use camsim_sensor::{electron_rate, expected_dn, expose_with, fixed_pattern, ElectronRate, FixedPattern, PatternSource, SensorModel, Shot};
+use camsim_sensor::{
+    electron_rate, expected_dn, expose_with, fixed_pattern, ElectronRate, FixedPattern,
+    PatternSource, SensorModel, Shot,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -59,7 +62,12 @@ pub fn wavelength_grid(set: &CaptureSet) -> WavelengthGrid {
 }
 
 /// Scene samples per pixel side and margin (pixels) needed by the optics' blur.
-pub fn sampling_for(optics: &OpticsModel, sensor: &SensorModel, grid: &WavelengthGrid, oversample: Option<usize>) -> (usize, usize) {
+pub fn sampling_for(
+    optics: &OpticsModel,
+    sensor: &SensorModel,
+    grid: &WavelengthGrid,
+    oversample: Option<usize>,
+) -> (usize, usize) {
     let p_um = sensor.pixel_pitch_m * 1e6;
     let lmin_um = grid.wavelength_nm[0] * 1e-3;
     let lmax_um = grid.wavelength_nm[grid.len() - 1] * 1e-3;
@@ -68,10 +76,19 @@ pub fn sampling_for(optics: &OpticsModel, sensor: &SensorModel, grid: &Wavelengt
     let diffraction_margin = (5.0 * lmax_um * n / p_um).ceil() as usize + 2;
     let (os, mut margin) = match &optics.blur {
         Blur::None => (1, 0),
-        Blur::Gaussian { sigma_um } => ((p_um / sigma_um.max(1e-9)).ceil() as usize, (4.0 * sigma_um / p_um).ceil() as usize + 1),
-        Blur::Pillbox { width_um } => ((2.0 * p_um / width_um).ceil() as usize, (0.5 * width_um / p_um).ceil() as usize + 1),
+        Blur::Gaussian { sigma_um } => (
+            (p_um / sigma_um.max(1e-9)).ceil() as usize,
+            (4.0 * sigma_um / p_um).ceil() as usize + 1,
+        ),
+        Blur::Pillbox { width_um } => (
+            (2.0 * p_um / width_um).ceil() as usize,
+            (0.5 * width_um / p_um).ceil() as usize + 1,
+        ),
         Blur::Diffraction | Blur::Psf(_) => (diffraction_os, diffraction_margin),
-        Blur::Wavefront { defocus_um, .. } => (diffraction_os, diffraction_margin + (16.0 * defocus_um.abs() * n / p_um).ceil() as usize),
+        Blur::Wavefront { defocus_um, .. } => (
+            diffraction_os,
+            diffraction_margin + (16.0 * defocus_um.abs() * n / p_um).ceil() as usize,
+        ),
     };
     if let Some(d) = &optics.diffuser {
         margin += (2.0 * d.fwhm_um / p_um).ceil() as usize + 1;
@@ -80,7 +97,11 @@ pub fn sampling_for(optics: &OpticsModel, sensor: &SensorModel, grid: &Wavelengt
 }
 
 /// The scene radiance of one shot's target, sampled for the camera's optics (with margin).
-pub fn shot_scene(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<SceneRadiance, CliError> {
+pub fn shot_scene(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+) -> Result<SceneRadiance, CliError> {
     let cam = &set.camera;
     let s = &cam.sensor;
     let shot = &set.shots[shot_index];
@@ -96,23 +117,40 @@ pub fn shot_scene(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) ->
         depth_m: None,
     };
     if let Some(l) = shot.target.mean_luminance_cd_m2 {
-        scale_to_mean_luminance(&mut scene, l, Some((g.sensor_width_m, g.sensor_height_m)), &SI);
+        scale_to_mean_luminance(
+            &mut scene,
+            l,
+            Some((g.sensor_width_m, g.sensor_height_m)),
+            &SI,
+        );
     }
     Ok(scene)
 }
 
 /// Sensor irradiance of one shot (scene → optics stage).
-pub fn shot_irradiance(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<SensorIrradiance, CliError> {
+pub fn shot_irradiance(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+) -> Result<SensorIrradiance, CliError> {
     let scene = shot_scene(set, shot_index, grid)?;
-    form_image(&set.camera.optics, &scene, grid).map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+    form_image(&set.camera.optics, &scene, grid)
+        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
 }
 
 /// Mean electron rate of every pixel for one target (optics + pixel integration).
-pub fn shot_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<ElectronRate, CliError> {
+pub fn shot_electron_rate(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+) -> Result<ElectronRate, CliError> {
     if let Some(rate) = uniform_electron_rate(set, shot_index, grid)? {
         return Ok(rate);
     }
-    Ok(electron_rate(&set.camera.sensor, &shot_irradiance(set, shot_index, grid)?))
+    Ok(electron_rate(
+        &set.camera.sensor,
+        &shot_irradiance(set, shot_index, grid)?,
+    ))
 }
 
 /// Fast path of [`shot_electron_rate`] for a uniform (or dark) target seen without blur,
@@ -123,7 +161,11 @@ pub fn shot_electron_rate(set: &CaptureSet, shot_index: usize, grid: &Wavelength
 /// R is evaluated at the pixel centres, as the general path does for one sample per pixel
 /// (whose box average over its own cell is that sample). No full-size planes are built.
 /// Returns None when the fast path does not apply.
-fn uniform_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthGrid) -> Result<Option<ElectronRate>, CliError> {
+fn uniform_electron_rate(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+) -> Result<Option<ElectronRate>, CliError> {
     use camsim_core::scene::Target;
     use camsim_optics::RelativeIllumination;
     let cam = &set.camera;
@@ -132,7 +174,10 @@ fn uniform_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthG
     if !matches!(shot.target.target, Target::Uniform { .. } | Target::Dark) {
         return Ok(None);
     }
-    if !matches!(cam.optics.relative_illumination, RelativeIllumination::Cos4 | RelativeIllumination::None) {
+    if !matches!(
+        cam.optics.relative_illumination,
+        RelativeIllumination::Cos4 | RelativeIllumination::None
+    ) {
         return Ok(None);
     }
     if !matches!(cam.optics.blur, Blur::None) || cam.optics.diffuser.is_some() {
@@ -145,7 +190,11 @@ fn uniform_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthG
     // The scene on the sensor's grid, but only its sample on the axis (a uniform target has
     // the same value everywhere, and so the same mean luminance over the sensor).
     let full = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin);
-    let g = SamplingGrid { rows: 1, cols: 1, ..full };
+    let g = SamplingGrid {
+        rows: 1,
+        cols: 1,
+        ..full
+    };
     let radiance = render_target(&shot.target.target, &g)
         .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
     let mut scene = SceneRadiance {
@@ -156,16 +205,29 @@ fn uniform_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthG
         depth_m: None,
     };
     if let Some(l) = shot.target.mean_luminance_cd_m2 {
-        scale_to_mean_luminance(&mut scene, l, Some((g.sensor_width_m, g.sensor_height_m)), &SI);
+        scale_to_mean_luminance(
+            &mut scene,
+            l,
+            Some((g.sensor_width_m, g.sensor_height_m)),
+            &SI,
+        );
     }
-    let irr = form_image(&cam.optics, &scene, grid).map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
+    let irr = form_image(&cam.optics, &scene, grid)
+        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
     let img = &irr.irradiance;
     // Step 2 on the axis: K_c = p² · FF · Σ_k (∫ QE_c B_k dλ) a_k.
     let area = s.pixel_pitch_m * s.pixel_pitch_m * s.fill_factor;
     let k_c: Vec<f64> = s
         .channel_qe
         .iter()
-        .map(|qe| area * img.term_integrals(qe).iter().zip(&img.planes).map(|(w, p)| w * p[0] as f64).sum::<f64>())
+        .map(|qe| {
+            area * img
+                .term_integrals(qe)
+                .iter()
+                .zip(&img.planes)
+                .map(|(w, p)| w * p[0] as f64)
+                .sum::<f64>()
+        })
         .collect();
     // R = cos⁴θ = (f² / (f² + r²))², tan θ = r / f (camsim_optics::relative_illumination_cos4),
     // at the pixel centres ((j − (cols−1)/2)·dx, (i − (rows−1)/2)·dx); R = 1 without fall-off.
@@ -173,9 +235,16 @@ fn uniform_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthG
     let (f, dx) = (cam.optics.focal_length_m, irr.sample_pitch_m);
     let f2 = f * f;
     let (yc, xc) = ((s.rows as f64 - 1.0) / 2.0, (s.cols as f64 - 1.0) / 2.0);
-    let x2: Vec<f64> = (0..s.cols).map(|c| ((c as f64 - xc) * dx).powi(2)).collect();
+    let x2: Vec<f64> = (0..s.cols)
+        .map(|c| ((c as f64 - xc) * dx).powi(2))
+        .collect();
     // K of each column for every tile row.
-    let k_rows: Vec<Vec<f64>> = s.cfa.tile.iter().map(|t| (0..s.cols).map(|c| k_c[t[c % t.len()]]).collect()).collect();
+    let k_rows: Vec<Vec<f64>> = s
+        .cfa
+        .tile
+        .iter()
+        .map(|t| (0..s.cols).map(|c| k_c[t[c % t.len()]]).collect())
+        .collect();
     let mut out = vec![0f32; s.rows * s.cols];
     out.par_chunks_mut(s.cols).enumerate().for_each(|(r, row)| {
         let k = &k_rows[r % k_rows.len()];
@@ -191,7 +260,11 @@ fn uniform_electron_rate(set: &CaptureSet, shot_index: usize, grid: &WavelengthG
             }
         }
     });
-    Ok(Some(ElectronRate { rows: s.rows, cols: s.cols, electrons_per_s: out }))
+    Ok(Some(ElectronRate {
+        rows: s.rows,
+        cols: s.cols,
+        electrons_per_s: out,
+    }))
 }
 
 /// Run the simulation and write its outputs; on any error nothing is left in the output folder.
@@ -201,7 +274,11 @@ pub fn simulate(set: &CaptureSet, opts: &SimulateOptions) -> Result<SimulateSumm
     for shot in &set.shots {
         for f in &shot.frames {
             let p = set.dir.join(f);
-            if p.extension().map(|e| e.eq_ignore_ascii_case("png")).unwrap_or(false) && p.exists() {
+            if p.extension()
+                .map(|e| e.eq_ignore_ascii_case("png"))
+                .unwrap_or(false)
+                && p.exists()
+            {
                 frames::check_frame(&p, sensor.rows, sensor.cols)?;
             }
         }
@@ -214,11 +291,23 @@ pub fn simulate(set: &CaptureSet, opts: &SimulateOptions) -> Result<SimulateSumm
     Ok(summary)
 }
 
-fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<SimulateSummary, CliError> {
+fn run_into(
+    set: &CaptureSet,
+    opts: &SimulateOptions,
+    staging: &Path,
+) -> Result<SimulateSummary, CliError> {
     let sensor = &set.camera.sensor;
     let grid = wavelength_grid(set);
-    let total: u64 = if opts.expected { set.shots.len() as u64 } else { set.shots.iter().map(|s| s.frames.len() as u64).sum() };
-    let bar = if opts.progress { ProgressBar::new(total) } else { ProgressBar::hidden() };
+    let total: u64 = if opts.expected {
+        set.shots.len() as u64
+    } else {
+        set.shots.iter().map(|s| s.frames.len() as u64).sum()
+    };
+    let bar = if opts.progress {
+        ProgressBar::new(total)
+    } else {
+        ProgressBar::hidden()
+    };
     bar.set_style(
         ProgressStyle::with_template("{spinner} simulate [{bar:40}] {pos}/{len} {msg} ({eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
@@ -234,7 +323,11 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
     };
     // Fixed patterns: one frame draws them row by row inside the frame loop (same values,
     // no full-size maps); several frames share the maps, built once on first use.
-    let total_frames: usize = if opts.expected { 0 } else { set.shots.iter().map(|s| s.frames.len()).sum() };
+    let total_frames: usize = if opts.expected {
+        0
+    } else {
+        set.shots.iter().map(|s| s.frames.len()).sum()
+    };
     let mut fixed: Option<FixedPattern> = None;
     let mut cache: HashMap<&str, ElectronRate> = HashMap::new();
     let mut summary = SimulateSummary::default();
@@ -251,12 +344,20 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
             Exposure::Auto(f) => camsim_sensor::auto_exposure_s(sensor, rate, f),
         };
         summary.exposures_s.push((shot.id.clone(), exposure_s));
-        let sh = Shot { exposure_s, analog_gain: shot.analog_gain };
+        let sh = Shot {
+            exposure_s,
+            analog_gain: shot.analog_gain,
+        };
         if opts.expected {
             let dn = expected_dn(sensor, rate, &sh);
             let rel = PathBuf::from(format!("{}.exr", shot.id));
-            let plane = Plane { rows: sensor.rows, cols: sensor.cols, data: dn };
-            write_single_channel_exr(&staging.join(&rel), "Y", &plane).map_err(|e| CliError::output(&rel, e))?;
+            let plane = Plane {
+                rows: sensor.rows,
+                cols: sensor.cols,
+                data: dn,
+            };
+            write_single_channel_exr(&staging.join(&rel), "Y", &plane)
+                .map_err(|e| CliError::output(&rel, e))?;
             summary.files.push(rel);
             bar.inc(1);
         } else {
@@ -270,7 +371,14 @@ fn run_into(set: &CaptureSet, opts: &SimulateOptions, staging: &Path) -> Result<
                     }
                     PatternSource::Maps(fixed.as_ref().expect("built above"))
                 };
-                let frame = expose_with(sensor, rate, &sh, pattern, opts.seed, &[si as u64, fi as u64]);
+                let frame = expose_with(
+                    sensor,
+                    rate,
+                    &sh,
+                    pattern,
+                    opts.seed,
+                    &[si as u64, fi as u64],
+                );
                 lap("expose");
                 let rel = PathBuf::from(f);
                 let dst = staging.join(&rel);
@@ -311,7 +419,11 @@ mod tests {
                        "read_noise_v": 1.0e-3, "dsnu_sigma_v": 1.0e-3, "prnu_sigma_percent": 1.0}
         });
         std::fs::write(dir.join("camera.json"), camera.to_string()).unwrap();
-        std::fs::write(dir.join("captures.json"), json!({"camera": "camera.json", "shots": shots}).to_string()).unwrap();
+        std::fs::write(
+            dir.join("captures.json"),
+            json!({"camera": "camera.json", "shots": shots}).to_string(),
+        )
+        .unwrap();
         crate::config::load_captures(&dir.join("captures.json"), None).unwrap()
     }
 
@@ -332,16 +444,32 @@ mod tests {
             let set = write(dir.path(), optics, shots.clone());
             let grid = wavelength_grid(&set);
             for si in 0..3 {
-                let fast = uniform_electron_rate(&set, si, &grid).unwrap().expect("fast path applies");
-                let general = electron_rate(&set.camera.sensor, &shot_irradiance(&set, si, &grid).unwrap());
+                let fast = uniform_electron_rate(&set, si, &grid)
+                    .unwrap()
+                    .expect("fast path applies");
+                let general = electron_rate(
+                    &set.camera.sensor,
+                    &shot_irradiance(&set, si, &grid).unwrap(),
+                );
                 assert_eq!((fast.rows, fast.cols), (general.rows, general.cols));
-                let (lo, hi) = general.electrons_per_s.iter().fold((f32::MAX, 0f32), |(a, b), &v| (a.min(v), b.max(v)));
+                let (lo, hi) = general
+                    .electrons_per_s
+                    .iter()
+                    .fold((f32::MAX, 0f32), |(a, b), &v| (a.min(v), b.max(v)));
                 if si < 2 && ri == "cos4" {
                     assert!(lo < 0.9 * hi, "fall-off visible: {lo} {hi}");
                 }
-                for (i, (a, b)) in fast.electrons_per_s.iter().zip(&general.electrons_per_s).enumerate() {
+                for (i, (a, b)) in fast
+                    .electrons_per_s
+                    .iter()
+                    .zip(&general.electrons_per_s)
+                    .enumerate()
+                {
                     let (a, b) = (*a as f64, *b as f64);
-                    assert!((a - b).abs() <= 1e-6 * b.abs(), "{ri} shot {si} pixel {i}: {a} vs {b}");
+                    assert!(
+                        (a - b).abs() <= 1e-6 * b.abs(),
+                        "{ri} shot {si} pixel {i}: {a} vs {b}"
+                    );
                 }
             }
         }
@@ -349,6 +477,8 @@ mod tests {
         let optics = json!({"f_number": 2.8, "focal_length_mm": 3.0, "relative_illumination": "cos4",
                             "blur": {"kind": "gaussian", "sigma_um": 1.0}});
         let set = write(dir.path(), optics, shots);
-        assert!(uniform_electron_rate(&set, 0, &wavelength_grid(&set)).unwrap().is_none());
+        assert!(uniform_electron_rate(&set, 0, &wavelength_grid(&set))
+            .unwrap()
+            .is_none());
     }
 }

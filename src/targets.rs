@@ -32,9 +32,16 @@ struct Obj<'a> {
 impl<'a> Obj<'a> {
     fn allow(&self, keys: &[&str]) -> Result<(), String> {
         for k in self.m.keys() {
-            if k != "kind" && k != "radiance_unit" && k != "mean_luminance_cd_m2" && !keys.contains(&k.as_str()) {
+            if k != "kind"
+                && k != "radiance_unit"
+                && k != "mean_luminance_cd_m2"
+                && !keys.contains(&k.as_str())
+            {
                 let kind = self.m["kind"].as_str().unwrap_or("");
-                return Err(format!(".{k}: unknown key for a target of kind \"{kind}\" (allowed: {})", keys.join(", ")));
+                return Err(format!(
+                    ".{k}: unknown key for a target of kind \"{kind}\" (allowed: {})",
+                    keys.join(", ")
+                ));
             }
         }
         Ok(())
@@ -42,7 +49,10 @@ impl<'a> Obj<'a> {
     fn num(&self, k: &str, default: Option<f64>) -> Result<f64, String> {
         match self.m.get(k) {
             None => default.ok_or_else(|| format!(".{k}: required")),
-            Some(v) => v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| format!(".{k}: must be a number")),
+            Some(v) => v
+                .as_f64()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!(".{k}: must be a number")),
         }
     }
     fn count(&self, k: &str) -> Result<usize, String> {
@@ -70,19 +80,33 @@ fn radiance_checked(s: Spectrum, k: &str, photons: bool) -> Result<Spectrum, Str
 }
 
 fn spectrum(v: &Value) -> Result<Spectrum, String> {
-    serde_json::from_value::<crate::config::SpectrumValue>(v.clone()).map(|s| s.0).map_err(|e| e.to_string())
+    serde_json::from_value::<crate::config::SpectrumValue>(v.clone())
+        .map(|s| s.0)
+        .map_err(|e| e.to_string())
 }
 
 /// Parse one target object. Errors start with the key path below `target` (".radiance: …").
-pub fn target_from_value(v: &Value, dir: &Path, sensor: &SensorModel) -> Result<ParsedTarget, String> {
+pub fn target_from_value(
+    v: &Value,
+    dir: &Path,
+    sensor: &SensorModel,
+) -> Result<ParsedTarget, String> {
     let m = v.as_object().ok_or(": must be an object with a \"kind\"")?;
-    let kind = m.get("kind").and_then(Value::as_str).ok_or(".kind: required (a string)")?;
+    let kind = m
+        .get("kind")
+        .and_then(Value::as_str)
+        .ok_or(".kind: required (a string)")?;
     let photons = match m.get("radiance_unit").map(|u| u.as_str()) {
         None => false,
         Some(Some("photons")) => true,
         Some(Some("W")) | Some(Some("watts")) => false,
         Some(other) => {
-            return Err(format!(".radiance_unit: expected \"photons\" (or \"W\", the default), got {}", other.map(|s| format!("\"{s}\"")).unwrap_or("a non-string".into())))
+            return Err(format!(
+                ".radiance_unit: expected \"photons\" (or \"W\", the default), got {}",
+                other
+                    .map(|s| format!("\"{s}\""))
+                    .unwrap_or("a non-string".into())
+            ))
         }
     };
     let o = Obj { m, photons };
@@ -105,7 +129,9 @@ pub fn target_from_value(v: &Value, dir: &Path, sensor: &SensorModel) -> Result<
         }
         "uniform" => {
             o.allow(&["radiance"])?;
-            Target::Uniform { radiance: o.radiance("radiance", None)? }
+            Target::Uniform {
+                radiance: o.radiance("radiance", None)?,
+            }
         }
         "patches" => {
             o.allow(&["rows", "cols", "patch_fraction", "background", "patches"])?;
@@ -114,24 +140,50 @@ pub fn target_from_value(v: &Value, dir: &Path, sensor: &SensorModel) -> Result<
             if !(pf > 0.0 && pf <= 1.0) {
                 return Err(format!(".patch_fraction: must be in (0, 1], got {pf}"));
             }
-            let list = m.get("patches").and_then(Value::as_array).ok_or(".patches: required (a list of spectra)")?;
+            let list = m
+                .get("patches")
+                .and_then(Value::as_array)
+                .ok_or(".patches: required (a list of spectra)")?;
             if list.len() != rows * cols {
-                return Err(format!(".patches: lists {} spectra but rows·cols = {}", list.len(), rows * cols));
+                return Err(format!(
+                    ".patches: lists {} spectra but rows·cols = {}",
+                    list.len(),
+                    rows * cols
+                ));
             }
             let patches = list
                 .iter()
                 .enumerate()
-                .map(|(i, p)| radiance_checked(spectrum(p).map_err(|e| format!(".patches[{i}]: {e}"))?, &format!("patches[{i}]"), photons))
+                .map(|(i, p)| {
+                    radiance_checked(
+                        spectrum(p).map_err(|e| format!(".patches[{i}]: {e}"))?,
+                        &format!("patches[{i}]"),
+                        photons,
+                    )
+                })
                 .collect::<Result<Vec<_>, _>>()?;
-            Target::Patches { rows, cols, patch_fraction: pf, background: o.radiance("background", Some(0.0))?, patches }
+            Target::Patches {
+                rows,
+                cols,
+                patch_fraction: pf,
+                background: o.radiance("background", Some(0.0))?,
+                patches,
+            }
         }
         "slanted_edge" => {
             o.allow(&["dark", "light", "angle_deg"])?;
-            Target::SlantedEdge { dark: o.radiance("dark", None)?, light: o.radiance("light", None)?, angle_deg: o.num("angle_deg", None)? }
+            Target::SlantedEdge {
+                dark: o.radiance("dark", None)?,
+                light: o.radiance("light", None)?,
+                angle_deg: o.num("angle_deg", None)?,
+            }
         }
         "image" => {
             o.allow(&["file"])?;
-            let f = m.get("file").and_then(Value::as_str).ok_or(".file: required (a spectral EXR path)")?;
+            let f = m
+                .get("file")
+                .and_then(Value::as_str)
+                .ok_or(".file: required (a spectral EXR path)")?;
             let p = dir.join(f);
             let exr = read_spectral_exr(&p).map_err(|e| format!(".file: {e}"))?;
             let mut img = exr.image;
@@ -145,7 +197,9 @@ pub fn target_from_value(v: &Value, dir: &Path, sensor: &SensorModel) -> Result<
             o.allow(&["illuminant", "patch_fraction", "background"])?;
             let ill_energy = match m.get("illuminant") {
                 None => data::illuminant("D65").map_err(|e| e.to_string())?,
-                Some(Value::String(name)) => data::illuminant(name).map_err(|e| format!(".illuminant: {e}"))?,
+                Some(Value::String(name)) => {
+                    data::illuminant(name).map_err(|e| format!(".illuminant: {e}"))?
+                }
                 Some(v) => spectrum(v).map_err(|e| format!(".illuminant: {e}"))?,
             };
             if let Some((w, v)) = ill_energy.first_negative() {
@@ -159,11 +213,21 @@ pub fn target_from_value(v: &Value, dir: &Path, sensor: &SensorModel) -> Result<
             }
             let patches = refl.iter().map(|r| Spectrum::multiply(r, &ill)).collect();
             illuminant = Some(ill);
-            Target::Patches { rows: 4, cols: 6, patch_fraction: pf, background: o.radiance("background", Some(0.0))?, patches }
+            Target::Patches {
+                rows: 4,
+                cols: 6,
+                patch_fraction: pf,
+                background: o.radiance("background", Some(0.0))?,
+                patches,
+            }
         }
         "ramp" => {
             o.allow(&["radiance", "min", "max"])?;
-            Target::Ramp { radiance: o.radiance("radiance", None)?, min: o.num("min", Some(0.0))?.max(0.0), max: o.num("max", Some(1.0))?.max(0.0) }
+            Target::Ramp {
+                radiance: o.radiance("radiance", None)?,
+                min: o.num("min", Some(0.0))?.max(0.0),
+                max: o.num("max", Some(1.0))?.max(0.0),
+            }
         }
         "frequency_sweep" => {
             o.allow(&["radiance", "max_cycles_per_pixel", "contrast"])?;
@@ -196,7 +260,15 @@ pub fn target_from_value(v: &Value, dir: &Path, sensor: &SensorModel) -> Result<
                 line_width_m: o.num("line_width_px", Some(1.0))?.max(1e-3) * pitch,
             }
         }
-        other => return Err(format!(".kind: unknown target kind \"{other}\" (expected one of {KINDS})")),
+        other => {
+            return Err(format!(
+                ".kind: unknown target kind \"{other}\" (expected one of {KINDS})"
+            ))
+        }
     };
-    Ok(ParsedTarget { target, mean_luminance_cd_m2, illuminant })
+    Ok(ParsedTarget {
+        target,
+        mean_luminance_cd_m2,
+        illuminant,
+    })
 }

@@ -33,8 +33,16 @@ pub fn captures(radiance_w: f64, exposure_s: f64) -> Value {
 }
 
 pub fn write_set(dir: &Path, camera: &Value, captures: &Value) {
-    std::fs::write(dir.join("camera.json"), serde_json::to_string_pretty(camera).unwrap()).unwrap();
-    std::fs::write(dir.join("captures.json"), serde_json::to_string_pretty(captures).unwrap()).unwrap();
+    std::fs::write(
+        dir.join("camera.json"),
+        serde_json::to_string_pretty(camera).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("captures.json"),
+        serde_json::to_string_pretty(captures).unwrap(),
+    )
+    .unwrap();
 }
 
 fn read_exr_y(path: &Path) -> (usize, usize, Vec<f32>) {
@@ -51,7 +59,10 @@ fn baseline_dn(row: usize, col: usize, rows: usize, cols: usize, radiance_w: f64
     let int = 0.5 * radiance_w * (700.0f64.powi(2) - 400.0f64.powi(2)) / 2.0 * 1e-9 / (h * c);
     let (n, f, p) = (2.8, 3.0e-3, 2.0e-6);
     // cos⁴θ, tan θ = r/f, averaged over the pixel square (20×20 midpoint rule)
-    let (x0, y0) = ((col as f64 - cols as f64 / 2.0) * p, (row as f64 - rows as f64 / 2.0) * p);
+    let (x0, y0) = (
+        (col as f64 - cols as f64 / 2.0) * p,
+        (row as f64 - rows as f64 / 2.0) * p,
+    );
     let mut r4 = 0.0;
     for i in 0..20 {
         for j in 0..20 {
@@ -80,13 +91,20 @@ fn expected_matches_closed_form_baseline() {
         .current_dir(dir.path())
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let (r, c, y) = read_exr_y(&out.join("flat.exr"));
     assert_eq!((r, c), (rows, cols));
     for &(row, col) in &[(32, 48), (0, 0), (63, 95), (10, 70)] {
         let want = baseline_dn(row, col, rows, cols, l, t);
         let got = y[row * cols + col] as f64;
-        assert!((got - want).abs() < 1e-4 * want, "pixel ({row},{col}): {got} vs {want}");
+        assert!(
+            (got - want).abs() < 1e-4 * want,
+            "pixel ({row},{col}): {got} vs {want}"
+        );
     }
     // corners are darker than the centre by cos⁴
     assert!(y[0] < y[32 * cols + 48]);
@@ -103,11 +121,24 @@ fn frames_are_16bit_png_at_their_paths_and_deterministic_across_threads() {
     for threads in ["1", "2"] {
         let out = format!("out{threads}");
         let st = camsim()
-            .args(["--threads", threads, "simulate", "captures.json", "--out", &out, "--seed", "7"])
+            .args([
+                "--threads",
+                threads,
+                "simulate",
+                "captures.json",
+                "--out",
+                &out,
+                "--seed",
+                "7",
+            ])
             .current_dir(dir.path())
             .output()
             .unwrap();
-        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
         outs.push(dir.path().join(out));
     }
     for f in ["raw/dark-0.png", "raw/flat-0.png", "raw/flat-1.png"] {
@@ -121,18 +152,32 @@ fn frames_are_16bit_png_at_their_paths_and_deterministic_across_threads() {
     let a = camsim::frames::read_png16(&outs[0].join("raw/flat-0.png")).unwrap();
     let b = camsim::frames::read_png16(&outs[0].join("raw/flat-1.png")).unwrap();
     assert_ne!(a.dn, b.dn);
-    let names: Vec<_> = std::fs::read_dir(&outs[0]).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(&outs[0])
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(names.len(), 1, "only raw/ in the output: {names:?}");
     // another seed gives other frames
-    let st = camsim().args(["simulate", "captures.json", "--out", "out3", "--seed", "8"]).current_dir(dir.path()).output().unwrap();
+    let st = camsim()
+        .args(["simulate", "captures.json", "--out", "out3", "--seed", "8"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
     assert!(st.status.success());
-    assert_ne!(std::fs::read(outs[0].join("raw/flat-0.png")).unwrap(), std::fs::read(dir.path().join("out3/raw/flat-0.png")).unwrap());
+    assert_ne!(
+        std::fs::read(outs[0].join("raw/flat-0.png")).unwrap(),
+        std::fs::read(dir.path().join("out3/raw/flat-0.png")).unwrap()
+    );
 }
 
 /// Runs simulate on a broken set and checks: non-zero exit, one line on stderr that names the
 /// file and contains `needle`, and no output folder.
 fn assert_bad(dir: &Path, needles: &[&str]) {
-    let st = camsim().args(["simulate", "captures.json", "--out", "out"]).current_dir(dir).output().unwrap();
+    let st = camsim()
+        .args(["simulate", "captures.json", "--out", "out"])
+        .current_dir(dir)
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&st.stderr).to_string();
     assert!(!st.status.success(), "should fail: {err}");
     assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
@@ -148,7 +193,11 @@ fn bad_input_gives_one_clear_line_and_writes_nothing() {
     let dir = d.path();
     // malformed JSON
     write_set(dir, &camera(8, 8), &captures(0.01, 0.01));
-    std::fs::write(dir.join("captures.json"), "{\"camera\": \"camera.json\", \"shots\": [").unwrap();
+    std::fs::write(
+        dir.join("captures.json"),
+        "{\"camera\": \"camera.json\", \"shots\": [",
+    )
+    .unwrap();
     assert_bad(dir, &["captures.json", "invalid"]);
     // unknown key (misspelt prnu_sigma_percent)
     let mut cam = camera(8, 8);
@@ -163,10 +212,18 @@ fn bad_input_gives_one_clear_line_and_writes_nothing() {
     let mut caps = captures(0.01, 0.01);
     caps["shots"][1]["target"]["radiance"] = json!({"wavelength_nm": [500, 400], "values": [1, 1]});
     write_set(dir, &camera(8, 8), &caps);
-    assert_bad(dir, &["captures.json", "shots[1] (flat).target.radiance", "increasing"]);
+    assert_bad(
+        dir,
+        &[
+            "captures.json",
+            "shots[1] (flat).target.radiance",
+            "increasing",
+        ],
+    );
     // negative radiance
     let mut caps = captures(0.01, 0.01);
-    caps["shots"][1]["target"]["radiance"] = json!({"wavelength_nm": [400, 700], "values": [0.1, -0.2]});
+    caps["shots"][1]["target"]["radiance"] =
+        json!({"wavelength_nm": [400, 700], "values": [0.1, -0.2]});
     write_set(dir, &camera(8, 8), &caps);
     assert_bad(dir, &["captures.json", "negative radiance"]);
     // unknown CFA letter
@@ -177,7 +234,12 @@ fn bad_input_gives_one_clear_line_and_writes_nothing() {
     // a recorded frame of the wrong size
     write_set(dir, &camera(8, 8), &captures(0.01, 0.01));
     std::fs::create_dir_all(dir.join("raw")).unwrap();
-    let wrong = camsim_core::RawFrame { rows: 4, cols: 8, adc_bits: 12, dn: vec![0; 32] };
+    let wrong = camsim_core::RawFrame {
+        rows: 4,
+        cols: 8,
+        adc_bits: 12,
+        dn: vec![0; 32],
+    };
     camsim::frames::write_png16(&dir.join("raw/flat-0.png"), &wrong).unwrap();
     assert_bad(dir, &["flat-0.png", "4×8", "8×8"]);
     // a recorded frame of the wrong bit depth (8-bit PNG)
@@ -201,8 +263,18 @@ fn bad_input_gives_one_clear_line_and_writes_nothing() {
 fn shipped_example_runs() {
     let dir = tempfile::tempdir().unwrap();
     let ex = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/table1/captures.json");
-    let st = camsim().args(["simulate"]).arg(&ex).arg("--out").arg(dir.path().join("o")).output().unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    let st = camsim()
+        .args(["simulate"])
+        .arg(&ex)
+        .arg("--out")
+        .arg(dir.path().join("o"))
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let f = camsim::frames::read_png16(&dir.path().join("o/raw/macbeth-0.png")).unwrap();
     assert_eq!((f.rows, f.cols), (480, 640));
     // auto-exposure to 90 % of the swing: the brightest pixels sit near 0.9 · 1023

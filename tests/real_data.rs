@@ -33,7 +33,10 @@ pub fn flea3_dark_set(dir: &Path) -> PathBuf {
         let parts: Vec<&str> = name.split('_').collect();
         let ms: u32 = parts[2].trim_end_matches("ms").parse().unwrap();
         std::os::unix::fs::symlink(src.join(&name), dir.join("raw").join(&name)).unwrap();
-        shots.entry((parts[0].to_string(), ms)).or_default().push(format!("raw/{name}"));
+        shots
+            .entry((parts[0].to_string(), ms))
+            .or_default()
+            .push(format!("raw/{name}"));
     }
     let shots: Vec<Value> = shots
         .into_iter()
@@ -44,7 +47,11 @@ pub fn flea3_dark_set(dir: &Path) -> PathBuf {
         .collect();
     std::fs::write(dir.join("camera.json"), flea3_camera().to_string()).unwrap();
     let p = dir.join("captures.json");
-    std::fs::write(&p, json!({"camera": "camera.json", "shots": shots}).to_string()).unwrap();
+    std::fs::write(
+        &p,
+        json!({"camera": "camera.json", "shots": shots}).to_string(),
+    )
+    .unwrap();
     p
 }
 
@@ -60,7 +67,10 @@ fn flea3_dark_series_dark_growth_and_hot_pixels() {
         f.dn.iter().filter(|&&v| v > 10).count()
     };
     let (short, long) = (count_above("d1-dark-25ms"), count_above("d1-dark-3916ms"));
-    assert!(short == 0 && long >= 5, "pixels > 10 DN: {short} at 25 ms, {long} at 3.9 s");
+    assert!(
+        short == 0 && long >= 5,
+        "pixels > 10 DN: {short} at 25 ms, {long} at 3.9 s"
+    );
     let out = d.path().join("cal");
     let c = camsim::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
     eprintln!("flea3 calibration: {}", serde_json::to_string_pretty(&json!({
@@ -72,12 +82,19 @@ fn flea3_dark_series_dark_growth_and_hot_pixels() {
     // * session 2 was cropped to 342 rows: those shots are rejected with the size named;
     let rejected = c["rejected_shots"].as_array().unwrap();
     assert_eq!(rejected.len(), 7);
-    assert!(rejected.iter().all(|r| r["id"].as_str().unwrap().starts_with("d2") && r["reason"].as_str().unwrap().contains("342×408")));
+    assert!(rejected
+        .iter()
+        .all(|r| r["id"].as_str().unwrap().starts_with("d2")
+            && r["reason"].as_str().unwrap().contains("342×408")));
     // * the 8-bit darks sit at 0 DN for most pixels: mean/variance estimators refuse, naming
     //   the clipping, instead of returning biased numbers;
     for k in ["dark_voltage_v_per_s", "read_noise_v"] {
         assert_eq!(c[k]["status"], "not_estimable", "{k}");
-        assert!(c[k]["reason"].as_str().unwrap().contains("clip"), "{k}: {}", c[k]["reason"]);
+        assert!(
+            c[k]["reason"].as_str().unwrap().contains("clip"),
+            "{k}: {}",
+            c[k]["reason"]
+        );
     }
     // * yet the dark signal does grow with exposure in the data (mean DN of session 1):
     let mean_dn = |id: &str| -> f64 {

@@ -6,9 +6,18 @@ use std::path::Path;
 
 fn run_ok(args: &[&str], dir: &Path) -> Value {
     let st = camsim().args(args).current_dir(dir).output().unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
-    let out = args.iter().position(|a| *a == "--out").map(|i| args[i + 1]).unwrap_or("out/run");
-    serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("summary.json")).unwrap()).unwrap()
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let out = args
+        .iter()
+        .position(|a| *a == "--out")
+        .map(|i| args[i + 1])
+        .unwrap_or("out/run");
+    serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("summary.json")).unwrap())
+        .unwrap()
 }
 
 #[test]
@@ -16,11 +25,23 @@ fn default_run_writes_every_product_and_real_figures() {
     let d = tempfile::tempdir().unwrap();
     let s = run_ok(&["run", "--out", "o"], d.path());
     let o = d.path().join("o");
-    for f in ["scene_radiance.exr", "sensor_irradiance.exr", "raw.png", "rendered.png", "display_radiance.exr", "summary.json", "report.html"] {
+    for f in [
+        "scene_radiance.exr",
+        "sensor_irradiance.exr",
+        "raw.png",
+        "rendered.png",
+        "display_radiance.exr",
+        "summary.json",
+        "report.html",
+    ] {
         assert!(o.join(f).is_file(), "{f} missing");
     }
     // the spectral EXRs are in the Fichet layout at the sensor's resolution
-    for f in ["scene_radiance.exr", "sensor_irradiance.exr", "display_radiance.exr"] {
+    for f in [
+        "scene_radiance.exr",
+        "sensor_irradiance.exr",
+        "display_radiance.exr",
+    ] {
         let e = camsim_core::exr_io::read_spectral_exr(&o.join(f)).unwrap();
         assert_eq!((e.image.rows, e.image.cols), (480, 640), "{f}");
         assert_eq!(e.grid.wavelength_nm.first(), Some(&400.0));
@@ -40,7 +61,10 @@ fn default_run_writes_every_product_and_real_figures() {
     assert!(figs.len() >= 6);
     for f in figs {
         let f = f.as_str().unwrap();
-        assert!(html.contains(&format!("src=\"{f}\"")), "report does not show {f}");
+        assert!(
+            html.contains(&format!("src=\"{f}\"")),
+            "report does not show {f}"
+        );
         let c = check_figure(&o.join(f)).unwrap();
         assert!(c.distinct_colours >= 8, "{f}: {c:?}");
         assert!(c.non_white_per_mille >= 20, "{f}: {c:?}");
@@ -71,17 +95,27 @@ fn small_config(dir: &Path, processor: Value) -> std::path::PathBuf {
 fn colour_correction_reduces_delta_e() {
     let d = tempfile::tempdir().unwrap();
     let with = small_config(d.path(), json!({"color_correction": "macbeth_d65"}));
-    let without = small_config(d.path(), json!({"color_correction": "none", "demosaic": "bilinear"}));
+    let without = small_config(
+        d.path(),
+        json!({"color_correction": "none", "demosaic": "bilinear"}),
+    );
     let a = run_ok(&["run", with.to_str().unwrap(), "--out", "a"], d.path());
     let b = run_ok(&["run", without.to_str().unwrap(), "--out", "b"], d.path());
-    let (da, db) = (a["delta_e_2000"]["mean"].as_f64().unwrap(), b["delta_e_2000"]["mean"].as_f64().unwrap());
+    let (da, db) = (
+        a["delta_e_2000"]["mean"].as_f64().unwrap(),
+        b["delta_e_2000"]["mean"].as_f64().unwrap(),
+    );
     assert!(da < 0.6 * db, "with CCM {da}, without {db}");
 }
 
 fn assert_bad_run(dir: &Path, cfg: &str, needles: &[&str]) {
     let p = dir.join("bad.json");
     std::fs::write(&p, cfg).unwrap();
-    let st = camsim().args(["run", "bad.json", "--out", "o"]).current_dir(dir).output().unwrap();
+    let st = camsim()
+        .args(["run", "bad.json", "--out", "o"])
+        .current_dir(dir)
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&st.stderr).to_string();
     assert!(!st.status.success());
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
@@ -95,10 +129,26 @@ fn assert_bad_run(dir: &Path, cfg: &str, needles: &[&str]) {
 fn bad_run_configs_give_one_clear_error() {
     let d = tempfile::tempdir().unwrap();
     let t = r#""target": {"kind": "macbeth"}"#;
-    assert_bad_run(d.path(), &format!(r#"{{{t}, "display": {{"name": "CRT-Nope"}}}}"#), &["bad.json", "CRT-Nope", "lcdExample"]);
-    assert_bad_run(d.path(), &format!(r#"{{{t}, "processor": {{"demosaic": "magic"}}}}"#), &["bad.json", "magic", "malvar"]);
-    assert_bad_run(d.path(), &format!(r#"{{{t}, "processor": {{"white_balance": "auto"}}}}"#), &["bad.json", "white_balance"]);
-    assert_bad_run(d.path(), r#"{"target": {"kind": "macbeth"}, "procesor": {}}"#, &["bad.json", "procesor"]);
+    assert_bad_run(
+        d.path(),
+        &format!(r#"{{{t}, "display": {{"name": "CRT-Nope"}}}}"#),
+        &["bad.json", "CRT-Nope", "lcdExample"],
+    );
+    assert_bad_run(
+        d.path(),
+        &format!(r#"{{{t}, "processor": {{"demosaic": "magic"}}}}"#),
+        &["bad.json", "magic", "malvar"],
+    );
+    assert_bad_run(
+        d.path(),
+        &format!(r#"{{{t}, "processor": {{"white_balance": "auto"}}}}"#),
+        &["bad.json", "white_balance"],
+    );
+    assert_bad_run(
+        d.path(),
+        r#"{"target": {"kind": "macbeth"}, "procesor": {}}"#,
+        &["bad.json", "procesor"],
+    );
     assert_bad_run(d.path(), r#"{"target": "#, &["bad.json", "invalid"]);
 }
 
@@ -108,14 +158,42 @@ fn figures_module_draws_every_kind() {
     let p = d.path();
     let xs: Vec<f64> = (0..30).map(|i| i as f64).collect();
     let ys: Vec<f64> = xs.iter().map(|x| x * 0.9 + 3.0).collect();
-    camsim::plots::scatter(&p.join("s.png"), "scatter", &xs, &ys, None, ("x", "y"), true).unwrap();
+    camsim::plots::scatter(
+        &p.join("s.png"),
+        "scatter",
+        &xs,
+        &ys,
+        None,
+        ("x", "y"),
+        true,
+    )
+    .unwrap();
     camsim::plots::histogram(&p.join("h.png"), "hist", &ys, 10, "v").unwrap();
-    camsim::plots::bar_chart(&p.join("b.png"), "bars", &xs.iter().map(|x| x.to_string()).collect::<Vec<_>>(), &ys, "v").unwrap();
-    camsim::plots::line_plot(&p.join("l.png"), "lines", &[("a".into(), xs.iter().zip(&ys).map(|(a, b)| (*a, *b)).collect())], ("x", "y")).unwrap();
+    camsim::plots::bar_chart(
+        &p.join("b.png"),
+        "bars",
+        &xs.iter().map(|x| x.to_string()).collect::<Vec<_>>(),
+        &ys,
+        "v",
+    )
+    .unwrap();
+    camsim::plots::line_plot(
+        &p.join("l.png"),
+        "lines",
+        &[(
+            "a".into(),
+            xs.iter().zip(&ys).map(|(a, b)| (*a, *b)).collect(),
+        )],
+        ("x", "y"),
+    )
+    .unwrap();
     for f in ["s.png", "h.png", "b.png", "l.png"] {
         let c = check_figure(&p.join(f)).unwrap();
         assert_eq!((c.width, c.height), (720, 480));
-        assert!(c.distinct_colours > 8 && c.non_white_per_mille > 10, "{f}: {c:?}");
+        assert!(
+            c.distinct_colours > 8 && c.non_white_per_mille > 10,
+            "{f}: {c:?}"
+        );
     }
     // a blank canvas fails the check that the tests rely on
     let blank = vec![255u8; 30 * 20 * 3];

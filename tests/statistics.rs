@@ -16,7 +16,10 @@ fn flat_field_frames_match_expected_mean_and_model_variance() {
     let grid = wavelength_grid(&set);
     let rate = shot_electron_rate(&set, 1, &grid).unwrap();
     let s = &set.camera.sensor;
-    let shot = Shot { exposure_s: t, analog_gain: 1.0 };
+    let shot = Shot {
+        exposure_s: t,
+        analog_gain: 1.0,
+    };
     let expected = expected_dn(s, &rate, &shot);
     let mean_exp = expected.iter().map(|v| *v as f64).sum::<f64>() / expected.len() as f64;
     // Model variance of one frame over pixels (DN²), spec steps 4–7:
@@ -28,14 +31,23 @@ fn flat_field_frames_match_expected_mean_and_model_variance() {
     let sp = s.prnu_sigma_percent / 100.0;
     let var_v = g * g * (e + d + e * e * sp * sp) + s.dsnu_sigma_v.powi(2) + s.read_noise_v.powi(2);
     let var_model = k * k * var_v + 1.0 / 12.0;
-    assert!(mean_exp > 500.0 && mean_exp < 3500.0, "operating point in range: {mean_exp}");
+    assert!(
+        mean_exp > 500.0 && mean_exp < 3500.0,
+        "operating point in range: {mean_exp}"
+    );
     let fixed = fixed_pattern(s, 11);
     for frame_index in 0..2u64 {
         let f = expose(s, &rate, &shot, &fixed, 11, &[1, frame_index]);
         let n = f.dn.len() as f64;
         let mean = f.dn.iter().map(|v| *v as f64).sum::<f64>() / n;
         let var = f.dn.iter().map(|v| (*v as f64 - mean).powi(2)).sum::<f64>() / (n - 1.0);
-        assert!((mean / mean_exp - 1.0).abs() < 0.005, "mean {mean} vs expected {mean_exp}");
-        assert!((var / var_model - 1.0).abs() < 0.03, "variance {var} vs model {var_model}");
+        assert!(
+            (mean / mean_exp - 1.0).abs() < 0.005,
+            "mean {mean} vs expected {mean_exp}"
+        );
+        assert!(
+            (var / var_model - 1.0).abs() < 0.03,
+            "variance {var} vs model {var_model}"
+        );
     }
 }

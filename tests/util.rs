@@ -10,12 +10,20 @@ pub fn oracle_dir() -> PathBuf {
 /// A parsed oracle case.
 pub fn case(id: &str) -> Value {
     let p = oracle_dir().join("cases").join(format!("{id}.json"));
-    serde_json::from_str(&std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).unwrap()
+    serde_json::from_str(
+        &std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+    )
+    .unwrap()
 }
 
 /// The `values` of an inline array.
 pub fn values(v: &Value) -> Vec<f64> {
-    v["values"].as_array().expect("values").iter().map(|x| x.as_f64().unwrap()).collect()
+    v["values"]
+        .as_array()
+        .expect("values")
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
 }
 
 /// The camsim binary built for these tests.

@@ -44,13 +44,19 @@ pub enum Quadrature {
 fn integrate(a: &Spectrum, b: &Spectrum, q: Quadrature) -> f64 {
     match q {
         Quadrature::Exact => Spectrum::integrate_product(a, b).unwrap_or(0.0),
-        Quadrature::RiemannOnGrid { start_nm, step_nm, count } => (0..count)
-            .map(|i| {
-                let w = (start_nm + i * step_nm) as f64;
-                a.eval(w) * b.eval(w)
-            })
-            .sum::<f64>()
-            * step_nm as f64,
+        Quadrature::RiemannOnGrid {
+            start_nm,
+            step_nm,
+            count,
+        } => {
+            (0..count)
+                .map(|i| {
+                    let w = (start_nm + i * step_nm) as f64;
+                    a.eval(w) * b.eval(w)
+                })
+                .sum::<f64>()
+                * step_nm as f64
+        }
     }
 }
 
@@ -95,8 +101,16 @@ pub fn xyz_to_lab(xyz: Xyz, white: Xyz) -> Lab {
     }
     let (fx, fy, fz) = (f(xyz.x / white.x), f(xyz.y / white.y), f(xyz.z / white.z));
     let yr = xyz.y / white.y;
-    let l = if yr > 0.008856 { 116.0 * fy - 16.0 } else { 903.3 * yr };
-    Lab { l, a: 500.0 * (fx - fy), b: 200.0 * (fy - fz) }
+    let l = if yr > 0.008856 {
+        116.0 * fy - 16.0
+    } else {
+        903.3 * yr
+    };
+    Lab {
+        l,
+        a: 500.0 * (fx - fy),
+        b: 200.0 * (fy - fz),
+    }
 }
 
 /// ΔE*ab (1976): Euclidean distance in CIELAB.
@@ -112,12 +126,34 @@ mod tests {
     #[test]
     fn lab_and_delta_e_oracles() {
         // ../shared/oracles/isetcam/cases/metrics_xyz_to_lab_1d.json, metrics_delta_e_ab_1976_1d.json
-        let w = Xyz { x: 95.047, y: 100.0, z: 108.883 };
-        let lab = xyz_to_lab(Xyz { x: 20.0, y: 30.0, z: 15.0 }, w);
+        let w = Xyz {
+            x: 95.047,
+            y: 100.0,
+            z: 108.883,
+        };
+        let lab = xyz_to_lab(
+            Xyz {
+                x: 20.0,
+                y: 30.0,
+                z: 15.0,
+            },
+            w,
+        );
         assert_relative_eq!(lab.l, 61.65422221, max_relative = 1e-9);
         assert_relative_eq!(lab.a, -37.32133644, max_relative = 1e-9);
         assert_relative_eq!(lab.b, 30.59291656, max_relative = 1e-9);
-        let lab2 = xyz_to_lab(Xyz { x: 18.0, y: 27.0, z: 16.5 }, w);
-        assert_relative_eq!(delta_e_76(lab, lab2), 8.492362455389074, max_relative = 1e-9);
+        let lab2 = xyz_to_lab(
+            Xyz {
+                x: 18.0,
+                y: 27.0,
+                z: 16.5,
+            },
+            w,
+        );
+        assert_relative_eq!(
+            delta_e_76(lab, lab2),
+            8.492362455389074,
+            max_relative = 1e-9
+        );
     }
 }

@@ -42,7 +42,10 @@ pub struct SpectralData {
 impl SpectralData {
     /// The channel called `name`.
     pub fn channel(&self, name: &str) -> Option<&Spectrum> {
-        self.names.iter().position(|n| n == name).map(|i| &self.spectra[i])
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| &self.spectra[i])
     }
 }
 
@@ -58,7 +61,10 @@ pub fn spectral(name: &str) -> Result<SpectralData, CoreError> {
         .collect::<Result<_, _>>()?;
     let values = v["values"].as_array().ok_or_else(|| bad("no values"))?;
     let names: Vec<String> = match v["names"].as_array() {
-        Some(a) => a.iter().map(|n| n.as_str().unwrap_or("").to_string()).collect(),
+        Some(a) => a
+            .iter()
+            .map(|n| n.as_str().unwrap_or("").to_string())
+            .collect(),
         None => (0..values.len()).map(|i| format!("channel_{i}")).collect(),
     };
     let mut spectra = Vec::with_capacity(values.len());
@@ -71,8 +77,12 @@ pub fn spectral(name: &str) -> Result<SpectralData, CoreError> {
             .collect();
         // drop samples that are null (non-finite) in the source table
         // a few source tables are unsorted or repeat a wavelength: sort, keep the first
-        let mut pairs: Vec<(f64, f64)> =
-            wl.iter().zip(&vals).filter(|(_, y)| y.is_finite()).map(|(a, b)| (*a, *b)).collect();
+        let mut pairs: Vec<(f64, f64)> = wl
+            .iter()
+            .zip(&vals)
+            .filter(|(_, y)| y.is_finite())
+            .map(|(a, b)| (*a, *b))
+            .collect();
         pairs.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
         pairs.dedup_by(|a, b| a.0 == b.0);
         let (w, vv): (Vec<f64>, Vec<f64>) = pairs.into_iter().unzip();
@@ -116,7 +126,11 @@ pub fn illuminant(name: &str) -> Result<Spectrum, CoreError> {
             name.into(),
             format!(
                 "unknown illuminant; expected one of {} or an embedded lights/... file",
-                ILLUMINANTS.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                ILLUMINANTS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
         )
     })?;
@@ -140,7 +154,11 @@ pub fn macbeth_reflectances_row_major() -> Result<Vec<Spectrum>, CoreError> {
 /// CIE 1931 colour-matching functions x̄, ȳ, z̄ for energy spectra (ISETCam XYZ.json).
 pub fn cie1931_xyz() -> Result<[Spectrum; 3], CoreError> {
     let d = spectral("human/XYZ")?;
-    Ok([d.spectra[0].clone(), d.spectra[1].clone(), d.spectra[2].clone()])
+    Ok([
+        d.spectra[0].clone(),
+        d.spectra[1].clone(),
+        d.spectra[2].clone(),
+    ])
 }
 
 #[cfg(test)]
@@ -158,7 +176,10 @@ mod tests {
         assert!(m[18].eval(550.0) > 0.8 && m[23].eval(550.0) < 0.1);
         for n in names() {
             let v = json(n).unwrap();
-            if v.get("wavelength_nm").is_some() && v.get("values").is_some() && v.get("spd").is_none() {
+            if v.get("wavelength_nm").is_some()
+                && v.get("values").is_some()
+                && v.get("spd").is_none()
+            {
                 spectral(n).unwrap_or_else(|e| panic!("{n}: {e}"));
             }
         }

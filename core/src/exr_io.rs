@@ -39,8 +39,14 @@ pub fn write_atomically<E: From<std::io::Error>>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
 ) -> Result<(), E> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
     match write(&tmp) {
         Ok(()) => {
@@ -56,13 +62,21 @@ pub fn write_atomically<E: From<std::io::Error>>(
 
 /// The channel name of a wavelength: `S0.550,000000nm`.
 pub fn channel_name(wavelength_nm: f64) -> String {
-    format!("S0.{:.6}nm", wavelength_nm).replace('.', ",").replacen("S0,", "S0.", 1)
+    format!("S0.{:.6}nm", wavelength_nm)
+        .replace('.', ",")
+        .replacen("S0,", "S0.", 1)
 }
 
 /// Parse `S0.<number><unit>` into a wavelength in nm (None for other channels).
 pub fn parse_channel_name(name: &str) -> Option<f64> {
     let rest = name.strip_prefix("S0.")?;
-    let units: [(&str, f64); 5] = [("nm", 1.0), ("um", 1e3), ("pm", 1e-3), ("mm", 1e6), ("m", 1e9)];
+    let units: [(&str, f64); 5] = [
+        ("nm", 1.0),
+        ("um", 1e3),
+        ("pm", 1e-3),
+        ("mm", 1e6),
+        ("m", 1e9),
+    ];
     for (u, k) in units {
         if let Some(num) = rest.strip_suffix(u) {
             return num.replace(',', ".").parse::<f64>().ok().map(|v| v * k);
@@ -72,7 +86,10 @@ pub fn parse_channel_name(name: &str) -> Option<f64> {
 }
 
 fn exr_err(path: &Path, e: impl std::fmt::Display) -> CoreError {
-    CoreError::Exr { path: path.display().to_string(), msg: e.to_string() }
+    CoreError::Exr {
+        path: path.display().to_string(),
+        msg: e.to_string(),
+    }
 }
 
 /// Write a band image (values per nm in `emissive_units`) with optional depth.
@@ -85,7 +102,10 @@ pub fn write_spectral_exr(
     let grid = match &image.basis {
         SpectralBasis::Bands(g) => g.clone(),
         SpectralBasis::Spectra(_) => {
-            return Err(exr_err(path, "spectral EXR needs a band image (call to_bands first)"))
+            return Err(exr_err(
+                path,
+                "spectral EXR needs a band image (call to_bands first)",
+            ))
         }
     };
     let mut channels: Vec<AnyChannel<FlatSamples>> = grid
@@ -101,8 +121,14 @@ pub fn write_spectral_exr(
         channels.push(AnyChannel::new("Z", FlatSamples::F32(d.data.clone())));
     }
     let mut attrs = LayerAttributes::default();
-    attrs.other.insert(Text::from("spectralLayoutVersion"), AttributeValue::Text(Text::from("1.0")));
-    attrs.other.insert(Text::from("emissiveUnits"), AttributeValue::Text(Text::from(emissive_units)));
+    attrs.other.insert(
+        Text::from("spectralLayoutVersion"),
+        AttributeValue::Text(Text::from("1.0")),
+    );
+    attrs.other.insert(
+        Text::from("emissiveUnits"),
+        AttributeValue::Text(Text::from(emissive_units)),
+    );
     let layer = Layer::new(
         (image.cols, image.rows),
         attrs,
@@ -111,13 +137,19 @@ pub fn write_spectral_exr(
     );
     let img = Image::from_layer(layer);
     write_atomically(path, |tmp| {
-        img.write().to_file(tmp).map_err(|e| std::io::Error::other(e.to_string()))
+        img.write()
+            .to_file(tmp)
+            .map_err(|e| std::io::Error::other(e.to_string()))
     })
     .map_err(|e| exr_err(path, e))
 }
 
 /// Write one float32 channel (e.g. `Y`) atomically.
-pub fn write_single_channel_exr(path: &Path, channel: &str, plane: &Plane) -> Result<(), CoreError> {
+pub fn write_single_channel_exr(
+    path: &Path,
+    channel: &str,
+    plane: &Plane,
+) -> Result<(), CoreError> {
     let ch = AnyChannel::new(channel, FlatSamples::F32(plane.data.clone()));
     let layer = Layer::new(
         (plane.cols, plane.rows),
@@ -127,13 +159,17 @@ pub fn write_single_channel_exr(path: &Path, channel: &str, plane: &Plane) -> Re
     );
     let img = Image::from_layer(layer);
     write_atomically(path, |tmp| {
-        img.write().to_file(tmp).map_err(|e| std::io::Error::other(e.to_string()))
+        img.write()
+            .to_file(tmp)
+            .map_err(|e| std::io::Error::other(e.to_string()))
     })
     .map_err(|e| exr_err(path, e))
 }
 
 /// Read every channel of the first layer: (name, rows, cols, values).
-pub fn read_channels(path: &Path) -> Result<(usize, usize, Vec<(String, Vec<f32>)>, Vec<(String, String)>), CoreError> {
+pub fn read_channels(
+    path: &Path,
+) -> Result<(usize, usize, Vec<(String, Vec<f32>)>, Vec<(String, String)>), CoreError> {
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -142,16 +178,29 @@ pub fn read_channels(path: &Path) -> Result<(usize, usize, Vec<(String, Vec<f32>
         .all_attributes()
         .from_file(path)
         .map_err(|e| exr_err(path, e))?;
-    let layer = image.layer_data.first().ok_or_else(|| exr_err(path, "no layers"))?;
+    let layer = image
+        .layer_data
+        .first()
+        .ok_or_else(|| exr_err(path, "no layers"))?;
     let (cols, rows) = (layer.size.0, layer.size.1);
     let chans = layer
         .channel_data
         .list
         .iter()
-        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect::<Vec<f32>>()))
+        .map(|c| {
+            (
+                c.name.to_string(),
+                c.sample_data.values_as_f32().collect::<Vec<f32>>(),
+            )
+        })
         .collect();
     let mut attrs = Vec::new();
-    for (k, v) in image.attributes.other.iter().chain(layer.attributes.other.iter()) {
+    for (k, v) in image
+        .attributes
+        .other
+        .iter()
+        .chain(layer.attributes.other.iter())
+    {
         if let AttributeValue::Text(t) = v {
             attrs.push((k.to_string(), t.to_string()));
         }
@@ -172,20 +221,26 @@ pub fn read_spectral_exr(path: &Path) -> Result<SpectralExr, CoreError> {
         }
     }
     if bands.is_empty() {
-        return Err(exr_err(path, "no spectral channels named S0.<wavelength>nm (Fichet 2021 layout)"));
-    }
-    bands.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
-    let grid = WavelengthGrid::new(bands.iter().map(|b| b.0).collect())
-        .map_err(|e| exr_err(path, e))?;
-    let planes: Vec<Vec<f32>> = bands.into_iter().map(|b| b.1).collect();
-    if let Some((i, v)) = planes
-        .iter()
-        .enumerate()
-        .find_map(|(i, p)| p.iter().find(|v| !v.is_finite() || **v < 0.0).map(|v| (i, *v)))
-    {
         return Err(exr_err(
             path,
-            format!("band {} nm has an invalid radiance {v} (must be finite and ≥ 0)", grid.wavelength_nm[i]),
+            "no spectral channels named S0.<wavelength>nm (Fichet 2021 layout)",
+        ));
+    }
+    bands.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
+    let grid =
+        WavelengthGrid::new(bands.iter().map(|b| b.0).collect()).map_err(|e| exr_err(path, e))?;
+    let planes: Vec<Vec<f32>> = bands.into_iter().map(|b| b.1).collect();
+    if let Some((i, v)) = planes.iter().enumerate().find_map(|(i, p)| {
+        p.iter()
+            .find(|v| !v.is_finite() || **v < 0.0)
+            .map(|v| (i, *v))
+    }) {
+        return Err(exr_err(
+            path,
+            format!(
+                "band {} nm has an invalid radiance {v} (must be finite and ≥ 0)",
+                grid.wavelength_nm[i]
+            ),
         ));
     }
     let units = attrs
@@ -195,7 +250,12 @@ pub fn read_spectral_exr(path: &Path) -> Result<SpectralExr, CoreError> {
         .unwrap_or_default();
     let image = SpectralImage::new(rows, cols, SpectralBasis::Bands(grid.clone()), planes)
         .map_err(|e| exr_err(path, e))?;
-    Ok(SpectralExr { image, grid, emissive_units: units, depth_m: depth })
+    Ok(SpectralExr {
+        image,
+        grid,
+        emissive_units: units,
+        depth_m: depth,
+    })
 }
 
 /// Convert a band image between energy (W per …) and photon units, per band: photons = W·λ/(hc).
@@ -231,9 +291,16 @@ mod tests {
     fn roundtrip_with_depth() {
         let dir = tempfile::tempdir().unwrap();
         let g = WavelengthGrid::regular(400.0, 700.0, 100.0).unwrap();
-        let planes: Vec<Vec<f32>> = (0..4).map(|b| (0..6).map(|i| (b * 10 + i) as f32).collect()).collect();
-        let img = SpectralImage::new(2, 3, SpectralBasis::Bands(g.clone()), planes.clone()).unwrap();
-        let depth = Plane { rows: 2, cols: 3, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
+        let planes: Vec<Vec<f32>> = (0..4)
+            .map(|b| (0..6).map(|i| (b * 10 + i) as f32).collect())
+            .collect();
+        let img =
+            SpectralImage::new(2, 3, SpectralBasis::Bands(g.clone()), planes.clone()).unwrap();
+        let depth = Plane {
+            rows: 2,
+            cols: 3,
+            data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        };
         let p = dir.path().join("a.exr");
         write_spectral_exr(&p, &img, RADIANCE_UNITS, Some(&depth)).unwrap();
         let back = read_spectral_exr(&p).unwrap();

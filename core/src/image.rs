@@ -23,7 +23,11 @@ pub struct Plane {
 impl Plane {
     /// A plane filled with `value`.
     pub fn filled(rows: usize, cols: usize, value: f32) -> Self {
-        Plane { rows, cols, data: vec![value; rows * cols] }
+        Plane {
+            rows,
+            cols,
+            data: vec![value; rows * cols],
+        }
     }
     /// Value at (row, col).
     pub fn at(&self, row: usize, col: usize) -> f32 {
@@ -66,7 +70,11 @@ impl SpectralImage {
             SpectralBasis::Spectra(s) => s.len(),
         };
         if planes.len() != k {
-            return Err(CoreError::Image(format!("{} planes for {} basis terms", planes.len(), k)));
+            return Err(CoreError::Image(format!(
+                "{} planes for {} basis terms",
+                planes.len(),
+                k
+            )));
         }
         if rows == 0 || cols == 0 {
             return Err(CoreError::Image(format!("empty image {rows}×{cols}")));
@@ -79,12 +87,22 @@ impl SpectralImage {
                 cols
             )));
         }
-        Ok(SpectralImage { rows, cols, basis, planes })
+        Ok(SpectralImage {
+            rows,
+            cols,
+            basis,
+            planes,
+        })
     }
 
     /// An image whose every pixel has spectrum `s` times `weight(row, col)`.
     pub fn from_single_spectrum(rows: usize, cols: usize, s: Spectrum, plane: Vec<f32>) -> Self {
-        SpectralImage { rows, cols, basis: SpectralBasis::Spectra(vec![s]), planes: vec![plane] }
+        SpectralImage {
+            rows,
+            cols,
+            basis: SpectralBasis::Spectra(vec![s]),
+            planes: vec![plane],
+        }
     }
 
     /// Number of basis terms (planes).
@@ -112,18 +130,24 @@ impl SpectralImage {
     pub fn combine(&self, weights: &[f64]) -> Vec<f32> {
         let n = self.rows * self.cols;
         let mut out = vec![0f32; n];
-        let active: Vec<(usize, f64)> =
-            weights.iter().copied().enumerate().filter(|(_, w)| *w != 0.0).collect();
-        out.par_chunks_mut(4096).enumerate().for_each(|(ci, chunk)| {
-            let off = ci * 4096;
-            for (j, o) in chunk.iter_mut().enumerate() {
-                let mut acc = 0.0f64;
-                for &(k, w) in &active {
-                    acc += w * self.planes[k][off + j] as f64;
+        let active: Vec<(usize, f64)> = weights
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|(_, w)| *w != 0.0)
+            .collect();
+        out.par_chunks_mut(4096)
+            .enumerate()
+            .for_each(|(ci, chunk)| {
+                let off = ci * 4096;
+                for (j, o) in chunk.iter_mut().enumerate() {
+                    let mut acc = 0.0f64;
+                    for &(k, w) in &active {
+                        acc += w * self.planes[k][off + j] as f64;
+                    }
+                    *o = acc as f32;
                 }
-                *o = acc as f32;
-            }
-        });
+            });
         out
     }
 
@@ -138,10 +162,13 @@ impl SpectralImage {
         match &mut self.basis {
             SpectralBasis::Bands(g) => {
                 let f = s.sample(g);
-                self.planes.par_iter_mut().zip(f.par_iter()).for_each(|(p, &k)| {
-                    let k = k as f32;
-                    p.iter_mut().for_each(|v| *v *= k);
-                });
+                self.planes
+                    .par_iter_mut()
+                    .zip(f.par_iter())
+                    .for_each(|(p, &k)| {
+                        let k = k as f32;
+                        p.iter_mut().for_each(|v| *v *= k);
+                    });
             }
             SpectralBasis::Spectra(b) => {
                 for bk in b.iter_mut() {
@@ -162,7 +189,9 @@ impl SpectralImage {
     /// Multiply by a scalar.
     pub fn scale(&mut self, k: f64) {
         let k = k as f32;
-        self.planes.par_iter_mut().for_each(|p| p.iter_mut().for_each(|v| *v *= k));
+        self.planes
+            .par_iter_mut()
+            .for_each(|p| p.iter_mut().for_each(|v| *v *= k));
     }
 
     /// Expand to a band cube on `grid` (plane b = L(x, λ_b)). A band image on the same grid is
@@ -183,7 +212,12 @@ impl SpectralImage {
                 self.combine(&w)
             })
             .collect();
-        SpectralImage { rows: self.rows, cols: self.cols, basis: SpectralBasis::Bands(grid.clone()), planes }
+        SpectralImage {
+            rows: self.rows,
+            cols: self.cols,
+            basis: SpectralBasis::Bands(grid.clone()),
+            planes,
+        }
     }
 
     /// The spectrum of pixel (row, col) sampled on `grid`.
@@ -214,9 +248,13 @@ impl SpectralImage {
     /// legitimately be negative).
     pub fn min_band_value(&self) -> Option<f32> {
         match self.basis {
-            SpectralBasis::Bands(_) => {
-                Some(self.planes.iter().flatten().copied().fold(f32::INFINITY, f32::min))
-            }
+            SpectralBasis::Bands(_) => Some(
+                self.planes
+                    .iter()
+                    .flatten()
+                    .copied()
+                    .fold(f32::INFINITY, f32::min),
+            ),
             SpectralBasis::Spectra(_) => None,
         }
     }
@@ -269,10 +307,15 @@ pub fn ratio_spectrum(a: &Spectrum, b: &Spectrum) -> Spectrum {
         (a0.max(b0).max(100.0), a1.min(b1).min(3000.0))
     };
     if hi <= lo {
-        return Spectrum::Sampled { wavelength_nm: vec![lo.max(1.0)], values: vec![0.0] };
+        return Spectrum::Sampled {
+            wavelength_nm: vec![lo.max(1.0)],
+            values: vec![0.0],
+        };
     }
     let n = ((hi - lo) / 1.0).ceil() as usize;
-    let w: Vec<f64> = (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect();
+    let w: Vec<f64> = (0..=n)
+        .map(|i| lo + (hi - lo) * i as f64 / n as f64)
+        .collect();
     let v = w
         .iter()
         .map(|&x| {
@@ -284,7 +327,10 @@ pub fn ratio_spectrum(a: &Spectrum, b: &Spectrum) -> Spectrum {
             }
         })
         .collect();
-    Spectrum::Sampled { wavelength_nm: w, values: v }
+    Spectrum::Sampled {
+        wavelength_nm: w,
+        values: v,
+    }
 }
 
 /// Spectral irradiance at the sensor surface, photons / (s · m² · nm), on a grid centred on
@@ -318,7 +364,12 @@ mod tests {
     #[test]
     fn linear_model_and_band_cube_integrate_alike() {
         let s = Spectrum::sampled(vec![400.0, 700.0], vec![1.0, 2.0]).unwrap();
-        let img = SpectralImage::from_single_spectrum(2, 3, s.clone(), vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        let img = SpectralImage::from_single_spectrum(
+            2,
+            3,
+            s.clone(),
+            vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        );
         let g = WavelengthGrid::regular(400.0, 700.0, 10.0).unwrap();
         let bands = img.to_bands(&g);
         let qe = Spectrum::sampled(vec![450.0, 550.0, 650.0], vec![0.0, 1.0, 0.0]).unwrap();

@@ -28,7 +28,11 @@ pub fn compress(bands: &SpectralImage, grid: &WavelengthGrid, k: usize) -> Compr
     let mut gram = DMatrix::<f64>::zeros(nb, nb);
     for i in 0..nb {
         for j in i..nb {
-            let s: f64 = cube.planes[i].iter().zip(&cube.planes[j]).map(|(a, b)| *a as f64 * *b as f64).sum();
+            let s: f64 = cube.planes[i]
+                .iter()
+                .zip(&cube.planes[j])
+                .map(|(a, b)| *a as f64 * *b as f64)
+                .sum();
             gram[(i, j)] = s;
             gram[(j, i)] = s;
         }
@@ -37,23 +41,40 @@ pub fn compress(bands: &SpectralImage, grid: &WavelengthGrid, k: usize) -> Compr
     let mut order: Vec<usize> = (0..nb).collect();
     order.sort_by(|&a, &b| eig.eigenvalues[b].partial_cmp(&eig.eigenvalues[a]).unwrap());
     let total: f64 = eig.eigenvalues.iter().map(|v| v.max(0.0)).sum();
-    let kept: f64 = order[..k].iter().map(|&i| eig.eigenvalues[i].max(0.0)).sum();
-    let basis_vecs: Vec<Vec<f64>> =
-        order[..k].iter().map(|&i| eig.eigenvectors.column(i).iter().copied().collect()).collect();
+    let kept: f64 = order[..k]
+        .iter()
+        .map(|&i| eig.eigenvalues[i].max(0.0))
+        .sum();
+    let basis_vecs: Vec<Vec<f64>> = order[..k]
+        .iter()
+        .map(|&i| eig.eigenvectors.column(i).iter().copied().collect())
+        .collect();
     // Coefficients: projection of each pixel spectrum on the orthonormal basis.
     let planes: Vec<Vec<f32>> = basis_vecs
         .iter()
         .map(|v| {
             (0..n)
-                .map(|p| (0..nb).map(|b| v[b] * cube.planes[b][p] as f64).sum::<f64>() as f32)
+                .map(|p| {
+                    (0..nb)
+                        .map(|b| v[b] * cube.planes[b][p] as f64)
+                        .sum::<f64>() as f32
+                })
                 .collect()
         })
         .collect();
     let basis: Vec<Spectrum> = basis_vecs
         .iter()
-        .map(|v| Spectrum::Sampled { wavelength_nm: grid.wavelength_nm.clone(), values: v.clone() })
+        .map(|v| Spectrum::Sampled {
+            wavelength_nm: grid.wavelength_nm.clone(),
+            values: v.clone(),
+        })
         .collect();
-    let image = SpectralImage { rows: cube.rows, cols: cube.cols, basis: SpectralBasis::Spectra(basis), planes };
+    let image = SpectralImage {
+        rows: cube.rows,
+        cols: cube.cols,
+        basis: SpectralBasis::Spectra(basis),
+        planes,
+    };
     // Round-trip error on the grid.
     let recon = image.to_bands(grid);
     let (mut se, mut ss, mut maxe) = (0.0f64, 0.0f64, 0.0f64);
@@ -87,13 +108,23 @@ mod tests {
             8,
             8,
             SpectralBasis::Spectra(vec![a, b]),
-            vec![(0..64).map(|i| (i % 7) as f32).collect(), (0..64).map(|i| (i % 5) as f32 + 1.0).collect()],
+            vec![
+                (0..64).map(|i| (i % 7) as f32).collect(),
+                (0..64).map(|i| (i % 5) as f32 + 1.0).collect(),
+            ],
         )
         .unwrap();
         let c1 = compress(&img, &g, 1);
         let c2 = compress(&img, &g, 2);
-        assert!(c1.relative_rms_error > 1e-2, "one term cannot hold a rank-2 image");
-        assert!(c2.relative_rms_error < 1e-5, "two terms are exact: {}", c2.relative_rms_error);
+        assert!(
+            c1.relative_rms_error > 1e-2,
+            "one term cannot hold a rank-2 image"
+        );
+        assert!(
+            c2.relative_rms_error < 1e-5,
+            "two terms are exact: {}",
+            c2.relative_rms_error
+        );
         assert!((c2.variance_explained - 1.0).abs() < 1e-9);
     }
 }

@@ -20,22 +20,34 @@ pub fn read_npy(path: &Path) -> Result<NpyArray, String> {
     let (hlen, hstart) = if bytes[6] == 1 {
         (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10)
     } else {
-        (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
+        (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        )
     };
     let header = String::from_utf8_lossy(&bytes[hstart..hstart + hlen]).to_string();
     let fortran = header.contains("'fortran_order': True");
-    let descr = header.split("'descr':").nth(1).and_then(|s| s.split('\'').nth(1)).unwrap_or("");
+    let descr = header
+        .split("'descr':")
+        .nth(1)
+        .and_then(|s| s.split('\'').nth(1))
+        .unwrap_or("");
     let shape_txt = header
         .split("'shape':")
         .nth(1)
         .and_then(|s| s.split('(').nth(1))
         .and_then(|s| s.split(')').next())
         .unwrap_or("");
-    let shape: Vec<usize> =
-        shape_txt.split(',').filter_map(|t| t.trim().parse().ok()).collect();
+    let shape: Vec<usize> = shape_txt
+        .split(',')
+        .filter_map(|t| t.trim().parse().ok())
+        .collect();
     let body = &bytes[hstart + hlen..];
     let data: Vec<f64> = match descr {
-        "<f8" => body.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect(),
+        "<f8" => body
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+            .collect(),
         "<f4" => body
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64)
@@ -44,9 +56,18 @@ pub fn read_npy(path: &Path) -> Result<NpyArray, String> {
     };
     let n: usize = shape.iter().product();
     if n != data.len() {
-        return Err(format!("{}: shape {:?} but {} values", path.display(), shape, data.len()));
+        return Err(format!(
+            "{}: shape {:?} but {} values",
+            path.display(),
+            shape,
+            data.len()
+        ));
     }
-    let data = if fortran { fortran_to_c(&shape, &data) } else { data };
+    let data = if fortran {
+        fortran_to_c(&shape, &data)
+    } else {
+        data
+    };
     Ok(NpyArray { shape, data })
 }
 

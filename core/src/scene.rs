@@ -212,7 +212,13 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
     Ok(match target {
         Target::Dark => single(&Spectrum::constant(0.0), vec![0.0; n]),
         Target::Uniform { radiance } => single(radiance, vec![1.0; n]),
-        Target::Patches { rows, cols, patch_fraction, background, patches } => {
+        Target::Patches {
+            rows,
+            cols,
+            patch_fraction,
+            background,
+            patches,
+        } => {
             if patches.len() != rows * cols {
                 return Err(CoreError::Target(format!(
                     "patches lists {} spectra, rows·cols = {}",
@@ -244,7 +250,11 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             planes.push(bg);
             SpectralImage::new(g.rows, g.cols, SpectralBasis::Spectra(basis), planes)?
         }
-        Target::SlantedEdge { dark, light, angle_deg } => {
+        Target::SlantedEdge {
+            dark,
+            light,
+            angle_deg,
+        } => {
             let a = angle_deg.to_radians();
             let (nx, ny) = (a.cos(), a.sin());
             let area = g.pitch_m * g.pitch_m;
@@ -275,7 +285,12 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             });
             single(radiance, plane)
         }
-        Target::FrequencySweep { radiance, max_cycles_per_pixel, pixel_pitch_m, contrast } => {
+        Target::FrequencySweep {
+            radiance,
+            max_cycles_per_pixel,
+            pixel_pitch_m,
+            contrast,
+        } => {
             // φ(x) = π f_max u² / p · W with u ∈ [0,1] across the sensor: local frequency
             // f(u) = f_max·u cycles/pixel.
             let fmax = max_cycles_per_pixel / pixel_pitch_m; // cycles per m at the right edge
@@ -293,11 +308,16 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             });
             single(radiance, plane)
         }
-        Target::PointArray { radiance, background, spacing_m, point_size_m } => {
+        Target::PointArray {
+            radiance,
+            background,
+            spacing_m,
+            point_size_m,
+        } => {
             let (s, half) = (*spacing_m, point_size_m / 2.0);
             let pts = plane_from_fn(g, |x0, x1, y0, y1| {
-                (periodic_coverage(x0, x1, s, -half, half) * periodic_coverage(y0, y1, s, -half, half))
-                    as f32
+                (periodic_coverage(x0, x1, s, -half, half)
+                    * periodic_coverage(y0, y1, s, -half, half)) as f32
             });
             let bg = pts.iter().map(|v| 1.0 - v).collect();
             SpectralImage::new(
@@ -307,7 +327,12 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
                 vec![pts, bg],
             )?
         }
-        Target::GridLines { radiance, background, spacing_m, line_width_m } => {
+        Target::GridLines {
+            radiance,
+            background,
+            spacing_m,
+            line_width_m,
+        } => {
             let (s, half) = (*spacing_m, line_width_m / 2.0);
             let lines = plane_from_fn(g, |x0, x1, y0, y1| {
                 let cx = periodic_coverage(x0, x1, s, -half, half);
@@ -352,7 +377,12 @@ fn resample_image(src: &SpectralImage, g: &SamplingGrid) -> SpectralImage {
             out
         })
         .collect();
-    SpectralImage { rows: g.rows, cols: g.cols, basis: src.basis.clone(), planes }
+    SpectralImage {
+        rows: g.rows,
+        cols: g.cols,
+        basis: src.basis.clone(),
+        planes,
+    }
 }
 
 /// Mean luminance (cd/m²) of the scene over the cells whose centres lie inside a
@@ -408,9 +438,17 @@ pub fn scale_to_mean_luminance(
 /// c1 = 2πhc², c2 = hc/k.
 pub fn blackbody_energy(kelvin: f64, lo_nm: f64, hi_nm: f64, c1: f64, c2: f64) -> Spectrum {
     let n = (hi_nm - lo_nm).round().max(1.0) as usize;
-    let w: Vec<f64> = (0..=n).map(|i| lo_nm + (hi_nm - lo_nm) * i as f64 / n as f64).collect();
-    let v = w.iter().map(|&nm| blackbody_value(kelvin, nm, c1, c2)).collect();
-    Spectrum::Sampled { wavelength_nm: w, values: v }
+    let w: Vec<f64> = (0..=n)
+        .map(|i| lo_nm + (hi_nm - lo_nm) * i as f64 / n as f64)
+        .collect();
+    let v = w
+        .iter()
+        .map(|&nm| blackbody_value(kelvin, nm, c1, c2))
+        .collect();
+    Spectrum::Sampled {
+        wavelength_nm: w,
+        values: v,
+    }
 }
 
 /// One value of [`blackbody_energy`].
@@ -432,14 +470,26 @@ mod tests {
     #[test]
     fn half_plane_area_is_exact() {
         // vertical edge through the middle of a unit square
-        assert_relative_eq!(half_plane_area(-0.5, 0.5, -0.5, 0.5, 1.0, 0.0), 0.5, epsilon = 1e-12);
+        assert_relative_eq!(
+            half_plane_area(-0.5, 0.5, -0.5, 0.5, 1.0, 0.0),
+            0.5,
+            epsilon = 1e-12
+        );
         // 45° diagonal through the centre: half
         let a = std::f64::consts::FRAC_1_SQRT_2;
-        assert_relative_eq!(half_plane_area(-0.5, 0.5, -0.5, 0.5, a, a), 0.5, epsilon = 1e-12);
+        assert_relative_eq!(
+            half_plane_area(-0.5, 0.5, -0.5, 0.5, a, a),
+            0.5,
+            epsilon = 1e-12
+        );
         // x + y > 0 over [-0.25, 0.75]²: all but the corner triangle of legs 0.5 → 1 - 0.125
         let tri = half_plane_area(-0.25, 0.75, -0.25, 0.75, a, a);
         assert_relative_eq!(tri, 0.875, epsilon = 1e-12);
-        assert_relative_eq!(half_plane_area(0.0, 1.0, 0.0, 1.0, 1.0, 0.0), 1.0, epsilon = 1e-12);
+        assert_relative_eq!(
+            half_plane_area(0.0, 1.0, 0.0, 1.0, 1.0, 0.0),
+            1.0,
+            epsilon = 1e-12
+        );
     }
 
     #[test]
@@ -472,11 +522,31 @@ mod tests {
         let g = SamplingGrid::for_sensor(20, 20, 1e-6, 1, 0);
         let light = Spectrum::constant(1.0);
         let dark = Spectrum::constant(0.0);
-        let img = render_target(&Target::SlantedEdge { dark: dark.clone(), light: light.clone(), angle_deg: 0.0 }, &g).unwrap();
+        let img = render_target(
+            &Target::SlantedEdge {
+                dark: dark.clone(),
+                light: light.clone(),
+                angle_deg: 0.0,
+            },
+            &g,
+        )
+        .unwrap();
         assert_eq!(img.planes[1][5 * 20 + 15], 1.0);
         assert_eq!(img.planes[1][5 * 20 + 4], 0.0);
-        let img = render_target(&Target::SlantedEdge { dark, light, angle_deg: 10.0 }, &g).unwrap();
-        let first_light = |r: usize| (0..20).position(|c| img.planes[1][r * 20 + c] > 0.5).unwrap();
+        let img = render_target(
+            &Target::SlantedEdge {
+                dark,
+                light,
+                angle_deg: 10.0,
+            },
+            &g,
+        )
+        .unwrap();
+        let first_light = |r: usize| {
+            (0..20)
+                .position(|c| img.planes[1][r * 20 + c] > 0.5)
+                .unwrap()
+        };
         assert!(first_light(0) > first_light(19), "top of edge leans right");
     }
 
@@ -509,7 +579,10 @@ pub fn mean_luminance_riemann(
     let weights: Vec<f64> = grid
         .wavelength_nm
         .iter()
-        .map(|&w| crate::constants::LUMINOUS_EFFICACY_LM_PER_W * cmf[1].eval(w) * step / c.photons_per_joule(w))
+        .map(|&w| {
+            crate::constants::LUMINOUS_EFFICACY_LM_PER_W * cmf[1].eval(w) * step
+                / c.photons_per_joule(w)
+        })
         .collect();
     let bands = scene.radiance.to_bands(grid);
     let lum = bands.combine(&weights);

@@ -35,7 +35,10 @@ pub const PRODUCT_MAX_STEP_NM: f64 = 2.0;
 impl Spectrum {
     /// The constant spectrum `value` (a bare number in the file format).
     pub fn constant(value: f64) -> Self {
-        Spectrum::Affine { offset: value, slope_per_nm: 0.0 }
+        Spectrum::Affine {
+            offset: value,
+            slope_per_nm: 0.0,
+        }
     }
 
     /// A validated sampled spectrum: same lengths, at least one sample, finite numbers,
@@ -51,7 +54,10 @@ impl Spectrum {
         if wavelength_nm.is_empty() {
             return Err(CoreError::Spectrum("no samples".into()));
         }
-        if let Some(i) = wavelength_nm.iter().position(|w| !w.is_finite() || *w <= 0.0) {
+        if let Some(i) = wavelength_nm
+            .iter()
+            .position(|w| !w.is_finite() || *w <= 0.0)
+        {
             return Err(CoreError::Spectrum(format!(
                 "wavelength_nm[{i}] = {} is not a positive finite number",
                 wavelength_nm[i]
@@ -68,15 +74,25 @@ impl Spectrum {
                 wavelength_nm[i]
             )));
         }
-        Ok(Spectrum::Sampled { wavelength_nm, values })
+        Ok(Spectrum::Sampled {
+            wavelength_nm,
+            values,
+        })
     }
 
     /// Validates a spectrum that came from serde (untagged) input.
     pub fn validated(self) -> Result<Self, CoreError> {
         match self {
-            Spectrum::Sampled { wavelength_nm, values } => Spectrum::sampled(wavelength_nm, values),
+            Spectrum::Sampled {
+                wavelength_nm,
+                values,
+            } => Spectrum::sampled(wavelength_nm, values),
             a @ Spectrum::Affine { .. } => {
-                if let Spectrum::Affine { offset, slope_per_nm } = a {
+                if let Spectrum::Affine {
+                    offset,
+                    slope_per_nm,
+                } = a
+                {
                     if !offset.is_finite() || !slope_per_nm.is_finite() {
                         return Err(CoreError::Spectrum("constant is not finite".into()));
                     }
@@ -89,8 +105,14 @@ impl Spectrum {
     /// Value at `wavelength_nm` (linear interpolation, zero outside a sampled range).
     pub fn eval(&self, wavelength_nm: f64) -> f64 {
         match self {
-            Spectrum::Affine { offset, slope_per_nm } => offset + slope_per_nm * wavelength_nm,
-            Spectrum::Sampled { wavelength_nm: w, values: v } => {
+            Spectrum::Affine {
+                offset,
+                slope_per_nm,
+            } => offset + slope_per_nm * wavelength_nm,
+            Spectrum::Sampled {
+                wavelength_nm: w,
+                values: v,
+            } => {
                 let n = w.len();
                 if wavelength_nm < w[0] || wavelength_nm > w[n - 1] {
                     return 0.0;
@@ -184,7 +206,10 @@ impl Spectrum {
     pub fn integral(&self) -> Option<f64> {
         match self {
             Spectrum::Affine { .. } => None,
-            Spectrum::Sampled { wavelength_nm: w, values: v } => Some(
+            Spectrum::Sampled {
+                wavelength_nm: w,
+                values: v,
+            } => Some(
                 w.windows(2)
                     .zip(v.windows(2))
                     .map(|(w, v)| 0.5 * (w[1] - w[0]) * (v[0] + v[1]))
@@ -199,19 +224,40 @@ impl Spectrum {
     pub fn multiply(a: &Spectrum, b: &Spectrum) -> Spectrum {
         match (a, b) {
             (
-                Spectrum::Affine { offset: o1, slope_per_nm: s1 },
-                Spectrum::Affine { offset: o2, slope_per_nm: s2 },
+                Spectrum::Affine {
+                    offset: o1,
+                    slope_per_nm: s1,
+                },
+                Spectrum::Affine {
+                    offset: o2,
+                    slope_per_nm: s2,
+                },
             ) if *s1 == 0.0 || *s2 == 0.0 => {
                 // constant × affine stays affine
-                let (c, o, s) = if *s1 == 0.0 { (*o1, *o2, *s2) } else { (*o2, *o1, *s1) };
-                Spectrum::Affine { offset: c * o, slope_per_nm: c * s }
+                let (c, o, s) = if *s1 == 0.0 {
+                    (*o1, *o2, *s2)
+                } else {
+                    (*o2, *o1, *s1)
+                };
+                Spectrum::Affine {
+                    offset: c * o,
+                    slope_per_nm: c * s,
+                }
             }
-            (Spectrum::Affine { offset, slope_per_nm }, s @ Spectrum::Sampled { .. })
-            | (s @ Spectrum::Sampled { .. }, Spectrum::Affine { offset, slope_per_nm })
-                if *slope_per_nm == 0.0 =>
-            {
-                s.scaled(*offset)
-            }
+            (
+                Spectrum::Affine {
+                    offset,
+                    slope_per_nm,
+                },
+                s @ Spectrum::Sampled { .. },
+            )
+            | (
+                s @ Spectrum::Sampled { .. },
+                Spectrum::Affine {
+                    offset,
+                    slope_per_nm,
+                },
+            ) if *slope_per_nm == 0.0 => s.scaled(*offset),
             _ => {
                 let pts = Spectrum::merged_breakpoints(a, b)
                     .expect("product of two non-constant affine spectra is not representable");
@@ -226,10 +272,16 @@ impl Spectrum {
                     w.push(last);
                 }
                 if w.is_empty() {
-                    return Spectrum::Sampled { wavelength_nm: vec![1.0], values: vec![0.0] };
+                    return Spectrum::Sampled {
+                        wavelength_nm: vec![1.0],
+                        values: vec![0.0],
+                    };
                 }
                 let v = w.iter().map(|&x| a.eval(x) * b.eval(x)).collect();
-                Spectrum::Sampled { wavelength_nm: w, values: v }
+                Spectrum::Sampled {
+                    wavelength_nm: w,
+                    values: v,
+                }
             }
         }
     }
@@ -237,10 +289,17 @@ impl Spectrum {
     /// The spectrum times a scalar.
     pub fn scaled(&self, k: f64) -> Spectrum {
         match self {
-            Spectrum::Affine { offset, slope_per_nm } => {
-                Spectrum::Affine { offset: offset * k, slope_per_nm: slope_per_nm * k }
-            }
-            Spectrum::Sampled { wavelength_nm, values } => Spectrum::Sampled {
+            Spectrum::Affine {
+                offset,
+                slope_per_nm,
+            } => Spectrum::Affine {
+                offset: offset * k,
+                slope_per_nm: slope_per_nm * k,
+            },
+            Spectrum::Sampled {
+                wavelength_nm,
+                values,
+            } => Spectrum::Sampled {
                 wavelength_nm: wavelength_nm.clone(),
                 values: values.iter().map(|v| v * k).collect(),
             },
@@ -252,10 +311,20 @@ impl Spectrum {
     pub fn energy_to_photons(&self, c: &PhysicalConstants) -> Spectrum {
         let k = c.photons_per_joule(1.0); // per nm of wavelength
         match self {
-            Spectrum::Affine { offset, slope_per_nm } if *slope_per_nm == 0.0 => {
-                Spectrum::Affine { offset: 0.0, slope_per_nm: offset * k }
-            }
-            _ => Spectrum::multiply(self, &Spectrum::Affine { offset: 0.0, slope_per_nm: k }),
+            Spectrum::Affine {
+                offset,
+                slope_per_nm,
+            } if *slope_per_nm == 0.0 => Spectrum::Affine {
+                offset: 0.0,
+                slope_per_nm: offset * k,
+            },
+            _ => Spectrum::multiply(
+                self,
+                &Spectrum::Affine {
+                    offset: 0.0,
+                    slope_per_nm: k,
+                },
+            ),
         }
     }
 
@@ -268,7 +337,10 @@ impl Spectrum {
     /// a constant must be ≥ 0).
     pub fn is_non_negative(&self) -> bool {
         match self {
-            Spectrum::Affine { offset, slope_per_nm } => *offset >= 0.0 && *slope_per_nm >= 0.0,
+            Spectrum::Affine {
+                offset,
+                slope_per_nm,
+            } => *offset >= 0.0 && *slope_per_nm >= 0.0,
             Spectrum::Sampled { values, .. } => values.iter().all(|v| *v >= 0.0),
         }
     }
@@ -277,7 +349,10 @@ impl Spectrum {
     pub fn first_negative(&self) -> Option<(f64, f64)> {
         match self {
             Spectrum::Affine { offset, .. } => (*offset < 0.0).then_some((0.0, *offset)),
-            Spectrum::Sampled { wavelength_nm, values } => values
+            Spectrum::Sampled {
+                wavelength_nm,
+                values,
+            } => values
                 .iter()
                 .position(|v| *v < 0.0)
                 .map(|i| (wavelength_nm[i], values[i])),
@@ -306,7 +381,9 @@ impl WavelengthGrid {
             )));
         }
         if wavelength_nm.iter().any(|w| !w.is_finite() || *w <= 0.0) {
-            return Err(CoreError::Grid("wavelengths must be positive finite numbers".into()));
+            return Err(CoreError::Grid(
+                "wavelengths must be positive finite numbers".into(),
+            ));
         }
         Ok(WavelengthGrid { wavelength_nm })
     }
@@ -344,7 +421,9 @@ impl WavelengthGrid {
             return None;
         }
         let s = w[1] - w[0];
-        w.windows(2).all(|p| ((p[1] - p[0]) - s).abs() <= 1e-6 * s).then_some(s)
+        w.windows(2)
+            .all(|p| ((p[1] - p[0]) - s).abs() <= 1e-6 * s)
+            .then_some(s)
     }
 
     /// The "hat" basis function of band `i`: 1 at λ_i, linear to 0 at the neighbours, and (by
@@ -364,7 +443,10 @@ impl WavelengthGrid {
             wl.push(w[i + 1]);
             v.push(0.0);
         }
-        Spectrum::Sampled { wavelength_nm: wl, values: v }
+        Spectrum::Sampled {
+            wavelength_nm: wl,
+            values: v,
+        }
     }
 
     /// Trapezoid quadrature weights (nm) of the grid: ∫ f = Σ f_i w_i for the piecewise-linear
@@ -413,12 +495,24 @@ mod tests {
         // ∫_400^700 (λ-400)/300 · 2 dλ = 300 ; ∫ x² over [0,1]·300 = 100 for x·x
         let a = s(&[400.0, 700.0], &[0.0, 1.0]);
         let c = Spectrum::constant(2.0);
-        assert_relative_eq!(Spectrum::integrate_product(&a, &c).unwrap(), 300.0, epsilon = 1e-9);
-        assert_relative_eq!(Spectrum::integrate_product(&a, &a).unwrap(), 100.0, epsilon = 1e-9);
+        assert_relative_eq!(
+            Spectrum::integrate_product(&a, &c).unwrap(),
+            300.0,
+            epsilon = 1e-9
+        );
+        assert_relative_eq!(
+            Spectrum::integrate_product(&a, &a).unwrap(),
+            100.0,
+            epsilon = 1e-9
+        );
         // different breakpoints: (λ) on [400,700] × step inside [500,600]
         let b = s(&[500.0, 600.0], &[1.0, 1.0]);
         // ∫_500^600 (λ-400)/300 dλ = (200²-100²)/600 = 50
-        assert_relative_eq!(Spectrum::integrate_product(&a, &b).unwrap(), 50.0, epsilon = 1e-9);
+        assert_relative_eq!(
+            Spectrum::integrate_product(&a, &b).unwrap(),
+            50.0,
+            epsilon = 1e-9
+        );
         assert!(Spectrum::integrate_product(&c, &c).is_none());
     }
 

@@ -23,8 +23,17 @@ pub fn stats(values: impl Iterator<Item = f64>) -> RegionStats {
         mean += d / n as f64;
         m2 += d * (v - mean);
     }
-    let std = if n > 1 { (m2 / (n - 1) as f64).sqrt() } else { 0.0 };
-    RegionStats { count: n, mean, std, snr_db: 20.0 * (mean.abs() / std).log10() }
+    let std = if n > 1 {
+        (m2 / (n - 1) as f64).sqrt()
+    } else {
+        0.0
+    };
+    RegionStats {
+        count: n,
+        mean,
+        std,
+        snr_db: 20.0 * (mean.abs() / std).log10(),
+    }
 }
 
 /// A rectangle of rows [row0, row1) × cols [col0, col1).
@@ -49,7 +58,9 @@ pub fn region_stats(
 ) -> RegionStats {
     stats((rect.row0..rect.row1).flat_map(|r| {
         let keep = &keep;
-        (rect.col0..rect.col1).filter(move |&c| keep(r, c)).map(move |c| data[r * cols + c] as f64)
+        (rect.col0..rect.col1)
+            .filter(move |&c| keep(r, c))
+            .map(move |c| data[r * cols + c] as f64)
     }))
 }
 
@@ -68,9 +79,21 @@ pub struct PtcPoint {
 /// pixels where `mask` is true (all when None).
 pub fn ptc_point(a: &[f32], b: &[f32], mask: Option<&[bool]>) -> PtcPoint {
     let sel = |i: usize| mask.map(|m| m[i]).unwrap_or(true);
-    let mean = stats((0..a.len()).filter(|&i| sel(i)).map(|i| 0.5 * (a[i] as f64 + b[i] as f64)));
-    let diff = stats((0..a.len()).filter(|&i| sel(i)).map(|i| a[i] as f64 - b[i] as f64));
-    PtcPoint { mean_dn: mean.mean, variance_dn2: diff.std * diff.std / 2.0, count: mean.count }
+    let mean = stats(
+        (0..a.len())
+            .filter(|&i| sel(i))
+            .map(|i| 0.5 * (a[i] as f64 + b[i] as f64)),
+    );
+    let diff = stats(
+        (0..a.len())
+            .filter(|&i| sel(i))
+            .map(|i| a[i] as f64 - b[i] as f64),
+    );
+    PtcPoint {
+        mean_dn: mean.mean,
+        variance_dn2: diff.std * diff.std / 2.0,
+        count: mean.count,
+    }
 }
 
 /// Least-squares line y = slope·x + intercept with the slope's standard error.
@@ -93,9 +116,21 @@ pub fn fit_line(x: &[f64], y: &[f64]) -> LineFit {
     let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
     let slope = sxy / sxx;
     let intercept = my - slope * mx;
-    let rss: f64 = x.iter().zip(y).map(|(a, b)| (b - slope * a - intercept).powi(2)).sum();
-    let se = if n > 2.0 { (rss / (n - 2.0) / sxx).sqrt() } else { f64::NAN };
-    LineFit { slope, intercept, slope_std_error: se }
+    let rss: f64 = x
+        .iter()
+        .zip(y)
+        .map(|(a, b)| (b - slope * a - intercept).powi(2))
+        .sum();
+    let se = if n > 2.0 {
+        (rss / (n - 2.0) / sxx).sqrt()
+    } else {
+        f64::NAN
+    };
+    LineFit {
+        slope,
+        intercept,
+        slope_std_error: se,
+    }
 }
 
 #[cfg(test)]

@@ -67,8 +67,18 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
             })
         })
         .collect();
-    let wy = box_weights(img.rows, irradiance.sample_pitch_m, sensor.rows, sensor.pixel_pitch_m);
-    let wx = box_weights(img.cols, irradiance.sample_pitch_m, sensor.cols, sensor.pixel_pitch_m);
+    let wy = box_weights(
+        img.rows,
+        irradiance.sample_pitch_m,
+        sensor.rows,
+        sensor.pixel_pitch_m,
+    );
+    let wx = box_weights(
+        img.cols,
+        irradiance.sample_pitch_m,
+        sensor.cols,
+        sensor.pixel_pitch_m,
+    );
     let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
     let (oi_cols, n_ch) = (img.cols, weights.len());
     let mut out = vec![0f32; sensor.rows * sensor.cols];
@@ -81,7 +91,9 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
                 if !lines[c].is_empty() {
                     continue;
                 }
-                let wc = weights[c].as_ref().expect("weights of a channel in the tile");
+                let wc = weights[c]
+                    .as_ref()
+                    .expect("weights of a channel in the tile");
                 // Row average over the cells of pixel row r (y box weights), per channel.
                 let line = &mut lines[c];
                 line.resize(oi_cols, 0.0);
@@ -89,7 +101,9 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
                     for &(term, wk) in wc {
                         let src = &img.planes[term][y * oi_cols..(y + 1) * oi_cols];
                         let f = w * wk;
-                        line.iter_mut().zip(src).for_each(|(l, s)| *l += f * *s as f64);
+                        line.iter_mut()
+                            .zip(src)
+                            .for_each(|(l, s)| *l += f * *s as f64);
                     }
                 }
             }
@@ -100,7 +114,11 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
             }
         },
     );
-    ElectronRate { rows: sensor.rows, cols: sensor.cols, electrons_per_s: out }
+    ElectronRate {
+        rows: sensor.rows,
+        cols: sensor.cols,
+        electrons_per_s: out,
+    }
 }
 
 pub(crate) fn channel_maps(

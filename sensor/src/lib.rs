@@ -22,9 +22,9 @@
 
 mod integrate;
 pub mod isetcam;
+mod noise;
 pub mod normal;
 pub mod pixel_rng;
-mod noise;
 pub mod poisson;
 
 use camsim_core::Spectrum;
@@ -33,8 +33,8 @@ use thiserror::Error;
 pub use camsim_core::{RawFrame, SensorIrradiance};
 pub use integrate::{box_weights, electron_rate};
 pub use noise::{
-    auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern, PatternSource,
-    FIXED_PATTERN_TAG,
+    auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
+    PatternSource, FIXED_PATTERN_TAG,
 };
 
 /// Errors of the sensor stage.

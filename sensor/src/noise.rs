@@ -178,7 +178,14 @@ pub fn expose(
     seed: u64,
     stream_ids: &[u64],
 ) -> RawFrame {
-    expose_with(sensor, rate, shot, PatternSource::Maps(fixed), seed, stream_ids)
+    expose_with(
+        sensor,
+        rate,
+        shot,
+        PatternSource::Maps(fixed),
+        seed,
+        stream_ids,
+    )
 }
 
 /// [`expose`] with the fixed patterns from `pattern`: `PatternSource::Seeded(s)` gives the
@@ -228,16 +235,21 @@ pub fn expose_with(
     };
     let prnu_sigma = sensor.prnu_sigma_percent / 100.0;
     let mut dn = vec![0u16; rows * cols];
-    dn.par_chunks_mut(cols).enumerate().for_each_init(
-        RowBuffers::default,
-        |bufs, (r, out)| {
+    dn.par_chunks_mut(cols)
+        .enumerate()
+        .for_each_init(RowBuffers::default, |bufs, (r, out)| {
             let mut ids = Vec::with_capacity(stream_ids.len() + 1);
             ids.extend_from_slice(stream_ids);
             ids.push(r as u64);
             let mut rng = PixelRng::from_stream(stream(seed, &ids));
             let base = r * cols;
             let rates = &rate.electrons_per_s[base..base + cols];
-            let RowBuffers { prnu: pbuf, dsnu: dbuf, electrons, volts } = bufs;
+            let RowBuffers {
+                prnu: pbuf,
+                dsnu: dbuf,
+                electrons,
+                volts,
+            } = bufs;
             let (prnu, dsnu): (Option<&[f32]>, Option<&[f32]>) = match pattern {
                 PatternSource::Maps(f) => (
                     sw.prnu.then(|| &f.prnu_gain[base..base + cols]),
@@ -258,8 +270,7 @@ pub fn expose_with(
             electrons.resize(cols, 0.0);
             volts.resize(cols, 0.0);
             k.row(rates, prnu, dsnu, col_off, &mut rng, electrons, volts, out);
-        },
-    );
+        });
     RawFrame {
         rows,
         cols,

@@ -154,7 +154,11 @@ mod tests {
         assert!((top / v - 1.0).abs() < 1e-9, "top layer {top} vs {v}");
         assert!((t.x[0] * t.f[1] - v).abs() < 1e-18);
         // Tail integral vs √(π/2)·erfc(R/√2) = 3.2339576466332173e-4 (Python math.erfc).
-        assert!((upper_tail(R) / 3.2339576466332173e-4 - 1.0).abs() < 1e-13, "{}", upper_tail(R));
+        assert!(
+            (upper_tail(R) / 3.2339576466332173e-4 - 1.0).abs() < 1e-13,
+            "{}",
+            upper_tail(R)
+        );
         // Layer area V = 4.928673233974658e-3 (Marsaglia & Tsang: 4.92867323399e-3).
         assert!((v / 4.928673233974658e-3 - 1.0).abs() < 1e-13, "{v}");
     }

@@ -15,8 +15,8 @@
 //! algorithm, which uses economised polynomials accurate to ~1e-7, `ln(1+v)` is computed by
 //! `ln_1p` and `δ` by five terms of the Stirling series (error < 3e-14 for K ≥ 10), so the
 //! sampler is exact up to floating point.
-use rand::{Rng, RngExt};
 use crate::normal::Ziggurat;
+use rand::{Rng, RngExt};
 use rand_distr::Exp1;
 
 const LN_FACT_TABLE_LEN: usize = 32;
@@ -53,8 +53,7 @@ pub fn ln_factorial(k: f64) -> f64 {
 fn stirling_correction(k: f64) -> f64 {
     let r = 1.0 / k;
     let r2 = r * r;
-    r * (1.0 / 12.0
-        - r2 * (1.0 / 360.0 - r2 * (1.0 / 1260.0 - r2 * (1.0 / 1680.0 - r2 / 1188.0))))
+    r * (1.0 / 12.0 - r2 * (1.0 / 360.0 - r2 * (1.0 / 1260.0 - r2 * (1.0 / 1680.0 - r2 / 1188.0))))
 }
 
 /// floor(x) for |x| < 2^63 without a libm call.

@@ -101,7 +101,10 @@ fn poisson_sampler_chi_square_goodness_of_fit() {
     // and candidates K < 10 use the exact small-K probabilities), mid (30, 1900.3, 3000) and
     // large means (2e5) are covered.
     let n = 200_000;
-    for (i, &mean) in [3.0, 9.99, 10.0, 10.5, 30.0, 1900.3, 3000.0, 2e5].iter().enumerate() {
+    for (i, &mean) in [3.0, 9.99, 10.0, 10.5, 30.0, 1900.3, 3000.0, 2e5]
+        .iter()
+        .enumerate()
+    {
         let mut rng = camsim_core::rng::stream(11, &[i as u64]);
         let x: Vec<f64> = (0..n).map(|_| sample_poisson(&mut rng, mean)).collect();
         let p = poisson_gof(&x, mean);
@@ -142,7 +145,8 @@ fn ziggurat_normal_chi_square_goodness_of_fit() {
     // the tail masses beyond ±3.654 (where the tail algorithm acts) within 5 standard errors.
     use camsim_sensor::normal::standard_normal;
     let n = 4_000_000usize;
-    let mut rng = camsim_sensor::pixel_rng::PixelRng::from_stream(camsim_core::rng::stream(21, &[]));
+    let mut rng =
+        camsim_sensor::pixel_rng::PixelRng::from_stream(camsim_core::rng::stream(21, &[]));
     let x: Vec<f64> = (0..n).map(|_| standard_normal(&mut rng)).collect();
     let nd = Normal::new(0.0, 1.0).unwrap();
     let w = 0.05;
