@@ -11,7 +11,10 @@
 //! * [`trace`]: exact rays in f64 through spheres, conics and even aspheres, vector Snell law,
 //!   TIR, vignetting, optical path length, chief-ray aiming at the stop centre;
 //! * [`analysis`]: spot diagrams and RMS radii, distortion, lateral colour, relative
-//!   illumination, geometric PSF, FFT wave PSF and MTF.
+//!   illumination, geometric PSF, FFT wave PSF and MTF;
+//! * [`field_model`]: the ISET-style field model (PSF, distortion, relative illumination over
+//!   image height × wavelength, interpolation, PSF rotation, JSON save/load);
+//! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers.
 //!
 //! ## Prescription file format (`lenses/*.json`)
 //!
@@ -59,6 +62,7 @@
 
 pub mod analysis;
 pub mod error;
+pub mod field_model;
 pub mod glass;
 pub mod paraxial;
 pub mod prescription;
@@ -66,6 +70,7 @@ pub mod readers;
 pub mod trace;
 
 pub use error::LensError;
+pub use field_model::{FieldModel, FieldModelOptions, PsfKind};
 pub use glass::{Glass, GlassCatalog};
 pub use paraxial::FirstOrder;
 pub use prescription::{LensPrescription, PrescriptionFile};
