@@ -385,7 +385,7 @@ fn run_into(
                 if let Some(parent) = dst.parent() {
                     std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
                 }
-                frames::write_png16(&dst, &frame)?;
+                frames::write_frame(&dst, &frame)?;
                 lap("write PNG");
                 summary.files.push(rel);
                 bar.inc(1);

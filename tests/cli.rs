@@ -281,3 +281,23 @@ fn shipped_example_runs() {
     let max = *f.dn.iter().max().unwrap() as f64;
     assert!(max > 0.8 * 1023.0 && max <= 1023.0, "max DN {max}");
 }
+
+#[test]
+fn frames_are_written_in_the_recording_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut caps = captures(0.002, 0.02);
+    caps["shots"][1]["frames"] = json!(["raw/flat-0.tif", "raw/flat-1.png"]);
+    write_set(dir.path(), &camera(16, 24), &caps);
+    let st = camsim().args(["simulate", "captures.json", "--out", "o", "--seed", "5"]).current_dir(dir.path()).output().unwrap();
+    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    let tif = camsim::raw_input::read_frame(&dir.path().join("o/raw/flat-0.tif")).unwrap();
+    assert_eq!((tif.rows, tif.cols), (16, 24));
+    assert_eq!(&std::fs::read(dir.path().join("o/raw/flat-0.tif")).unwrap()[..2], b"II", "a TIFF file");
+    // same seed, shot and frame index → the same frame as when it is written as PNG
+    caps["shots"][1]["frames"] = json!(["raw/flat-0.png", "raw/flat-1.png"]);
+    write_set(dir.path(), &camera(16, 24), &caps);
+    let st = camsim().args(["simulate", "captures.json", "--out", "p", "--seed", "5"]).current_dir(dir.path()).output().unwrap();
+    assert!(st.status.success());
+    let png = camsim::frames::read_png16(&dir.path().join("p/raw/flat-0.png")).unwrap();
+    assert_eq!(tif.dn, png.dn);
+}
