@@ -301,3 +301,32 @@ fn frames_are_written_in_the_recording_format() {
     let png = camsim::frames::read_png16(&dir.path().join("p/raw/flat-0.png")).unwrap();
     assert_eq!(tif.dn, png.dn);
 }
+
+/// `camsim scene`: spectral EXR of a shot's radiance and irradiance plus the §2.A linear-model
+/// round-trip error; a Macbeth chart is (nearly) rank ≤ 24, so more basis terms never do worse.
+#[test]
+fn scene_command_writes_spectral_exr_and_linear_model_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cam = camera(48, 72);
+    cam["optics"]["blur"] = json!({"kind": "diffraction"});
+    let caps = json!({"camera": "camera.json", "shots": [{"id": "chart", "exposure_s": 0.01,
+        "target": {"kind": "macbeth", "illuminant": "D65", "mean_luminance_cd_m2": 100, "patch_fraction": 0.8},
+        "frames": ["c.png"]}]});
+    write_set(dir.path(), &cam, &caps);
+    let mut errs = Vec::new();
+    for k in ["1", "3", "6"] {
+        let out = format!("s{k}");
+        let st = camsim().args(["scene", "captures.json", "--shot", "chart", "--basis", k, "--out", &out]).current_dir(dir.path()).output().unwrap();
+        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+        let rep: Value = serde_json::from_str(&std::fs::read_to_string(dir.path().join(&out).join("chart_scene.json")).unwrap()).unwrap();
+        assert!((rep["mean_luminance_cd_m2"].as_f64().unwrap() - 100.0).abs() < 0.1);
+        errs.push(rep["linear_model"]["relative_rms_error"].as_f64().unwrap());
+        let e = camsim_core::exr_io::read_spectral_exr(&dir.path().join(&out).join("chart_radiance.exr")).unwrap();
+        assert_eq!(e.emissive_units, "W.m^-2.sr^-1");
+        assert_eq!(e.grid.len(), 31);
+        let i = camsim_core::exr_io::read_spectral_exr(&dir.path().join(&out).join("chart_irradiance.exr")).unwrap();
+        assert_eq!(i.emissive_units, "W.m^-2");
+    }
+    assert!(errs[0] > errs[1] && errs[1] >= errs[2], "errors {errs:?}");
+    assert!(errs[2] < 0.05, "6 basis functions capture Macbeth radiance to a few %: {errs:?}");
+}
