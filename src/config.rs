@@ -424,7 +424,15 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
     let pixel_pitch_m = positive(path, "sensor.pixel_pitch_um", raw.sensor.pixel_pitch_um)? * 1e-6;
     let blur = match &o.blur {
         None => Blur::None,
-        Some(b) => blur_from_file(path, dir, b)?,
+        Some(b) => {
+            let (r, c) = (raw.sensor.rows as f64, raw.sensor.cols as f64);
+            blur_from_file(
+                path,
+                dir,
+                b,
+                (0.5 * pixel_pitch_m * (r * r + c * c).sqrt()).max(pixel_pitch_m),
+            )?
+        }
     };
     let diffuser = match &o.diffuser {
         None => None,
@@ -461,7 +469,12 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
     })
 }
 
-fn blur_from_file(path: &Path, dir: &Path, b: &BlurFile) -> Result<Blur, CliError> {
+fn blur_from_file(
+    path: &Path,
+    dir: &Path,
+    b: &BlurFile,
+    sensor_half_diagonal_m: f64,
+) -> Result<Blur, CliError> {
     let allowed: &[&str] = match b.kind.as_str() {
         "none" | "diffraction" => &[],
         "gaussian" => &["sigma_um"],
@@ -502,19 +515,52 @@ fn blur_from_file(path: &Path, dir: &Path, b: &BlurFile) -> Result<Blur, CliErro
     Ok(match b.kind.as_str() {
         "none" => Blur::None,
         "diffraction" => Blur::Diffraction,
-        "gaussian" => Blur::Gaussian { sigma_um: non_negative(path, "optics.blur.sigma_um", need("sigma_um", b.sigma_um)?)? },
-        "pillbox" => Blur::Pillbox { width_um: positive(path, "optics.blur.width_um", need("width_um", b.width_um)?)? },
-        "wavefront" => Blur::Wavefront { defocus_um: need("defocus_um", b.defocus_um)?, pupil_samples: 64 },
+        "gaussian" => Blur::Gaussian {
+            sigma_um: non_negative(path, "optics.blur.sigma_um", need("sigma_um", b.sigma_um)?)?,
+        },
+        "pillbox" => Blur::Pillbox {
+            width_um: positive(path, "optics.blur.width_um", need("width_um", b.width_um)?)?,
+        },
+        "wavefront" => Blur::Wavefront {
+            defocus_um: need("defocus_um", b.defocus_um)?,
+            pupil_samples: 64,
+        },
         "psf" => {
-            let f = b.psf_file.as_ref().ok_or_else(|| CliError::input(path, "optics.blur.psf_file: required for blur kind \"psf\""))?;
+            let f = b.psf_file.as_ref().ok_or_else(|| {
+                CliError::input(path, "optics.blur.psf_file: required for blur kind \"psf\"")
+            })?;
             let p = dir.join(f);
-            Blur::Psf(camsim_optics::PsfSet::from_json_file(&p).map_err(|e| CliError::input(&p, e))?)
+            Blur::Psf(
+                camsim_optics::PsfSet::from_json_file(&p).map_err(|e| CliError::input(&p, e))?,
+            )
         }
         _ => {
-            return Err(CliError::input(
-                path,
-                "optics.blur.kind \"lens\": the lens ray tracer is not part of this build yet (see the lens issue); use diffraction, gaussian, pillbox, psf or wavefront",
-            ))
+            // "lens": the prescription's field model, covering the sensor's half-diagonal
+            // (camsim_optics::LensBlur; the camera's f_number / focal_length_mm and
+            // relative_illumination are not used by this kind: the lens's own are).
+            let f = b.lens_file.as_ref().ok_or_else(|| {
+                CliError::input(
+                    path,
+                    "optics.blur.lens_file: required for blur kind \"lens\"",
+                )
+            })?;
+            let p = dir.join(f);
+            if !p.is_file() {
+                return Err(CliError::input(
+                    path,
+                    format!("optics.blur.lens_file: cannot read {}", p.display()),
+                ));
+            }
+            let lens = camsim_optics::lens::LensPrescription::from_json_file(
+                &p,
+                &camsim_optics::lens::GlassCatalog::bundled(),
+            )
+            .map_err(|e| CliError::input(&p, e))?;
+            let opts = camsim_optics::LensBlurOptions::covering(sensor_half_diagonal_m * 1e3);
+            Blur::Lens(
+                camsim_optics::LensBlur::from_prescription(&lens, &opts)
+                    .map_err(|e| CliError::input(&p, e))?,
+            )
         }
     })
 }

@@ -375,13 +375,22 @@ mod tests {
 /// Write a frame in the format its path names: 16-bit greyscale TIFF for `.tif`/`.tiff`,
 /// otherwise the spec's 16-bit PNG (same format as the recording).
 pub fn write_frame(path: &Path, frame: &RawFrame) -> Result<(), CliError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     if ext == "tif" || ext == "tiff" {
-        let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(frame.cols as u32, frame.rows as u32, frame.dn.clone())
-            .ok_or_else(|| CliError::output(path, "frame size does not match its data"))?;
+        let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(
+            frame.cols as u32,
+            frame.rows as u32,
+            frame.dn.clone(),
+        )
+        .ok_or_else(|| CliError::output(path, "frame size does not match its data"))?;
         write_atomically(path, |tmp| -> Result<(), std::io::Error> {
             let f = std::io::BufWriter::new(File::create(tmp)?);
-            img.write_with_encoder(image::codecs::tiff::TiffEncoder::new(f)).map_err(std::io::Error::other)
+            img.write_with_encoder(image::codecs::tiff::TiffEncoder::new(f))
+                .map_err(std::io::Error::other)
         })
         .map_err(|e| CliError::output(path, e))
     } else {

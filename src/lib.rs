@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod calibrate_cmd;
+pub mod color_eval;
 pub mod config;
 pub mod error;
 pub mod frames;
@@ -17,3 +18,4 @@ pub mod scene_cmd;
 pub mod simulate;
 pub mod staging;
 pub mod targets;
+pub mod validate_cmd;

@@ -5,13 +5,13 @@
 //! scene → optics → sensor (one noisy frame) → processor (demosaic, white balance, 3×3 colour
 //! correction fitted to the chart's D65 sRGB targets, sRGB) → display (Eq. 8), then metrics:
 //! per-patch SNR, ΔE76/ΔE2000 between desired and rendered sRGB, and figures.
+use crate::color_eval::{self, patch_means};
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure, SimulationFile};
 use crate::error::CliError;
 use crate::plots;
 use crate::simulate::{shot_scene, wavelength_grid};
 use crate::staging::with_staging;
 use crate::targets::target_from_value;
-use camsim_core::colorimetry::{xyz_to_lab, Xyz};
 use camsim_core::constants::SI;
 use camsim_core::exr_io::{
     bands_energy_to_photons, write_spectral_exr, IRRADIANCE_UNITS, RADIANCE_UNITS,
@@ -25,7 +25,7 @@ use camsim_isp::{
     to_srgb16, to_srgb8, ColorMatrix, DemosaicMethod, Mosaic, RgbImage, WhiteBalance,
     XYZ_TO_LINEAR_SRGB,
 };
-use camsim_metrics::{delta_e_2000, delta_e_stats, patch_sample_rect, patch_stats, ChartLayout};
+use camsim_metrics::{patch_stats, ChartLayout};
 use camsim_sensor::{electron_rate, expose, fixed_pattern, Shot as SensorShot};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Deserialize;
@@ -344,16 +344,6 @@ fn rgb_index(names: &[String]) -> [usize; 3] {
     [f("r"), f("g"), f("b")]
 }
 
-fn srgb_to_xyz(rgb: [f64; 3]) -> [f64; 3] {
-    // inverse of IEC 61966-2-1's XYZ → linear sRGB
-    let m = [
-        [0.4124564, 0.3575761, 0.1804375],
-        [0.2126729, 0.7151522, 0.0721750],
-        [0.0193339, 0.1191920, 0.9503041],
-    ];
-    [0, 1, 2].map(|i| m[i][0] * rgb[0] + m[i][1] * rgb[1] + m[i][2] * rgb[2])
-}
-
 /// Run the pipeline and write everything into `out`.
 pub fn run(config: Option<&Path>, out: &Path, progress: bool) -> Result<Summary, CliError> {
     let r = load(config)?;
@@ -499,25 +489,6 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         }),
         _ => None,
     };
-    let patch_means = |img: &RgbImage, layout: &ChartLayout| -> Vec<[f64; 3]> {
-        (0..24)
-            .map(|i| {
-                let rect = patch_sample_rect(img.rows, img.cols, layout, i / 6, i % 6);
-                let mut s = [0.0f64; 3];
-                let mut n = 0.0f64;
-                for y in rect.row0..rect.row1 {
-                    for x in rect.col0..rect.col1 {
-                        let v = img.at(y, x);
-                        for c in 0..3 {
-                            s[c] += v[c] as f64;
-                        }
-                        n += 1.0;
-                    }
-                }
-                s.map(|v| v / n.max(1.0))
-            })
-            .collect()
-    };
     let d65 = camsim_core::data::illuminant("D65").expect("D65");
     let targets = macbeth_target_linear_srgb(&d65, r.white_level)
         .map_err(|e| CliError::Other(format!("colour targets: {e}")))?;
@@ -656,37 +627,14 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                 .collect(),
         };
         let rendered_means = patch_means(&rendered_lin, layout);
-        let white = srgb_to_xyz([1.0, 1.0, 1.0]);
-        let white = Xyz {
-            x: white[0],
-            y: white[1],
-            z: white[2],
-        };
-        let lab = |v: [f64; 3]| {
-            let x = srgb_to_xyz(v);
-            xyz_to_lab(
-                Xyz {
-                    x: x[0],
-                    y: x[1],
-                    z: x[2],
-                },
-                white,
-            )
-        };
-        let de2000: Vec<f64> = (0..24)
-            .map(|i| delta_e_2000(lab(targets[i]), lab(rendered_means[i])))
-            .collect();
-        let de76: Vec<f64> = (0..24)
-            .map(|i| camsim_core::colorimetry::delta_e_76(lab(targets[i]), lab(rendered_means[i])))
-            .collect();
-        let s2000 = delta_e_stats(&de2000).map_err(|e| CliError::Other(e.to_string()))?;
-        let s76 = delta_e_stats(&de76).map_err(|e| CliError::Other(e.to_string()))?;
-        report["delta_e_2000"] = json!({"mean": s2000.mean, "median": s2000.median, "p95": s2000.p95, "max": s2000.max, "per_patch": de2000});
-        report["delta_e_76"] = json!({"mean": s76.mean, "median": s76.median, "p95": s76.p95, "max": s76.max, "per_patch": de76});
+        let de = color_eval::patch_delta_e(&targets, &rendered_means)?;
+        let (de2000, s2000) = (&de.de2000, &de.stats2000);
+        report["delta_e_2000"] = de.json_2000();
+        report["delta_e_76"] = de.json_76();
         plots::histogram(
             &put("delta_e_histogram.png"),
             &format!("ΔE2000, desired vs rendered (mean {:.2})", s2000.mean),
-            &de2000,
+            de2000,
             12,
             "ΔE2000",
         )?;

@@ -89,6 +89,18 @@ pub fn sampling_for(
             diffraction_os,
             diffraction_margin + (16.0 * defocus_um.abs() * n / p_um).ceil() as usize,
         ),
+        // Resolve the field model's PSF detail; margin = PSF half-width + the inward shift of
+        // the corner by (barrel) distortion, capped at the sensor's size.
+        Blur::Lens(l) => {
+            let half_diag_m = 0.5
+                * sensor.pixel_pitch_m
+                * ((sensor.rows * sensor.rows + sensor.cols * sensor.cols) as f64).sqrt();
+            let margin = (l.margin_m(half_diag_m) * 1e6 / p_um).ceil() as usize + 2;
+            (
+                (p_um / l.detail_um(lmin_um * 1e3)).ceil() as usize,
+                margin.min(sensor.rows.max(sensor.cols)),
+            )
+        }
     };
     if let Some(d) = &optics.diffuser {
         margin += (2.0 * d.fwhm_um / p_um).ceil() as usize + 1;

@@ -288,15 +288,31 @@ fn frames_are_written_in_the_recording_format() {
     let mut caps = captures(0.002, 0.02);
     caps["shots"][1]["frames"] = json!(["raw/flat-0.tif", "raw/flat-1.png"]);
     write_set(dir.path(), &camera(16, 24), &caps);
-    let st = camsim().args(["simulate", "captures.json", "--out", "o", "--seed", "5"]).current_dir(dir.path()).output().unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    let st = camsim()
+        .args(["simulate", "captures.json", "--out", "o", "--seed", "5"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let tif = camsim::raw_input::read_frame(&dir.path().join("o/raw/flat-0.tif")).unwrap();
     assert_eq!((tif.rows, tif.cols), (16, 24));
-    assert_eq!(&std::fs::read(dir.path().join("o/raw/flat-0.tif")).unwrap()[..2], b"II", "a TIFF file");
+    assert_eq!(
+        &std::fs::read(dir.path().join("o/raw/flat-0.tif")).unwrap()[..2],
+        b"II",
+        "a TIFF file"
+    );
     // same seed, shot and frame index → the same frame as when it is written as PNG
     caps["shots"][1]["frames"] = json!(["raw/flat-0.png", "raw/flat-1.png"]);
     write_set(dir.path(), &camera(16, 24), &caps);
-    let st = camsim().args(["simulate", "captures.json", "--out", "p", "--seed", "5"]).current_dir(dir.path()).output().unwrap();
+    let st = camsim()
+        .args(["simulate", "captures.json", "--out", "p", "--seed", "5"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
     assert!(st.status.success());
     let png = camsim::frames::read_png16(&dir.path().join("p/raw/flat-0.png")).unwrap();
     assert_eq!(tif.dn, png.dn);
@@ -316,17 +332,46 @@ fn scene_command_writes_spectral_exr_and_linear_model_error() {
     let mut errs = Vec::new();
     for k in ["1", "3", "6"] {
         let out = format!("s{k}");
-        let st = camsim().args(["scene", "captures.json", "--shot", "chart", "--basis", k, "--out", &out]).current_dir(dir.path()).output().unwrap();
-        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
-        let rep: Value = serde_json::from_str(&std::fs::read_to_string(dir.path().join(&out).join("chart_scene.json")).unwrap()).unwrap();
+        let st = camsim()
+            .args([
+                "scene",
+                "captures.json",
+                "--shot",
+                "chart",
+                "--basis",
+                k,
+                "--out",
+                &out,
+            ])
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        let rep: Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join(&out).join("chart_scene.json")).unwrap(),
+        )
+        .unwrap();
         assert!((rep["mean_luminance_cd_m2"].as_f64().unwrap() - 100.0).abs() < 0.1);
         errs.push(rep["linear_model"]["relative_rms_error"].as_f64().unwrap());
-        let e = camsim_core::exr_io::read_spectral_exr(&dir.path().join(&out).join("chart_radiance.exr")).unwrap();
+        let e = camsim_core::exr_io::read_spectral_exr(
+            &dir.path().join(&out).join("chart_radiance.exr"),
+        )
+        .unwrap();
         assert_eq!(e.emissive_units, "W.m^-2.sr^-1");
         assert_eq!(e.grid.len(), 31);
-        let i = camsim_core::exr_io::read_spectral_exr(&dir.path().join(&out).join("chart_irradiance.exr")).unwrap();
+        let i = camsim_core::exr_io::read_spectral_exr(
+            &dir.path().join(&out).join("chart_irradiance.exr"),
+        )
+        .unwrap();
         assert_eq!(i.emissive_units, "W.m^-2");
     }
     assert!(errs[0] > errs[1] && errs[1] >= errs[2], "errors {errs:?}");
-    assert!(errs[2] < 0.05, "6 basis functions capture Macbeth radiance to a few %: {errs:?}");
+    assert!(
+        errs[2] < 0.05,
+        "6 basis functions capture Macbeth radiance to a few %: {errs:?}"
+    );
 }

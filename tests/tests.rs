@@ -1,8 +1,10 @@
 //! camsim's integration tests: one test binary (ripgrep style), one module per concern.
 mod calibrate;
 mod cli;
+mod lens_blur;
 mod oracles;
 mod real_data;
 mod run;
 mod statistics;
 mod util;
+mod validate;

@@ -257,10 +257,14 @@ impl FieldModel {
                         let wo = lens.wave_optics(th, w, opts.pupil_n, opts.pad, &[])?;
                         let m = wo.psf.n;
                         let cm = (m / 2) as f64;
+                        // The FFT PSF is point-reflected with respect to the image plane (its
+                        // energy centroid sits on the opposite side of the chief ray from the
+                        // traced spot centroid); sample it at (−x, −y) so wave and geometric
+                        // PSFs share the image-plane orientation.
                         for iy in 0..psf_n {
                             for ix in 0..psf_n {
-                                let x = (ix as f64 - c0) * pitch_mm / wo.psf.sample_mm + cm;
-                                let y = (iy as f64 - c0) * pitch_mm / wo.psf.sample_mm + cm;
+                                let x = cm - (ix as f64 - c0) * pitch_mm / wo.psf.sample_mm;
+                                let y = cm - (iy as f64 - c0) * pitch_mm / wo.psf.sample_mm;
                                 img[iy * psf_n + ix] = bilinear(&wo.psf.values, m, x, y);
                             }
                         }

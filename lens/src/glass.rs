@@ -315,7 +315,10 @@ fn parse_nums(s: &str) -> Result<Vec<f64>, String> {
 /// Vendors searched, in order, when a glass is named without a catalogue.
 pub const VENDORS: [&str; 4] = ["schott", "ohara", "hoya", "cdgm"];
 
-/// A folder of refractiveindex.info glass files laid out as `<vendor>/<NAME>.yml`.
+include!(concat!(env!("OUT_DIR"), "/embedded_glass.rs"));
+
+/// A glass catalogue: the bundled one (embedded in the binary) or a folder of
+/// refractiveindex.info glass files laid out as `<vendor>/<NAME>.yml`.
 #[derive(Debug, Clone)]
 pub struct GlassCatalog {
     /// The folder holding one sub-folder per vendor.
@@ -340,7 +343,17 @@ impl GlassCatalog {
             Some(c) => vec![c.to_lowercase()],
             None => VENDORS.iter().map(|s| s.to_string()).collect(),
         };
+        let bundled = self.root == GlassCatalog::bundled().root;
         for v in &vendors {
+            if bundled {
+                // the bundled catalogue is embedded in the binary: no files needed at run time
+                if let Some((_, stem, text)) = EMBEDDED_GLASS.iter().find(|(vendor, stem, _)| {
+                    vendor.eq_ignore_ascii_case(v) && stem.eq_ignore_ascii_case(name)
+                }) {
+                    return Glass::from_refractiveindex_yaml(stem, v, text);
+                }
+                continue;
+            }
             let dir = self.root.join(v);
             let Ok(rd) = std::fs::read_dir(&dir) else {
                 continue;

@@ -25,6 +25,9 @@ pub enum OpticsError {
     /// A PSF set is malformed (shapes, negative values, wavelengths).
     #[error("PSF set: {0}")]
     Psf(String),
+    /// A lens prescription / field model problem (`Blur::Lens`).
+    #[error("{0}")]
+    Lens(String),
     /// The scene cannot be imaged (empty, inconsistent).
     #[error("scene: {0}")]
     Scene(String),

@@ -12,6 +12,9 @@
 //!    Eqs. 4–6), a Gaussian or pillbox PSF (wavelength independent, applied to the planes of
 //!    the linear model), sampled per-wavelength PSFs ([`PsfSet`]) or a wavefront PSF with
 //!    Zernike defocus;
+//!    or, with [`Blur::Lens`], the ISET ray-trace method (§2.B.3) of a lens prescription, which
+//!    replaces steps 1–3 (distortion, traced relative illumination, the lens's working
+//!    F-number, shift-variant PSFs; see [`LensBlur`]);
 //! 4. an optional Gaussian diffuser (§3.A: FWHM = pixel width).
 //!
 //! The baseline follows the project spec (capture-format.md, step 1). ISETCam conventions are
@@ -24,9 +27,12 @@ mod error;
 mod fft;
 mod formulas;
 mod kernels;
+mod lens_blur;
 mod psf_set;
 
 pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
+/// The lens ray tracer (prescriptions, field models) used by [`Blur::Lens`].
+pub use camsim_lens as lens;
 pub use error::OpticsError;
 pub use formulas::{
     airy_first_zero_m, airy_first_zero_rad, airy_psf, bessel_j1, camera_equation_factor,
@@ -34,6 +40,7 @@ pub use formulas::{
     relative_illumination_isetcam, sigma_from_fwhm, thin_lens_image_distance_m,
 };
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
+pub use lens_blur::{LensBlur, LensBlurOptions};
 pub use psf_set::PsfSet;
 
 use camsim_core::SpectralImage;
@@ -107,6 +114,11 @@ pub enum Blur {
         /// Pupil samples across the diameter (16..=4096; 128 is ample for |defocus| < λ).
         pupil_samples: usize,
     },
+    /// A lens prescription's ray-trace field model (ISET ray-trace method, paper §2.B.3):
+    /// distortion, traced relative illumination (replacing `relative_illumination`), the
+    /// lens's working F-number in the camera equation and shift-variant, wavelength-dependent
+    /// PSFs. See [`LensBlur`] for the details.
+    Lens(LensBlur),
 }
 
 /// A Gaussian diffuser (e.g. an optical low-pass filter), wavelength independent.
@@ -169,7 +181,7 @@ impl OpticsModel {
             });
         }
         match &self.blur {
-            Blur::None | Blur::Diffraction | Blur::Psf(_) => {}
+            Blur::None | Blur::Diffraction | Blur::Psf(_) | Blur::Lens(_) => {}
             Blur::Gaussian { sigma_um } => check_positive("blur sigma_um", *sigma_um, true)?,
             Blur::Pillbox { width_um } => check_positive("blur width_um", *width_um, true)?,
             Blur::Wavefront {
@@ -232,6 +244,14 @@ pub fn form_image(
     let (rows, cols) = (scene.radiance.rows, scene.radiance.cols);
     if rows == 0 || cols == 0 {
         return Err(OpticsError::Scene(format!("empty image {rows}×{cols}")));
+    }
+    if let Blur::Lens(lb) = &optics.blur {
+        let mut img = lens_blur::form_lens_image(optics, lb, &scene.radiance, bands, dx)?;
+        apply_diffuser(optics, &mut img, dx);
+        return Ok(SensorIrradiance {
+            irradiance: img,
+            sample_pitch_m: dx,
+        });
     }
     let n = optics.f_number;
     let m = optics.magnification(scene.object_distance_m);
@@ -339,18 +359,25 @@ pub fn form_image(
                 .collect::<Result<_, _>>()?;
             convolve_planes_with(&mut img, optics.padding, band_finish, |b| psfs[b].clone())?;
         }
+        Blur::Lens(_) => unreachable!("handled above"),
     }
 
-    // 4. Diffuser (Gaussian, FWHM → σ).
-    if let Some(d) = &optics.diffuser {
-        let kern = gaussian_kernel_1d(sigma_from_fwhm(d.fwhm_um * 1e-6), dx);
-        kernels::separable_convolve(&mut img.planes, rows, cols, &kern, optics.padding);
-    }
+    // 4. Diffuser.
+    apply_diffuser(optics, &mut img, dx);
 
     Ok(SensorIrradiance {
         irradiance: img,
         sample_pitch_m: dx,
     })
+}
+
+/// The optional diffuser (Gaussian, FWHM → σ).
+fn apply_diffuser(optics: &OpticsModel, img: &mut SpectralImage, dx: f64) {
+    if let Some(d) = &optics.diffuser {
+        let kern = gaussian_kernel_1d(sigma_from_fwhm(d.fwhm_um * 1e-6), dx);
+        let (rows, cols) = (img.rows, img.cols);
+        kernels::separable_convolve(&mut img.planes, rows, cols, &kern, optics.padding);
+    }
 }
 
 /// The image as a band cube on `bands` (moved, not copied, when it already is one).
