@@ -5,7 +5,7 @@
 use crate::config::CaptureSet;
 use crate::error::CliError;
 use crate::plots;
-use crate::raw_input::read_frame;
+use crate::raw_input::read_frame_with;
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_core::spectrum::Spectrum;
@@ -77,7 +77,7 @@ pub fn load_shots(
         let mut frames = Vec::with_capacity(s.frames.len());
         for f in &s.frames {
             let path = set.dir.join(f);
-            let mut frame = read_frame(&path)?;
+            let mut frame = read_frame_with(&path, set.raw_format.as_ref())?;
             // a frame of the wrong size is left to the estimators, which reject that shot with
             // a reason and run the rest
             // PNG/TIFF containers hold DN as stored: check they fit the camera's ADC

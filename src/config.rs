@@ -239,6 +239,29 @@ pub struct CapturesFile {
     /// Extension: simulation settings.
     #[serde(default)]
     pub simulation: Option<SimulationFile>,
+    /// Extension: layout of headerless raw frames (`.raw` / `.bin` frame files).
+    #[serde(default)]
+    pub raw_format: Option<RawFormatFile>,
+}
+
+/// `captures.raw_format` as written: how to read headerless raw frames.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawFormatFile {
+    /// Rows (default: the sensor's).
+    #[serde(default)]
+    pub rows: Option<usize>,
+    /// Columns (default: the sensor's).
+    #[serde(default)]
+    pub cols: Option<usize>,
+    /// 8 or 16 bits per stored sample.
+    pub bits_per_sample: u32,
+    /// "little" or "big" (16-bit samples).
+    #[serde(default)]
+    pub endianness: Option<String>,
+    /// Bytes to skip at the start of each file (default 0).
+    #[serde(default)]
+    pub header_bytes: Option<u64>,
 }
 
 /// One shot as written.
@@ -341,6 +364,8 @@ pub struct CaptureSet {
     pub shots: Vec<Shot>,
     /// Simulation settings.
     pub simulation: SimulationFile,
+    /// Layout of headerless raw frames, when given.
+    pub raw_format: Option<crate::raw_input::RawFormat>,
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, CliError> {
@@ -783,6 +808,39 @@ pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<Capt
             format!("must be 1–16, got {o}"),
         )?;
     }
+    let raw_format = match &raw.raw_format {
+        None => None,
+        Some(r) => {
+            let bytes = match r.bits_per_sample {
+                8 => 1,
+                16 => 2,
+                b => {
+                    return Err(CliError::input(
+                        path,
+                        format!("raw_format.bits_per_sample: must be 8 or 16, got {b}"),
+                    ))
+                }
+            };
+            let little_endian =
+                match r.endianness.as_deref().unwrap_or("little") {
+                    "little" => true,
+                    "big" => false,
+                    e => return Err(CliError::input(
+                        path,
+                        format!(
+                            "raw_format.endianness: expected \"little\" or \"big\", got \"{e}\""
+                        ),
+                    )),
+                };
+            Some(crate::raw_input::RawFormat {
+                rows: r.rows.unwrap_or(camera.sensor.rows),
+                cols: r.cols.unwrap_or(camera.sensor.cols),
+                bytes_per_sample: bytes,
+                little_endian,
+                header_bytes: r.header_bytes.unwrap_or(0),
+            })
+        }
+    };
     Ok(CaptureSet {
         path: path.to_path_buf(),
         dir,
@@ -790,6 +848,7 @@ pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<Capt
         camera_path,
         shots,
         simulation,
+        raw_format,
     })
 }
 

@@ -397,3 +397,34 @@ pub fn write_frame(path: &Path, frame: &RawFrame) -> Result<(), CliError> {
         write_png16(path, frame)
     }
 }
+
+/// Write a frame in its recording's format, headerless raw (`.raw`/`.bin`) included.
+pub fn write_frame_with(
+    path: &Path,
+    frame: &RawFrame,
+    raw_format: Option<&crate::raw_input::RawFormat>,
+) -> Result<(), CliError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext != "raw" && ext != "bin" {
+        return write_frame(path, frame);
+    }
+    let fmt = raw_format.ok_or_else(|| {
+        CliError::output(
+            path,
+            "a headerless raw frame needs \"raw_format\" in captures.json",
+        )
+    })?;
+    let mut bytes = vec![0u8; fmt.header_bytes as usize];
+    for &v in &frame.dn {
+        match (fmt.bytes_per_sample, fmt.little_endian) {
+            (1, _) => bytes.push(v.min(255) as u8),
+            (_, true) => bytes.extend_from_slice(&v.to_le_bytes()),
+            (_, false) => bytes.extend_from_slice(&v.to_be_bytes()),
+        }
+    }
+    write_atomically(path, |tmp| std::fs::write(tmp, &bytes)).map_err(|e| CliError::output(path, e))
+}

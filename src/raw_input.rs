@@ -5,6 +5,81 @@ use crate::frames::read_png16;
 use camsim_core::RawFrame;
 use std::path::Path;
 
+/// Layout of a headerless raw frame file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawFormat {
+    /// rows
+    pub rows: usize,
+    /// columns
+    pub cols: usize,
+    /// 1 or 2
+    pub bytes_per_sample: usize,
+    /// byte order of 16-bit samples
+    pub little_endian: bool,
+    /// bytes skipped at the start
+    pub header_bytes: u64,
+}
+
+fn is_raw(path: &Path) -> bool {
+    matches!(
+        path.extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref(),
+        Some("raw") | Some("bin")
+    )
+}
+
+/// Read a headerless raw mosaic laid out as `fmt` says (row 0 first).
+pub fn read_raw(path: &Path, fmt: &RawFormat) -> Result<RawFrame, CliError> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
+    let n = fmt.rows * fmt.cols;
+    let need = fmt.header_bytes as usize + n * fmt.bytes_per_sample;
+    if bytes.len() != need {
+        return Err(CliError::input(
+            path,
+            format!(
+                "raw frame has {} bytes; raw_format ({}×{}, {} bit, {} header bytes) needs {need}",
+                bytes.len(),
+                fmt.rows,
+                fmt.cols,
+                fmt.bytes_per_sample * 8,
+                fmt.header_bytes
+            ),
+        ));
+    }
+    let body = &bytes[fmt.header_bytes as usize..];
+    let dn: Vec<u16> = if fmt.bytes_per_sample == 1 {
+        body.iter().map(|&b| b as u16).collect()
+    } else if fmt.little_endian {
+        body.chunks_exact(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]))
+            .collect()
+    } else {
+        body.chunks_exact(2)
+            .map(|c| u16::from_be_bytes([c[0], c[1]]))
+            .collect()
+    };
+    Ok(RawFrame {
+        rows: fmt.rows,
+        cols: fmt.cols,
+        adc_bits: (fmt.bytes_per_sample * 8) as u32,
+        dn,
+    })
+}
+
+/// Read one recorded frame; `.raw`/`.bin` files need the capture set's `raw_format`.
+pub fn read_frame_with(path: &Path, raw_format: Option<&RawFormat>) -> Result<RawFrame, CliError> {
+    if is_raw(path) {
+        let fmt = raw_format.ok_or_else(|| {
+            CliError::input(path, "a headerless raw frame needs \"raw_format\" in captures.json (rows, cols, bits_per_sample, endianness)")
+        })?;
+        return read_raw(path, fmt);
+    }
+    read_frame(path)
+}
+
 /// Read one recorded frame (PNG: 16-bit greyscale; TIFF: 8- or 16-bit greyscale).
 pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
     let ext = path
@@ -44,7 +119,7 @@ pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
         }
         other => Err(CliError::input(
             path,
-            format!("unsupported frame format \".{other}\" (expected .png or .tif)"),
+            format!("unsupported frame format \".{other}\" (expected .png, .tif, or .raw/.bin with raw_format)"),
         )),
     }
 }

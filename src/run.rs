@@ -244,6 +244,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         camera_path,
         shots: vec![shot],
         simulation: raw.simulation.unwrap_or_default(),
+        raw_format: None,
     };
     Ok(Run {
         set,

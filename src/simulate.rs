@@ -397,7 +397,7 @@ fn run_into(
                 if let Some(parent) = dst.parent() {
                     std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
                 }
-                frames::write_frame(&dst, &frame)?;
+                frames::write_frame_with(&dst, &frame, set.raw_format.as_ref())?;
                 lap("write PNG");
                 summary.files.push(rel);
                 bar.inc(1);

@@ -20,7 +20,7 @@ use crate::color_eval::{patch_delta_e, through_srgb8};
 use crate::config::{CaptureSet, Exposure};
 use crate::error::CliError;
 use crate::plots;
-use crate::raw_input::read_frame;
+use crate::raw_input::read_frame_with;
 use crate::simulate::{shot_electron_rate, wavelength_grid};
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
@@ -285,7 +285,7 @@ fn check_frames(set: &CaptureSet) -> Result<(), CliError> {
                 // the header is enough for the size and bit depth
                 crate::frames::check_frame(&p, s.rows, s.cols)?;
             } else {
-                let fr = read_frame(&p)?;
+                let fr = read_frame_with(&p, set.raw_format.as_ref())?;
                 check_size(&p, &fr, s)?;
             }
         }
@@ -469,7 +469,7 @@ fn validate_into(
         let fixed_ref = fixed.as_ref().expect("built above");
         for (fi, f) in shot.frames.iter().enumerate() {
             let path = set.dir.join(f);
-            let measured = read_frame(&path)?;
+            let measured = read_frame_with(&path, set.raw_format.as_ref())?;
             check_size(&path, &measured, sensor)?;
             let simulated = expose(sensor, rate, &sh, fixed_ref, seed, &[si as u64, fi as u64]);
             for (a, &v) in measured_sum.iter_mut().zip(&measured.dn) {
