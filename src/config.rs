@@ -821,17 +821,18 @@ pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<Capt
                     ))
                 }
             };
-            let little_endian =
-                match r.endianness.as_deref().unwrap_or("little") {
-                    "little" => true,
-                    "big" => false,
-                    e => return Err(CliError::input(
+            let little_endian = match r.endianness.as_deref().unwrap_or("little") {
+                "little" => true,
+                "big" => false,
+                e => {
+                    return Err(CliError::input(
                         path,
                         format!(
                             "raw_format.endianness: expected \"little\" or \"big\", got \"{e}\""
                         ),
-                    )),
-                };
+                    ))
+                }
+            };
             Some(crate::raw_input::RawFormat {
                 rows: r.rows.unwrap_or(camera.sensor.rows),
                 cols: r.cols.unwrap_or(camera.sensor.cols),

@@ -10,6 +10,7 @@ pub mod color_eval;
 pub mod config;
 pub mod error;
 pub mod frames;
+pub mod lens_cmd;
 pub mod plots;
 pub mod raw_input;
 pub mod report;

@@ -92,6 +92,11 @@ enum Command {
         #[arg(long)]
         basis: Option<usize>,
     },
+    /// Lens prescriptions (.json, .zmx, ISET .dat/.json): report, spot, field-model, psf.
+    Lens {
+        #[command(subcommand)]
+        cmd: camsim::lens_cmd::LensCommand,
+    },
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
@@ -195,6 +200,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             );
             Ok(())
         }
+        Command::Lens { cmd } => camsim::lens_cmd::run_lens(cmd),
     }
 }
 

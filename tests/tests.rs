@@ -2,6 +2,7 @@
 mod calibrate;
 mod cli;
 mod lens_blur;
+mod lens_cli;
 mod oracles;
 mod real_data;
 mod run;

@@ -1,0 +1,1277 @@
+//! `camsim lens …`: lens-prescription analyses on the command line (camsim-lens).
+//!
+//! * `report`: first-order data, chief rays, distortion, lateral colour, RMS spots per field and
+//!   wavelength and the on-axis MTF, as JSON (`--json`) and/or an HTML report with figures;
+//! * `spot`: one spot diagram (statistics, optionally the points);
+//! * `field-model`: the ISET-style field model file ([`camsim_lens::FieldModel`]);
+//! * `psf`: the wave-optics PSF of one field and wavelength as PNG or EXR.
+//!
+//! A LENS argument is a project prescription (`.json`, see `lens/src/lib.rs`), a Zemax `.zmx`,
+//! an ISET/pbrt `.dat` or an ISETCam lens `.json` (told apart from the project format by its
+//! surface keys `radius`/`thickness`/`ior`). Every error names the file and is printed on one
+//! line.
+//!
+//! ## Conventions (those of /work/shared/tools/optics_ref/ref_lens.py)
+//! * The lens is refocused at the paraxial focus of its primary wavelength (the last thickness
+//!   of the file is replaced by the paraxial image distance), for the lens's own object
+//!   distance (object at infinity when `object_distance_mm` is null).
+//! * Aperture, primary wavelength and fields come from the lens file; a field fraction f means
+//!   the object-space chief-ray angle f × (largest |fields_deg| of the file), or f ×
+//!   `--max-field-deg` when given.
+//! * Chief ray: real ray aimed at the centre of the stop at the primary wavelength.
+//!   `chief_ray_height_mm` is |y| of that ray on the image plane, `paraxial_image_height_mm` the
+//!   paraxial chief-ray height (= EFL·tan θ for an object at infinity), distortion
+//!   % = 100 (real − paraxial)/paraxial.
+//! * Lateral colour = |y_chief(486.1 nm)| − |y_chief(656.3 nm)| (F − C, µm), the primary-aimed
+//!   chief ray traced at each wavelength.
+//! * RMS spot: the n×n square grid ((i + ½)/n·2 − 1) of the paraxial entrance pupil clipped to
+//!   the unit disc (shifted by the real chief-ray aim point off axis), RMS radius about the
+//!   centroid on the paraxial image plane; no clipping at semi-diameters unless `--clip`.
+//! * On-axis MTF: diffraction MTF at the primary wavelength from the OPD map (64² pupil grid,
+//!   4× zero padding), by default on the best-focus plane (the image-plane shift minimising the
+//!   on-axis polychromatic RMS spot of the report wavelengths), as ref_lens.py's
+//!   `mtf_best_focus_primary`; `--mtf-focus paraxial` uses the paraxial image plane.
+//!   On axis the tangential and sagittal MTFs coincide; their mean is reported.
+use crate::error::CliError;
+use crate::plots;
+use crate::staging::with_staging;
+use camsim_lens::analysis::pupil_grid;
+use camsim_lens::readers::{decode_text, read_iset_dat, read_iset_json, read_zmx, ZmxOptions};
+use camsim_lens::{
+    Clipping, FieldModel, FieldModelOptions, GlassCatalog, LensPrescription, PrescriptionFile,
+    PsfKind,
+};
+use clap::{Subcommand, ValueEnum};
+use serde_json::{json, Map, Value};
+use std::path::{Path, PathBuf};
+
+/// Wavelengths of the lateral-colour definition (F and C lines, nm).
+pub const F_LINE_NM: f64 = 486.1;
+/// C line (nm).
+pub const C_LINE_NM: f64 = 656.3;
+
+/// Which image plane the on-axis MTF of `lens report` uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MtfFocus {
+    /// The plane minimising the on-axis polychromatic RMS spot.
+    Best,
+    /// The paraxial image plane of the primary wavelength.
+    Paraxial,
+}
+
+/// The LENS argument and the glass substitutions for Zemax files.
+#[derive(Debug, Clone, clap::Args)]
+pub struct LensArg {
+    /// The lens: project .json, Zemax .zmx, ISET/pbrt .dat or ISETCam lens .json.
+    #[arg(value_name = "LENS")]
+    pub path: PathBuf,
+    /// Replace a glass that is not in the catalogue (Zemax files; repeatable), e.g.
+    /// `--glass-sub J-LAK14=ohara/S-LAL14`.
+    #[arg(long = "glass-sub", value_name = "FROM=VENDOR/GLASS")]
+    pub glass_sub: Vec<String>,
+}
+
+impl LensArg {
+    /// Read the lens (see [`load_lens_with`]).
+    pub fn load(&self) -> Result<LensPrescription, CliError> {
+        let mut opts = ZmxOptions::default();
+        for s in &self.glass_sub {
+            let parsed = s.split_once('=').and_then(|(from, to)| {
+                let (vendor, glass) = to.split_once('/')?;
+                let ok = |x: &str| !x.trim().is_empty();
+                (ok(from) && ok(vendor) && ok(glass))
+                    .then(|| (from.trim(), vendor.trim(), glass.trim()))
+            });
+            let Some((from, vendor, glass)) = parsed else {
+                return Err(CliError::Other(format!(
+                    "--glass-sub '{s}': expected FROM=VENDOR/GLASS, e.g. J-LAK14=ohara/S-LAL14"
+                )));
+            };
+            opts = opts.substitute(from, glass, vendor);
+        }
+        load_lens_with(&self.path, &opts)
+    }
+}
+
+/// `camsim lens …` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum LensCommand {
+    /// First-order data, chief rays, distortion, lateral colour, RMS spots and the on-axis MTF;
+    /// prints JSON (--json) and/or writes DIR/report.html, report.json and figures.
+    Report {
+        /// The lens and glass substitutions.
+        #[command(flatten)]
+        lens: LensArg,
+        /// Print the report JSON to stdout (no folder is written unless --out is given).
+        #[arg(long)]
+        json: bool,
+        /// Field fractions of the lens's maximum field.
+        #[arg(long, value_delimiter = ',', default_value = "0,0.5,0.7,1")]
+        field_fraction: Vec<f64>,
+        /// Wavelengths of the RMS spots (nm); they key `rms_spot_um` as written.
+        #[arg(long, value_delimiter = ',', default_value = "486.1,587.6,656.3")]
+        wavelength_nm: Vec<String>,
+        /// Output folder for report.html, report.json and the figures (default out/lens
+        /// when --json is not given).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Maximum field angle (degrees) instead of the largest of the file's fields_deg.
+        #[arg(long)]
+        max_field_deg: Option<f64>,
+        /// Pupil grid per side of the spot diagrams (33 → 861 rays).
+        #[arg(long, default_value_t = 33)]
+        grid: usize,
+        /// MTF frequencies (cycles/mm).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "0,10,20,30,40,50,60,70,80,90,100,120,140,160,180,200"
+        )]
+        mtf_lp_mm: Vec<f64>,
+        /// Image plane of the on-axis MTF.
+        #[arg(long, value_enum, default_value_t = MtfFocus::Best)]
+        mtf_focus: MtfFocus,
+        /// Clip rays at the surfaces' semi-diameters (vignetting).
+        #[arg(long)]
+        clip: bool,
+    },
+    /// One spot diagram on the paraxial image plane: RMS radius, centroid, rays transmitted.
+    Spot {
+        /// The lens and glass substitutions.
+        #[command(flatten)]
+        lens: LensArg,
+        /// Field fraction of the lens's maximum field.
+        #[arg(long)]
+        field_fraction: f64,
+        /// Wavelength (nm).
+        #[arg(long)]
+        wavelength_nm: f64,
+        /// At least this many rays (the smallest square pupil grid clipped to the disc that
+        /// holds N rays).
+        #[arg(long, default_value_t = 861)]
+        rays: usize,
+        /// Print JSON including the image points.
+        #[arg(long)]
+        json: bool,
+        /// Maximum field angle (degrees) instead of the largest of the file's fields_deg.
+        #[arg(long)]
+        max_field_deg: Option<f64>,
+        /// Shift of the image plane from the paraxial focus (mm).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        defocus_mm: f64,
+        /// Clip rays at the surfaces' semi-diameters (vignetting).
+        #[arg(long)]
+        clip: bool,
+    },
+    /// Compute the field model (PSF, distortion, relative illumination over image height ×
+    /// wavelength) and save it as JSON.
+    FieldModel {
+        /// The lens and glass substitutions.
+        #[command(flatten)]
+        lens: LensArg,
+        /// Output file (.json).
+        #[arg(long)]
+        out: PathBuf,
+        /// Number of tabulated field heights (≥ 2).
+        #[arg(long, default_value_t = 5)]
+        fields: usize,
+        /// Wavelengths (nm); default the lens's.
+        #[arg(long, value_delimiter = ',')]
+        wavelengths_nm: Option<Vec<f64>>,
+        /// Maximum field angle (degrees) instead of the largest of the file's fields_deg.
+        #[arg(long)]
+        max_field_deg: Option<f64>,
+        /// Geometric (ray-density) PSFs instead of wave-optics ones.
+        #[arg(long)]
+        geometric: bool,
+        /// Samples per side of the stored PSFs.
+        #[arg(long, default_value_t = 33)]
+        psf_n: usize,
+        /// Pitch of the stored PSFs (µm).
+        #[arg(long, default_value_t = 1.0)]
+        psf_pitch_um: f64,
+    },
+    /// Draw the lens layout (meridional section, surfaces and rays of the axis and the maximum
+    /// field at the primary wavelength) as SVG.
+    Draw {
+        /// The lens and glass substitutions.
+        #[command(flatten)]
+        lens: LensArg,
+        /// Output .svg file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Rays per field across the pupil (meridional fan).
+        #[arg(long, default_value_t = 7)]
+        rays: usize,
+        /// Maximum field angle (degrees) instead of the largest of the file's fields_deg.
+        #[arg(long)]
+        max_field_deg: Option<f64>,
+    },
+    /// The wave-optics PSF (sum 1) of one field and wavelength on the paraxial image plane, as
+    /// a PNG (normalised to its peak) or a single-channel EXR (channel Y).
+    Psf {
+        /// The lens and glass substitutions.
+        #[command(flatten)]
+        lens: LensArg,
+        /// Field fraction of the lens's maximum field.
+        #[arg(long)]
+        field_fraction: f64,
+        /// Wavelength (nm).
+        #[arg(long)]
+        wavelength_nm: f64,
+        /// Output: .png or .exr.
+        #[arg(long)]
+        out: PathBuf,
+        /// Maximum field angle (degrees) instead of the largest of the file's fields_deg.
+        #[arg(long)]
+        max_field_deg: Option<f64>,
+        /// Pupil samples per side of the OPD map.
+        #[arg(long, default_value_t = 64)]
+        pupil_samples: usize,
+        /// Zero-padding factor of the FFT (PSF size = pupil samples × pad).
+        #[arg(long, default_value_t = 4)]
+        pad: usize,
+        /// Shift of the image plane from the paraxial focus (mm).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        defocus_mm: f64,
+    },
+}
+
+/// Read a lens in any supported format (chosen by extension, else by content).
+pub fn load_lens(path: &Path) -> Result<LensPrescription, CliError> {
+    load_lens_with(path, &ZmxOptions::default())
+}
+
+/// [`load_lens`] with explicit Zemax options (glass substitutions).
+pub fn load_lens_with(path: &Path, zmx: &ZmxOptions) -> Result<LensPrescription, CliError> {
+    let bad = |e: &dyn std::fmt::Display| CliError::input(path, e);
+    let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let kind = match ext.as_str() {
+        "zmx" => "zmx",
+        "dat" => "dat",
+        "json" => "json",
+        _ => {
+            let text = decode_text(&bytes);
+            let t = text.trim_start();
+            if t.starts_with('{') {
+                "json"
+            } else if text.lines().any(|l| {
+                let l = l.trim_start();
+                l.starts_with("SURF ") || l.starts_with("VERS ") || l.starts_with("UNIT ")
+            }) {
+                "zmx"
+            } else {
+                "dat"
+            }
+        }
+    };
+    let catalog = GlassCatalog::bundled();
+    let file: PrescriptionFile = match kind {
+        "zmx" => read_zmx(&bytes, &stem, zmx).map_err(|e| bad(&e))?,
+        "dat" => read_iset_dat(&decode_text(&bytes), &stem).map_err(|e| bad(&e))?,
+        _ => {
+            let text = decode_text(&bytes);
+            let v: Value =
+                serde_json::from_str(&text).map_err(|e| bad(&format!("not valid JSON: {e}")))?;
+            let first = v
+                .get("surfaces")
+                .and_then(Value::as_array)
+                .and_then(|a| a.first());
+            let is_iset = first.is_some_and(|s| {
+                s.get("ior").is_some()
+                    || s.get("semi_aperture").is_some()
+                    || (s.get("radius").is_some() && s.get("radius_mm").is_none())
+            });
+            if is_iset {
+                read_iset_json(&text, &stem).map_err(|e| bad(&e))?
+            } else {
+                serde_json::from_value(v)
+                    .map_err(|e| bad(&format!("not a lens prescription: {e}")))?
+            }
+        }
+    };
+    LensPrescription::from_file_form(&file, &catalog).map_err(|e| bad(&e))
+}
+
+/// The lens refocused at the paraxial focus of its primary wavelength.
+fn focused(lens: &LensPrescription, path: &Path) -> Result<LensPrescription, CliError> {
+    let l = lens
+        .focused(lens.primary_nm)
+        .map_err(|e| CliError::input(path, e))?;
+    let d = l.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+    if !d.is_finite() {
+        return Err(CliError::input(
+            path,
+            "the paraxial image is at infinity (afocal or object at the front focal point)",
+        ));
+    }
+    Ok(l)
+}
+
+/// The maximum field angle (degrees): `override_deg` or the largest |fields_deg| of the lens.
+fn max_field_deg(lens: &LensPrescription, override_deg: Option<f64>) -> Result<f64, CliError> {
+    match override_deg {
+        Some(d) if d.is_finite() && d.abs() < 90.0 => Ok(d.abs()),
+        Some(d) => Err(CliError::Other(format!(
+            "--max-field-deg {d} must be in [0, 90)"
+        ))),
+        None => Ok(lens.fields_deg.iter().fold(0.0, |m, a| m.max(a.abs()))),
+    }
+}
+
+fn field_angle(fraction: f64, max_deg: f64) -> Result<f64, CliError> {
+    let a = fraction * max_deg;
+    if !(fraction.is_finite() && a.abs() < 90.0) {
+        return Err(CliError::Other(format!(
+            "--field-fraction {fraction} gives a field angle of {a}° (must be below 90°)"
+        )));
+    }
+    Ok(a)
+}
+
+fn check_wavelength(w: f64) -> Result<f64, CliError> {
+    if w.is_finite() && w > 0.0 {
+        Ok(w)
+    } else {
+        Err(CliError::Other(format!(
+            "--wavelength-nm {w} must be a positive number"
+        )))
+    }
+}
+
+/// RGB of a wavelength for plots (rough spectral colour).
+fn wavelength_rgb(w: f64) -> [u8; 3] {
+    if w < 450.0 {
+        [110, 0, 200]
+    } else if w < 500.0 {
+        [0, 70, 255]
+    } else if w < 570.0 {
+        [0, 160, 0]
+    } else if w < 600.0 {
+        [220, 170, 0]
+    } else {
+        [220, 0, 0]
+    }
+}
+
+/// Print `text` and a newline on stdout; a closed pipe (e.g. `| head`) is not an error.
+fn print_out(text: &str) -> Result<(), CliError> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    match writeln!(o, "{text}").and_then(|_| o.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(CliError::Other(format!("stdout: {e}")))
+        }
+        _ => Ok(()),
+    }
+}
+
+fn finite_or_null(x: f64) -> Value {
+    if x.is_finite() {
+        json!(x)
+    } else {
+        Value::Null
+    }
+}
+
+/// Options of [`lens_report`].
+#[derive(Debug, Clone)]
+pub struct ReportOptions {
+    /// Field fractions.
+    pub field_fractions: Vec<f64>,
+    /// Wavelengths as written (keys of `rms_spot_um`).
+    pub wavelengths: Vec<String>,
+    /// Maximum field override (degrees).
+    pub max_field_deg: Option<f64>,
+    /// Spot pupil grid per side.
+    pub grid: usize,
+    /// MTF frequencies (cycles/mm).
+    pub mtf_lp_mm: Vec<f64>,
+    /// MTF image plane.
+    pub mtf_focus: MtfFocus,
+    /// Clip at semi-diameters.
+    pub clip: bool,
+}
+
+/// Image points (mm) of one wavelength: (wavelength nm, points).
+pub type WavelengthSpot = (f64, Vec<[f64; 2]>);
+
+/// Ray paths (z, y) of one field and their SVG colour.
+type RayFanPaths<'a> = (Vec<Vec<(f64, f64)>>, &'a str);
+
+/// What the report figures need besides the JSON.
+pub struct ReportData {
+    /// The report JSON (schema in the module docs of `lens report`).
+    pub json: Value,
+    /// Dense distortion curve (field °, %).
+    pub distortion_curve: Vec<(f64, f64)>,
+    /// Spot points per field: (field °, [(wavelength, points mm)]).
+    pub spots: Vec<(f64, Vec<WavelengthSpot>)>,
+    /// Best-focus shift used for the MTF (mm).
+    pub mtf_focus_shift_mm: f64,
+    /// Lens name.
+    pub name: String,
+}
+
+/// Compute the `lens report` numbers of `lens` (read from `path`, which errors name).
+pub fn lens_report(
+    lens: &LensPrescription,
+    path: &Path,
+    opts: &ReportOptions,
+) -> Result<ReportData, CliError> {
+    let lens = focused(lens, path)?;
+    let lerr = |e: camsim_lens::LensError| CliError::input(path, e);
+    if opts.grid == 0 {
+        return Err(CliError::Other("--grid must be ≥ 1".into()));
+    }
+    let wls: Vec<f64> = opts
+        .wavelengths
+        .iter()
+        .map(|s| {
+            s.trim()
+                .parse::<f64>()
+                .map_err(|_| CliError::Other(format!("--wavelength-nm: '{s}' is not a number")))
+                .and_then(check_wavelength)
+        })
+        .collect::<Result<_, _>>()?;
+    if wls.is_empty() {
+        return Err(CliError::Other("--wavelength-nm: no wavelengths".into()));
+    }
+    let max_deg = max_field_deg(&lens, opts.max_field_deg)?;
+    let primary = lens.primary_nm;
+    let fo = lens.first_order(primary).map_err(lerr)?;
+    let clipping = if opts.clip {
+        Clipping::SemiDiameters
+    } else {
+        Clipping::None
+    };
+    // Distortion / lateral colour: wavelengths [F, C] so that `distortion` returns F − C.
+    let mut lc_lens = lens.clone();
+    lc_lens.wavelengths_nm = vec![F_LINE_NM, C_LINE_NM];
+    let grid = pupil_grid(opts.grid);
+    let fig_grid = pupil_grid(opts.grid.min(15));
+    let mut fields = Vec::new();
+    let mut spots = Vec::new();
+    for &frac in &opts.field_fractions {
+        let th = field_angle(frac, max_deg)?;
+        let d = lc_lens.distortion(th).map_err(lerr)?;
+        let mut rms = Map::new();
+        let mut pts = Vec::new();
+        for (key, &w) in opts.wavelengths.iter().zip(&wls) {
+            let fan = lens
+                .ray_fan(th, w, primary, &grid, clipping)
+                .map_err(lerr)?;
+            let s = fan.spot(0.0);
+            let v = if s.points_mm.is_empty() {
+                f64::NAN
+            } else {
+                1000.0 * s.rms_radius_mm
+            };
+            rms.insert(key.trim().to_string(), finite_or_null(v));
+            // The figure shows a coarser grid (≤ 15 per side) so the dots stay legible.
+            let fig_pts = if opts.grid <= 15 {
+                s.points_mm
+            } else {
+                lens.ray_fan(th, w, primary, &fig_grid, clipping)
+                    .map_err(lerr)?
+                    .spot(0.0)
+                    .points_mm
+            };
+            pts.push((w, fig_pts));
+        }
+        fields.push(json!({
+            "field_fraction": frac,
+            "field_deg": th,
+            "chief_ray_height_mm": d.real_height_mm,
+            "paraxial_image_height_mm": d.paraxial_height_mm,
+            "distortion_percent": d.distortion_pct,
+            "lateral_color_um": d.lateral_colour_um,
+            "rms_spot_um": Value::Object(rms),
+        }));
+        spots.push((th, pts));
+    }
+    // Dense distortion curve for the figure.
+    let mut distortion_curve = Vec::new();
+    if max_deg > 0.0 {
+        for k in 0..=20 {
+            let th = max_deg * k as f64 / 20.0;
+            if let Ok(d) = lens.distortion(th) {
+                distortion_curve.push((th, d.distortion_pct));
+            }
+        }
+    }
+    // On-axis MTF.
+    let dz = match opts.mtf_focus {
+        MtfFocus::Paraxial => 0.0,
+        MtfFocus::Best => {
+            let fans: Vec<_> = wls
+                .iter()
+                .map(|&w| lens.ray_fan(0.0, w, primary, &grid, clipping))
+                .collect::<Result<_, _>>()
+                .map_err(lerr)?;
+            if fans.iter().all(|f| f.rays.iter().all(Option::is_none)) {
+                0.0
+            } else {
+                lens.best_focus_shift_mm(&fans, 0.02 * fo.efl_mm.abs())
+            }
+        }
+    };
+    let img_d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+    let mtf_lens = lens.with_image_distance(img_d + dz);
+    let wo = mtf_lens
+        .wave_optics(0.0, primary, 64, 4, &opts.mtf_lp_mm)
+        .map_err(lerr)?;
+    let mtf: Vec<Value> = wo
+        .mtf
+        .iter()
+        .map(|p| {
+            json!({"lp_per_mm": p.freq_cyc_per_mm,
+                   "mtf": finite_or_null(0.5 * (p.tangential + p.sagittal))})
+        })
+        .collect();
+    let json = json!({
+        "efl_mm": fo.efl_mm,
+        "bfl_mm": fo.bfl_mm,
+        "f_number": fo.f_number,
+        "entrance_pupil_diameter_mm": fo.entrance_pupil_diameter_mm,
+        "primary_wavelength_nm": primary,
+        "fields": fields,
+        "mtf_on_axis": mtf,
+    });
+    Ok(ReportData {
+        json,
+        distortion_curve,
+        spots,
+        mtf_focus_shift_mm: dz,
+        name: lens.name.clone(),
+    })
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// Write report.json, report.html and the figures into `dir` (a staging folder); returns the
+/// relative file names.
+fn write_report_files(
+    dir: &Path,
+    lens_path: &Path,
+    data: &ReportData,
+    opts: &ReportOptions,
+) -> Result<Vec<PathBuf>, CliError> {
+    let mut files = Vec::new();
+    let mut figures: Vec<(String, String)> = Vec::new();
+    let j = &data.json;
+    let fields = j["fields"].as_array().cloned().unwrap_or_default();
+    // Distortion curve.
+    let mut curve = data.distortion_curve.clone();
+    if curve.is_empty() {
+        curve = fields
+            .iter()
+            .map(|f| {
+                (
+                    f["field_deg"].as_f64().unwrap_or(0.0),
+                    f["distortion_percent"].as_f64().unwrap_or(0.0),
+                )
+            })
+            .collect();
+    }
+    plots::line_plot(
+        &dir.join("distortion.png"),
+        "Distortion (primary wavelength)",
+        &[("distortion".to_string(), curve)],
+        ("field angle (deg)", "distortion (%)"),
+    )?;
+    figures.push((
+        "distortion.png".into(),
+        "Distortion vs field angle (real vs paraxial chief-ray height)".into(),
+    ));
+    // RMS spot vs field per wavelength.
+    let series: Vec<(String, Vec<(f64, f64)>)> = opts
+        .wavelengths
+        .iter()
+        .map(|key| {
+            let k = key.trim().to_string();
+            let pts = fields
+                .iter()
+                .filter_map(|f| {
+                    Some((
+                        f["field_deg"].as_f64()?,
+                        f["rms_spot_um"][k.as_str()].as_f64()?,
+                    ))
+                })
+                .collect();
+            (format!("{k} nm"), pts)
+        })
+        .collect();
+    plots::line_plot(
+        &dir.join("rms_spot.png"),
+        "RMS spot radius at paraxial focus",
+        &series,
+        ("field angle (deg)", "RMS spot radius (µm)"),
+    )?;
+    figures.push((
+        "rms_spot.png".into(),
+        "RMS spot radius vs field, per wavelength".into(),
+    ));
+    // MTF.
+    let mtf: Vec<(f64, f64)> = j["mtf_on_axis"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|p| Some((p["lp_per_mm"].as_f64()?, p["mtf"].as_f64()?)))
+        .collect();
+    plots::line_plot(
+        &dir.join("mtf.png"),
+        "On-axis MTF (primary wavelength)",
+        &[("MTF".to_string(), mtf)],
+        ("spatial frequency (cycles/mm)", "MTF"),
+    )?;
+    figures.push((
+        "mtf.png".into(),
+        format!(
+            "On-axis diffraction MTF, image plane shifted {:+.4} mm from paraxial focus",
+            data.mtf_focus_shift_mm
+        ),
+    ));
+    // Spot diagrams.
+    for (i, (th, per_wl)) in data.spots.iter().enumerate() {
+        let all: Vec<[f64; 2]> = per_wl.iter().flat_map(|(_, p)| p.iter().copied()).collect();
+        let n = all.len().max(1) as f64;
+        let cx = all.iter().map(|p| p[0]).sum::<f64>() / n;
+        let cy = all.iter().map(|p| p[1]).sum::<f64>() / n;
+        let mut xs = Vec::new();
+        let mut ys = Vec::new();
+        let mut cs = Vec::new();
+        for (w, pts) in per_wl {
+            for p in pts {
+                xs.push(1000.0 * (p[0] - cx));
+                ys.push(1000.0 * (p[1] - cy));
+                cs.push(wavelength_rgb(*w));
+            }
+        }
+        let name = format!("spot_{i}.png");
+        plots::scatter(
+            &dir.join(&name),
+            &format!("Spot diagram, field {th:.3}°"),
+            &xs,
+            &ys,
+            Some(&cs),
+            ("x − centroid (µm)", "y − centroid (µm)"),
+            false,
+        )?;
+        let wl_list = per_wl
+            .iter()
+            .map(|(w, _)| format!("{w} nm"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        figures.push((
+            name,
+            format!(
+                "Spot diagram at {th:.3}° ({wl_list}; blue→red by wavelength; {0}×{0} pupil grid)",
+                opts.grid.min(15)
+            ),
+        ));
+    }
+    let json_text = serde_json::to_string_pretty(j).map_err(|e| CliError::Other(e.to_string()))?;
+    std::fs::write(dir.join("report.json"), json_text + "\n")
+        .map_err(|e| CliError::output(&dir.join("report.json"), e))?;
+    // HTML.
+    let mut h = String::new();
+    h.push_str("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>camsim lens report</title>");
+    h.push_str("<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}figure{display:inline-block;margin:8px;vertical-align:top}figure img{max-width:520px;border:1px solid #ccc}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f3f3f3}</style></head><body>");
+    h.push_str(&format!(
+        "<h1>camsim lens report</h1><p>{} — <code>{}</code></p>",
+        esc(&data.name),
+        esc(&lens_path.display().to_string())
+    ));
+    h.push_str("<h2>First order</h2><table>");
+    for (k, label) in [
+        ("efl_mm", "EFL (mm)"),
+        ("bfl_mm", "BFL (mm)"),
+        ("f_number", "F-number (EFL/EPD)"),
+        ("entrance_pupil_diameter_mm", "entrance-pupil diameter (mm)"),
+        ("primary_wavelength_nm", "primary wavelength (nm)"),
+    ] {
+        h.push_str(&format!(
+            "<tr><th style=\"text-align:left\">{label}</th><td>{:.6}</td></tr>",
+            j[k].as_f64().unwrap_or(f64::NAN)
+        ));
+    }
+    h.push_str("</table>");
+    h.push_str("<h2>Fields</h2><table><tr><th>fraction</th><th>angle (°)</th><th>chief-ray height (mm)</th><th>paraxial height (mm)</th><th>distortion (%)</th><th>lateral colour F−C (µm)</th>");
+    for key in &opts.wavelengths {
+        h.push_str(&format!("<th>RMS spot {} nm (µm)</th>", esc(key.trim())));
+    }
+    h.push_str("</tr>");
+    for f in &fields {
+        let g = |k: &str, p: usize| {
+            f[k].as_f64()
+                .map(|x| format!("{x:.p$}"))
+                .unwrap_or_else(|| "–".into())
+        };
+        h.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
+            g("field_fraction", 3),
+            g("field_deg", 4),
+            g("chief_ray_height_mm", 6),
+            g("paraxial_image_height_mm", 6),
+            g("distortion_percent", 4),
+            g("lateral_color_um", 3)
+        ));
+        for key in &opts.wavelengths {
+            let v = f["rms_spot_um"][key.trim()]
+                .as_f64()
+                .map(|x| format!("{x:.3}"))
+                .unwrap_or_else(|| "–".into());
+            h.push_str(&format!("<td>{v}</td>"));
+        }
+        h.push_str("</tr>");
+    }
+    h.push_str("</table>");
+    h.push_str("<p>Conventions: lens refocused at the paraxial focus of the primary wavelength; chief ray aimed at the stop centre at the primary wavelength; distortion = 100·(real − paraxial)/paraxial chief-ray height; lateral colour = |y(486.1 nm)| − |y(656.3 nm)| of the primary-aimed chief ray; RMS spot about the centroid, square pupil grid clipped to the unit disc on the paraxial entrance pupil");
+    h.push_str(if opts.clip {
+        ", rays clipped at the semi-diameters"
+    } else {
+        ", no clipping at the semi-diameters"
+    });
+    h.push_str(&format!(
+        ". On-axis MTF: FFT of the pupil function (64² OPD grid, 4× padding) at the primary wavelength, image plane shifted {:+.5} mm from the paraxial focus ({}).</p>",
+        data.mtf_focus_shift_mm,
+        match opts.mtf_focus {
+            MtfFocus::Best => "best focus: minimum on-axis polychromatic RMS spot",
+            MtfFocus::Paraxial => "paraxial focus",
+        }
+    ));
+    h.push_str("<h2>On-axis MTF</h2><table><tr><th>cycles/mm</th><th>MTF</th></tr>");
+    for p in j["mtf_on_axis"].as_array().into_iter().flatten() {
+        h.push_str(&format!(
+            "<tr><td>{}</td><td>{:.4}</td></tr>",
+            p["lp_per_mm"].as_f64().unwrap_or(f64::NAN),
+            p["mtf"].as_f64().unwrap_or(f64::NAN)
+        ));
+    }
+    h.push_str("</table><h2>Figures</h2>");
+    for (file, caption) in &figures {
+        h.push_str(&format!(
+            "<figure><img src=\"{0}\" alt=\"{1}\"><figcaption>{1}</figcaption></figure>",
+            esc(file),
+            esc(caption)
+        ));
+    }
+    h.push_str(
+        "<h2>Files</h2><ul><li><a href=\"report.json\">report.json</a></li></ul></body></html>\n",
+    );
+    std::fs::write(dir.join("report.html"), h)
+        .map_err(|e| CliError::output(&dir.join("report.html"), e))?;
+    files.push(PathBuf::from("report.json"));
+    files.push(PathBuf::from("report.html"));
+    files.extend(figures.iter().map(|(f, _)| PathBuf::from(f)));
+    Ok(files)
+}
+
+/// Smallest square pupil grid whose disc-clipped sample holds at least `n` rays.
+pub fn grid_for_rays(n: usize) -> usize {
+    let mut g = ((4.0 * n as f64 / std::f64::consts::PI).sqrt().floor() as usize).max(1);
+    while pupil_grid(g).len() < n {
+        g += 1;
+    }
+    while g > 1 && pupil_grid(g - 1).len() >= n {
+        g -= 1;
+    }
+    g
+}
+
+/// Run one `camsim lens` subcommand (results on stdout, progress on stderr).
+pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
+    match cmd {
+        LensCommand::Report {
+            lens,
+            json,
+            field_fraction,
+            wavelength_nm,
+            out,
+            max_field_deg,
+            grid,
+            mtf_lp_mm,
+            mtf_focus,
+            clip,
+        } => {
+            if field_fraction.is_empty() {
+                return Err(CliError::Other("--field-fraction: no fields".into()));
+            }
+            let opts = ReportOptions {
+                field_fractions: field_fraction,
+                wavelengths: wavelength_nm,
+                max_field_deg,
+                grid,
+                mtf_lp_mm,
+                mtf_focus,
+                clip,
+            };
+            let data = lens_report(&lens.load()?, &lens.path, &opts)?;
+            let out = match (out, json) {
+                (Some(o), _) => Some(o),
+                (None, false) => Some(PathBuf::from("out/lens")),
+                (None, true) => None,
+            };
+            if let Some(out) = &out {
+                with_staging(out, |dir| write_report_files(dir, &lens.path, &data, &opts))?;
+            }
+            if json {
+                print_out(
+                    &serde_json::to_string_pretty(&data.json)
+                        .map_err(|e| CliError::Other(e.to_string()))?,
+                )?;
+            }
+            if let Some(out) = &out {
+                eprintln!("camsim: wrote {} (open report.html)", out.display());
+            }
+            Ok(())
+        }
+        LensCommand::Spot {
+            lens: la,
+            field_fraction,
+            wavelength_nm,
+            rays,
+            json,
+            max_field_deg: mfd,
+            defocus_mm,
+            clip,
+        } => {
+            let w = check_wavelength(wavelength_nm)?;
+            if rays == 0 {
+                return Err(CliError::Other("--rays must be ≥ 1".into()));
+            }
+            if !defocus_mm.is_finite() {
+                return Err(CliError::Other("--defocus-mm must be finite".into()));
+            }
+            let path = la.path.clone();
+            let lens = focused(&la.load()?, &path)?;
+            let th = field_angle(field_fraction, max_field_deg(&lens, mfd)?)?;
+            let g = grid_for_rays(rays);
+            let clipping = if clip {
+                Clipping::SemiDiameters
+            } else {
+                Clipping::None
+            };
+            let fan = lens
+                .ray_fan(th, w, lens.primary_nm, &pupil_grid(g), clipping)
+                .map_err(|e| CliError::input(&path, e))?;
+            let s = fan.spot(defocus_mm);
+            let n_ok = s.points_mm.len();
+            let (rms, cx, cy) = if n_ok == 0 {
+                (f64::NAN, f64::NAN, f64::NAN)
+            } else {
+                (1000.0 * s.rms_radius_mm, s.centroid_mm[0], s.centroid_mm[1])
+            };
+            if json {
+                let v = json!({
+                    "field_fraction": field_fraction,
+                    "field_deg": th,
+                    "wavelength_nm": w,
+                    "defocus_mm": defocus_mm,
+                    "pupil_grid": g,
+                    "rays_launched": s.n_launched,
+                    "rays_transmitted": n_ok,
+                    "rms_radius_um": finite_or_null(rms),
+                    "centroid_mm": [finite_or_null(cx), finite_or_null(cy)],
+                    "points_mm": s.points_mm,
+                });
+                print_out(&serde_json::to_string(&v).map_err(|e| CliError::Other(e.to_string()))?)?;
+            } else {
+                print_out(&format!(
+                    "field {th:.4}° at {w} nm: RMS radius {rms:.4} µm, centroid ({cx:.6}, {cy:.6}) mm, {n_ok} of {} rays transmitted",
+                    s.n_launched
+                ))?;
+            }
+            Ok(())
+        }
+        LensCommand::FieldModel {
+            lens: la,
+            out,
+            fields,
+            wavelengths_nm,
+            max_field_deg: mfd,
+            geometric,
+            psf_n,
+            psf_pitch_um,
+        } => {
+            if let Some(ws) = &wavelengths_nm {
+                if ws.is_empty() {
+                    return Err(CliError::Other("--wavelengths-nm: no wavelengths".into()));
+                }
+                for w in ws {
+                    check_wavelength(*w)?;
+                }
+            }
+            if fields < 2 {
+                return Err(CliError::Other(format!("--fields {fields} must be ≥ 2")));
+            }
+            let path = la.path.clone();
+            let lens = la.load()?;
+            let max_deg = max_field_deg(&lens, mfd)?;
+            if max_deg <= 0.0 {
+                return Err(CliError::input(
+                    &path,
+                    "the lens has no off-axis field (fields_deg); give --max-field-deg",
+                ));
+            }
+            let opts = FieldModelOptions {
+                n_fields: fields,
+                max_field_deg: Some(max_deg),
+                wavelengths_nm,
+                kind: if geometric {
+                    PsfKind::Geometric
+                } else {
+                    PsfKind::Wave
+                },
+                psf_n,
+                psf_pitch_um,
+                ..FieldModelOptions::default()
+            };
+            let m = FieldModel::compute(&lens, &opts).map_err(|e| CliError::input(&path, e))?;
+            if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+                std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
+            }
+            camsim_core::exr_io::write_atomically(&out, |tmp| {
+                m.save(tmp).map_err(|e| CliError::output(&out, e))
+            })
+            .map_err(|e| match e {
+                CliError::Output { .. } => e,
+                e => CliError::output(&out, e),
+            })?;
+            eprintln!(
+                "camsim: wrote {} ({} fields to {:.3}°, {} wavelengths, {}×{} PSFs at {} µm)",
+                out.display(),
+                m.field_angles_deg.len(),
+                max_deg,
+                m.wavelengths_nm.len(),
+                m.psf_n,
+                m.psf_n,
+                m.psf_pitch_um
+            );
+            Ok(())
+        }
+        LensCommand::Draw {
+            lens: la,
+            out,
+            rays,
+            max_field_deg: mfd,
+        } => {
+            let path = la.path.clone();
+            let lens = focused(&la.load()?, &path)?;
+            let max_deg = max_field_deg(&lens, mfd)?;
+            let svg = draw_svg(&lens, max_deg, rays.clamp(1, 101))
+                .map_err(|e| CliError::input(&path, e))?;
+            if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+                std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
+            }
+            camsim_core::exr_io::write_atomically(&out, |tmp| std::fs::write(tmp, &svg))
+                .map_err(|e| CliError::output(&out, e))?;
+            eprintln!("camsim: wrote {}", out.display());
+            Ok(())
+        }
+        LensCommand::Psf {
+            lens: la,
+            field_fraction,
+            wavelength_nm,
+            out,
+            max_field_deg: mfd,
+            pupil_samples,
+            pad,
+            defocus_mm,
+        } => {
+            let w = check_wavelength(wavelength_nm)?;
+            let ext = out
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default();
+            if ext != "png" && ext != "exr" {
+                return Err(CliError::output(
+                    &out,
+                    "the output must end in .png or .exr",
+                ));
+            }
+            if pupil_samples < 2 || pad == 0 || pupil_samples * pad > 4096 {
+                return Err(CliError::Other(
+                    "--pupil-samples must be ≥ 2, --pad ≥ 1 and their product ≤ 4096".into(),
+                ));
+            }
+            if !defocus_mm.is_finite() {
+                return Err(CliError::Other("--defocus-mm must be finite".into()));
+            }
+            let path = la.path.clone();
+            let lens = focused(&la.load()?, &path)?;
+            let th = field_angle(field_fraction, max_field_deg(&lens, mfd)?)?;
+            let d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+            let lens = lens.with_image_distance(d + defocus_mm);
+            let wo = lens
+                .wave_optics(th, w, pupil_samples, pad, &[])
+                .map_err(|e| CliError::input(&path, e))?;
+            let m = wo.psf.n;
+            // The FFT PSF is point-reflected with respect to the image plane (see
+            // camsim_lens::field_model); reflect it about the centre sample (m/2, m/2) so x, y
+            // grow with the column / row index like image-plane coordinates.
+            let mut v = vec![0.0f64; m * m];
+            for iy in 0..m {
+                for ix in 0..m {
+                    v[iy * m + ix] = wo.psf.values[((m - iy) % m) * m + (m - ix) % m];
+                }
+            }
+            let sum: f64 = v.iter().sum();
+            if !(sum.is_finite() && sum > 0.0) {
+                return Err(CliError::input(
+                    &path,
+                    "no ray reaches the image (empty PSF)",
+                ));
+            }
+            v.iter_mut().for_each(|x| *x /= sum);
+            if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+                std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
+            }
+            let peak = v.iter().cloned().fold(0.0, f64::max);
+            if ext == "exr" {
+                let plane = camsim_core::image::Plane {
+                    rows: m,
+                    cols: m,
+                    data: v.iter().map(|&x| x as f32).collect(),
+                };
+                camsim_core::exr_io::write_single_channel_exr(&out, "Y", &plane)
+                    .map_err(|e| CliError::output(&out, e))?;
+            } else {
+                let rgb: Vec<u8> = v
+                    .iter()
+                    .flat_map(|&x| {
+                        let g = (255.0 * x / peak).round().clamp(0.0, 255.0) as u8;
+                        [g, g, g]
+                    })
+                    .collect();
+                plots::rgb8_png(&out, &rgb, m, m)?;
+            }
+            let summary = json!({
+                "file": out.display().to_string(),
+                "field_deg": th,
+                "wavelength_nm": w,
+                "samples": m,
+                "sample_pitch_um": 1000.0 * wo.psf.sample_mm,
+                "centre_index": m / 2,
+                "peak": peak,
+                "opd_rms_waves": finite_or_null(wo.opd.rms_waves),
+            });
+            print_out(
+                &serde_json::to_string_pretty(&summary)
+                    .map_err(|e| CliError::Other(e.to_string()))?,
+            )?;
+            Ok(())
+        }
+    }
+}
+
+/// Points (z, y) of a meridional ray at the object-side start, every surface and the image.
+fn ray_path(
+    lens: &LensPrescription,
+    ray: &camsim_lens::Ray,
+    wavelength_nm: f64,
+) -> Option<Vec<(f64, f64)>> {
+    use camsim_lens::trace::{intersect, normal, refract};
+    let z = lens.vertex_z_mm();
+    let mut r = *ray;
+    let mut pts = vec![(r.origin_mm[2], r.origin_mm[1])];
+    let mut n1 = 1.0;
+    for (j, s) in lens.surfaces.iter().enumerate() {
+        let (_, q) = intersect(s, z[j], &r)?;
+        pts.push((q[2], q[1]));
+        let n2 = s.medium.index(wavelength_nm);
+        let nrm = normal(s, [q[0], q[1], q[2] - z[j]])?;
+        let d = refract(r.direction, nrm, n1, n2)?;
+        r = camsim_lens::Ray {
+            origin_mm: q,
+            direction: d,
+            opl_mm: 0.0,
+        };
+        n1 = n2;
+    }
+    let zi = z[lens.surfaces.len()];
+    if r.direction[2] <= 0.0 {
+        return None;
+    }
+    let t = (zi - r.origin_mm[2]) / r.direction[2];
+    pts.push((zi, r.origin_mm[1] + t * r.direction[1]));
+    Some(pts)
+}
+
+/// SVG of the meridional section: surfaces (sag profiles over their semi-diameters), element
+/// edges, the stop, the image plane and ray fans of the axis and the maximum field.
+pub fn draw_svg(
+    lens: &LensPrescription,
+    max_field_deg: f64,
+    rays: usize,
+) -> Result<String, camsim_lens::LensError> {
+    let primary = lens.primary_nm;
+    let fo = lens.first_order(primary)?;
+    let z = lens.vertex_z_mm();
+    let ns = lens.surfaces.len();
+    let mut fans: Vec<RayFanPaths> = Vec::new();
+    let mut fields = vec![(0.0, "#1f5fd6")];
+    if max_field_deg > 0.0 {
+        fields.push((max_field_deg, "#d62f1f"));
+    }
+    for (th, colour) in fields {
+        let aim = lens.aim_field(th, primary, &fo)?;
+        let mut paths = Vec::new();
+        for k in 0..rays {
+            let py = if rays == 1 {
+                0.0
+            } else {
+                -1.0 + 2.0 * k as f64 / (rays - 1) as f64
+            };
+            if let Some(mut p) = ray_path(lens, &aim.ray(0.0, py), primary) {
+                // start the drawing one EPD in front of the first vertex
+                let z0 = -(fo.entrance_pupil_diameter_mm.max(1.0));
+                let (za, ya) = p[0];
+                let (zb, yb) = p[1];
+                if zb != za && za < z0 {
+                    p[0] = (z0, ya + (yb - ya) * (z0 - za) / (zb - za));
+                }
+                paths.push(p);
+            }
+        }
+        fans.push((paths, colour));
+    }
+    // Semi-diameters for drawing.
+    let sd: Vec<f64> = (0..ns)
+        .map(|j| {
+            lens.surfaces[j].semi_diameter_mm.unwrap_or_else(|| {
+                let m = fans
+                    .iter()
+                    .flat_map(|(ps, _)| ps.iter().map(move |p| p[j + 1].1.abs()))
+                    .fold(fo.entrance_pupil_diameter_mm / 2.0, f64::max);
+                1.05 * m
+            })
+        })
+        .collect();
+    let profile = |j: usize| -> Vec<(f64, f64)> {
+        let s = &lens.surfaces[j];
+        let mut h = sd[j];
+        // stay inside the conic's domain
+        while h > 0.0 && s.sag_mm(h * h).is_none() {
+            h *= 0.98;
+        }
+        (0..=40)
+            .map(|i| {
+                let y = -h + 2.0 * h * i as f64 / 40.0;
+                (z[j] + s.sag_mm(y * y).unwrap_or(0.0), y)
+            })
+            .collect()
+    };
+    let profiles: Vec<Vec<(f64, f64)>> = (0..ns).map(profile).collect();
+    // Bounds.
+    let all = profiles
+        .iter()
+        .flatten()
+        .chain(fans.iter().flat_map(|(ps, _)| ps.iter().flatten()))
+        .copied()
+        .filter(|p| p.0.is_finite() && p.1.is_finite());
+    let (mut zmin, mut zmax, mut ymin, mut ymax) = (0.0f64, z[ns], 0.0f64, 0.0f64);
+    for (zz, yy) in all {
+        zmin = zmin.min(zz);
+        zmax = zmax.max(zz);
+        ymin = ymin.min(yy);
+        ymax = ymax.max(yy);
+    }
+    let (w_px, margin) = (1000.0, 30.0);
+    let scale = (w_px - 2.0 * margin) / (zmax - zmin).max(1e-9);
+    let h_px = (ymax - ymin) * scale + 2.0 * margin + 30.0;
+    let tx = |zz: f64| margin + (zz - zmin) * scale;
+    let ty = |yy: f64| margin + 20.0 + (ymax - yy) * scale;
+    let poly = |pts: &[(f64, f64)]| -> String {
+        pts.iter()
+            .map(|(a, b)| format!("{:.2},{:.2}", tx(*a), ty(*b)))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let mut o = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w_px:.0}\" height=\"{h_px:.0}\" viewBox=\"0 0 {w_px:.0} {h_px:.0}\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n<text x=\"{margin}\" y=\"20\" font-family=\"sans-serif\" font-size=\"14\">{} — EFL {:.3} mm, F/{:.2}, fields 0° and {:.2}° at {} nm</text>\n",
+        esc(&lens.name),
+        fo.efl_mm,
+        fo.f_number,
+        max_field_deg,
+        primary
+    );
+    // axis
+    o.push_str(&format!(
+        "<line x1=\"{:.2}\" y1=\"{:.2}\" x2=\"{:.2}\" y2=\"{:.2}\" stroke=\"#999\" stroke-dasharray=\"6 4\"/>\n",
+        tx(zmin),
+        ty(0.0),
+        tx(zmax),
+        ty(0.0)
+    ));
+    // elements: glass after surface j (medium not air) is closed by edges to surface j+1
+    for j in 0..ns {
+        let glass = !matches!(
+            lens.surfaces[j].medium,
+            camsim_lens::prescription::Medium::Air
+        );
+        if glass && j + 1 < ns {
+            let (a, b) = (&profiles[j], &profiles[j + 1]);
+            let mut pts: Vec<(f64, f64)> = a.clone();
+            pts.push(*b.last().unwrap());
+            pts.extend(b.iter().rev().copied());
+            pts.push(a[0]);
+            o.push_str(&format!(
+                "<polygon points=\"{}\" fill=\"#cfe3f7\" stroke=\"#234\" stroke-width=\"1.2\"/>\n",
+                poly(&pts)
+            ));
+        } else if j == lens.stop_index {
+            let (zs, h) = (z[j], sd[j]);
+            for sgn in [1.0, -1.0] {
+                o.push_str(&format!(
+                    "<line x1=\"{:.2}\" y1=\"{:.2}\" x2=\"{:.2}\" y2=\"{:.2}\" stroke=\"black\" stroke-width=\"3\"/>\n",
+                    tx(zs),
+                    ty(sgn * h),
+                    tx(zs),
+                    ty(sgn * h * 1.25)
+                ));
+            }
+        } else if j == 0
+            || matches!(
+                lens.surfaces[j - 1].medium,
+                camsim_lens::prescription::Medium::Air
+            )
+        {
+            o.push_str(&format!(
+                "<polyline points=\"{}\" fill=\"none\" stroke=\"#234\" stroke-width=\"1\"/>\n",
+                poly(&profiles[j])
+            ));
+        }
+    }
+    // image plane
+    o.push_str(&format!(
+        "<line x1=\"{0:.2}\" y1=\"{1:.2}\" x2=\"{0:.2}\" y2=\"{2:.2}\" stroke=\"black\" stroke-width=\"1.5\"/>\n",
+        tx(z[ns]),
+        ty(ymax),
+        ty(ymin)
+    ));
+    for (paths, colour) in &fans {
+        for p in paths {
+            o.push_str(&format!(
+                "<polyline points=\"{}\" fill=\"none\" stroke=\"{colour}\" stroke-width=\"0.8\"/>\n",
+                poly(p)
+            ));
+        }
+    }
+    o.push_str("</svg>\n");
+    Ok(o)
+}
