@@ -137,9 +137,11 @@ def main():
     json.dump({"camera": "camera.json", "shots": [{"id": "flat", "exposure_s": t,
               "target": {"kind": "uniform", "radiance": radiance_w}, "frames": ["flat.png"]}]},
               open(os.path.join(tmp, "captures.json"), "w"))
-    cmd = [BIN, "simulate", os.path.join(tmp, "captures.json"), "--out", os.path.join(tmp, "out")]
-    subprocess.run(cmd, check=True)  # warm-up (page cache)
-    rs_med, rs_min = timeit(lambda: subprocess.run(cmd, check=True), repeats)
+    runs = iter(range(1000))
+    # each run writes into a new folder, as a user's run does (no rename over an existing file)
+    cmd = lambda: [BIN, "simulate", os.path.join(tmp, "captures.json"), "--out", os.path.join(tmp, f"out{next(runs)}")]
+    subprocess.run(cmd(), check=True)  # warm-up (page cache)
+    rs_med, rs_min = timeit(lambda: subprocess.run(cmd(), check=True), repeats)
     np_med, np_min = timeit(lambda: numpy_model(cam, radiance_w, t, os.path.join(tmp, "np.png")), max(2, repeats // 2))
 
     out = subprocess.run(["cargo", "bench", "-q", "-p", "camsim-optics", "--bench", "diffraction"], cwd=ROOT,
