@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# Regenerate the Optiland / rayoptics reference numbers for the lens crate's tests.
+#
+# For each input prescription lens/tests/data/optics_ref/<name>.json this runs the shared
+# reference harness (../shared/tools/optics_ref/ref_lens.py, called in place, not copied)
+# and writes <name>.ref.json beside it. The Python packages live in a git-ignored venv,
+# .venv-optics, in the repository root (created on first use).
+#
+# An input may carry a key "ref_lens_runs" (ignored by ref_lens.py): an object mapping a tag to
+# ref_lens.py arguments; tag "" writes <name>.ref.json, any other tag <name>.<tag>.ref.json.
+# E.g. {"": "--backends optiland", "paraxial_aiming": "--backends optiland --optiland-aiming paraxial"}
+# for a lens with a glass that rayoptics' catalogue lacks. Without the key: one run, default args.
+#
+# Usage: tools/optics_ref_run.sh [name ...]     (default: every *.json that is not *.ref.json)
+# Env:   PYTHON (interpreter used to create the venv, default python3)
+#        REF_LENS_ARGS (extra arguments appended to every ref_lens.py run, e.g. "--no-psf")
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+REF_LENS="$ROOT/../shared/tools/optics_ref/ref_lens.py"
+DATA="$ROOT/lens/tests/data/optics_ref"
+VENV="$ROOT/.venv-optics"
+
+if [[ ! -f "$REF_LENS" ]]; then
+    echo "ref_lens.py not found at $REF_LENS" >&2
+    exit 1
+fi
+
+if [[ ! -x "$VENV/bin/python" ]]; then
+    "${PYTHON:-python3}" -m venv "$VENV"
+fi
+if ! "$VENV/bin/python" -c "import optiland, rayoptics" 2>/dev/null; then
+    "$VENV/bin/pip" install --quiet --upgrade pip
+    "$VENV/bin/pip" install --quiet optiland rayoptics
+fi
+"$VENV/bin/python" - <<'PY'
+from importlib.metadata import version
+print("optiland", version("optiland"), "| rayoptics", version("rayoptics"),
+      "| opticalglass", version("opticalglass"))
+PY
+
+if [[ $# -gt 0 ]]; then
+    inputs=()
+    for n in "$@"; do inputs+=("$DATA/${n%.json}.json"); done
+else
+    inputs=()
+    for f in "$DATA"/*.json; do
+        [[ "$f" == *.ref.json ]] && continue
+        inputs+=("$f")
+    done
+fi
+
+failed=0
+for f in "${inputs[@]}"; do
+    # one "tag|args" line per run
+    runs="$("$VENV/bin/python" -c '
+import json, sys
+d = json.load(open(sys.argv[1])).get("ref_lens_runs", {"": ""})
+for tag, args in d.items():
+    print(tag + "|" + args)
+' "$f")"
+    while IFS='|' read -r tag args; do
+        if [[ -z "$tag" ]]; then out="${f%.json}.ref.json"; else out="${f%.json}.$tag.ref.json"; fi
+        echo "== $(basename "$f") ${args:+[$args] }-> $(basename "$out")"
+        start=$SECONDS
+        # shellcheck disable=SC2086
+        if "$VENV/bin/python" "$REF_LENS" "$f" -o "$out" $args ${REF_LENS_ARGS:-} > /dev/null; then
+            echo "   done in $((SECONDS - start)) s"
+        else
+            echo "   FAILED (see the traceback above); $(basename "$out") not updated" >&2
+            failed=$((failed + 1))
+        fi
+    done <<< "$runs"
+done
+if [[ $failed -gt 0 ]]; then
+    echo "$failed run(s) failed" >&2
+    exit 1
+fi
