@@ -169,6 +169,22 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
     let result = calibrate(sensor, &shots, &opts);
     let fitted = fitted_camera_json(&set.camera_path, &result, &sensor.channel_names)?;
     let mut summary = serde_json::to_value(&result).map_err(|e| CliError::Other(e.to_string()))?;
+    // the reported uncertainty: value ± σ and the 99 % interval (value ± 2.576 σ)
+    for (k, o) in [
+        ("black_level_dn", &result.black_level_dn),
+        ("dark_voltage_v_per_s", &result.dark_voltage_v_per_s),
+        ("read_noise_v", &result.read_noise_v),
+        ("dsnu_sigma_v", &result.dsnu_sigma_v),
+        ("prnu_sigma_percent", &result.prnu_sigma_percent),
+        ("conversion_gain_v_per_e", &result.conversion_gain_v_per_e),
+        ("full_well_e", &result.full_well_e),
+        ("saturation_dn", &result.saturation_dn),
+        ("linearity_error_percent", &result.linearity_error_percent),
+    ] {
+        if let Some(e) = o.get() {
+            summary[k]["interval_99"] = json!(e.interval_99());
+        }
+    }
     summary["skipped_shots"] = json!(skipped);
     summary["fitted_camera"] = json!("fitted_camera.json");
     with_staging(out, |st| {
