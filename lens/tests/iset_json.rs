@@ -2,7 +2,7 @@
 use camsim_lens::readers::{iset_json_focal_length_mm, read_iset_json};
 use camsim_lens::{GlassCatalog, LensPrescription};
 
-const DIR: &str = "/work/shared/data/iset/lenses";
+const DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/iset/lenses");
 
 fn efl(text: &str) -> f64 {
     let f = read_iset_json(text, "t").unwrap();
