@@ -12,7 +12,6 @@ use camsim_core::spectrum::Spectrum;
 use camsim_diagnose::{
     calibrate, CalibrationOptions, CalibrationResult, CalibrationShot, Outcome, ShotKind,
 };
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -44,15 +43,10 @@ pub fn load_shots(
     progress: bool,
 ) -> Result<(Vec<CalibrationShot>, Vec<String>), CliError> {
     let n: usize = set.shots.iter().map(|s| s.frames.len()).sum();
-    let bar = if progress {
-        ProgressBar::new(n as u64)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} reading frames [{bar:30}] {pos}/{len}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = crate::progress::bar(
+        progress,
+        n as u64,
+        "{spinner} reading frames [{bar:30}] {pos}/{len}",
     );
     let mut shots = Vec::new();
     let mut skipped = Vec::new();

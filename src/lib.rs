@@ -12,6 +12,7 @@ pub mod error;
 pub mod frames;
 pub mod lens_cmd;
 pub mod plots;
+pub mod progress;
 pub mod raw_input;
 pub mod report;
 pub mod run;

@@ -27,7 +27,6 @@ use camsim_isp::{
 };
 use camsim_metrics::{patch_stats, ChartLayout};
 use camsim_sensor::{electron_rate, expose, fixed_pattern, Shot as SensorShot};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Deserialize;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -361,16 +360,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     let set = &r.set;
     let cam = &set.camera;
     let sensor = &cam.sensor;
-    let bar = if progress {
-        ProgressBar::new(7)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} run [{bar:30}] {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
+    let bar = crate::progress::bar(progress, 7, "{spinner} run [{bar:30}] {pos}/{len} {msg}");
     let mut files: Vec<PathBuf> = Vec::new();
     let mut put = |name: &str| -> PathBuf {
         files.push(PathBuf::from(name));

@@ -14,7 +14,6 @@ use camsim_sensor::{
     electron_rate, expected_dn, expose_with, fixed_pattern, ElectronRate, FixedPattern,
     PatternSource, SensorModel, Shot,
 };
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -108,18 +107,14 @@ pub fn sampling_for(
     (oversample.unwrap_or(os.clamp(1, 4)), margin)
 }
 
-/// The scene radiance of one shot's target, sampled for the camera's optics (with margin).
-pub fn shot_scene(
+/// A shot's target rendered on `g`, with its illuminant, scaled to its mean luminance over
+/// the sensor when the target asks for one.
+fn scene_on_grid(
     set: &CaptureSet,
-    shot_index: usize,
-    grid: &WavelengthGrid,
+    shot: &crate::config::Shot,
+    g: &SamplingGrid,
 ) -> Result<SceneRadiance, CliError> {
-    let cam = &set.camera;
-    let s = &cam.sensor;
-    let shot = &set.shots[shot_index];
-    let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
-    let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin);
-    let radiance = render_target(&shot.target.target, &g)
+    let radiance = render_target(&shot.target.target, g)
         .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
     let mut scene = SceneRadiance {
         radiance,
@@ -137,6 +132,20 @@ pub fn shot_scene(
         );
     }
     Ok(scene)
+}
+
+/// The scene radiance of one shot's target, sampled for the camera's optics (with margin).
+pub fn shot_scene(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+) -> Result<SceneRadiance, CliError> {
+    let cam = &set.camera;
+    let s = &cam.sensor;
+    let shot = &set.shots[shot_index];
+    let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
+    let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin);
+    scene_on_grid(set, shot, &g)
 }
 
 /// Sensor irradiance of one shot (scene → optics stage).
@@ -207,23 +216,7 @@ fn uniform_electron_rate(
         cols: 1,
         ..full
     };
-    let radiance = render_target(&shot.target.target, &g)
-        .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
-    let mut scene = SceneRadiance {
-        radiance,
-        sample_pitch_m: g.pitch_m,
-        object_distance_m: None,
-        illuminant: shot.target.illuminant.clone(),
-        depth_m: None,
-    };
-    if let Some(l) = shot.target.mean_luminance_cd_m2 {
-        scale_to_mean_luminance(
-            &mut scene,
-            l,
-            Some((g.sensor_width_m, g.sensor_height_m)),
-            &SI,
-        );
-    }
+    let scene = scene_on_grid(set, shot, &g)?;
     let irr = form_image(&cam.optics, &scene, grid)
         .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
     let img = &irr.irradiance;
@@ -315,15 +308,10 @@ fn run_into(
     } else {
         set.shots.iter().map(|s| s.frames.len() as u64).sum()
     };
-    let bar = if opts.progress {
-        ProgressBar::new(total)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} simulate [{bar:40}] {pos}/{len} {msg} ({eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = crate::progress::bar(
+        opts.progress,
+        total,
+        "{spinner} simulate [{bar:40}] {pos}/{len} {msg} ({eta})",
     );
     let profile = std::env::var_os("CAMSIM_PROFILE").is_some();
     let mut tick = std::time::Instant::now();

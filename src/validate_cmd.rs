@@ -30,7 +30,6 @@ use camsim_metrics::{patch_sample_rect, ChartLayout};
 use camsim_sensor::{
     expected_dn, expose, fixed_pattern, ElectronRate, FixedPattern, SensorModel, Shot,
 };
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -369,15 +368,10 @@ fn validate_into(
     let names = &sensor.channel_names;
     let grid = wavelength_grid(set);
     let total: u64 = set.shots.iter().map(|s| s.frames.len() as u64 + 1).sum();
-    let bar = if progress {
-        ProgressBar::new(total)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} validate [{bar:40}] {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = crate::progress::bar(
+        progress,
+        total,
+        "{spinner} validate [{bar:40}] {pos}/{len} {msg}",
     );
     let mut files: Vec<PathBuf> = Vec::new();
     let mut put = |name: &str| -> PathBuf {
