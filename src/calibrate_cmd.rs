@@ -2,6 +2,11 @@
 //! photon transfer on a capture set; writes `fitted_camera.json` (the believed camera with the
 //! estimates in place), `calibration.json` (every estimate with its uncertainty, or why it
 //! could not be made) and `report.html` with figures.
+//!
+//! `patches` shots whose patches have known radiance (e.g. a chart lit through narrowband
+//! filters, at several exposures) feed Appendix B per patch ([`patch_spectral`]).
+pub mod patch_spectral;
+
 use crate::config::CaptureSet;
 use crate::error::CliError;
 use crate::plots;
@@ -37,11 +42,18 @@ fn shot_kind(t: &Target) -> Option<ShotKind> {
     }
 }
 
-/// Load every frame of the calibration shots (dark and uniform targets).
-pub fn load_shots(
-    set: &CaptureSet,
-    progress: bool,
-) -> Result<(Vec<CalibrationShot>, Vec<String>), CliError> {
+/// The shots of a capture set as the calibration uses them.
+pub struct LoadedShots {
+    /// Dark and uniform shots.
+    pub shots: Vec<CalibrationShot>,
+    /// `patches` shots (for the per-patch spectral fit).
+    pub patch_shots: Vec<patch_spectral::PatchShot>,
+    /// Shots not used, with the reason.
+    pub skipped: Vec<String>,
+}
+
+/// Load every frame of the calibration shots (dark, uniform and `patches` targets).
+pub fn load_shots(set: &CaptureSet, progress: bool) -> Result<LoadedShots, CliError> {
     let n: usize = set.shots.iter().map(|s| s.frames.len()).sum();
     let bar = crate::progress::bar(
         progress,
@@ -49,15 +61,18 @@ pub fn load_shots(
         "{spinner} reading frames [{bar:30}] {pos}/{len}",
     );
     let mut shots = Vec::new();
+    let mut patch_shots = Vec::new();
     let mut skipped = Vec::new();
     for s in &set.shots {
-        let Some(kind) = shot_kind(&s.target.target) else {
+        let kind = shot_kind(&s.target.target);
+        let is_chart = matches!(s.target.target, Target::Patches { .. });
+        if kind.is_none() && !is_chart {
             skipped.push(format!(
-                "{}: not a dark or uniform target, not used for calibration",
+                "{}: not a dark, uniform or patches target, not used for calibration",
                 s.id
             ));
             continue;
-        };
+        }
         let exposure_s = match s.exposure {
             crate::config::Exposure::Fixed(t) => t,
             crate::config::Exposure::Auto(_) => {
@@ -89,21 +104,50 @@ pub fn load_shots(
             frames.push(frame);
             bar.inc(1);
         }
-        shots.push(CalibrationShot {
-            id: s.id.clone(),
-            kind,
-            exposure_s,
-            analog_gain: s.analog_gain,
-            frames,
-        });
+        match (kind, &s.target.target) {
+            (Some(kind), _) => shots.push(CalibrationShot {
+                id: s.id.clone(),
+                kind,
+                exposure_s,
+                analog_gain: s.analog_gain,
+                frames,
+            }),
+            (
+                None,
+                Target::Patches {
+                    rows,
+                    cols,
+                    patch_fraction,
+                    patches,
+                    ..
+                },
+            ) => patch_shots.push(patch_spectral::PatchShot {
+                id: s.id.clone(),
+                series_key: s.target_key.clone(),
+                exposure_s,
+                analog_gain: s.analog_gain,
+                frames,
+                chart_rows: *rows,
+                chart_cols: *cols,
+                patch_fraction: *patch_fraction,
+                patches: patches.clone(),
+                labels: s.target.patch_labels.clone(),
+            }),
+            (None, _) => {}
+        }
     }
     bar.finish_and_clear();
-    Ok((shots, skipped))
+    Ok(LoadedShots {
+        shots,
+        patch_shots,
+        skipped,
+    })
 }
 
 fn fitted_camera_json(
     camera_path: &Path,
     r: &CalibrationResult,
+    chart_qe: Option<&camsim_diagnose::SpectralQe>,
     names: &[String],
 ) -> Result<Value, CliError> {
     let text = std::fs::read_to_string(camera_path)
@@ -123,7 +167,7 @@ fn fitted_camera_json(
     set("prnu_sigma_percent", r.prnu_sigma_percent.value());
     set("conversion_gain_v_per_e", r.conversion_gain_v_per_e.value());
     set("well_capacity_e", r.full_well_e.value());
-    if let Some(q) = r.channel_qe.get() {
+    if let Some(q) = r.channel_qe.get().or(chart_qe) {
         for ch in &q.channels {
             if names.contains(&ch.name) {
                 cam["sensor"]["channels"][&ch.name] =
@@ -153,7 +197,11 @@ fn html_escape(s: &str) -> String {
 /// Run the calibration and write its outputs into `out` (all or nothing).
 pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Value, CliError> {
     let sensor = &set.camera.sensor;
-    let (shots, skipped) = load_shots(set, progress)?;
+    let LoadedShots {
+        shots,
+        patch_shots,
+        skipped,
+    } = load_shots(set, progress)?;
     let o = &set.camera.optics;
     let t550 = o.transmittance.eval(550.0);
     let opts = CalibrationOptions {
@@ -161,7 +209,19 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
         ..CalibrationOptions::default()
     };
     let result = calibrate(sensor, &shots, &opts);
-    let fitted = fitted_camera_json(&set.camera_path, &result, &sensor.channel_names)?;
+    let chart = patch_spectral::patch_spectral(
+        &patch_shots,
+        sensor,
+        o,
+        &result,
+        &opts.spectral_grid,
+    );
+    let fitted = fitted_camera_json(
+        &set.camera_path,
+        &result,
+        chart.fit.get().map(|f| &f.qe),
+        &sensor.channel_names,
+    )?;
     let mut summary = serde_json::to_value(&result).map_err(|e| CliError::Other(e.to_string()))?;
     // the reported uncertainty: value ± σ and the 99 % interval (value ± 2.576 σ)
     for (k, o) in [
@@ -179,6 +239,8 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
             summary[k]["interval_99"] = json!(e.interval_99());
         }
     }
+    summary["chart_channel_qe"] =
+        serde_json::to_value(&chart).map_err(|e| CliError::Other(e.to_string()))?;
     summary["skipped_shots"] = json!(skipped);
     summary["fitted_camera"] = json!("fitted_camera.json");
     with_staging(out, |st| {
@@ -324,6 +386,72 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
                 "Recovered combined QE per channel with ±1σ bands".into(),
             ));
         }
+        // chart (per-patch) spectral efficiencies with ±1σ bands, and the fit per observation
+        if let Some(f) = chart.fit.get() {
+            let palette = [[200u8, 30, 30], [20, 140, 40], [30, 60, 200], [120, 60, 160]];
+            let colour = |name: &str, i: usize| match name {
+                "r" => palette[0],
+                "g" => palette[1],
+                "b" => palette[2],
+                _ => palette[(i + 3) % palette.len()],
+            };
+            let series: Vec<plots::BandSeries> = f
+                .qe
+                .channels
+                .iter()
+                .enumerate()
+                .map(|(i, ch)| plots::BandSeries {
+                    name: format!("{} ±1σ", ch.name),
+                    colour: colour(&ch.name, i),
+                    points: f
+                        .qe
+                        .wavelength_nm
+                        .iter()
+                        .zip(ch.qe.iter().zip(&ch.std_error))
+                        .map(|(w, (v, e))| (*w, *v, (v - e).max(0.0), v + e))
+                        .collect(),
+                    dashed: false,
+                })
+                .collect();
+            plots::band_plot(
+                &put("chart_spectral_qe.png"),
+                "Channel spectral efficiency from chart patches (Appendix B)",
+                &series,
+                ("wavelength (nm)", "QE (electrons / photon of the given radiance)"),
+            )?;
+            figures.push((
+                "chart_spectral_qe.png".into(),
+                "Channel efficiencies fitted to the per-patch signal rates, ±1σ".into(),
+            ));
+            let names: Vec<&str> = f.qe.channels.iter().map(|c| c.name.as_str()).collect();
+            let (xs, ys, cs): (Vec<f64>, Vec<f64>, Vec<[u8; 3]>) = f
+                .observations
+                .iter()
+                .map(|o| {
+                    let i = names.iter().position(|n| *n == o.channel).unwrap_or(0);
+                    (o.predicted, o.signal, colour(&o.channel, i))
+                })
+                .fold((vec![], vec![], vec![]), |mut a, (x, y, c)| {
+                    a.0.push(x);
+                    a.1.push(y);
+                    a.2.push(c);
+                    a
+                });
+            plots::scatter(
+                &put("chart_fit.png"),
+                "Patch signal rates: measured vs fitted",
+                &xs,
+                &ys,
+                Some(&cs),
+                ("fitted (electrons/s)", "measured (electrons/s)"),
+                true,
+            )?;
+            figures.push((
+                "chart_fit.png".into(),
+                "Every patch × channel × series: measured signal rate against the fitted curves"
+                    .into(),
+            ));
+        }
         // report
         let mut h = String::from("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>camsim calibration</title><style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}figure{display:inline-block;margin:8px;vertical-align:top}figure img{max-width:520px;border:1px solid #ccc}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}</style></head><body>");
         h.push_str(&format!("<h1>camsim calibrate</h1><p>Capture set: {}</p><h2>Estimates</h2><table><tr><th>quantity</th><th>value</th><th>1σ</th><th>unit</th><th>method / reason</th></tr>", html_escape(&set.path.display().to_string())));
@@ -341,6 +469,44 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
             h.push_str(&outcome_row(name, o));
         }
         h.push_str("</table>");
+        match &chart.fit {
+            Outcome::Estimated(f) => {
+                h.push_str(&format!(
+                    "<h2>Chart spectral efficiency</h2><p>{} observations in {} series; {}</p><table><tr><th>channel</th><th>CV weight α</th><th>CV χ²/observation</th></tr>",
+                    f.observations.len(),
+                    chart.series.len(),
+                    html_escape(&f.qe.method)
+                ));
+                for c in &f.qe.channels {
+                    h.push_str(&format!(
+                        "<tr><th>{}</th><td>{:.1e}</td><td>{:.2}</td></tr>",
+                        html_escape(&c.name),
+                        c.alpha,
+                        c.cv_chi2_per_shot
+                    ));
+                }
+                h.push_str(&format!(
+                    "</table><p>Pedestal {:.3} ± {:.3} DN ({}); median intercept of the patch lines: {}</p>",
+                    chart.pedestal_dn,
+                    chart.pedestal_sigma_dn,
+                    html_escape(&chart.pedestal_source),
+                    chart
+                        .median_intercept_dn
+                        .map(|v| format!("{v:.3} DN"))
+                        .unwrap_or_else(|| "—".into())
+                ));
+            }
+            Outcome::NotEstimable { reason } if !patch_shots.is_empty() => {
+                h.push_str(&format!(
+                    "<h2>Chart spectral efficiency</h2><p>not estimable: {}</p>",
+                    html_escape(reason)
+                ));
+            }
+            _ => {}
+        }
+        for n in &chart.notes {
+            h.push_str(&format!("<p>Chart: {}</p>", html_escape(n)));
+        }
         if let Some(hp) = result.hot_pixels.get() {
             h.push_str(&format!(
                 "<p>Hot pixels: {} above {:.3e} ({})</p>",

@@ -4,10 +4,16 @@
 use crate::error::CliError;
 use camsim_core::constants::SI;
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
-use camsim_optics::{Blur, CameraEquation, Diffuser, OpticsModel, Padding, RelativeIllumination};
-use camsim_sensor::{Cfa, ColumnFpn, NoiseSwitches, ResetNoise, SensorModel};
+use camsim_optics::{
+    Blur, CameraEquation, Defocus, Diffuser, Distortion, Falloff, LateralColor, LateralColorKind,
+    OpticsEffects, OpticsModel, Padding, RelativeIllumination,
+};
+use camsim_sensor::{
+    Cfa, ColumnFpn, Crosstalk, HotPixels, IrLeakage, NoiseSwitches, Nonlinearity, QeShift,
+    ResetNoise, SensorEffects, SensorModel,
+};
 use serde::de::Error as _;
-use serde::{Deserialize, Deserializer};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -22,6 +28,32 @@ impl<'de> Deserialize<'de> for SpectrumValue {
         spectrum_from_value(&v)
             .map(SpectrumValue)
             .map_err(D::Error::custom)
+    }
+}
+
+impl Serialize for SpectrumValue {
+    /// A constant as a bare number, a sampled spectrum as `{"wavelength_nm", "values"}`
+    /// (the file format); an affine spectrum with a slope has no file form and is an error.
+    fn serialize<S: Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{Error as _, SerializeMap};
+        match &self.0 {
+            Spectrum::Affine {
+                offset,
+                slope_per_nm,
+            } if *slope_per_nm == 0.0 => ser.serialize_f64(*offset),
+            Spectrum::Affine { .. } => Err(S::Error::custom(
+                "a spectrum with a slope has no JSON form; sample it on a wavelength list",
+            )),
+            Spectrum::Sampled {
+                wavelength_nm,
+                values,
+            } => {
+                let mut m = ser.serialize_map(Some(2))?;
+                m.serialize_entry("wavelength_nm", wavelength_nm)?;
+                m.serialize_entry("values", values)?;
+                m.end()
+            }
+        }
     }
 }
 
@@ -59,11 +91,11 @@ fn spectrum_from_value(v: &Value) -> Result<Spectrum, String> {
 }
 
 /// `camera.json` as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraFile {
     /// Camera name.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub name: Option<String>,
     /// Optics section.
     pub optics: OpticsFile,
@@ -72,7 +104,7 @@ pub struct CameraFile {
 }
 
 /// `camera.optics` as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OpticsFile {
     /// f-number N.
@@ -80,59 +112,361 @@ pub struct OpticsFile {
     /// Focal length (mm).
     pub focal_length_mm: f64,
     /// Lens transmittance T(λ) (default 1).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transmittance: Option<SpectrumValue>,
-    /// `"cos4"` (default), `"none"`, or the extension `"isetcam"`.
-    #[serde(default)]
-    pub relative_illumination: Option<String>,
+    /// `"cos4"` (default), `"none"`, or the extension `"isetcam"`; or the effect block's
+    /// object form `{"model": …, "falloff": …}` (docs/effects.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_illumination: Option<RelativeIlluminationFile>,
     /// Blur model (default none).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub blur: Option<BlurFile>,
     /// Extension: optical diffuser (Gaussian) of the paper's §3.A.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diffuser: Option<DiffuserFile>,
     /// Extension: object distance (m) for the camera equation's magnification (default ∞).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub object_distance_m: Option<f64>,
     /// Extension: `"baseline"` (default) or `"isetcam"` (π/(1 + 4N²(1+|m|)²)).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera_equation: Option<String>,
+    /// Effect block `exposure_scale` (docs/effects.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_scale: Option<ExposureScaleFile>,
+    /// Effect block `veiling_glare`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub veiling_glare: Option<VeilingGlareFile>,
+    /// Effect block `defocus`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub defocus: Option<DefocusFile>,
+    /// Effect block `distortion`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<DistortionFile>,
+    /// Effect block `lateral_color`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lateral_color: Option<LateralColorFile>,
+}
+
+/// `optics.relative_illumination`: the model name, or the object form with an extra
+/// fall-off (effect block `relative_illumination`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum RelativeIlluminationFile {
+    /// `"cos4"`, `"none"` or `"isetcam"`.
+    Model(String),
+    /// `{"model": …, "falloff": …}`.
+    Object(RelativeIlluminationObject),
+}
+
+/// The object form of `optics.relative_illumination`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RelativeIlluminationObject {
+    /// `"cos4"` (default), `"none"` or `"isetcam"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+    /// Extra fall-off F(h) multiplying the irradiance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub falloff: Option<FalloffFile>,
+}
+
+impl RelativeIlluminationFile {
+    /// The model name (`"cos4"` when the object form omits it).
+    pub fn model(&self) -> &str {
+        match self {
+            RelativeIlluminationFile::Model(m) => m,
+            RelativeIlluminationFile::Object(o) => o.model.as_deref().unwrap_or("cos4"),
+        }
+    }
+    /// The extra fall-off, if any.
+    pub fn falloff(&self) -> Option<&FalloffFile> {
+        match self {
+            RelativeIlluminationFile::Model(_) => None,
+            RelativeIlluminationFile::Object(o) => o.falloff.as_ref(),
+        }
+    }
+}
+
+impl Serialize for RelativeIlluminationFile {
+    fn serialize<S: Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        match self {
+            RelativeIlluminationFile::Model(m) => ser.serialize_str(m),
+            RelativeIlluminationFile::Object(o) => o.serialize(ser),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for RelativeIlluminationFile {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        match Value::deserialize(d)? {
+            Value::String(m) => Ok(RelativeIlluminationFile::Model(m)),
+            v @ Value::Object(_) => serde_json::from_value(v)
+                .map(RelativeIlluminationFile::Object)
+                .map_err(|e| D::Error::custom(format!("optics.relative_illumination: {e}"))),
+            _ => Err(D::Error::custom(
+                "optics.relative_illumination: expected \"cos4\", \"none\", \"isetcam\" or {\"model\": …, \"falloff\": …}",
+            )),
+        }
+    }
+}
+
+/// `optics.relative_illumination.falloff` (`"kind"` selects the form).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum FalloffFile {
+    /// Fitted: `1 + a1·h² + a2·h⁴ + …`.
+    Polynomial {
+        /// a1, a2, … (coefficient i multiplies h^(2i+2)).
+        coefficients: Vec<f64>,
+    },
+    /// Generator: overlap of two unit circles `s·h` apart, over π.
+    TwoCircle {
+        /// s.
+        separation_at_h1: f64,
+    },
+}
+
+/// `optics.exposure_scale`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExposureScaleFile {
+    /// Factor multiplying the sensor irradiance.
+    pub factor: f64,
+}
+
+/// `optics.veiling_glare`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VeilingGlareFile {
+    /// Fraction of the mean irradiance added uniformly.
+    pub fraction: f64,
+}
+
+/// `optics.defocus` (`"kind"` selects the form).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum DefocusFile {
+    /// Fitted: Gaussian PSF.
+    Gaussian {
+        /// σ (µm).
+        sigma_um: f64,
+    },
+    /// Generator: uniform disk.
+    Pillbox {
+        /// Radius (µm).
+        radius_um: f64,
+    },
+}
+
+/// `optics.distortion` (`"kind"` selects the form).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum DistortionFile {
+    /// Fitted: `D = 1 + k1·h² + k2·h⁴`.
+    Polynomial {
+        /// k1.
+        k1: f64,
+        /// k2 (default 0).
+        #[serde(default)]
+        k2: f64,
+    },
+    /// Generator: `D = 1/(1 − k·h²)`.
+    Division {
+        /// k.
+        k: f64,
+    },
+}
+
+/// `optics.lateral_color` (`"kind"` selects the form).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum LateralColorFile {
+    /// Fitted: `w = (λ − 550)/200`.
+    Linear {
+        /// d (µm).
+        displacement_um: f64,
+    },
+    /// Generator: Cauchy-shaped w(λ).
+    Cauchy {
+        /// d (µm).
+        displacement_um: f64,
+    },
+}
+
+/// `sensor.hot_pixels`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HotPixelsFile {
+    /// Fraction of pixels that are hot.
+    pub fraction: f64,
+    /// Extra dark voltage rate of a hot pixel (V/s; the median with `log_sigma`).
+    pub dark_voltage_v_per_s: f64,
+    /// Generator: σ of ln(rate) (lognormal spread).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log_sigma: Option<f64>,
+}
+
+/// `sensor.nonlinearity` (`"kind"` selects the form).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum NonlinearityFile {
+    /// Fitted: `v' = v − a·v²`.
+    Quadratic {
+        /// a (1/V).
+        coefficient_per_v: f64,
+    },
+    /// Generator: `v' = S·tanh(v/S)`.
+    Tanh {
+        /// S (V).
+        saturation_v: f64,
+    },
+}
+
+/// `sensor.crosstalk`: `{"fraction": f}` (fitted) or `{"left", "right", "up", "down"}`
+/// (generator; missing directions are 0).
+#[derive(Debug, Clone, PartialEq)]
+pub enum CrosstalkFile {
+    /// f/4 to each neighbour.
+    Symmetric {
+        /// f.
+        fraction: f64,
+    },
+    /// Fractions sent to each neighbour.
+    Directional {
+        /// to column − 1
+        left: f64,
+        /// to column + 1
+        right: f64,
+        /// to row − 1
+        up: f64,
+        /// to row + 1
+        down: f64,
+    },
+}
+
+impl Serialize for CrosstalkFile {
+    fn serialize<S: Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        match self {
+            CrosstalkFile::Symmetric { fraction } => {
+                let mut m = ser.serialize_map(Some(1))?;
+                m.serialize_entry("fraction", fraction)?;
+                m.end()
+            }
+            CrosstalkFile::Directional {
+                left,
+                right,
+                up,
+                down,
+            } => {
+                let mut m = ser.serialize_map(Some(4))?;
+                m.serialize_entry("left", left)?;
+                m.serialize_entry("right", right)?;
+                m.serialize_entry("up", up)?;
+                m.serialize_entry("down", down)?;
+                m.end()
+            }
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for CrosstalkFile {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let v = Value::deserialize(d)?;
+        let m = v.as_object().ok_or_else(|| {
+            D::Error::custom("sensor.crosstalk: expected {\"fraction\": f} or {\"left\", \"right\", \"up\", \"down\"}")
+        })?;
+        let num = |k: &str| -> Result<f64, D::Error> {
+            m[k].as_f64()
+                .ok_or_else(|| D::Error::custom(format!("sensor.crosstalk.{k}: must be a number")))
+        };
+        if m.contains_key("fraction") {
+            if let Some(k) = m.keys().find(|k| *k != "fraction") {
+                return Err(D::Error::custom(format!(
+                    "sensor.crosstalk.{k}: unknown key with `fraction` (give `fraction` alone, or `left`/`right`/`up`/`down`)"
+                )));
+            }
+            return Ok(CrosstalkFile::Symmetric {
+                fraction: num("fraction")?,
+            });
+        }
+        const DIRS: [&str; 4] = ["left", "right", "up", "down"];
+        if let Some(k) = m.keys().find(|k| !DIRS.contains(&k.as_str())) {
+            return Err(D::Error::custom(format!(
+                "sensor.crosstalk.{k}: unknown key (expected `fraction`, or `left`, `right`, `up`, `down`)"
+            )));
+        }
+        if m.is_empty() {
+            return Err(D::Error::custom(
+                "sensor.crosstalk: needs `fraction` or at least one of `left`, `right`, `up`, `down`",
+            ));
+        }
+        let dir = |k: &str| -> Result<f64, D::Error> {
+            if m.contains_key(k) {
+                num(k)
+            } else {
+                Ok(0.0)
+            }
+        };
+        Ok(CrosstalkFile::Directional {
+            left: dir("left")?,
+            right: dir("right")?,
+            up: dir("up")?,
+            down: dir("down")?,
+        })
+    }
+}
+
+/// `sensor.ir_leakage`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IrLeakageFile {
+    /// Added QE per channel letter: a number = that constant on [700, 1000] nm with 1 nm
+    /// ramps (fitted form); a spectrum = itself (generator form).
+    pub channels: BTreeMap<String, SpectrumValue>,
+}
+
+/// `sensor.qe_shift`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QeShiftFile {
+    /// Shift per channel letter (nm, + = towards red).
+    pub shift_nm: BTreeMap<String, f64>,
 }
 
 /// `optics.blur` as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BlurFile {
     /// none | diffraction | gaussian | pillbox | psf | wavefront | lens
     pub kind: String,
     /// gaussian: σ (µm)
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma_um: Option<f64>,
     /// pillbox: side (µm)
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub width_um: Option<f64>,
     /// psf: a PSF file
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub psf_file: Option<String>,
     /// wavefront: Zernike defocus coefficient (µm RMS)
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub defocus_um: Option<f64>,
     /// lens: a prescription (needs the lens ray tracer)
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lens_file: Option<String>,
 }
 
 /// `optics.diffuser` as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DiffuserFile {
     /// Full width at half maximum (µm); default = the pixel pitch.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fwhm_um: Option<f64>,
 }
 
 /// `camera.sensor` as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorFile {
     /// Rows.
@@ -142,7 +476,7 @@ pub struct SensorFile {
     /// Pixel pitch (µm).
     pub pixel_pitch_um: f64,
     /// Fill factor (default 1).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fill_factor: Option<f64>,
     /// CFA tile rows.
     pub cfa: Vec<String>,
@@ -155,62 +489,77 @@ pub struct SensorFile {
     /// Voltage swing (V).
     pub voltage_swing_v: f64,
     /// Analog gain (default 1).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analog_gain: Option<f64>,
     /// Analog offset (V, default 0).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analog_offset_v: Option<f64>,
     /// ADC bits (1–16).
     pub adc_bits: u32,
     /// Black level (DN, default 0).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub black_level_dn: Option<f64>,
     /// Dark voltage (V/s, default 0).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dark_voltage_v_per_s: Option<f64>,
     /// Read noise σ (V, default 0).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub read_noise_v: Option<f64>,
     /// DSNU σ (V, default 0).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dsnu_sigma_v: Option<f64>,
     /// PRNU σ (percent, default 0).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prnu_sigma_percent: Option<f64>,
     /// Extension: noise switches.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<NoiseFile>,
     /// Effect block `column_fpn` (effects.md): fixed per-column offsets.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub column_fpn: Option<ColumnFpnFile>,
     /// Extension: reset (kTC) noise, cancelled by correlated double sampling.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reset_noise: Option<ResetNoiseFile>,
+    /// Effect block `hot_pixels` (docs/effects.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hot_pixels: Option<HotPixelsFile>,
+    /// Effect block `nonlinearity`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nonlinearity: Option<NonlinearityFile>,
+    /// Effect block `crosstalk`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crosstalk: Option<CrosstalkFile>,
+    /// Effect block `ir_leakage`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ir_leakage: Option<IrLeakageFile>,
+    /// Effect block `qe_shift`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub qe_shift: Option<QeShiftFile>,
 }
 
 /// `sensor.noise` switches (all default true).
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseFile {
     /// Photon shot noise.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shot: Option<bool>,
     /// Dark current (its mean and its shot noise).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dark: Option<bool>,
     /// Read noise.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub read: Option<bool>,
     /// DSNU.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dsnu: Option<bool>,
     /// PRNU.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prnu: Option<bool>,
 }
 
 /// `sensor.column_fpn`.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ColumnFpnFile {
     /// σ of the per-column offsets (V).
@@ -218,18 +567,18 @@ pub struct ColumnFpnFile {
 }
 
 /// `sensor.reset_noise`.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ResetNoiseFile {
     /// kTC noise σ (V) per frame.
     pub sigma_v: f64,
     /// Correlated double sampling (default true: the reset noise cancels).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cds: Option<bool>,
 }
 
 /// `captures.json` as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CapturesFile {
     /// Path of camera.json, relative to the captures file.
@@ -237,35 +586,35 @@ pub struct CapturesFile {
     /// The shots.
     pub shots: Vec<ShotFile>,
     /// Extension: simulation settings.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulation: Option<SimulationFile>,
     /// Extension: layout of headerless raw frames (`.raw` / `.bin` frame files).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub raw_format: Option<RawFormatFile>,
 }
 
 /// `captures.raw_format` as written: how to read headerless raw frames.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawFormatFile {
     /// Rows (default: the sensor's).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rows: Option<usize>,
     /// Columns (default: the sensor's).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cols: Option<usize>,
     /// 8 or 16 bits per stored sample.
     pub bits_per_sample: u32,
     /// "little" or "big" (16-bit samples).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub endianness: Option<String>,
     /// Bytes to skip at the start of each file (default 0).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub header_bytes: Option<u64>,
 }
 
 /// One shot as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShotFile {
     /// Shot id (output file stem).
@@ -273,35 +622,35 @@ pub struct ShotFile {
     /// The target.
     pub target: Value,
     /// Exposure time (s); absent with `auto_exposure`.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exposure_s: Option<f64>,
     /// Extension: auto-exposure to this fraction of the voltage swing.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub auto_exposure: Option<f64>,
     /// Analog gain for this shot.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analog_gain: Option<f64>,
     /// Frame files, relative to the captures file.
     pub frames: Vec<String>,
 }
 
 /// `captures.simulation` (extension).
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationFile {
     /// Wavelength grid for wavelength-dependent optics: `{start_nm, stop_nm, step_nm}`.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wavelength_nm: Option<GridFile>,
     /// Scene samples per pixel side (default: from the blur).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub oversample: Option<usize>,
     /// Default seed when --seed is not given.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
 }
 
 /// A regular wavelength grid as written.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridFile {
     /// first wavelength
@@ -424,7 +773,12 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
             format!("optics.transmittance: negative value {v} at {w} nm"),
         ));
     }
-    let relative_illumination = match o.relative_illumination.as_deref().unwrap_or("cos4") {
+    let relative_illumination = match o
+        .relative_illumination
+        .as_ref()
+        .map(|r| r.model())
+        .unwrap_or("cos4")
+    {
         "cos4" => RelativeIllumination::Cos4,
         "none" => RelativeIllumination::None,
         "isetcam" => RelativeIllumination::IsetCam,
@@ -485,6 +839,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         blur,
         diffuser,
         padding: Padding::Replicate,
+        effects: optics_effects_from_file(path, o, &raw.sensor)?,
     };
     let sensor = sensor_from_file(path, &raw.sensor)?;
     Ok(Camera {
@@ -660,7 +1015,7 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
         pixel_pitch_m: s.pixel_pitch_um * 1e-6,
         fill_factor: ff,
         cfa: Cfa { tile },
-        channel_names: names,
+        channel_names: names.clone(),
         channel_qe: s.channels.values().map(|v| v.0.clone()).collect(),
         well_capacity_e: positive(path, "sensor.well_capacity_e", s.well_capacity_e)?,
         conversion_gain_v_per_e: positive(
@@ -705,9 +1060,325 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
             }),
             None => None,
         },
+        effects: sensor_effects_from_file(path, s, &names)?,
     };
     model.validate().map_err(|e| CliError::input(path, e))?;
     Ok(model)
+}
+
+/// `what = value: must …` as a one-line input error.
+fn bad_value(path: &Path, key: &str, value: impl std::fmt::Display, need: &str) -> CliError {
+    CliError::input(path, format!("{key} = {value}: {need}"))
+}
+
+fn finite(path: &Path, key: &str, v: f64) -> Result<f64, CliError> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(bad_value(path, key, v, "must be a finite number"))
+    }
+}
+
+fn in_range(
+    path: &Path,
+    key: &str,
+    v: f64,
+    ok: impl Fn(f64) -> bool,
+    need: &str,
+) -> Result<f64, CliError> {
+    if v.is_finite() && ok(v) {
+        Ok(v)
+    } else {
+        Err(bad_value(path, key, v, need))
+    }
+}
+
+/// The optics effect blocks (docs/effects.md) as the optics crate's [`OpticsEffects`].
+fn optics_effects_from_file(
+    path: &Path,
+    o: &OpticsFile,
+    sensor: &SensorFile,
+) -> Result<OpticsEffects, CliError> {
+    let p = sensor.pixel_pitch_um * 1e-6;
+    let mut fx = OpticsEffects {
+        sensor_width_m: sensor.cols as f64 * p,
+        sensor_height_m: sensor.rows as f64 * p,
+        ..Default::default()
+    };
+    if let Some(e) = &o.exposure_scale {
+        fx.exposure_scale = Some(in_range(
+            path,
+            "optics.exposure_scale.factor",
+            e.factor,
+            |v| v > 0.0,
+            "must be > 0",
+        )?);
+    }
+    if let Some(f) = o.relative_illumination.as_ref().and_then(|r| r.falloff()) {
+        fx.falloff = Some(match f {
+            FalloffFile::Polynomial { coefficients } => {
+                for (i, a) in coefficients.iter().enumerate() {
+                    finite(
+                        path,
+                        &format!("optics.relative_illumination.falloff.coefficients[{i}]"),
+                        *a,
+                    )?;
+                }
+                Falloff::Polynomial {
+                    coefficients: coefficients.clone(),
+                }
+            }
+            FalloffFile::TwoCircle { separation_at_h1 } => Falloff::TwoCircle {
+                separation_at_h1: in_range(
+                    path,
+                    "optics.relative_illumination.falloff.separation_at_h1",
+                    *separation_at_h1,
+                    |v| (0.0..=2.0).contains(&v),
+                    "must be in [0, 2] (circle radii)",
+                )?,
+            },
+        });
+    }
+    if let Some(g) = &o.veiling_glare {
+        fx.veiling_glare = Some(in_range(
+            path,
+            "optics.veiling_glare.fraction",
+            g.fraction,
+            |v| v >= 0.0,
+            "must be ≥ 0",
+        )?);
+    }
+    if let Some(d) = &o.defocus {
+        fx.defocus = Some(match d {
+            DefocusFile::Gaussian { sigma_um } => Defocus::Gaussian {
+                sigma_um: in_range(
+                    path,
+                    "optics.defocus.sigma_um",
+                    *sigma_um,
+                    |v| v >= 0.0,
+                    "must be ≥ 0",
+                )?,
+            },
+            DefocusFile::Pillbox { radius_um } => Defocus::Pillbox {
+                radius_um: in_range(
+                    path,
+                    "optics.defocus.radius_um",
+                    *radius_um,
+                    |v| v >= 0.0,
+                    "must be ≥ 0",
+                )?,
+            },
+        });
+    }
+    if let Some(d) = &o.distortion {
+        fx.distortion = Some(match d {
+            DistortionFile::Polynomial { k1, k2 } => Distortion::Polynomial {
+                k1: finite(path, "optics.distortion.k1", *k1)?,
+                k2: finite(path, "optics.distortion.k2", *k2)?,
+            },
+            DistortionFile::Division { k } => Distortion::Division {
+                k: in_range(
+                    path,
+                    "optics.distortion.k",
+                    *k,
+                    |v| v < 1.0,
+                    "must be < 1 (the division model has a pole at h = 1/√k)",
+                )?,
+            },
+        });
+    }
+    if let Some(l) = &o.lateral_color {
+        let (kind, d) = match l {
+            LateralColorFile::Linear { displacement_um } => {
+                (LateralColorKind::Linear, displacement_um)
+            }
+            LateralColorFile::Cauchy { displacement_um } => {
+                (LateralColorKind::Cauchy, displacement_um)
+            }
+        };
+        fx.lateral_color = Some(LateralColor {
+            kind,
+            displacement_um: finite(path, "optics.lateral_color.displacement_um", *d)?,
+        });
+    }
+    fx.validate().map_err(|e| CliError::input(path, e))?;
+    Ok(fx)
+}
+
+/// The sensor effect blocks (docs/effects.md) as the sensor crate's [`SensorEffects`];
+/// `names` are the channel letters in channel-index order.
+fn sensor_effects_from_file(
+    path: &Path,
+    s: &SensorFile,
+    names: &[String],
+) -> Result<SensorEffects, CliError> {
+    let mut fx = SensorEffects::default();
+    let channel = |key: &str, name: &str| -> Result<usize, CliError> {
+        names.iter().position(|n| n == name).ok_or_else(|| {
+            CliError::input(
+                path,
+                format!(
+                    "{key}.{name}: no such channel (sensor.channels has: {})",
+                    names.join(", ")
+                ),
+            )
+        })
+    };
+    if let Some(h) = &s.hot_pixels {
+        fx.hot_pixels = Some(HotPixels {
+            fraction: in_range(
+                path,
+                "sensor.hot_pixels.fraction",
+                h.fraction,
+                |v| (0.0..=1.0).contains(&v),
+                "must be in [0, 1]",
+            )?,
+            dark_voltage_v_per_s: in_range(
+                path,
+                "sensor.hot_pixels.dark_voltage_v_per_s",
+                h.dark_voltage_v_per_s,
+                |v| v >= 0.0,
+                "must be ≥ 0",
+            )?,
+            log_sigma: match h.log_sigma {
+                Some(v) => in_range(
+                    path,
+                    "sensor.hot_pixels.log_sigma",
+                    v,
+                    |v| v >= 0.0,
+                    "must be ≥ 0",
+                )?,
+                None => 0.0,
+            },
+        });
+    }
+    if let Some(n) = &s.nonlinearity {
+        fx.nonlinearity = Some(match n {
+            NonlinearityFile::Quadratic { coefficient_per_v } => Nonlinearity::Quadratic {
+                coefficient_per_v: in_range(
+                    path,
+                    "sensor.nonlinearity.coefficient_per_v",
+                    *coefficient_per_v,
+                    |v| v >= 0.0,
+                    "must be ≥ 0",
+                )?,
+            },
+            NonlinearityFile::Tanh { saturation_v } => Nonlinearity::Tanh {
+                saturation_v: in_range(
+                    path,
+                    "sensor.nonlinearity.saturation_v",
+                    *saturation_v,
+                    |v| v > 0.0,
+                    "must be > 0",
+                )?,
+            },
+        });
+    }
+    if let Some(c) = &s.crosstalk {
+        fx.crosstalk = Some(match c {
+            CrosstalkFile::Symmetric { fraction } => Crosstalk::symmetric(in_range(
+                path,
+                "sensor.crosstalk.fraction",
+                *fraction,
+                |v| (0.0..1.0).contains(&v),
+                "must be in [0, 1)",
+            )?),
+            CrosstalkFile::Directional {
+                left,
+                right,
+                up,
+                down,
+            } => {
+                let mut d = [0.0; 4];
+                for (i, (k, v)) in [("left", left), ("right", right), ("up", up), ("down", down)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    d[i] = in_range(
+                        path,
+                        &format!("sensor.crosstalk.{k}"),
+                        *v,
+                        |v| (0.0..1.0).contains(&v),
+                        "must be in [0, 1)",
+                    )?;
+                }
+                let t: f64 = d.iter().sum();
+                if t >= 1.0 {
+                    return Err(bad_value(
+                        path,
+                        "sensor.crosstalk (left + right + up + down)",
+                        t,
+                        "must be < 1",
+                    ));
+                }
+                Crosstalk {
+                    left: d[0],
+                    right: d[1],
+                    up: d[2],
+                    down: d[3],
+                }
+            }
+        });
+    }
+    if let Some(ir) = &s.ir_leakage {
+        let mut channels = vec![None; names.len()];
+        for (name, v) in &ir.channels {
+            let c = channel("sensor.ir_leakage.channels", name)?;
+            let key = format!("sensor.ir_leakage.channels.{name}");
+            let spec = match &v.0 {
+                Spectrum::Affine {
+                    offset,
+                    slope_per_nm,
+                } if *slope_per_nm == 0.0 => IrLeakage::band(in_range(
+                    path,
+                    &key,
+                    *offset,
+                    |v| v >= 0.0,
+                    "must be ≥ 0 (QE added on 700–1000 nm)",
+                )?),
+                other => {
+                    if let Some((w, q)) = other.first_negative() {
+                        return Err(CliError::input(
+                            path,
+                            format!("{key}: negative QE {q} at {w} nm"),
+                        ));
+                    }
+                    other.clone()
+                }
+            };
+            channels[c] = Some(spec);
+        }
+        fx.ir_leakage = Some(IrLeakage { channels });
+    }
+    if let Some(q) = &s.qe_shift {
+        let mut shift_nm = vec![0.0; names.len()];
+        for (name, v) in &q.shift_nm {
+            let c = channel("sensor.qe_shift.shift_nm", name)?;
+            shift_nm[c] = finite(path, &format!("sensor.qe_shift.shift_nm.{name}"), *v)?;
+        }
+        fx.qe_shift = Some(QeShift { shift_nm });
+    }
+    Ok(fx)
+}
+
+/// Read `camera.json` as written (unknown keys rejected), without validating values: the form
+/// to edit and write back with [`write_camera_file`].
+pub fn read_camera_file(path: &Path) -> Result<CameraFile, CliError> {
+    read_json(path)
+}
+
+/// A camera file as pretty JSON (the format [`load_camera`] reads; `parse(serialize(x))` is
+/// the same camera).
+pub fn camera_file_json(camera: &CameraFile) -> Result<String, CliError> {
+    serde_json::to_string_pretty(camera)
+        .map_err(|e| CliError::Other(format!("cannot serialise the camera: {e}")))
+}
+
+/// Write a camera file as pretty JSON, atomically (temporary file + rename).
+pub fn write_camera_file(path: &Path, camera: &CameraFile) -> Result<(), CliError> {
+    let text = camera_file_json(camera)?;
+    camsim_core::exr_io::write_atomically(path, |tmp| std::fs::write(tmp, text.as_bytes()))
+        .map_err(|e| CliError::output(path, e))
 }
 
 /// Read and validate a capture set; `camera_override` replaces the camera it names.

@@ -36,6 +36,7 @@ use crate::error::CliError;
 use crate::plots;
 use crate::staging::with_staging;
 use camsim_lens::analysis::pupil_grid;
+use camsim_lens::huygens::{HuygensPsf, HuygensWindow};
 use camsim_lens::readers::{decode_text, read_iset_dat, read_iset_json, read_zmx, ZmxOptions};
 use camsim_lens::{
     Clipping, FieldModel, FieldModelOptions, GlassCatalog, LensPrescription, PrescriptionFile,
@@ -164,7 +165,8 @@ pub enum LensCommand {
         clip: bool,
     },
     /// Compute the field model (PSF, distortion, relative illumination over image height ×
-    /// wavelength) and save it as JSON.
+    /// wavelength × object distance, the lens at one focus) and save it as JSON (format
+    /// version 2, see camsim_lens::field_model).
     FieldModel {
         /// The lens and glass substitutions.
         #[command(flatten)]
@@ -190,6 +192,17 @@ pub enum LensCommand {
         /// Pitch of the stored PSFs (µm).
         #[arg(long, default_value_t = 1.0)]
         psf_pitch_um: f64,
+        /// Object distances to tabulate (mm from the first vertex; `inf` = infinity), e.g.
+        /// `inf,5000,2000,1000`; default the focus distance only.
+        #[arg(long, value_delimiter = ',')]
+        object_distances_mm: Vec<String>,
+        /// Object distance the lens is focused on (mm or `inf`); default the lens file's
+        /// `object_distance_mm`.
+        #[arg(long)]
+        focus_distance_mm: Option<String>,
+        /// Pupil samples per side (OPD grid of wave PSFs, ray grid of geometric ones).
+        #[arg(long, default_value_t = 64)]
+        pupil_samples: usize,
     },
     /// Draw the lens layout (meridional section, surfaces and rays of the axis and the maximum
     /// field at the primary wavelength) as SVG.
@@ -234,7 +247,26 @@ pub enum LensCommand {
         /// Shift of the image plane from the paraxial focus (mm).
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         defocus_mm: f64,
+        /// fft: |FFT of the pupil function|² (pitch λN_w(n − 1)/(n·pad)); huygens: direct
+        /// Huygens–Fresnel sum on any grid (--samples, --sample-um), centred on the chief ray.
+        #[arg(long, value_enum, default_value_t = PsfMethod::Fft)]
+        method: PsfMethod,
+        /// Huygens: samples per side (default 129).
+        #[arg(long)]
+        samples: Option<usize>,
+        /// Huygens: sample pitch in µm (default λN_w/4).
+        #[arg(long)]
+        sample_um: Option<f64>,
     },
+}
+
+/// How `lens psf` computes the PSF.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PsfMethod {
+    /// FFT of the pupil function.
+    Fft,
+    /// Huygens–Fresnel integration over the exit-pupil reference sphere.
+    Huygens,
 }
 
 /// Read a lens in any supported format (chosen by extension, else by content).
@@ -419,6 +451,84 @@ pub struct ReportData {
     pub mtf_focus_shift_mm: f64,
     /// Lens name.
     pub name: String,
+    /// Dense field-curvature curves: (wavelength nm, [(field °, sagittal mm, tangential mm)]).
+    pub field_curvature_curve: Vec<(f64, Vec<(f64, f64, f64)>)>,
+    /// Huygens PSF of each report field at the primary wavelength: (field °, PSF).
+    pub huygens: Vec<(f64, HuygensPsf)>,
+}
+
+/// Samples per side of the report's Huygens PSFs.
+pub const HUYGENS_SAMPLES: usize = 49;
+/// Largest pupil grid of the report's Huygens PSFs.
+pub const HUYGENS_MAX_PUPIL: usize = 96;
+
+/// The report's Huygens PSF of field `th` at `w`: a `HUYGENS_SAMPLES`² window about the chief
+/// ray of half-width max(4 λN_w, |centroid − chief| + 2.5 × RMS spot radius) on the lens's image
+/// plane, from the pupil grid whose period λN_w(n − 1) holds every traced ray's landing point
+/// (so no ray's wavelet aliases into the window), at most `HUYGENS_MAX_PUPIL` and at least 32.
+/// Returns the PSF, the pupil grid used and whether it met that condition.
+pub fn report_huygens(
+    lens: &LensPrescription,
+    th: f64,
+    w: f64,
+    clipping: Clipping,
+) -> Result<(HuygensPsf, usize, bool), camsim_lens::LensError> {
+    let fo = lens.first_order(w)?;
+    let lam_nw = w * 1e-6 * fo.working_f_number;
+    let fan = lens.ray_fan(th, w, w, &pupil_grid(21), clipping)?;
+    let spot = fan.spot(0.0);
+    let chief = lens
+        .trace(&fan.aim.ray(0.0, 0.0), w, Clipping::None)
+        .map(|r| [r.image_mm[0], r.image_mm[1]])
+        .unwrap_or(spot.centroid_mm);
+    let off = (spot.centroid_mm[0] - chief[0]).hypot(spot.centroid_mm[1] - chief[1]);
+    let (geo, extent) = if spot.points_mm.is_empty() {
+        (0.0, 0.0)
+    } else {
+        let far = spot
+            .points_mm
+            .iter()
+            .map(|p| (p[0] - chief[0]).hypot(p[1] - chief[1]))
+            .fold(0.0, f64::max);
+        (off + 2.5 * spot.rms_radius_mm, far)
+    };
+    let half = geo.max(4.0 * lam_nw);
+    let need = lens.huygens_pupil_samples(w, half.max(extent + 2.0 * lam_nw))?;
+    let pupil_n = need.clamp(32, HUYGENS_MAX_PUPIL);
+    let win = HuygensWindow {
+        n: HUYGENS_SAMPLES,
+        sample_mm: 2.0 * half / (HUYGENS_SAMPLES - 1) as f64,
+        offset_mm: [0.0, 0.0],
+    };
+    let h = lens.huygens_psf(th, w, pupil_n, &win, clipping)?;
+    Ok((h, pupil_n, need <= HUYGENS_MAX_PUPIL))
+}
+
+/// Centroid offset from the centre sample and RMS radius about the centroid (mm) of a PSF.
+fn psf_moments(p: &camsim_lens::analysis::Psf) -> ([f64; 2], f64) {
+    let n = p.n;
+    let c = (n / 2) as f64;
+    let (mut sx, mut sy, mut t) = (0.0, 0.0, 0.0);
+    for (k, v) in p.values.iter().enumerate() {
+        sx += (k % n) as f64 * v;
+        sy += (k / n) as f64 * v;
+        t += v;
+    }
+    if t <= 0.0 {
+        return ([f64::NAN; 2], f64::NAN);
+    }
+    let (mx, my) = (sx / t, sy / t);
+    let r2: f64 = p
+        .values
+        .iter()
+        .enumerate()
+        .map(|(k, v)| v * (((k % n) as f64 - mx).powi(2) + ((k / n) as f64 - my).powi(2)))
+        .sum::<f64>()
+        / t;
+    (
+        [(mx - c) * p.sample_mm, (my - c) * p.sample_mm],
+        r2.sqrt() * p.sample_mm,
+    )
 }
 
 /// Compute the `lens report` numbers of `lens` (read from `path`, which errors name).
@@ -487,6 +597,17 @@ pub fn lens_report(
             };
             pts.push((w, fig_pts));
         }
+        // Sagittal / tangential foci (Coddington along the chief ray of each wavelength).
+        let mut sag = Map::new();
+        let mut tan = Map::new();
+        for (key, &w) in opts.wavelengths.iter().zip(&wls) {
+            let (a, b) = match lens.field_curvature(th, w) {
+                Ok(fc) => (fc.sagittal_mm, fc.tangential_mm),
+                Err(_) => (f64::NAN, f64::NAN),
+            };
+            sag.insert(key.trim().to_string(), finite_or_null(a));
+            tan.insert(key.trim().to_string(), finite_or_null(b));
+        }
         fields.push(json!({
             "field_fraction": frac,
             "field_deg": th,
@@ -495,6 +616,8 @@ pub fn lens_report(
             "distortion_percent": d.distortion_pct,
             "lateral_color_um": d.lateral_colour_um,
             "rms_spot_um": Value::Object(rms),
+            "sagittal_focus_mm": Value::Object(sag),
+            "tangential_focus_mm": Value::Object(tan),
         }));
         spots.push((th, pts));
     }
@@ -537,6 +660,45 @@ pub fn lens_report(
                    "mtf": finite_or_null(0.5 * (p.tangential + p.sagittal))})
         })
         .collect();
+    // Dense field-curvature curves for the figure.
+    let field_curvature_curve: Vec<(f64, Vec<(f64, f64, f64)>)> = wls
+        .iter()
+        .map(|&w| {
+            let pts = (0..=20)
+                .filter_map(|k| {
+                    let th = max_deg * k as f64 / 20.0;
+                    let fc = lens.field_curvature(th, w).ok()?;
+                    (fc.sagittal_mm.is_finite() && fc.tangential_mm.is_finite())
+                        .then_some((th, fc.sagittal_mm, fc.tangential_mm))
+                })
+                .collect();
+            (w, pts)
+        })
+        .collect();
+    // Huygens PSFs of the report fields at the primary wavelength, on the MTF's image plane.
+    let mut huygens = Vec::new();
+    let mut huygens_json = Vec::new();
+    for &frac in &opts.field_fractions {
+        let th = field_angle(frac, max_deg)?;
+        let (h, pupil_n, alias_free) =
+            report_huygens(&mtf_lens, th, primary, clipping).map_err(lerr)?;
+        let (c, rms) = psf_moments(&h.psf);
+        let n = h.psf.n;
+        huygens_json.push(json!({
+            "field_fraction": frac,
+            "field_deg": th,
+            "wavelength_nm": primary,
+            "image_plane_shift_mm": dz,
+            "samples": n,
+            "sample_um": 1000.0 * h.psf.sample_mm,
+            "pupil_samples": pupil_n,
+            "alias_free": alias_free,
+            "strehl_ratio": finite_or_null(h.strehl_ratio),
+            "centroid_offset_um": [finite_or_null(1000.0 * c[0]), finite_or_null(1000.0 * c[1])],
+            "rms_radius_um": finite_or_null(1000.0 * rms),
+        }));
+        huygens.push((th, h));
+    }
     let json = json!({
         "efl_mm": fo.efl_mm,
         "bfl_mm": fo.bfl_mm,
@@ -545,10 +707,13 @@ pub fn lens_report(
         "primary_wavelength_nm": primary,
         "fields": fields,
         "mtf_on_axis": mtf,
+        "huygens_psf": huygens_json,
     });
     Ok(ReportData {
         json,
         distortion_curve,
+        field_curvature_curve,
+        huygens,
         spots,
         mtf_focus_shift_mm: dz,
         name: lens.name.clone(),
@@ -684,6 +849,46 @@ fn write_report_files(
             ),
         ));
     }
+    // Field curvature.
+    let mut fc_series = Vec::new();
+    for (w, pts) in &data.field_curvature_curve {
+        fc_series.push((
+            format!("S {w} nm"),
+            pts.iter().map(|p| (p.1, p.0)).collect::<Vec<_>>(),
+        ));
+        fc_series.push((
+            format!("T {w} nm"),
+            pts.iter().map(|p| (p.2, p.0)).collect::<Vec<_>>(),
+        ));
+    }
+    if fc_series.iter().any(|s| s.1.len() > 1) {
+        plots::line_plot(
+            &dir.join("field_curvature.png"),
+            "Field curvature (sagittal S, tangential T)",
+            &fc_series,
+            ("focus − image plane (mm)", "field angle (deg)"),
+        )?;
+        figures.push((
+            "field_curvature.png".into(),
+            "Sagittal (S) and tangential (T) focus vs field: axial distance from the paraxial image plane (Coddington along the real chief ray)".into(),
+        ));
+    }
+    // Huygens PSFs.
+    for (i, (th, h)) in data.huygens.iter().enumerate() {
+        let name = format!("huygens_psf_{i}.png");
+        psf_png(&dir.join(&name), &h.psf)?;
+        figures.push((
+            name,
+            format!(
+                "Huygens PSF at {th:.3}°, {} nm: {}×{} samples of {:.3} µm about the chief ray (√ intensity, x right, y up), Strehl {:.3}",
+                j["primary_wavelength_nm"].as_f64().unwrap_or(f64::NAN),
+                h.psf.n,
+                h.psf.n,
+                1000.0 * h.psf.sample_mm,
+                h.strehl_ratio
+            ),
+        ));
+    }
     let json_text = serde_json::to_string_pretty(j).map_err(|e| CliError::Other(e.to_string()))?;
     std::fs::write(dir.join("report.json"), json_text + "\n")
         .map_err(|e| CliError::output(&dir.join("report.json"), e))?;
@@ -754,6 +959,52 @@ fn write_report_files(
             MtfFocus::Paraxial => "paraxial focus",
         }
     ));
+    h.push_str("<h2>Field curvature</h2><table><tr><th>angle (°)</th>");
+    for key in &opts.wavelengths {
+        h.push_str(&format!(
+            "<th>sagittal {0} nm (mm)</th><th>tangential {0} nm (mm)</th>",
+            esc(key.trim())
+        ));
+    }
+    h.push_str("</tr>");
+    for f in &fields {
+        h.push_str(&format!(
+            "<tr><td>{:.4}</td>",
+            f["field_deg"].as_f64().unwrap_or(f64::NAN)
+        ));
+        for key in &opts.wavelengths {
+            for k in ["sagittal_focus_mm", "tangential_focus_mm"] {
+                let v = f[k][key.trim()]
+                    .as_f64()
+                    .map(|x| format!("{x:.5}"))
+                    .unwrap_or_else(|| "–".into());
+                h.push_str(&format!("<td>{v}</td>"));
+            }
+        }
+        h.push_str("</tr>");
+    }
+    h.push_str("</table><p>Axial distance from the paraxial image plane to the sagittal and tangential foci of the thin pencils about the real chief ray of each wavelength (Coddington's equations; negative = towards the lens).</p>");
+    h.push_str("<h2>Huygens PSF (primary wavelength)</h2><table><tr><th>angle (°)</th><th>samples</th><th>pitch (µm)</th><th>pupil grid</th><th>alias-free</th><th>Strehl</th><th>centroid offset x, y (µm)</th><th>RMS radius (µm)</th></tr>");
+    for p in j["huygens_psf"].as_array().into_iter().flatten() {
+        let f = |v: &Value, d: usize| {
+            v.as_f64()
+                .map(|x| format!("{x:.d$}"))
+                .unwrap_or_else(|| "–".into())
+        };
+        h.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}, {}</td><td>{}</td></tr>",
+            f(&p["field_deg"], 4),
+            p["samples"],
+            f(&p["sample_um"], 4),
+            p["pupil_samples"],
+            p["alias_free"],
+            f(&p["strehl_ratio"], 4),
+            f(&p["centroid_offset_um"][0], 3),
+            f(&p["centroid_offset_um"][1], 3),
+            f(&p["rms_radius_um"], 3)
+        ));
+    }
+    h.push_str(&format!("</table><p>Huygens–Fresnel sum of secondary wavelets from the real rays on the exit-pupil reference sphere (camsim_lens::huygens), on the image plane of the MTF below (shifted {:+.5} mm from the paraxial focus), window centred on the chief ray; Strehl ratio at the chief-ray point. Alias-free: the period λN<sub>w</sub>(n − 1) of the n² pupil sum holds every ray's landing point (else n was capped at {}).</p>", data.mtf_focus_shift_mm, HUYGENS_MAX_PUPIL));
     h.push_str("<h2>On-axis MTF</h2><table><tr><th>cycles/mm</th><th>MTF</th></tr>");
     for p in j["mtf_on_axis"].as_array().into_iter().flatten() {
         h.push_str(&format!(
@@ -779,6 +1030,43 @@ fn write_report_files(
     files.push(PathBuf::from("report.html"));
     files.extend(figures.iter().map(|(f, _)| PathBuf::from(f)));
     Ok(files)
+}
+
+/// A PSF as a colour-mapped PNG (√ of the intensity relative to the peak, so faint structure
+/// shows; row 0 at the top is +y), each sample enlarged to at least 320 pixels overall.
+fn psf_png(path: &Path, psf: &camsim_lens::analysis::Psf) -> Result<(), CliError> {
+    let n = psf.n.max(1);
+    let zoom = 320usize.div_ceil(n).max(1);
+    let side = n * zoom;
+    let peak = psf.values.iter().cloned().fold(0.0, f64::max);
+    let mut rgb = vec![255u8; side * side * 3];
+    for r in 0..side {
+        let iy = n - 1 - r / zoom;
+        for c in 0..side {
+            let ix = c / zoom;
+            let v = if peak > 0.0 {
+                (psf.values[iy * n + ix] / peak).max(0.0).sqrt()
+            } else {
+                0.0
+            };
+            // Dark blue → red → yellow → white.
+            let (cr, cg, cb) = if v < 1.0 / 3.0 {
+                let t = 3.0 * v;
+                (0.5 * t, 0.0, 0.3 + 0.3 * t)
+            } else if v < 2.0 / 3.0 {
+                let t = 3.0 * v - 1.0;
+                (0.5 + 0.5 * t, 0.6 * t, 0.6 * (1.0 - t))
+            } else {
+                let t = 3.0 * v - 2.0;
+                (1.0, 0.6 + 0.4 * t, t)
+            };
+            let o = (r * side + c) * 3;
+            rgb[o] = (255.0 * cr).round() as u8;
+            rgb[o + 1] = (255.0 * cg).round() as u8;
+            rgb[o + 2] = (255.0 * cb).round() as u8;
+        }
+    }
+    plots::rgb8_png(path, &rgb, side, side)
 }
 
 /// Smallest square pupil grid whose disc-clipped sample holds at least `n` rays.
@@ -907,7 +1195,35 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             geometric,
             psf_n,
             psf_pitch_um,
+            object_distances_mm,
+            focus_distance_mm,
+            pupil_samples,
         } => {
+            let distance = |flag: &str, s: &str| -> Result<Option<f64>, CliError> {
+                let t = s.trim();
+                if t.eq_ignore_ascii_case("inf") || t.eq_ignore_ascii_case("infinity") {
+                    return Ok(None);
+                }
+                match t.parse::<f64>() {
+                    Ok(d) if d.is_finite() && d > 0.0 => Ok(Some(d)),
+                    _ => Err(CliError::Other(format!(
+                        "{flag} '{s}': expected a distance in mm > 0 or inf"
+                    ))),
+                }
+            };
+            let distances: Vec<Option<f64>> = object_distances_mm
+                .iter()
+                .map(|s| distance("--object-distances-mm", s))
+                .collect::<Result<_, _>>()?;
+            let focus = match &focus_distance_mm {
+                None => camsim_lens::Focus::Prescription,
+                Some(s) => camsim_lens::Focus::At(distance("--focus-distance-mm", s)?),
+            };
+            if pupil_samples < 2 || pupil_samples > 1024 {
+                return Err(CliError::Other(format!(
+                    "--pupil-samples {pupil_samples} must be in 2..=1024"
+                )));
+            }
             if let Some(ws) = &wavelengths_nm {
                 if ws.is_empty() {
                     return Err(CliError::Other("--wavelengths-nm: no wavelengths".into()));
@@ -939,6 +1255,9 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                 },
                 psf_n,
                 psf_pitch_um,
+                pupil_n: pupil_samples,
+                focus,
+                object_distances_mm: distances,
                 ..FieldModelOptions::default()
             };
             let m = FieldModel::compute(&lens, &opts).map_err(|e| CliError::input(&path, e))?;
@@ -952,12 +1271,19 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                 CliError::Output { .. } => e,
                 e => CliError::output(&out, e),
             })?;
+            let show = |d: Option<f64>| d.map_or("inf".to_string(), |d| format!("{d}"));
             eprintln!(
-                "camsim: wrote {} ({} fields to {:.3}°, {} wavelengths, {}×{} PSFs at {} µm)",
+                "camsim: wrote {} ({} fields to {:.3}°, {} wavelengths, object distances [{}] mm, focused on {} mm, {}×{} PSFs at {} µm)",
                 out.display(),
-                m.field_angles_deg.len(),
+                m.paraxial_height_mm.len(),
                 max_deg,
                 m.wavelengths_nm.len(),
+                m.object_distances_mm()
+                    .iter()
+                    .map(|d| show(*d))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                show(m.focus_distance_mm),
                 m.psf_n,
                 m.psf_n,
                 m.psf_pitch_um
@@ -992,8 +1318,28 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             pupil_samples,
             pad,
             defocus_mm,
+            method,
+            samples,
+            sample_um,
         } => {
             let w = check_wavelength(wavelength_nm)?;
+            if method == PsfMethod::Fft && (samples.is_some() || sample_um.is_some()) {
+                return Err(CliError::Other(
+                    "--samples and --sample-um apply to --method huygens".into(),
+                ));
+            }
+            if let Some(n) = samples {
+                if n == 0 || n > 2049 {
+                    return Err(CliError::Other(format!(
+                        "--samples {n} must be in 1..=2049"
+                    )));
+                }
+            }
+            if let Some(p) = sample_um {
+                if !(p.is_finite() && p > 0.0) {
+                    return Err(CliError::Other(format!("--sample-um {p} must be > 0")));
+                }
+            }
             let ext = out
                 .extension()
                 .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -1017,19 +1363,45 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             let th = field_angle(field_fraction, max_field_deg(&lens, mfd)?)?;
             let d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
             let lens = lens.with_image_distance(d + defocus_mm);
-            let wo = lens
-                .wave_optics(th, w, pupil_samples, pad, &[])
-                .map_err(|e| CliError::input(&path, e))?;
-            let m = wo.psf.n;
-            // The FFT PSF is point-reflected with respect to the image plane (see
-            // camsim_lens::field_model); reflect it about the centre sample (m/2, m/2) so x, y
-            // grow with the column / row index like image-plane coordinates.
-            let mut v = vec![0.0f64; m * m];
-            for iy in 0..m {
-                for ix in 0..m {
-                    v[iy * m + ix] = wo.psf.values[((m - iy) % m) * m + (m - ix) % m];
+            let (m, sample_mm, mut v, extra) = match method {
+                PsfMethod::Fft => {
+                    let wo = lens
+                        .wave_optics(th, w, pupil_samples, pad, &[])
+                        .map_err(|e| CliError::input(&path, e))?;
+                    let m = wo.psf.n;
+                    // The FFT PSF is point-reflected with respect to the image plane (see
+                    // camsim_lens::field_model); reflect it about the centre sample (m/2, m/2)
+                    // so x, y grow with the column / row index like image-plane coordinates.
+                    let mut v = vec![0.0f64; m * m];
+                    for iy in 0..m {
+                        for ix in 0..m {
+                            v[iy * m + ix] = wo.psf.values[((m - iy) % m) * m + (m - ix) % m];
+                        }
+                    }
+                    let extra = json!({"method": "fft", "pad": pad,
+                                       "opd_rms_waves": finite_or_null(wo.opd.rms_waves)});
+                    (m, wo.psf.sample_mm, v, extra)
                 }
-            }
+                PsfMethod::Huygens => {
+                    let nw = lens
+                        .first_order(w)
+                        .map_err(|e| CliError::input(&path, e))?
+                        .working_f_number;
+                    let n = samples.unwrap_or(129);
+                    let win = HuygensWindow {
+                        n,
+                        sample_mm: sample_um.map_or(w * 1e-6 * nw / 4.0, |p| p * 1e-3),
+                        offset_mm: [0.0, 0.0],
+                    };
+                    let h = lens
+                        .huygens_psf(th, w, pupil_samples, &win, Clipping::None)
+                        .map_err(|e| CliError::input(&path, e))?;
+                    let extra = json!({"method": "huygens",
+                                       "strehl_ratio": finite_or_null(h.strehl_ratio),
+                                       "chief_ray_mm": h.chief_mm});
+                    (n, win.sample_mm, h.psf.values, extra)
+                }
+            };
             let sum: f64 = v.iter().sum();
             if !(sum.is_finite() && sum > 0.0) {
                 return Err(CliError::input(
@@ -1060,16 +1432,19 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                     .collect();
                 plots::rgb8_png(&out, &rgb, m, m)?;
             }
-            let summary = json!({
+            let mut summary = json!({
                 "file": out.display().to_string(),
                 "field_deg": th,
                 "wavelength_nm": w,
                 "samples": m,
-                "sample_pitch_um": 1000.0 * wo.psf.sample_mm,
+                "sample_pitch_um": 1000.0 * sample_mm,
                 "centre_index": m / 2,
                 "peak": peak,
-                "opd_rms_waves": finite_or_null(wo.opd.rms_waves),
+                "pupil_samples": pupil_samples,
             });
+            if let (Some(o), Some(e)) = (summary.as_object_mut(), extra.as_object()) {
+                o.extend(e.clone());
+            }
             print_out(
                 &serde_json::to_string_pretty(&summary)
                     .map_err(|e| CliError::Other(e.to_string()))?,

@@ -8,6 +8,8 @@
 pub mod calibrate_cmd;
 pub mod color_eval;
 pub mod config;
+pub mod datasets;
+pub mod diagnose_cmd;
 pub mod error;
 pub mod frames;
 pub mod lens_cmd;

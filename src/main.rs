@@ -92,6 +92,24 @@ enum Command {
         #[arg(long)]
         basis: Option<usize>,
     },
+    /// Find the physics the camera model leaves out (fit check, locate, candidate effects,
+    /// BIC selection); writes DIR/report.json, DIR/fitted_camera.json and DIR/report.html.
+    Diagnose {
+        /// captures.json
+        captures: PathBuf,
+        /// Replace the camera named in the capture set (the believed camera).
+        #[arg(long)]
+        camera: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Accept a candidate effect when its BIC improves by more than this.
+        #[arg(long, default_value_t = 10.0)]
+        bic_threshold: f64,
+        /// Only consider these effect ids (comma-separated; default: all of effects.md).
+        #[arg(long, value_delimiter = ',')]
+        effects: Vec<String>,
+    },
     /// Lens prescriptions (.json, .zmx, ISET .dat/.json): report, spot, field-model, psf.
     Lens {
         #[command(subcommand)]
@@ -197,6 +215,29 @@ fn run(cli: Cli) -> Result<(), CliError> {
             println!(
                 "{}",
                 serde_json::to_string_pretty(&report).unwrap_or_default()
+            );
+            Ok(())
+        }
+        Command::Diagnose {
+            captures,
+            camera,
+            out,
+            bic_threshold,
+            effects,
+        } => {
+            let set = load_captures(&captures, camera.as_deref())?;
+            let opts = camsim::diagnose_cmd::DiagnoseCmdOptions {
+                bic_threshold,
+                effects,
+                progress: true,
+            };
+            let report = camsim::diagnose_cmd::run_diagnose(&set, &out, &opts)?;
+            let findings = report["findings"].as_array().map_or(0, |f| f.len());
+            eprintln!(
+                "camsim: chi2/dof {:.3} -> {:.3}, {findings} finding(s); wrote {} (open report.html)",
+                report["fit_before"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
+                report["fit_after"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
+                out.display()
             );
             Ok(())
         }

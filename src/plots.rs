@@ -285,3 +285,93 @@ pub fn check_figure(path: &Path) -> Result<FigureCheck, CliError> {
         non_white_per_mille: (non_white * 1000 / n.max(1)) as u32,
     })
 }
+
+/// One curve with an uncertainty band for [`band_plot`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct BandSeries {
+    /// Legend name.
+    pub name: String,
+    /// RGB colour.
+    pub colour: [u8; 3],
+    /// Points (x, y, lower, upper); a band is drawn where lower < upper.
+    pub points: Vec<(f64, f64, f64, f64)>,
+    /// Draw dashed (e.g. a reference curve).
+    pub dashed: bool,
+}
+
+/// Curves with shaded uncertainty bands (e.g. fitted spectral efficiencies ± 1σ).
+pub fn band_plot(
+    path: &Path,
+    title: &str,
+    series: &[BandSeries],
+    axis_labels: (&str, &str),
+) -> Result<(), CliError> {
+    let (x0, x1) = range(series.iter().flat_map(|s| s.points.iter().map(|p| p.0)), 0.0);
+    let (y0, y1) = range(
+        series
+            .iter()
+            .flat_map(|s| s.points.iter().flat_map(|p| [p.1, p.2, p.3])),
+        0.05,
+    );
+    draw(path, |root| {
+        let mut ch = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(e)?;
+        ch.configure_mesh()
+            .x_desc(axis_labels.0)
+            .y_desc(axis_labels.1)
+            .draw()
+            .map_err(e)?;
+        for s in series {
+            let c = RGBColor(s.colour[0], s.colour[1], s.colour[2]);
+            if s.points.iter().any(|p| p.2 < p.3) {
+                let poly: Vec<(f64, f64)> = s
+                    .points
+                    .iter()
+                    .map(|p| (p.0, p.3))
+                    .chain(s.points.iter().rev().map(|p| (p.0, p.2)))
+                    .collect();
+                ch.draw_series(std::iter::once(Polygon::new(poly, c.mix(0.2).filled())))
+                    .map_err(e)?;
+            }
+            let pts: Vec<(f64, f64)> = s.points.iter().map(|p| (p.0, p.1)).collect();
+            let style = c.stroke_width(2);
+            let legend = move |(x, y): (i32, i32)| PathElement::new([(x, y), (x + 20, y)], style);
+            if s.dashed {
+                // dashes: every other segment of a 4× refined polyline
+                let mut segs = Vec::new();
+                for w in pts.windows(2) {
+                    for k in 0..4 {
+                        if k % 2 == 0 {
+                            let t0 = k as f64 / 4.0;
+                            let t1 = (k + 1) as f64 / 4.0;
+                            let p = |t: f64| {
+                                (w[0].0 + t * (w[1].0 - w[0].0), w[0].1 + t * (w[1].1 - w[0].1))
+                            };
+                            segs.push(PathElement::new([p(t0), p(t1)], style));
+                        }
+                    }
+                }
+                ch.draw_series(segs)
+                    .map_err(e)?
+                    .label(s.name.clone())
+                    .legend(legend);
+            } else {
+                ch.draw_series(LineSeries::new(pts, style))
+                    .map_err(e)?
+                    .label(s.name.clone())
+                    .legend(legend);
+            }
+        }
+        ch.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
+        Ok(())
+    })
+}

@@ -123,3 +123,67 @@ pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
         )),
     }
 }
+
+/// Where the patches of a chart are in the recorded frames: a label image of the sensor's
+/// size in which pixel value k ≥ 1 marks patch k − 1 (row-major chart order) and 0 marks no
+/// patch (camsim's `labels` extension of `patches` targets; docs/calibrate.md).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PatchLabels {
+    /// rows
+    pub rows: usize,
+    /// columns
+    pub cols: usize,
+    /// label per pixel, row-major
+    pub label: Vec<u16>,
+}
+
+/// Read a patch label image (8- or 16-bit greyscale PNG or TIFF) for a `rows × cols` sensor
+/// and a chart of `n_patches` patches.
+pub fn read_patch_labels(
+    path: &Path,
+    rows: usize,
+    cols: usize,
+    n_patches: usize,
+) -> Result<PatchLabels, CliError> {
+    let img = image::ImageReader::open(path)
+        .map_err(|e| CliError::input(path, format!("cannot open label image: {e}")))?
+        .with_guessed_format()
+        .map_err(|e| CliError::input(path, format!("cannot read label image: {e}")))?
+        .decode()
+        .map_err(|e| CliError::input(path, format!("not a readable label image: {e}")))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let label: Vec<u16> = match img {
+        image::DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(u16::from).collect(),
+        image::DynamicImage::ImageLuma16(b) => b.into_raw(),
+        other => {
+            return Err(CliError::input(
+                path,
+                format!(
+                    "a label image must be single-channel greyscale (pixel value = patch number), found {:?}",
+                    other.color()
+                ),
+            ))
+        }
+    };
+    if (h, w) != (rows, cols) {
+        return Err(CliError::input(
+            path,
+            format!("label image is {h}×{w} (rows×cols) but the sensor is {rows}×{cols}"),
+        ));
+    }
+    if let Some(i) = label.iter().position(|&v| v as usize > n_patches) {
+        return Err(CliError::input(
+            path,
+            format!(
+                "pixel (row {}, col {}) has label {} but the chart has {n_patches} patches (labels 1–{n_patches}, 0 = none)",
+                i / cols,
+                i % cols,
+                label[i]
+            ),
+        ));
+    }
+    if label.iter().all(|&v| v == 0) {
+        return Err(CliError::input(path, "label image marks no patch (all 0)"));
+    }
+    Ok(PatchLabels { rows, cols, label })
+}

@@ -41,17 +41,14 @@ pub struct SimulateSummary {
 }
 
 /// Wavelength grid for wavelength-dependent optics: the configured one, or 10 nm steps over
-/// the channels' spectral support clipped to 350–1100 nm (400–700 nm if unbounded).
+/// the channels' spectral support (effective QE: the qe_shift and ir_leakage blocks move and
+/// extend it) clipped to 350–1100 nm (400–700 nm if unbounded).
 pub fn wavelength_grid(set: &CaptureSet) -> WavelengthGrid {
     if let Some(g) = &set.simulation.wavelength_nm {
         return WavelengthGrid::regular(g.start_nm, g.stop_nm, g.step_nm).expect("validated");
     }
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for q in &set.camera.sensor.channel_qe {
-        let (a, b) = q.support_nm();
-        lo = lo.min(a);
-        hi = hi.max(b);
-    }
+    // The effective QE (qe_shift and ir_leakage blocks included) sets the range.
+    let (lo, hi) = set.camera.sensor.effective_qe_support_nm();
     if !lo.is_finite() || !hi.is_finite() {
         return WavelengthGrid::default_visible();
     }
@@ -103,6 +100,19 @@ pub fn sampling_for(
     };
     if let Some(d) = &optics.diffuser {
         margin += (2.0 * d.fwhm_um / p_um).ceil() as usize + 1;
+    }
+    // Effect blocks: the defocus blur's detail and reach, and the scene the distortion /
+    // lateral-colour warp samples beyond the blurred region (the target continues there).
+    let fx = &optics.effects;
+    let os = os.max(fx.oversample_hint(sensor.pixel_pitch_m));
+    if fx.defocus.is_some() || fx.has_warp() {
+        margin += fx.extra_margin_px(
+            sensor.pixel_pitch_m,
+            sensor.rows,
+            sensor.cols,
+            margin,
+            &grid.wavelength_nm,
+        );
     }
     (oversample.unwrap_or(os.clamp(1, 4)), margin)
 }
@@ -204,6 +214,12 @@ fn uniform_electron_rate(
     if !matches!(cam.optics.blur, Blur::None) || cam.optics.diffuser.is_some() {
         return Ok(None);
     }
+    // Effect blocks the fast path folds in: exposure_scale, fall-off and veiling glare
+    // (uniform target); not the warp or defocus.
+    let fx = &cam.optics.effects;
+    if fx.defocus.is_some() || fx.has_warp() {
+        return Ok(None);
+    }
     let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
     if (os, margin) != (1, 0) {
         return Ok(None);
@@ -217,17 +233,17 @@ fn uniform_electron_rate(
         ..full
     };
     let scene = scene_on_grid(set, shot, &g)?;
-    let irr = form_image(&cam.optics, &scene, grid)
+    // The axis sample without the glare block (added below from the mean over the sensor).
+    let mut axis_optics = cam.optics.clone();
+    axis_optics.effects.veiling_glare = None;
+    let irr = form_image(&axis_optics, &scene, grid)
         .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
     let img = &irr.irradiance;
     // Step 2 on the axis: K_c = p² · FF · Σ_k (∫ QE_c B_k dλ) a_k.
     let area = s.pixel_pitch_m * s.pixel_pitch_m * s.fill_factor;
-    let k_c: Vec<f64> = s
-        .channel_qe
-        .iter()
-        .map(|qe| {
-            area * img
-                .term_integrals(qe)
+    let k_c: Vec<f64> = (0..s.channel_qe.len())
+        .map(|c| {
+            area * camsim_sensor::channel_term_integrals(s, img, c)
                 .iter()
                 .zip(&img.planes)
                 .map(|(w, p)| w * p[0] as f64)
@@ -251,6 +267,37 @@ fn uniform_electron_rate(
         .map(|t| (0..s.cols).map(|c| k_c[t[c % t.len()]]).collect())
         .collect();
     let mut out = vec![0f32; s.rows * s.cols];
+    if fx.falloff.is_some() || fx.veiling_glare.is_some() {
+        // Effect blocks: m(x) = R(x)·F(h) at the pixel centres, plus the veiling glare
+        // f · mean over the sensor of m (the irradiance is E_axis(λ)·m(x): one spectrum).
+        let hd = fx.half_diagonal_m();
+        let factor = |r: usize, c: usize| -> f64 {
+            let (y, x) = ((r as f64 - yc) * dx, (c as f64 - xc) * dx);
+            let ri = if cos4 {
+                let c2 = f2 / (f2 + x * x + y * y);
+                c2 * c2
+            } else {
+                1.0
+            };
+            ri * fx.falloff.as_ref().map_or(1.0, |f| f.factor(x.hypot(y) / hd))
+        };
+        let glare = match fx.veiling_glare {
+            Some(g) if g > 0.0 => {
+                let sum: f64 = (0..s.rows)
+                    .into_par_iter()
+                    .map(|r| (0..s.cols).map(|c| factor(r, c)).sum::<f64>())
+                    .sum();
+                g * sum / (s.rows * s.cols) as f64
+            }
+            _ => 0.0,
+        };
+        out.par_chunks_mut(s.cols).enumerate().for_each(|(r, row)| {
+            let k = &k_rows[r % k_rows.len()];
+            for (c, (o, &k)) in row.iter_mut().zip(k).enumerate() {
+                *o = (k * (factor(r, c) + glare)) as f32;
+            }
+        });
+    } else {
     out.par_chunks_mut(s.cols).enumerate().for_each(|(r, row)| {
         let k = &k_rows[r % k_rows.len()];
         if cos4 {
@@ -265,11 +312,17 @@ fn uniform_electron_rate(
             }
         }
     });
-    Ok(Some(ElectronRate {
+    }
+    let mut rate = ElectronRate {
         rows: s.rows,
         cols: s.cols,
         electrons_per_s: out,
-    }))
+    };
+    // Crosstalk block (after pixel integration, as electron_rate does).
+    if let Some(ct) = &s.effects.crosstalk {
+        camsim_sensor::apply_crosstalk(ct, &mut rate);
+    }
+    Ok(Some(rate))
 }
 
 /// Run the simulation and write its outputs; on any error nothing is left in the output folder.

@@ -20,6 +20,9 @@ pub struct ParsedTarget {
     pub mean_luminance_cd_m2: Option<f64>,
     /// The illuminant (photons) when the target is reflectance × illuminant.
     pub illuminant: Option<Spectrum>,
+    /// `patches` extension `labels`: where each patch is in the recorded frames (used by
+    /// `camsim calibrate`; simulation keeps the spec's chart geometry).
+    pub patch_labels: Option<std::sync::Arc<crate::raw_input::PatchLabels>>,
 }
 
 const KINDS: &str = "dark, uniform, patches, slanted_edge, image, macbeth, ramp, frequency_sweep, point_array, grid_lines";
@@ -122,6 +125,7 @@ pub fn target_from_value(
     };
     let pitch = sensor.pixel_pitch_m;
     let mut illuminant = None;
+    let mut patch_labels = None;
     let target = match kind {
         "dark" => {
             o.allow(&[])?;
@@ -134,7 +138,14 @@ pub fn target_from_value(
             }
         }
         "patches" => {
-            o.allow(&["rows", "cols", "patch_fraction", "background", "patches"])?;
+            o.allow(&[
+                "rows",
+                "cols",
+                "patch_fraction",
+                "background",
+                "patches",
+                "labels",
+            ])?;
             let (rows, cols) = (o.count("rows")?, o.count("cols")?);
             let pf = o.num("patch_fraction", Some(1.0))?;
             if !(pf > 0.0 && pf <= 1.0) {
@@ -162,6 +173,19 @@ pub fn target_from_value(
                     )
                 })
                 .collect::<Result<Vec<_>, _>>()?;
+            if let Some(v) = m.get("labels") {
+                let f = v
+                    .as_str()
+                    .ok_or(".labels: must be a path to a label image (PNG or TIFF)")?;
+                let l = crate::raw_input::read_patch_labels(
+                    &dir.join(f),
+                    sensor.rows,
+                    sensor.cols,
+                    rows * cols,
+                )
+                .map_err(|e| format!(".labels: {}", e.one_line()))?;
+                patch_labels = Some(std::sync::Arc::new(l));
+            }
             Target::Patches {
                 rows,
                 cols,
@@ -270,5 +294,6 @@ pub fn target_from_value(
         target,
         mean_luminance_cd_m2,
         illuminant,
+        patch_labels,
     })
 }

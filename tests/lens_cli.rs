@@ -70,6 +70,7 @@ fn check_schema(r: &Value, wavelengths: &[&str]) {
             "entrance_pupil_diameter_mm",
             "f_number",
             "fields",
+            "huygens_psf",
             "mtf_on_axis",
             "primary_wavelength_nm"
         ]
@@ -84,12 +85,40 @@ fn check_schema(r: &Value, wavelengths: &[&str]) {
                 "field_fraction",
                 "lateral_color_um",
                 "paraxial_image_height_mm",
-                "rms_spot_um"
+                "rms_spot_um",
+                "sagittal_focus_mm",
+                "tangential_focus_mm"
             ]
         );
         let mut want: Vec<String> = wavelengths.iter().map(|s| s.to_string()).collect();
         want.sort();
         assert_eq!(keys(&f["rms_spot_um"]), want);
+        assert_eq!(keys(&f["sagittal_focus_mm"]), want);
+        assert_eq!(keys(&f["tangential_focus_mm"]), want);
+    }
+    let fields = r["fields"].as_array().unwrap();
+    let hs = r["huygens_psf"].as_array().unwrap();
+    assert_eq!(hs.len(), fields.len(), "one Huygens PSF per field");
+    for (h, f) in hs.iter().zip(fields) {
+        assert_eq!(
+            keys(h),
+            [
+                "alias_free",
+                "centroid_offset_um",
+                "field_deg",
+                "field_fraction",
+                "image_plane_shift_mm",
+                "pupil_samples",
+                "rms_radius_um",
+                "sample_um",
+                "samples",
+                "strehl_ratio",
+                "wavelength_nm"
+            ]
+        );
+        assert_eq!(h["field_deg"], f["field_deg"]);
+        let st = num(&h["strehl_ratio"]);
+        assert!(st > 0.0 && st <= 1.0 + 1e-12, "{h}");
     }
     for p in r["mtf_on_axis"].as_array().unwrap() {
         assert_eq!(keys(p), ["lp_per_mm", "mtf"]);
@@ -347,12 +376,101 @@ fn lens_cli_field_model_round_trips() {
     // Last field = the lens's maximum field (20°): paraxial and real heights as in the
     // reference (real chief ray at the primary wavelength).
     let rd = &reference()["backends"]["rayoptics"]["distortion"][5];
-    assert!((m.field_angles_deg[2] - 20.0).abs() < 1e-9);
+    assert_eq!(m.tables.len(), 1);
+    assert_eq!(m.focus_distance_mm, None);
+    let t = &m.tables[0];
+    assert_eq!(t.object_distance_mm, None);
+    assert!((t.field_angles_deg[2] - 20.0).abs() < 1e-9);
     assert!((m.paraxial_height_mm[2] - num(&rd["paraxial_image_height_mm"])).abs() < 1e-4);
-    assert!((m.real_height_mm[2][1].abs() - num(&rd["real_chief_height_mm"])).abs() < 1e-4);
-    for p in m.psf.iter().flatten() {
+    assert!((t.real_height_mm[2][1].abs() - num(&rd["real_chief_height_mm"])).abs() < 1e-4);
+    for p in t.psf.iter().flatten() {
         assert!((p.iter().sum::<f64>() - 1.0).abs() < 1e-9);
     }
+}
+
+#[test]
+fn lens_cli_field_model_with_object_distances() {
+    // Focused at 2 m, tabulated at ∞, 2 m and 1 m (sorted by vergence on output): the object
+    // at the focus distance is in focus, the others are defocused by the Gauss-equation
+    // image shift Δ ≈ f²|1/d − 1/d_f|, i.e. a geometric blur of diameter ≈ Δ/N_w.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("fm.json");
+    let (code, _, err) = run(&[
+        "lens",
+        "field-model",
+        dgauss().to_str().unwrap(),
+        "--out",
+        file.to_str().unwrap(),
+        "--fields",
+        "2",
+        "--wavelengths-nm",
+        "587.6",
+        "--object-distances-mm",
+        "1000,inf,2000",
+        "--focus-distance-mm",
+        "2000",
+        "--geometric",
+        "--psf-n",
+        "61",
+        "--psf-pitch-um",
+        "16",
+    ]);
+    assert_eq!(code, 0, "stderr: {err}");
+    let m = camsim_lens::FieldModel::load(&file).unwrap();
+    assert_eq!(m.focus_distance_mm, Some(2000.0));
+    assert_eq!(
+        m.object_distances_mm(),
+        vec![None, Some(2000.0), Some(1000.0)]
+    );
+    // RMS radius of the on-axis PSF of each distance (µm).
+    let rms = |t: &camsim_lens::FieldTable| {
+        let p = &t.psf[0][0];
+        let n = t.psf_n;
+        let c = (n / 2) as f64;
+        let r2: f64 = p
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v * (((k % n) as f64 - c).powi(2) + ((k / n) as f64 - c).powi(2)))
+            .sum();
+        r2.sqrt() * t.psf_pitch_um
+    };
+    let (r_inf, r_2m, r_1m) = (rms(&m.tables[0]), rms(&m.tables[1]), rms(&m.tables[2]));
+    assert!(r_2m < 0.3 * r_inf && r_2m < 0.3 * r_1m, "{r_inf} {r_2m} {r_1m}");
+    // The defocused PSFs are those of the lens focused at 2 m imaging the other distances:
+    // the RMS radius of the same rays traced directly (64² pupil grid, clipped at the
+    // semi-diameters, as --geometric bins them; binning adds pitch²/6 to the variance).
+    let lens = camsim_lens::LensPrescription::from_json_file(
+        dgauss(),
+        &camsim_lens::GlassCatalog::bundled(),
+    )
+    .unwrap();
+    let at2m = lens.focus_at(Some(2000.0)).unwrap();
+    for (r, d) in [(r_inf, None), (r_2m, Some(2000.0)), (r_1m, Some(1000.0))] {
+        let spot = at2m
+            .with_object_distance(d)
+            .spot_diagram(0.0, 587.6, 64, 0.0, camsim_lens::Clipping::SemiDiameters)
+            .unwrap();
+        let want_um = (1e6 * spot.rms_radius_mm.powi(2) + 16.0 * 16.0 / 6.0).sqrt();
+        assert!((r / want_um - 1.0).abs() < 0.02, "{d:?}: {r} vs {want_um} µm");
+    }
+    // And roughly the Gauss-equation blur: image shift Δ = f²|1/d − 1/2000| = 1.25 mm for both,
+    // a disc of radius Δ/(2N) ≈ 0.31 mm at f/2 (RMS radius/√2 ≈ 0.22 mm; spherical aberration
+    // of the f/2 lens adds to it).
+    for r in [r_inf, r_1m] {
+        assert!(r > 200.0 && r < 300.0, "{r}");
+    }
+    // Bad distance: one error line naming the flag.
+    let (code, _, err) = run(&[
+        "lens",
+        "field-model",
+        dgauss().to_str().unwrap(),
+        "--out",
+        file.to_str().unwrap(),
+        "--object-distances-mm",
+        "0",
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("--object-distances-mm") && err.trim().lines().count() == 1, "{err}");
 }
 
 #[test]

@@ -24,6 +24,7 @@
 
 mod dark;
 pub mod fit;
+pub mod mismatch;
 mod prnu;
 mod ptc;
 mod spectral;
@@ -38,6 +39,10 @@ pub use camsim_core::RawFrame;
 pub use prnu::PrnuChannel;
 pub use ptc::PtcPoint;
 pub use spectral::{ChannelQe, SpectralQe};
+pub use spectral::{
+    fit_spectral_efficiency, regularisation_weights, ObservationFit, SpectralFit,
+    SpectralObservation,
+};
 
 /// What a calibration shot looked at.
 #[derive(Debug, Clone, PartialEq)]

@@ -453,6 +453,26 @@ impl LensPrescription {
         let mut psf_raw: Vec<f64> = field.iter().map(|c| c.norm_sqr()).collect();
         let total: f64 = psf_raw.iter().sum();
         psf_raw.iter_mut().for_each(|v| *v /= total);
+        // fftshift the PSF so the zero-offset sample sits at (m/2, m/2).
+        let mut values = vec![0.0; m * m];
+        for iy in 0..m {
+            for ix in 0..m {
+                values[((iy + m / 2) % m) * m + (ix + m / 2) % m] = psf_raw[iy * m + ix];
+            }
+        }
+        let sample_mm = wavelength_nm * 1e-6 * fo.working_f_number * (n as f64 - 1.0) / m as f64;
+        if freqs_cyc_per_mm.is_empty() {
+            // No MTF asked for: skip the OTF transform.
+            return Ok(WaveOptics {
+                opd,
+                psf: Psf {
+                    n: m,
+                    sample_mm,
+                    values,
+                },
+                mtf: Vec::new(),
+            });
+        }
         // OTF from the (unshifted) PSF.
         let mut otf: Vec<Complex64> = psf_raw.iter().map(|&v| Complex64::new(v, 0.0)).collect();
         fft2(&mut planner, &mut otf, m);
@@ -478,14 +498,6 @@ impl LensPrescription {
                 sagittal: at(&sag, f),
             })
             .collect();
-        // fftshift the PSF so the zero-offset sample sits at (m/2, m/2).
-        let mut values = vec![0.0; m * m];
-        for iy in 0..m {
-            for ix in 0..m {
-                values[((iy + m / 2) % m) * m + (ix + m / 2) % m] = psf_raw[iy * m + ix];
-            }
-        }
-        let sample_mm = wavelength_nm * 1e-6 * fo.working_f_number * (n as f64 - 1.0) / m as f64;
         Ok(WaveOptics {
             opd,
             psf: Psf {

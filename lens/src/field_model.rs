@@ -1,15 +1,22 @@
 //! Field model: the ISET ray-trace lens representation (the "field model" of §2.B.3 of the
 //! camera-simulation paper): point-spread functions, distortion and relative illumination
-//! tabulated over image height × wavelength for a lens focused at its paraxial focus, with
-//! interpolation between tabulated heights and wavelengths and rotation of a PSF to any field
-//! azimuth.
+//! tabulated over image height × wavelength × **object distance** for a lens at one focus
+//! setting, with interpolation between tabulated heights, wavelengths and distances and
+//! rotation of a PSF to any field azimuth.
 //!
 //! ## Conventions
-//! * Fields are tabulated at object-space angles θ_k whose **paraxial** image heights
-//!   h_k = |y_parax(θ_k)| are evenly spaced from 0 to the maximum field; look-ups are by
+//! * The lens is at one focus setting: its image plane is the paraxial image (primary
+//!   wavelength) of an object at the **focus distance** (default: the prescription's own
+//!   object distance). Every tabulated object distance is imaged on that same plane, so objects
+//!   away from the focus distance are defocused.
+//! * Image heights: one grid h_k of **paraxial** chief-ray heights on the image plane, evenly
+//!   spaced from 0 to the maximum, shared by every distance; at each distance the object-space
+//!   field angle θ_k of h_k is stored (the paraxial height is linear in tan θ). Look-ups are by
 //!   paraxial image height in mm (the ideal, undistorted position of the image point).
+//! * Field angles of a finite object are measured at the paraxial entrance pupil: the object
+//!   point of θ lies at height (d + z_ep)·tan θ (see `trace::FieldAim`).
 //! * Every PSF is computed for a field point on **+y** (the meridional plane is y–z) and stored
-//!   on an `psf_n` × `psf_n` grid (odd `psf_n`) of pitch `psf_pitch_um` µm, row-major
+//!   on a `psf_n` × `psf_n` grid (odd `psf_n`) of pitch `psf_pitch_um` µm, row-major
 //!   `[iy·n + ix]`, sample (n/2, n/2) at the real chief ray's image point, x = (ix − n/2)·pitch,
 //!   y = (iy − n/2)·pitch, values summing to 1.
 //! * A field point at azimuth φ (measured from +x towards +y, so +y is φ = 90°) has the +y
@@ -18,30 +25,48 @@
 //!   aimed at the stop centre at that wavelength), `paraxial_height_mm[field]` the paraxial
 //!   one at the primary wavelength; distortion % = 100 (real − paraxial)/paraxial.
 //! * Relative illumination: [`LensPrescription::relative_illumination`] (vignetting × cos⁴ of
-//!   the image-space chief-ray angle) at the primary wavelength.
+//!   the image-space chief-ray angle) at the primary wavelength, per distance.
 //! * Wave PSFs come from [`LensPrescription::wave_optics`] (FFT of the pupil function) and are
 //!   point-sampled bilinearly onto the common grid, then renormalised; geometric PSFs bin the
 //!   rays of a square pupil grid (clipped at the semi-diameters) about the chief ray.
+//! * Interpolation: bilinear in paraxial height × wavelength within a distance, and linear in
+//!   the object-space **vergence** 1/d (0 for an object at infinity) between the two tabulated
+//!   distances that bracket the one asked for; defocus, magnification and the image-space
+//!   quantities vary smoothly in 1/d (the Gauss equation is linear in it). Outside the
+//!   tabulated range the nearest distance is used.
 //!
-//! ## File format (`FieldModel::save` / `load`)
-//! A JSON object whose keys carry their units:
+//! ## File format (`FieldModel::save` / `load`), version 2
+//! A JSON object whose keys carry their units; `null` distances are infinity:
 //! ```json
-//! {"format": "camsim-lens field model", "version": 1,
+//! {"format": "camsim-lens field model", "version": 2,
 //!  "lens_name": "...", "psf_kind": "wave" | "geometric",
-//!  "object_distance_mm": null, "image_distance_mm": 41.6, "efl_mm": 49.4, "f_number": 4.5,
+//!  "focus_distance_mm": null, "image_distance_mm": 41.6, "efl_mm": 49.4, "f_number": 4.5,
 //!  "primary_nm": 587.56, "wavelengths_nm": [486.1, 587.6, 656.3],
-//!  "field_angles_deg": [0, 8.1, 16.0], "paraxial_height_mm": [0, 7.0, 14.1],
-//!  "real_height_mm": [[0, 0, 0], [7.01, 7.02, 7.03], ...],      // [field][wavelength]
-//!  "relative_illumination": [1.0, 0.93, 0.78],                  // [field]
-//!  "psf_n": 33, "psf_pitch_um": 1.0,
-//!  "psf": [[[...n² values...], ...], ...]}                      // [field][wavelength]
+//!  "paraxial_height_mm": [0, 7.0, 14.1], "psf_n": 33, "psf_pitch_um": 1.0,
+//!  "distances": [                                   // increasing vergence 1/d (∞ first)
+//!    {"object_distance_mm": null, "working_f_number": 4.5, "magnification": 0.0,
+//!     "field_angles_deg": [0, 8.1, 16.0],                          // [field]
+//!     "real_height_mm": [[0, 0, 0], [7.01, 7.02, 7.03], ...],     // [field][wavelength]
+//!     "relative_illumination": [1.0, 0.93, 0.78],                 // [field]
+//!     "psf": [[[...n² values...], ...], ...]},                    // [field][wavelength]
+//!    {"object_distance_mm": 2000.0, ...}]}
 //! ```
+//! Version 1 files (one distance: `object_distance_mm`, `field_angles_deg`,
+//! `real_height_mm`, `relative_illumination` and `psf` at the top level, the lens focused on
+//! that distance) are still read, as a model with that single distance.
 use crate::analysis::pupil_grid;
 use crate::error::LensError;
 use crate::prescription::LensPrescription;
 use crate::trace::Clipping;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use serde_json::Value;
 use std::path::Path;
+
+/// The `format` string of field-model files.
+pub const FORMAT: &str = "camsim-lens field model";
+/// The version written by [`FieldModel::save`].
+pub const VERSION: u32 = 2;
 
 /// Which PSF the model holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -53,12 +78,24 @@ pub enum PsfKind {
     Geometric,
 }
 
+/// Where the lens is focused when a [`FieldModel`] is built.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Focus {
+    /// On the prescription's own object distance (its `object_distance_mm`).
+    #[default]
+    Prescription,
+    /// On an object at this distance from the first vertex (mm; `None` = infinity).
+    At(Option<f64>),
+}
+
 /// How to build a [`FieldModel`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FieldModelOptions {
     /// Number of tabulated field heights (≥ 2), evenly spaced in paraxial image height.
     pub n_fields: usize,
-    /// Maximum field angle (degrees); default the largest of the lens's `fields_deg`.
+    /// Maximum field angle (degrees) **of the first tabulated distance**; default the largest
+    /// of the lens's `fields_deg`. It fixes the maximum paraxial image height shared by all
+    /// distances.
     pub max_field_deg: Option<f64>,
     /// Wavelengths (nm); default the lens's.
     pub wavelengths_nm: Option<Vec<f64>>,
@@ -74,6 +111,11 @@ pub struct FieldModelOptions {
     pub pad: usize,
     /// Pupil grid per side for relative illumination.
     pub ri_grid_n: usize,
+    /// Focus setting (image plane).
+    pub focus: Focus,
+    /// Object distances to tabulate (mm from the first vertex, `None` = infinity); empty = the
+    /// focus distance only.
+    pub object_distances_mm: Vec<Option<f64>>,
 }
 
 impl Default for FieldModelOptions {
@@ -88,37 +130,28 @@ impl Default for FieldModelOptions {
             pupil_n: 64,
             pad: 4,
             ri_grid_n: 64,
+            focus: Focus::Prescription,
+            object_distances_mm: Vec::new(),
         }
     }
 }
 
-/// The tabulated field model (see the module docs for conventions and the file format).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FieldModel {
-    /// Always "camsim-lens field model".
-    pub format: String,
-    /// Format version (1).
-    pub version: u32,
-    /// Lens name.
-    pub lens_name: String,
-    /// PSF kind.
-    pub psf_kind: PsfKind,
-    /// Object distance (mm from the first vertex), `null` = infinity.
+/// The tables of one object distance, with the grids they are tabulated on (see the module
+/// docs). This is what image formation looks PSFs, distortion and illumination up in.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldTable {
+    /// Object distance (mm from the first vertex), `None` = infinity.
     pub object_distance_mm: Option<f64>,
-    /// Last vertex → image plane (mm), the paraxial focus at the primary wavelength.
-    pub image_distance_mm: f64,
-    /// EFL at the primary wavelength (mm).
-    pub efl_mm: f64,
-    /// Infinite-conjugate F-number.
-    pub f_number: f64,
-    /// Primary wavelength (nm).
-    pub primary_nm: f64,
+    /// Working F-number at this conjugate (paraxial, primary wavelength).
+    pub working_f_number: f64,
+    /// Paraxial magnification (0 for an object at infinity).
+    pub magnification: f64,
     /// Tabulated wavelengths (nm, increasing).
     pub wavelengths_nm: Vec<f64>,
+    /// Paraxial image height of each tabulated field (mm, increasing from 0).
+    pub paraxial_height_mm: Vec<f64>,
     /// Object-space field angle of each tabulated field (degrees).
     pub field_angles_deg: Vec<f64>,
-    /// Paraxial image height of each tabulated field at the primary wavelength (mm, increasing).
-    pub paraxial_height_mm: Vec<f64>,
     /// Real chief-ray image height, `[field][wavelength]` (mm).
     pub real_height_mm: Vec<Vec<f64>>,
     /// Relative illumination per field (1 on axis).
@@ -129,6 +162,86 @@ pub struct FieldModel {
     pub psf_pitch_um: f64,
     /// PSFs `[field][wavelength][iy·n + ix]`, field on +y, centred on the chief ray, sum 1.
     pub psf: Vec<Vec<Vec<f64>>>,
+}
+
+/// The tabulated field model (see the module docs for conventions and the file format).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldModel {
+    /// Lens name.
+    pub lens_name: String,
+    /// PSF kind.
+    pub psf_kind: PsfKind,
+    /// Object distance the lens is focused on (mm; `None` = infinity).
+    pub focus_distance_mm: Option<f64>,
+    /// Last vertex → image plane (mm): the paraxial image of the focus distance.
+    pub image_distance_mm: f64,
+    /// EFL at the primary wavelength (mm).
+    pub efl_mm: f64,
+    /// Infinite-conjugate F-number.
+    pub f_number: f64,
+    /// Primary wavelength (nm).
+    pub primary_nm: f64,
+    /// Tabulated wavelengths (nm, increasing).
+    pub wavelengths_nm: Vec<f64>,
+    /// Paraxial image heights of the tabulated fields (mm, increasing from 0).
+    pub paraxial_height_mm: Vec<f64>,
+    /// PSF samples per side (odd).
+    pub psf_n: usize,
+    /// PSF sample pitch (µm).
+    pub psf_pitch_um: f64,
+    /// One table per object distance, by increasing vergence 1/d (infinity first).
+    pub tables: Vec<FieldTable>,
+}
+
+/// One distance of a version-2 file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct DistanceFile {
+    object_distance_mm: Option<f64>,
+    working_f_number: f64,
+    magnification: f64,
+    field_angles_deg: Vec<f64>,
+    real_height_mm: Vec<Vec<f64>>,
+    relative_illumination: Vec<f64>,
+    psf: Vec<Vec<Vec<f64>>>,
+}
+
+/// A version-2 file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct FileV2 {
+    format: String,
+    version: u32,
+    lens_name: String,
+    psf_kind: PsfKind,
+    focus_distance_mm: Option<f64>,
+    image_distance_mm: f64,
+    efl_mm: f64,
+    f_number: f64,
+    primary_nm: f64,
+    wavelengths_nm: Vec<f64>,
+    paraxial_height_mm: Vec<f64>,
+    psf_n: usize,
+    psf_pitch_um: f64,
+    distances: Vec<DistanceFile>,
+}
+
+/// A version-1 file (one distance, the lens focused on it).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+struct FileV1 {
+    lens_name: String,
+    psf_kind: PsfKind,
+    object_distance_mm: Option<f64>,
+    image_distance_mm: f64,
+    efl_mm: f64,
+    f_number: f64,
+    primary_nm: f64,
+    wavelengths_nm: Vec<f64>,
+    field_angles_deg: Vec<f64>,
+    paraxial_height_mm: Vec<f64>,
+    real_height_mm: Vec<Vec<f64>>,
+    relative_illumination: Vec<f64>,
+    psf_n: usize,
+    psf_pitch_um: f64,
+    psf: Vec<Vec<Vec<f64>>>,
 }
 
 /// Bilinear sample of an n×n row-major image at fractional index (fx, fy); 0 outside.
@@ -172,6 +285,14 @@ fn bracket(xs: &[f64], x: f64) -> (usize, f64) {
     (i, (x - xs[i]) / (xs[i + 1] - xs[i]))
 }
 
+/// Object-space vergence 1/d (mm⁻¹) of an object distance (0 at infinity).
+pub fn vergence_per_mm(object_distance_mm: Option<f64>) -> f64 {
+    match object_distance_mm {
+        None => 0.0,
+        Some(d) => 1.0 / d,
+    }
+}
+
 /// Rotate an n×n PSF (centre n/2) by `angle_deg` counter-clockwise (+x towards +y) about its
 /// centre, by bilinear resampling; renormalised to sum 1.
 pub fn rotate_psf(psf: &[f64], n: usize, angle_deg: f64) -> Vec<f64> {
@@ -190,9 +311,72 @@ pub fn rotate_psf(psf: &[f64], n: usize, angle_deg: f64) -> Vec<f64> {
     out
 }
 
+/// One (field, wavelength) entry: chief-ray height and PSF.
+struct Entry {
+    real_height_mm: f64,
+    psf: Vec<f64>,
+}
+
+/// The PSF and chief-ray height of field `th` at `w` for `lens` (own object distance and image
+/// plane) on the common grid.
+fn entry(
+    lens: &LensPrescription,
+    th: f64,
+    w: f64,
+    opts: &FieldModelOptions,
+    psf_n: usize,
+) -> Result<Entry, LensError> {
+    let pitch_mm = opts.psf_pitch_um * 1e-3;
+    let c0 = (psf_n / 2) as f64;
+    let fo_w = lens.first_order(w)?;
+    let aim = lens.aim_field(th, w, &fo_w)?;
+    let chief = lens
+        .trace(&aim.ray(0.0, 0.0), w, Clipping::None)
+        .ok_or_else(|| LensError::Aiming {
+            field_deg: th,
+            msg: format!("chief ray lost at {w} nm"),
+        })?;
+    let mut img = vec![0.0; psf_n * psf_n];
+    match opts.kind {
+        PsfKind::Wave => {
+            let wo = lens.wave_optics(th, w, opts.pupil_n, opts.pad, &[])?;
+            let m = wo.psf.n;
+            let cm = (m / 2) as f64;
+            // The FFT PSF is point-reflected with respect to the image plane (its energy
+            // centroid sits on the opposite side of the chief ray from the traced spot
+            // centroid); sample it at (−x, −y) so wave and geometric PSFs share the
+            // image-plane orientation.
+            for iy in 0..psf_n {
+                for ix in 0..psf_n {
+                    let x = cm - (ix as f64 - c0) * pitch_mm / wo.psf.sample_mm;
+                    let y = cm - (iy as f64 - c0) * pitch_mm / wo.psf.sample_mm;
+                    img[iy * psf_n + ix] = bilinear(&wo.psf.values, m, x, y);
+                }
+            }
+        }
+        PsfKind::Geometric => {
+            for p in pupil_grid(opts.pupil_n) {
+                if let Some(r) = lens.trace(&aim.ray(p[0], p[1]), w, Clipping::SemiDiameters) {
+                    let fx = ((r.image_mm[0] - chief.image_mm[0]) / pitch_mm + c0 + 0.5).floor();
+                    let fy = ((r.image_mm[1] - chief.image_mm[1]) / pitch_mm + c0 + 0.5).floor();
+                    if fx >= 0.0 && fy >= 0.0 && (fx as usize) < psf_n && (fy as usize) < psf_n {
+                        img[fy as usize * psf_n + fx as usize] += 1.0;
+                    }
+                }
+            }
+        }
+    }
+    normalise(&mut img);
+    Ok(Entry {
+        real_height_mm: chief.image_mm[1],
+        psf: img,
+    })
+}
+
 impl FieldModel {
-    /// Build the field model of `lens` focused at its paraxial focus (primary wavelength) for
-    /// its own object distance.
+    /// Build the field model of `lens` at the focus and object distances of `opts` (see the
+    /// module docs). Entries are computed in parallel; the result does not depend on the
+    /// thread count.
     pub fn compute(lens: &LensPrescription, opts: &FieldModelOptions) -> Result<Self, LensError> {
         let bad = |m: String| LensError::Prescription(format!("field model: {m}"));
         if opts.n_fields < 2 {
@@ -204,170 +388,368 @@ impl FieldModel {
             ));
         }
         let psf_n = opts.psf_n | 1;
-        let lens = lens.focused(lens.primary_nm)?;
-        let fo = lens.first_order(lens.primary_nm)?;
+        let focus_distance_mm = match opts.focus {
+            Focus::Prescription => lens.object_distance_mm,
+            Focus::At(d) => d,
+        };
+        for d in std::iter::once(&focus_distance_mm).chain(&opts.object_distances_mm) {
+            if let Some(d) = d {
+                if !(d.is_finite() && *d > 0.0) {
+                    return Err(bad(format!(
+                        "object distance {d} mm must be > 0 (None = infinity)"
+                    )));
+                }
+            }
+        }
+        let focused = lens.focus_at(focus_distance_mm)?;
+        let image_distance_mm = focused.surfaces.last().unwrap().thickness_mm;
+        if !image_distance_mm.is_finite() {
+            return Err(bad("the focus distance has no real paraxial image".into()));
+        }
+        let fo = focused.first_order(lens.primary_nm)?;
         let mut wls = opts
             .wavelengths_nm
             .clone()
             .unwrap_or_else(|| lens.wavelengths_nm.clone());
         wls.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        let mut distances = if opts.object_distances_mm.is_empty() {
+            vec![focus_distance_mm]
+        } else {
+            opts.object_distances_mm.clone()
+        };
+        distances.sort_by(|a, b| {
+            vergence_per_mm(*a)
+                .partial_cmp(&vergence_per_mm(*b))
+                .unwrap()
+        });
+        distances.dedup();
+        let lenses: Vec<LensPrescription> = distances
+            .iter()
+            .map(|d| focused.with_object_distance(*d))
+            .collect();
         let max_deg = opts
             .max_field_deg
             .unwrap_or_else(|| lens.fields_deg.iter().cloned().fold(0.0, f64::max));
         if !(max_deg > 0.0) {
             return Err(bad(format!("maximum field {max_deg}° must be > 0")));
         }
-        // Paraxial height is linear in tan θ.
-        let hmax = lens
-            .paraxial_chief_height_mm(max_deg, lens.primary_nm)?
-            .abs();
-        let per_tan = hmax / max_deg.to_radians().tan();
+        // Paraxial height is linear in tan θ at every distance.
+        let per_tan: Vec<f64> = lenses
+            .iter()
+            .map(|l| {
+                l.paraxial_chief_height_mm(1.0, lens.primary_nm)
+                    .map(|h| (h / 1f64.to_radians().tan()).abs())
+            })
+            .collect::<Result<_, _>>()?;
+        let hmax = per_tan[0] * max_deg.to_radians().tan();
         let paraxial_height_mm: Vec<f64> = (0..opts.n_fields)
             .map(|k| hmax * k as f64 / (opts.n_fields - 1) as f64)
             .collect();
-        let field_angles_deg: Vec<f64> = paraxial_height_mm
+        let angles: Vec<Vec<f64>> = per_tan
             .iter()
-            .map(|h| (h / per_tan).atan().to_degrees())
+            .map(|pt| {
+                paraxial_height_mm
+                    .iter()
+                    .map(|h| (h / pt).atan().to_degrees())
+                    .collect()
+            })
             .collect();
-        let pitch_mm = opts.psf_pitch_um * 1e-3;
-        let c0 = (psf_n / 2) as f64;
-        let mut real_height_mm = Vec::new();
-        let mut relative_illumination = Vec::new();
-        let mut psf = Vec::new();
-        for &th in &field_angles_deg {
-            relative_illumination.push(
-                lens.relative_illumination(th, opts.ri_grid_n)?
-                    .relative_illumination,
-            );
-            let mut heights = Vec::new();
-            let mut per_wl = Vec::new();
-            for &w in &wls {
-                let fo_w = lens.first_order(w)?;
-                let aim = lens.aim_field(th, w, &fo_w)?;
-                let chief = lens
-                    .trace(&aim.ray(0.0, 0.0), w, Clipping::None)
-                    .ok_or_else(|| LensError::Aiming {
-                        field_deg: th,
-                        msg: format!("chief ray lost at {w} nm"),
-                    })?;
-                heights.push(chief.image_mm[1]);
-                let mut img = vec![0.0; psf_n * psf_n];
-                match opts.kind {
-                    PsfKind::Wave => {
-                        let wo = lens.wave_optics(th, w, opts.pupil_n, opts.pad, &[])?;
-                        let m = wo.psf.n;
-                        let cm = (m / 2) as f64;
-                        // The FFT PSF is point-reflected with respect to the image plane (its
-                        // energy centroid sits on the opposite side of the chief ray from the
-                        // traced spot centroid); sample it at (−x, −y) so wave and geometric
-                        // PSFs share the image-plane orientation.
-                        for iy in 0..psf_n {
-                            for ix in 0..psf_n {
-                                let x = cm - (ix as f64 - c0) * pitch_mm / wo.psf.sample_mm;
-                                let y = cm - (iy as f64 - c0) * pitch_mm / wo.psf.sample_mm;
-                                img[iy * psf_n + ix] = bilinear(&wo.psf.values, m, x, y);
-                            }
-                        }
-                    }
-                    PsfKind::Geometric => {
-                        let grid = pupil_grid(opts.pupil_n);
-                        for p in &grid {
-                            if let Some(r) =
-                                lens.trace(&aim.ray(p[0], p[1]), w, Clipping::SemiDiameters)
-                            {
-                                let fx =
-                                    ((r.image_mm[0] - chief.image_mm[0]) / pitch_mm + c0 + 0.5)
-                                        .floor();
-                                let fy =
-                                    ((r.image_mm[1] - chief.image_mm[1]) / pitch_mm + c0 + 0.5)
-                                        .floor();
-                                if fx >= 0.0
-                                    && fy >= 0.0
-                                    && (fx as usize) < psf_n
-                                    && (fy as usize) < psf_n
-                                {
-                                    img[fy as usize * psf_n + fx as usize] += 1.0;
-                                }
-                            }
-                        }
-                    }
+        let (nd, nf, nw) = (distances.len(), opts.n_fields, wls.len());
+        // Every (distance, field, wavelength) entry in parallel.
+        let entries: Vec<Entry> = (0..nd * nf * nw)
+            .into_par_iter()
+            .map(|i| {
+                let (d, f, w) = (i / (nf * nw), (i / nw) % nf, i % nw);
+                entry(&lenses[d], angles[d][f], wls[w], opts, psf_n)
+            })
+            .collect::<Result<_, _>>()?;
+        let ri: Vec<f64> = (0..nd * nf)
+            .into_par_iter()
+            .map(|i| {
+                let (d, f) = (i / nf, i % nf);
+                lenses[d]
+                    .relative_illumination(angles[d][f], opts.ri_grid_n)
+                    .map(|r| r.relative_illumination)
+            })
+            .collect::<Result<_, _>>()?;
+        let mut entries = entries.into_iter();
+        let mut tables = Vec::with_capacity(nd);
+        for (d, l) in lenses.iter().enumerate() {
+            let fo_d = l.first_order(lens.primary_nm)?;
+            let mut real_height_mm = Vec::with_capacity(nf);
+            let mut psf = Vec::with_capacity(nf);
+            for _ in 0..nf {
+                let mut hs = Vec::with_capacity(nw);
+                let mut ps = Vec::with_capacity(nw);
+                for _ in 0..nw {
+                    let e = entries.next().unwrap();
+                    hs.push(e.real_height_mm);
+                    ps.push(e.psf);
                 }
-                normalise(&mut img);
-                per_wl.push(img);
+                real_height_mm.push(hs);
+                psf.push(ps);
             }
-            real_height_mm.push(heights);
-            psf.push(per_wl);
+            tables.push(FieldTable {
+                object_distance_mm: distances[d],
+                working_f_number: fo_d.working_f_number,
+                magnification: fo_d.magnification,
+                wavelengths_nm: wls.clone(),
+                paraxial_height_mm: paraxial_height_mm.clone(),
+                field_angles_deg: angles[d].clone(),
+                real_height_mm,
+                relative_illumination: ri[d * nf..(d + 1) * nf].to_vec(),
+                psf_n,
+                psf_pitch_um: opts.psf_pitch_um,
+                psf,
+            });
         }
         Ok(FieldModel {
-            format: "camsim-lens field model".into(),
-            version: 1,
             lens_name: lens.name.clone(),
             psf_kind: opts.kind,
-            object_distance_mm: lens.object_distance_mm,
-            image_distance_mm: lens.surfaces.last().unwrap().thickness_mm,
+            focus_distance_mm,
+            image_distance_mm,
             efl_mm: fo.efl_mm,
             f_number: fo.f_number,
             primary_nm: lens.primary_nm,
             wavelengths_nm: wls,
-            field_angles_deg,
             paraxial_height_mm,
-            real_height_mm,
-            relative_illumination,
             psf_n,
             psf_pitch_um: opts.psf_pitch_um,
-            psf,
+            tables,
         })
     }
 
-    /// Write the model as JSON (see the module docs).
+    /// Object distances of the tables (mm, `None` = infinity), by increasing vergence.
+    pub fn object_distances_mm(&self) -> Vec<Option<f64>> {
+        self.tables.iter().map(|t| t.object_distance_mm).collect()
+    }
+
+    /// The table of an object at `object_distance_mm` (`None` = infinity): the tabulated one
+    /// if present, else the two bracketing tables blended linearly in vergence 1/d (PSFs
+    /// renormalised), the nearest one outside the tabulated range (see the module docs).
+    pub fn at_distance(&self, object_distance_mm: Option<f64>) -> FieldTable {
+        let v = vergence_per_mm(object_distance_mm);
+        let vs: Vec<f64> = self
+            .tables
+            .iter()
+            .map(|t| vergence_per_mm(t.object_distance_mm))
+            .collect();
+        if let Some(i) = vs.iter().position(|&x| x == v) {
+            return self.tables[i].clone();
+        }
+        let (i, t) = bracket(&vs, v);
+        if t == 0.0 || self.tables.len() == 1 {
+            return self.tables[i].clone();
+        }
+        if t == 1.0 {
+            return self.tables[i + 1].clone();
+        }
+        let (a, b) = (&self.tables[i], &self.tables[i + 1]);
+        let lin = |x: f64, y: f64| (1.0 - t) * x + t * y;
+        let lin_v = |x: &[f64], y: &[f64]| -> Vec<f64> {
+            x.iter().zip(y).map(|(p, q)| lin(*p, *q)).collect()
+        };
+        FieldTable {
+            object_distance_mm,
+            working_f_number: lin(a.working_f_number, b.working_f_number),
+            magnification: lin(a.magnification, b.magnification),
+            wavelengths_nm: a.wavelengths_nm.clone(),
+            paraxial_height_mm: a.paraxial_height_mm.clone(),
+            field_angles_deg: lin_v(&a.field_angles_deg, &b.field_angles_deg),
+            real_height_mm: a
+                .real_height_mm
+                .iter()
+                .zip(&b.real_height_mm)
+                .map(|(x, y)| lin_v(x, y))
+                .collect(),
+            relative_illumination: lin_v(&a.relative_illumination, &b.relative_illumination),
+            psf_n: a.psf_n,
+            psf_pitch_um: a.psf_pitch_um,
+            psf: a
+                .psf
+                .iter()
+                .zip(&b.psf)
+                .map(|(fa, fb)| {
+                    fa.iter()
+                        .zip(fb)
+                        .map(|(x, y)| {
+                            let mut p = lin_v(x, y);
+                            normalise(&mut p);
+                            p
+                        })
+                        .collect()
+                })
+                .collect(),
+        }
+    }
+
+    /// Write the model as JSON, format version 2 (see the module docs).
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), LensError> {
         let p = path.as_ref();
-        let text = serde_json::to_string(self)?;
+        let f = FileV2 {
+            format: FORMAT.into(),
+            version: VERSION,
+            lens_name: self.lens_name.clone(),
+            psf_kind: self.psf_kind,
+            focus_distance_mm: self.focus_distance_mm,
+            image_distance_mm: self.image_distance_mm,
+            efl_mm: self.efl_mm,
+            f_number: self.f_number,
+            primary_nm: self.primary_nm,
+            wavelengths_nm: self.wavelengths_nm.clone(),
+            paraxial_height_mm: self.paraxial_height_mm.clone(),
+            psf_n: self.psf_n,
+            psf_pitch_um: self.psf_pitch_um,
+            distances: self
+                .tables
+                .iter()
+                .map(|t| DistanceFile {
+                    object_distance_mm: t.object_distance_mm,
+                    working_f_number: t.working_f_number,
+                    magnification: t.magnification,
+                    field_angles_deg: t.field_angles_deg.clone(),
+                    real_height_mm: t.real_height_mm.clone(),
+                    relative_illumination: t.relative_illumination.clone(),
+                    psf: t.psf.clone(),
+                })
+                .collect(),
+        };
+        let text = serde_json::to_string(&f)?;
         std::fs::write(p, text).map_err(|e| LensError::Io {
             path: p.display().to_string(),
             msg: e.to_string(),
         })
     }
 
-    /// Read a model written by [`FieldModel::save`], checking the table shapes.
+    /// Read a model written by [`FieldModel::save`] (version 2) or by an earlier camsim
+    /// (version 1), checking the table shapes.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, LensError> {
         let p = path.as_ref();
-        let text = std::fs::read_to_string(p).map_err(|e| LensError::Io {
-            path: p.display().to_string(),
-            msg: e.to_string(),
-        })?;
-        let m: FieldModel = serde_json::from_str(&text)?;
         let bad = |msg: String| LensError::Io {
             path: p.display().to_string(),
             msg,
         };
-        if m.format != "camsim-lens field model" || m.version != 1 {
+        let text = std::fs::read_to_string(p).map_err(|e| bad(e.to_string()))?;
+        let v: Value =
+            serde_json::from_str(&text).map_err(|e| bad(format!("not valid JSON: {e}")))?;
+        let format = v.get("format").and_then(Value::as_str).unwrap_or("");
+        let version = v.get("version").and_then(Value::as_u64);
+        if format != FORMAT {
             return Err(bad(format!(
-                "format '{}' version {} (expected camsim-lens field model 1)",
-                m.format, m.version
+                "\"format\" = {:?} (expected \"{FORMAT}\")",
+                v.get("format")
             )));
         }
-        let (nf, nw, nn) = (
-            m.paraxial_height_mm.len(),
-            m.wavelengths_nm.len(),
-            m.psf_n * m.psf_n,
-        );
-        let shape_ok = m.field_angles_deg.len() == nf
-            && m.relative_illumination.len() == nf
-            && m.real_height_mm.len() == nf
-            && m.real_height_mm.iter().all(|r| r.len() == nw)
-            && m.psf.len() == nf
-            && m.psf
-                .iter()
-                .all(|f| f.len() == nw && f.iter().all(|p| p.len() == nn));
-        if !shape_ok || nf == 0 || nw == 0 {
-            return Err(bad(
-                "table shapes do not match the field/wavelength lists".into()
-            ));
-        }
+        let m = match version {
+            Some(2) => {
+                let f: FileV2 = serde_json::from_value(v).map_err(|e| bad(e.to_string()))?;
+                let tables = f
+                    .distances
+                    .into_iter()
+                    .map(|d| FieldTable {
+                        object_distance_mm: d.object_distance_mm,
+                        working_f_number: d.working_f_number,
+                        magnification: d.magnification,
+                        wavelengths_nm: f.wavelengths_nm.clone(),
+                        paraxial_height_mm: f.paraxial_height_mm.clone(),
+                        field_angles_deg: d.field_angles_deg,
+                        real_height_mm: d.real_height_mm,
+                        relative_illumination: d.relative_illumination,
+                        psf_n: f.psf_n,
+                        psf_pitch_um: f.psf_pitch_um,
+                        psf: d.psf,
+                    })
+                    .collect();
+                FieldModel {
+                    lens_name: f.lens_name,
+                    psf_kind: f.psf_kind,
+                    focus_distance_mm: f.focus_distance_mm,
+                    image_distance_mm: f.image_distance_mm,
+                    efl_mm: f.efl_mm,
+                    f_number: f.f_number,
+                    primary_nm: f.primary_nm,
+                    wavelengths_nm: f.wavelengths_nm,
+                    paraxial_height_mm: f.paraxial_height_mm,
+                    psf_n: f.psf_n,
+                    psf_pitch_um: f.psf_pitch_um,
+                    tables,
+                }
+            }
+            Some(1) => {
+                let f: FileV1 = serde_json::from_value(v).map_err(|e| bad(e.to_string()))?;
+                // Version 1 did not store the working F-number; the infinite-conjugate value
+                // is exact for an object at infinity, (1 − m)·N otherwise is not recoverable
+                // without the lens, so the F-number is kept (as version 1 readers used it).
+                let table = FieldTable {
+                    object_distance_mm: f.object_distance_mm,
+                    working_f_number: f.f_number,
+                    magnification: 0.0,
+                    wavelengths_nm: f.wavelengths_nm.clone(),
+                    paraxial_height_mm: f.paraxial_height_mm.clone(),
+                    field_angles_deg: f.field_angles_deg,
+                    real_height_mm: f.real_height_mm,
+                    relative_illumination: f.relative_illumination,
+                    psf_n: f.psf_n,
+                    psf_pitch_um: f.psf_pitch_um,
+                    psf: f.psf,
+                };
+                FieldModel {
+                    lens_name: f.lens_name,
+                    psf_kind: f.psf_kind,
+                    focus_distance_mm: f.object_distance_mm,
+                    image_distance_mm: f.image_distance_mm,
+                    efl_mm: f.efl_mm,
+                    f_number: f.f_number,
+                    primary_nm: f.primary_nm,
+                    wavelengths_nm: f.wavelengths_nm,
+                    paraxial_height_mm: f.paraxial_height_mm,
+                    psf_n: f.psf_n,
+                    psf_pitch_um: f.psf_pitch_um,
+                    tables: vec![table],
+                }
+            }
+            _ => {
+                return Err(bad(format!(
+                    "\"version\" = {:?} (this camsim reads versions 1 and 2)",
+                    v.get("version")
+                )))
+            }
+        };
+        m.check_shapes().map_err(bad)?;
         Ok(m)
     }
 
+    /// Check that every table matches the field / wavelength / PSF grids.
+    fn check_shapes(&self) -> Result<(), String> {
+        let (nf, nw, nn) = (
+            self.paraxial_height_mm.len(),
+            self.wavelengths_nm.len(),
+            self.psf_n * self.psf_n,
+        );
+        if nf == 0 || nw == 0 || self.tables.is_empty() || self.psf_n == 0 {
+            return Err("empty field, wavelength, distance or PSF grid".into());
+        }
+        for (i, t) in self.tables.iter().enumerate() {
+            let ok = t.field_angles_deg.len() == nf
+                && t.relative_illumination.len() == nf
+                && t.real_height_mm.len() == nf
+                && t.real_height_mm.iter().all(|r| r.len() == nw)
+                && t.psf.len() == nf
+                && t.psf
+                    .iter()
+                    .all(|f| f.len() == nw && f.iter().all(|p| p.len() == nn));
+            if !ok {
+                return Err(format!(
+                    "distance {i}: table shapes do not match {nf} fields × {nw} wavelengths × {}² PSF samples",
+                    self.psf_n
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl FieldTable {
     /// PSF of a field on +y at paraxial image height `height_mm` and `wavelength_nm`,
     /// bilinearly interpolated between the tabulated heights and wavelengths (clamped at the
     /// table ends), renormalised to sum 1.

@@ -10,10 +10,17 @@
 //!   planes, pupils, F/#, working F/#, focusing;
 //! * [`trace`]: exact rays in f64 through spheres, conics and even aspheres, vector Snell law,
 //!   TIR, vignetting, optical path length, chief-ray aiming at the stop centre;
+//! * [`batch`]: the same exact trace for many rays at once (structure of arrays, vectorised,
+//!   rayon), used by the analyses and the field model;
 //! * [`analysis`]: spot diagrams and RMS radii, distortion, lateral colour, relative
 //!   illumination, geometric PSF, FFT wave PSF and MTF;
+//! * [`huygens`]: wave-optics PSF by Huygens–Fresnel integration over the reference sphere
+//!   (any sample pitch and window);
+//! * [`field_curvature`]: sagittal and tangential foci by field (Coddington's equations along
+//!   the real chief ray, and independently from traced ray pairs);
 //! * [`field_model`]: the ISET-style field model (PSF, distortion, relative illumination over
-//!   image height × wavelength, interpolation, PSF rotation, JSON save/load);
+//!   image height × wavelength × object distance, interpolation, PSF rotation, JSON
+//!   save/load);
 //! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers.
 //!
 //! ## Prescription file format (`lenses/*.json`)
@@ -61,16 +68,19 @@
 #![deny(missing_docs)]
 
 pub mod analysis;
+pub mod batch;
 pub mod error;
+pub mod field_curvature;
 pub mod field_model;
 pub mod glass;
+pub mod huygens;
 pub mod paraxial;
 pub mod prescription;
 pub mod readers;
 pub mod trace;
 
 pub use error::LensError;
-pub use field_model::{FieldModel, FieldModelOptions, PsfKind};
+pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
 pub use glass::{Glass, GlassCatalog};
 pub use paraxial::FirstOrder;
 pub use prescription::{LensPrescription, PrescriptionFile};

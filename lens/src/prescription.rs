@@ -208,6 +208,41 @@ impl Surface {
         Some(d)
     }
 
+    /// d²z/d(r²)² of the sag (so ∂²z/∂y² on the meridian = 2·dz/d(r²) + 4y²·d²z/d(r²)²).
+    /// `None` outside the conic's domain.
+    pub fn d2sag_dr2(&self, r2: f64) -> Option<f64> {
+        let c = self.curvature_per_mm;
+        let k1 = 1.0 + self.conic;
+        let arg = 1.0 - k1 * c * c * r2;
+        if arg <= 0.0 {
+            return None;
+        }
+        // d/d(r²) of c/(2√arg) = c·k1c²/(4 arg^{3/2}).
+        let mut d = c * k1 * c * c / (4.0 * arg * arg.sqrt());
+        let mut p = 1.0;
+        for (i, a) in self.aspheric_coeffs.iter().enumerate() {
+            let m = (i + 2) as f64; // term a·(r²)^m
+            d += a * m * (m - 1.0) * p;
+            p *= r2;
+        }
+        Some(d)
+    }
+
+    /// Principal curvatures (mm⁻¹) of the surface at radial distance `r_mm` from the axis:
+    /// meridional (tangential) z''/(1 + z'²)^{3/2} and azimuthal (sagittal) z'/(r (1 + z'²)^{1/2})
+    /// of the profile z(r) (a surface of revolution; both equal the vertex curvature on the
+    /// axis). Signed like `curvature_per_mm`. `None` outside the conic's domain.
+    pub fn principal_curvatures_per_mm(&self, r_mm: f64) -> Option<[f64; 2]> {
+        let r2 = r_mm * r_mm;
+        let g = self.dsag_dr2(r2)?;
+        let g2 = self.d2sag_dr2(r2)?;
+        let z1 = 2.0 * r_mm * g; // dz/dr
+        let z2 = 2.0 * g + 4.0 * r2 * g2; // d²z/dr²
+        let q = 1.0 + z1 * z1;
+        // z'/r = 2g (finite on the axis).
+        Some([z2 / (q * q.sqrt()), 2.0 * g / q.sqrt()])
+    }
+
     /// True if the surface is a sphere or plane (closed-form intersection suffices).
     pub fn is_conic_only(&self) -> bool {
         self.aspheric_coeffs.iter().all(|a| *a == 0.0)

@@ -241,6 +241,11 @@ pub struct FieldAim {
 }
 
 impl FieldAim {
+    /// z of the start plane of collimated beams (mm).
+    pub fn start_z_mm(&self) -> f64 {
+        self.start_z_mm
+    }
+
     /// The ray through normalised entrance-pupil coordinates (px, py) ∈ unit disc. The pupil
     /// grid is the paraxial entrance pupil shifted by the real chief-ray aim point (the
     /// rayoptics convention). For an object at infinity the start OPL is measured from the

@@ -3,7 +3,7 @@ use camsim_lens::analysis::pupil_grid;
 use camsim_lens::field_model::rotate_psf;
 use camsim_lens::trace::Ray;
 use camsim_lens::{
-    Clipping, FieldModel, FieldModelOptions, GlassCatalog, LensPrescription, PsfKind,
+    Clipping, FieldModel, FieldModelOptions, FieldTable, GlassCatalog, LensPrescription, PsfKind,
 };
 
 fn lens() -> LensPrescription {
@@ -12,7 +12,7 @@ fn lens() -> LensPrescription {
     LensPrescription::from_json_file(p, &GlassCatalog::bundled()).unwrap()
 }
 
-fn geometric() -> (LensPrescription, FieldModel) {
+fn geometric() -> (LensPrescription, FieldTable) {
     let l = lens();
     let o = FieldModelOptions {
         n_fields: 3,
@@ -23,8 +23,9 @@ fn geometric() -> (LensPrescription, FieldModel) {
         ri_grid_n: 32,
         ..Default::default()
     };
-    let m = FieldModel::compute(&l, &o).unwrap();
-    (l, m)
+    let mut m = FieldModel::compute(&l, &o).unwrap();
+    assert_eq!(m.tables.len(), 1);
+    (l, m.tables.remove(0))
 }
 
 #[test]
@@ -137,36 +138,45 @@ fn save_load_round_trip_wave_model() {
         "\"psf_pitch_um\"",
         "\"wavelengths_nm\"",
         "\"paraxial_height_mm\"",
+        "\"version\":2",
+        "\"distances\"",
+        "\"focus_distance_mm\"",
     ];
-    let j = serde_json::to_string(&m).unwrap();
-    assert!(text_keys.iter().all(|k| j.contains(k)));
+    m.save(&path).unwrap();
+    let j = std::fs::read_to_string(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    assert!(text_keys.iter().all(|k| j.contains(k)), "{}", &j[..200]);
     // serde_json's default float parser may differ from the shortest-round-trip printer by
     // 1 ulp, so compare to 1e-15 relative rather than bit-for-bit.
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-15 * a.abs().max(b.abs()).max(1e-300);
     assert_eq!(back.psf_n, m.psf_n);
     assert_eq!(back.lens_name, m.lens_name);
     assert_eq!(back.psf_kind, m.psf_kind);
-    for (a, b) in back
+    let (bt, mt) = (&back.tables[0], &m.tables[0]);
+    assert_eq!(back.tables.len(), 1);
+    assert_eq!(bt.object_distance_mm, mt.object_distance_mm);
+    assert!(close(bt.working_f_number, mt.working_f_number));
+    for (a, b) in bt
         .psf
         .iter()
         .flatten()
         .flatten()
-        .zip(m.psf.iter().flatten().flatten())
+        .zip(mt.psf.iter().flatten().flatten())
     {
         assert!(close(*a, *b));
     }
-    for (a, b) in back
+    for (a, b) in bt
         .real_height_mm
         .iter()
         .flatten()
-        .zip(m.real_height_mm.iter().flatten())
+        .zip(mt.real_height_mm.iter().flatten())
     {
         assert!(close(*a, *b));
     }
-    for (a, b) in back
+    for (a, b) in bt
         .relative_illumination
         .iter()
-        .zip(&m.relative_illumination)
+        .zip(&mt.relative_illumination)
     {
         assert!(close(*a, *b));
     }
@@ -174,7 +184,7 @@ fn save_load_round_trip_wave_model() {
     // The on-axis wave PSF sums to 1 and is mirror-symmetric in x and y (rotational symmetry
     // of the lens; the FFT pupil grid is symmetric), to FFT round-off.
     let n = m.psf_n;
-    for p0 in &m.psf[0] {
+    for p0 in &mt.psf[0] {
         assert!((p0.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         let peak = p0.iter().cloned().fold(0.0, f64::max);
         for iy in 0..n {
@@ -185,4 +195,191 @@ fn save_load_round_trip_wave_model() {
             }
         }
     }
+}
+
+/// L1 distance between two PSFs (each sums to 1; 0 = equal, 2 = disjoint).
+fn l1(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum()
+}
+
+/// RMS radius (in samples) of a PSF about its centroid.
+fn rms_radius(p: &[f64], n: usize) -> f64 {
+    let (mut mx, mut my) = (0.0, 0.0);
+    for (k, v) in p.iter().enumerate() {
+        mx += (k % n) as f64 * v;
+        my += (k / n) as f64 * v;
+    }
+    p.iter()
+        .enumerate()
+        .map(|(k, v)| v * (((k % n) as f64 - mx).powi(2) + ((k / n) as f64 - my).powi(2)))
+        .sum::<f64>()
+        .sqrt()
+}
+
+#[test]
+fn interpolated_table_at_an_intermediate_distance_matches_a_direct_computation() {
+    // The 50 mm double Gauss stopped down to f/8, focused at 3 m (vergence 0.333 D), tabled at
+    // object vergences 0.25, 0.30, 0.35 and 0.40 D; the table blended at 0.275 and 0.375 D is
+    // compared with the one computed directly there.
+    let mut l = lens();
+    l.aperture = camsim_lens::prescription::Aperture::EntrancePupilDiameter(6.25);
+    let base = FieldModelOptions {
+        n_fields: 3,
+        kind: PsfKind::Wave,
+        psf_n: 41,
+        psf_pitch_um: 1.5,
+        pupil_n: 64,
+        pad: 2,
+        ri_grid_n: 48,
+        focus: camsim_lens::Focus::At(Some(3000.0)),
+        ..Default::default()
+    };
+    let grid: Vec<Option<f64>> = [0.25e-3, 0.30e-3, 0.35e-3, 0.40e-3]
+        .iter()
+        .map(|v| Some(1.0 / v))
+        .collect();
+    let m = FieldModel::compute(
+        &l,
+        &FieldModelOptions {
+            object_distances_mm: grid.clone(),
+            ..base.clone()
+        },
+    )
+    .unwrap();
+    // At a tabulated distance the table itself.
+    for t in &m.tables {
+        assert_eq!(&m.at_distance(t.object_distance_mm), t);
+    }
+    for v in [0.275e-3, 0.375e-3] {
+        let d = 1.0 / v;
+        let direct = FieldModel::compute(
+            &l,
+            &FieldModelOptions {
+                object_distances_mm: vec![Some(d)],
+                ..base.clone()
+            },
+        )
+        .unwrap()
+        .tables
+        .remove(0);
+        let interp = m.at_distance(Some(d));
+        // Smooth in 1/d: errors are second order in the 0.05 D step.
+        assert!((interp.working_f_number / direct.working_f_number - 1.0).abs() < 1e-5);
+        assert!((interp.magnification - direct.magnification).abs() < 1e-6);
+        for k in 0..3 {
+            assert!((interp.field_angles_deg[k] - direct.field_angles_deg[k]).abs() < 1e-6);
+            assert!(
+                (interp.relative_illumination[k] - direct.relative_illumination[k]).abs() < 2e-3,
+                "{d} field {k}: RI {} vs {}",
+                interp.relative_illumination[k],
+                direct.relative_illumination[k]
+            );
+            for j in 0..direct.wavelengths_nm.len() {
+                assert!(
+                    (interp.real_height_mm[k][j] - direct.real_height_mm[k][j]).abs() < 1e-5,
+                    "{d} field {k} wl {j}: height {} vs {}",
+                    interp.real_height_mm[k][j],
+                    direct.real_height_mm[k][j]
+                );
+                // Both tabulated neighbours are 0.025 D away.
+                let (a, b) = if v < 0.3e-3 { (0, 1) } else { (2, 3) };
+                let e_interp = l1(&interp.psf[k][j], &direct.psf[k][j]);
+                let e_near = l1(&m.tables[a].psf[k][j], &direct.psf[k][j])
+                    .min(l1(&m.tables[b].psf[k][j], &direct.psf[k][j]));
+                let (ri, rd) = (
+                    rms_radius(&interp.psf[k][j], m.psf_n),
+                    rms_radius(&direct.psf[k][j], m.psf_n),
+                );
+                // Linear blending of two defocused PSFs is a mixture, not the intermediate
+                // defocus: its second moment is the mean of theirs, which over-estimates the
+                // RMS radius of the direct PSF (r² is convex in the defocus); a few % here.
+                assert!(
+                    e_interp < 0.25 && e_interp < e_near,
+                    "{d} field {k} wl {j}: L1 interp {e_interp} nearest {e_near}"
+                );
+                assert!(
+                    (ri / rd - 1.0).abs() < 0.1,
+                    "{d} field {k} wl {j}: RMS radius {ri} vs {rd} samples"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn version_1_files_are_read_and_bad_versions_named() {
+    // A version-1 file (single distance at the top level) as earlier camsim versions wrote it.
+    let (l, t) = geometric();
+    let fo = l
+        .focused(l.primary_nm)
+        .unwrap()
+        .first_order(l.primary_nm)
+        .unwrap();
+    let v1 = serde_json::json!({
+        "format": "camsim-lens field model", "version": 1,
+        "lens_name": l.name, "psf_kind": "geometric",
+        "object_distance_mm": null, "image_distance_mm": 38.2, "efl_mm": fo.efl_mm,
+        "f_number": fo.f_number, "primary_nm": l.primary_nm,
+        "wavelengths_nm": t.wavelengths_nm, "field_angles_deg": t.field_angles_deg,
+        "paraxial_height_mm": t.paraxial_height_mm, "real_height_mm": t.real_height_mm,
+        "relative_illumination": t.relative_illumination, "psf_n": t.psf_n,
+        "psf_pitch_um": t.psf_pitch_um, "psf": t.psf,
+    });
+    let dir = std::env::temp_dir();
+    let path = dir.join(format!("camsim_fm_v1_{}.json", std::process::id()));
+    std::fs::write(&path, v1.to_string()).unwrap();
+    let m = FieldModel::load(&path).unwrap();
+    assert_eq!(m.tables.len(), 1);
+    assert_eq!(m.focus_distance_mm, None);
+    assert_eq!(m.image_distance_mm, 38.2);
+    let b = &m.tables[0];
+    assert_eq!(b.object_distance_mm, None);
+    // Version 1 had no working F-number: the infinite-conjugate F-number (exact at infinity).
+    assert_eq!(b.working_f_number, fo.f_number);
+    // serde_json may round a float 1 ulp off on reading: compare to 1e-15 relative.
+    let close = |a: &[f64], b: &[f64]| {
+        a.len() == b.len()
+            && a.iter()
+                .zip(b)
+                .all(|(x, y)| (x - y).abs() <= 1e-15 * x.abs().max(y.abs()))
+    };
+    let flat = |v: &Vec<Vec<Vec<f64>>>| v.iter().flatten().flatten().copied().collect::<Vec<_>>();
+    assert!(close(&flat(&b.psf), &flat(&t.psf)), "PSFs differ");
+    assert!(close(
+        &b.real_height_mm.concat(),
+        &t.real_height_mm.concat()
+    ));
+    assert!(close(&b.field_angles_deg, &t.field_angles_deg));
+    assert!(
+        m.at_distance(Some(1000.0)) == *b,
+        "a single table is used at any distance"
+    );
+    // Unknown version / format / wrong shapes: one error naming the file and the problem.
+    for (text, what) in [
+        (
+            v1.to_string().replace("\"version\":1", "\"version\":7"),
+            "version",
+        ),
+        (
+            v1.to_string().replace("camsim-lens field model", "other"),
+            "format",
+        ),
+        (
+            v1.to_string().replacen(
+                "\"relative_illumination\":[",
+                "\"relative_illumination\":[0.5,",
+                1,
+            ),
+            "shapes",
+        ),
+    ] {
+        std::fs::write(&path, text).unwrap();
+        let e = FieldModel::load(&path).unwrap_err().to_string();
+        assert!(
+            e.contains(&path.display().to_string()) && e.contains(what),
+            "{e}"
+        );
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+    std::fs::remove_file(&path).ok();
 }

@@ -39,6 +39,7 @@ fn main() {
         blur: Blur::Diffraction,
         diffuser: None,
         padding: Padding::Replicate,
+        effects: Default::default(),
     };
     let mut times = Vec::new();
     for _ in 0..5 {

@@ -31,6 +31,9 @@ pub enum OpticsError {
     /// The scene cannot be imaged (empty, inconsistent).
     #[error("scene: {0}")]
     Scene(String),
+    /// An optics effect block is invalid or cannot be applied (the message names its key).
+    #[error("{0}")]
+    Effect(String),
 }
 
 /// Check `value` is finite and `> 0` (or `>= 0` when `allow_zero`).

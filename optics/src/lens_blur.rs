@@ -1,7 +1,9 @@
 //! `Blur::Lens`: the ISET ray-trace image-formation method (Farrell, Catrysse & Wandell,
 //! "Digital camera simulation", Applied Optics 2012, §2.B.3): a lens prescription is turned
 //! into a [`FieldModel`] (PSFs, real vs paraxial chief-ray heights and relative illumination
-//! tabulated over field height × wavelength, see `camsim_lens::field_model`), which
+//! tabulated over field height × wavelength × object distance, see
+//! `camsim_lens::field_model`); the table of the scene's object distance (a [`FieldTable`],
+//! interpolated in 1/d between tabulated distances) is what
 //! [`form_image`](crate::form_image) applies per wavelength band:
 //!
 //! 1. **Geometric distortion.** The scene is given on the ideal (paraxial) image grid. Each
@@ -16,9 +18,10 @@
 //!    real image-space chief-ray angle, traced) at r_p **replaces** `OpticsModel::
 //!    relative_illumination` (which is ignored for this blur kind: the traced value already
 //!    contains the cos⁴ fall-off). Interpolated linearly in r_p², held constant beyond the table.
-//! 3. **Camera equation** (Eq. 1) with the lens's own *working* F-number (the `OpticsModel`
-//!    `f_number`, `focal_length_m` and the scene's object distance are not used: the field
-//!    model is for the lens's own conjugates). `CameraEquation::IsetCam` is honoured.
+//! 3. **Camera equation** (Eq. 1) with the lens's *working* F-number at the object distance
+//!    of the table (paraxial, 1/(2n'u') of the marginal ray; it carries the (1 + |m|) factor
+//!    of a finite conjugate). The `OpticsModel` `f_number` and `focal_length_m` are not used.
+//!    `CameraEquation::IsetCam` is honoured.
 //! 4. **Shift-variant PSF.** The image is split into square tiles (32–64 samples); every tile is
 //!    convolved (FFT, zero-padded, overlap-add) with the field model's PSF at the tile centre's
 //!    paraxial field height and the band's wavelength (bilinear in height × wavelength), oriented
@@ -33,8 +36,13 @@
 //!
 //! ## Where the field model comes from
 //! [`LensBlur::from_prescription`] computes it when the camera is loaded (config `"lens"`
-//! kind): the lens is focused at its paraxial focus (primary wavelength, own object
-//! distance), the fields are chosen so that the tabulated **real** heights cover
+//! kind) for one object distance, `LensBlurOptions::object_distance_mm` (config:
+//! `optics.object_distance_m`; default the prescription's own `object_distance_mm`, infinity
+//! when null). The lens is focused per `LensBlurOptions::focus`: by default on that object
+//! (image plane at its paraxial image at the primary wavelength, as a camera focused on its
+//! subject), or at a fixed distance, in which case the object is defocused. A saved model
+//! with several distances is used through [`LensBlur::from_model_at`]. The fields are chosen
+//! so that the tabulated **real** heights cover
 //! `LensBlurOptions::max_image_height_mm` (config: the sensor's half-diagonal) with 10 %
 //! to spare; beyond the table distortion is extrapolated (last segment of q(r_p²)) and PSFs
 //! and illumination are those of the last field. The PSF grid is sized from traced spots: its
@@ -49,6 +57,7 @@ use crate::{
 };
 use camsim_core::{SpectralImage, Spectrum, WavelengthGrid};
 use camsim_lens::analysis::pupil_grid;
+use camsim_lens::field_model::{FieldTable, Focus};
 use camsim_lens::{Clipping, FieldModel, FieldModelOptions, LensPrescription, PsfKind};
 use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
@@ -72,6 +81,23 @@ pub struct LensBlurOptions {
     pub max_psf_n: usize,
     /// Fields of the dense distortion / relative-illumination table (chief rays only).
     pub n_dense_fields: usize,
+    /// Object distance from the first vertex (mm); `None` = the prescription's own
+    /// `object_distance_mm` (infinity when that is null).
+    pub object_distance_mm: Option<f64>,
+    /// Where the lens is focused.
+    pub focus: LensFocus,
+}
+
+/// The focus setting of a [`LensBlur`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum LensFocus {
+    /// On the object (image plane at its paraxial image, primary wavelength).
+    #[default]
+    OnObject,
+    /// On the prescription's own object distance (objects elsewhere are defocused).
+    Prescription,
+    /// On an object at this distance (mm from the first vertex; `None` = infinity).
+    At(Option<f64>),
 }
 
 impl LensBlurOptions {
@@ -86,6 +112,8 @@ impl LensBlurOptions {
             max_wave_pupil_n: 160,
             max_psf_n: 97,
             n_dense_fields: 41,
+            object_distance_mm: None,
+            focus: LensFocus::OnObject,
         }
     }
 }
@@ -95,6 +123,8 @@ impl LensBlurOptions {
 pub struct LensBlur {
     /// The tabulated field model.
     pub model: Arc<FieldModel>,
+    /// The model's table at the object distance in use (what image formation looks up).
+    pub table: Arc<FieldTable>,
     /// Working F-number of the lens at its conjugates (camera equation).
     pub working_f_number: f64,
     /// Apply the PSFs (false: distortion and relative illumination only, ISET's geometry step).
@@ -123,6 +153,8 @@ impl std::fmt::Debug for LensBlur {
         let m = &self.model;
         f.debug_struct("LensBlur")
             .field("lens", &m.lens_name)
+            .field("object_distance_mm", &self.table.object_distance_mm)
+            .field("focus_distance_mm", &m.focus_distance_mm)
             .field("psf_kind", &m.psf_kind)
             .field("efl_mm", &m.efl_mm)
             .field("working_f_number", &self.working_f_number)
@@ -140,19 +172,29 @@ fn lens_err(e: impl std::fmt::Display) -> OpticsError {
 }
 
 impl LensBlur {
-    /// A lens blur from an existing field model (e.g. `FieldModel::load`). The working
-    /// F-number is the model's F-number (exact for an object at infinity).
+    /// A lens blur from an existing field model (e.g. `FieldModel::load`) for an object at
+    /// the model's focus distance (the nearest tabulated distance if that one is absent).
     pub fn from_model(model: FieldModel) -> Self {
+        let d = model.focus_distance_mm;
+        Self::from_model_at(model, d)
+    }
+
+    /// A lens blur from an existing field model for an object at `object_distance_mm` (`None`
+    /// = infinity): the model's table there, interpolated in 1/d between tabulated distances
+    /// (`FieldModel::at_distance`). The working F-number is the table's.
+    pub fn from_model_at(model: FieldModel, object_distance_mm: Option<f64>) -> Self {
+        let table = model.at_distance(object_distance_mm);
         LensBlur {
-            working_f_number: model.f_number,
+            working_f_number: table.working_f_number,
+            table: Arc::new(table),
             model: Arc::new(model),
             apply_psf: true,
             radial: None,
         }
     }
 
-    /// Compute the field model of `lens` (focused at its paraxial focus) covering
-    /// `opts.max_image_height_mm` (see the module docs).
+    /// Compute the field model of `lens` at `opts.object_distance_mm` and focus `opts.focus`,
+    /// covering `opts.max_image_height_mm` (see the module docs).
     pub fn from_prescription(
         lens: &LensPrescription,
         opts: &LensBlurOptions,
@@ -174,7 +216,33 @@ impl LensBlur {
             format!("lens \"{}\"", lens.name)
         };
         let ctx = |e: camsim_lens::LensError| lens_err(format!("{name}: {e}"));
-        let focused = lens.focused(lens.primary_nm).map_err(ctx)?;
+        if let Some(d) = opts.object_distance_mm {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(OpticsError::InvalidParameter {
+                    name: "object_distance_mm",
+                    value: d,
+                    reason: "must be a finite number > 0",
+                });
+            }
+        }
+        let object_mm = opts.object_distance_mm.or(lens.object_distance_mm);
+        let focus_mm = match opts.focus {
+            LensFocus::OnObject => object_mm,
+            LensFocus::Prescription => lens.object_distance_mm,
+            LensFocus::At(d) => d,
+        };
+        // The lens at its focus setting, imaging the object (defocused unless they coincide).
+        let focused = lens
+            .focus_at(focus_mm)
+            .map_err(ctx)?
+            .with_object_distance(object_mm);
+        let image_mm = focused.surfaces.last().map_or(f64::NAN, |s| s.thickness_mm);
+        if !(image_mm.is_finite() && image_mm > 0.0) {
+            return Err(lens_err(format!(
+                "{name}: focused on {}, the paraxial image is not real (image distance {image_mm} mm)",
+                focus_mm.map_or("infinity".to_string(), |d| format!("{d} mm"))
+            )));
+        }
         let fo = focused.first_order(lens.primary_nm).map_err(ctx)?;
         let nw = fo.working_f_number;
         // Paraxial height is linear in tan θ.
@@ -256,8 +324,11 @@ impl LensBlur {
             pupil_n,
             pad,
             ri_grid_n: 64,
+            focus: Focus::At(focus_mm),
+            object_distances_mm: vec![object_mm],
         };
         let model = FieldModel::compute(lens, &fm_opts).map_err(ctx)?;
+        let table = model.at_distance(object_mm);
         // Dense distortion / illumination table (chief rays and pupil grids only: cheap).
         let nd = opts.n_dense_fields.max(opts.n_fields);
         let wls = model.wavelengths_nm.clone();
@@ -294,6 +365,7 @@ impl LensBlur {
         };
         Ok(LensBlur {
             model: Arc::new(model),
+            table: Arc::new(table),
             working_f_number: nw,
             apply_psf: true,
             radial: Some(Arc::new(radial)),
@@ -302,7 +374,7 @@ impl LensBlur {
 
     /// Finest detail (µm) the blurred image holds: the PSF pitch or λN_w/2, whichever is larger.
     pub fn detail_um(&self, min_wavelength_nm: f64) -> f64 {
-        self.model
+        self.table
             .psf_pitch_um
             .max(0.5 * min_wavelength_nm * 1e-3 * self.working_f_number)
     }
@@ -311,7 +383,7 @@ impl LensBlur {
     /// half-width plus the largest inward displacement by distortion (barrel distortion samples
     /// the scene outside the image).
     pub fn margin_m(&self, half_diagonal_m: f64) -> f64 {
-        let m = &self.model;
+        let m = &self.table;
         let psf_half_m = (m.psf_n / 2) as f64 * m.psf_pitch_um * 1e-6 * std::f64::consts::SQRT_2;
         let r_mm = half_diagonal_m * 1e3;
         let shift_mm = m
@@ -361,7 +433,7 @@ fn interp(xs: &[f64], ys: &[f64], x: f64, extrapolate: bool) -> f64 {
 
 impl Radial {
     fn new(lb: &LensBlur, wavelength_nm: f64) -> Self {
-        let m = &*lb.model;
+        let m = &*lb.table;
         let (h, real, ri) = match &lb.radial {
             Some(t) => {
                 let wl = &t.wavelengths_nm;
@@ -594,7 +666,7 @@ pub(crate) fn form_lens_image(
     };
     let (rows, cols) = (img.rows, img.cols);
     let clamp = optics.padding == Padding::Replicate;
-    let model = &*lb.model;
+    let model = &*lb.table;
     let wl = bands.wavelength_nm.clone();
     img.planes
         .par_iter_mut()
@@ -660,7 +732,7 @@ fn shift_variant_blur(
     rows: usize,
     cols: usize,
     dx: f64,
-    model: &FieldModel,
+    model: &FieldTable,
     radial: &Radial,
     wavelength_nm: f64,
     clamp: bool,

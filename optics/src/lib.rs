@@ -23,6 +23,7 @@
 //! never the default.
 #![deny(missing_docs)]
 
+pub mod effects;
 mod error;
 mod fft;
 mod formulas;
@@ -33,6 +34,10 @@ mod psf_set;
 pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
 /// The lens ray tracer (prescriptions, field models) used by [`Blur::Lens`].
 pub use camsim_lens as lens;
+pub use effects::{
+    equivalent_gaussian_sigma_um, two_circle_overlap_fraction, Defocus, Distortion, Falloff,
+    LateralColor, LateralColorKind, OpticsEffects,
+};
 pub use error::OpticsError;
 pub use formulas::{
     airy_first_zero_m, airy_first_zero_rad, airy_psf, bessel_j1, camera_equation_factor,
@@ -147,6 +152,9 @@ pub struct OpticsModel {
     pub diffuser: Option<Diffuser>,
     /// Border handling for blurs.
     pub padding: Padding,
+    /// Optional effect blocks of effects.md (exposure scale, fall-off, distortion, lateral
+    /// colour, defocus, veiling glare); `OpticsEffects::default()` = none.
+    pub effects: OpticsEffects,
 }
 
 impl OpticsModel {
@@ -162,6 +170,7 @@ impl OpticsModel {
             blur: Blur::Diffraction,
             diffuser: None,
             padding: Padding::Replicate,
+            effects: OpticsEffects::default(),
         }
     }
 
@@ -207,7 +216,7 @@ impl OpticsModel {
         if let Some(d) = &self.diffuser {
             check_positive("diffuser fwhm_um", d.fwhm_um, true)?;
         }
-        Ok(())
+        self.effects.validate()
     }
 
     /// Magnification m = −image_distance/d for the object distance (0 at infinity).
@@ -248,6 +257,20 @@ pub fn form_image(
     if let Blur::Lens(lb) = &optics.blur {
         let mut img = lens_blur::form_lens_image(optics, lb, &scene.radiance, bands, dx)?;
         apply_diffuser(optics, &mut img, dx);
+        // Effect blocks with a lens: after the lens's own image formation (an approximation
+        // for the fall-off and the warp, which ideally act before its PSFs).
+        let fx = &optics.effects;
+        if !fx.is_empty() {
+            let s = fx.exposure_scale.unwrap_or(1.0);
+            if fx.falloff.is_some() {
+                let map = radial_map(rows, cols, dx, fx, |_| s);
+                img.scale_spatially(&map);
+            } else if s != 1.0 {
+                img.scale(s);
+            }
+            apply_warp(optics, &mut img, dx, bands)?;
+            apply_defocus_and_glare(optics, &mut img, dx)?;
+        }
         return Ok(SensorIrradiance {
             irradiance: img,
             sample_pitch_m: dx,
@@ -257,11 +280,14 @@ pub fn form_image(
     let m = optics.magnification(scene.object_distance_m);
     let mut img = scene.radiance.clone();
 
-    // 1. Camera equation (Eq. 1) and lens transmittance.
+    // 1. Camera equation (Eq. 1) and lens transmittance; the exposure_scale block
+    // multiplies the irradiance.
     let (k, n_eff) = match optics.camera_equation {
         CameraEquation::Baseline => (camera_equation_factor(n, m), n * (1.0 + m.abs())),
         CameraEquation::IsetCam => (camera_equation_factor_isetcam(n, m), n),
     };
+    let k = k * optics.effects.exposure_scale.unwrap_or(1.0);
+    let falloff = optics.effects.falloff.as_ref();
     let k = match &optics.transmittance {
         Spectrum::Affine {
             offset,
@@ -278,7 +304,11 @@ pub fn form_image(
     let xc = (cols as f64 - 1.0) / 2.0;
     let f = optics.focal_length_m;
     match optics.relative_illumination {
-        RelativeIllumination::None => img.scale(k),
+        RelativeIllumination::None if falloff.is_none() => img.scale(k),
+        RelativeIllumination::None => {
+            let map = radial_map(rows, cols, dx, &optics.effects, |_| k);
+            img.scale_spatially(&map);
+        }
         ri => {
             // ISETCam evaluates the diagonal on the padded optical image.
             let (pr, pc) = match optics.padding {
@@ -300,11 +330,24 @@ pub fn form_image(
                         }
                         _ => relative_illumination_isetcam(x, y, f, n, m, diag),
                     };
+                    // The relative_illumination block's extra fall-off F(h).
+                    let r = match falloff {
+                        None => r,
+                        Some(fo) => r * fo.factor(x.hypot(y) / optics.effects.half_diagonal_m()),
+                    };
                     *v = (k * r) as f32;
                 }
             });
             img.scale_spatially(&map);
         }
+    }
+
+    // Distortion and lateral colour blocks: geometric warp of every wavelength plane.
+    if optics.effects.has_warp() {
+        if optics.effects.lateral_color.is_some() {
+            img = into_bands(img, bands);
+        }
+        apply_warp(optics, &mut img, dx, bands)?;
     }
 
     // 3. Blur.
@@ -365,10 +408,85 @@ pub fn form_image(
     // 4. Diffuser.
     apply_diffuser(optics, &mut img, dx);
 
+    // 5. Defocus and veiling glare blocks.
+    apply_defocus_and_glare(optics, &mut img, dx)?;
+
     Ok(SensorIrradiance {
         irradiance: img,
         sample_pitch_m: dx,
     })
+}
+
+/// `scalar(h) · F(h)` at every sample (F: the fall-off block, h: field height).
+fn radial_map(
+    rows: usize,
+    cols: usize,
+    dx: f64,
+    fx: &OpticsEffects,
+    scalar: impl Fn(f64) -> f64 + Sync,
+) -> Vec<f32> {
+    let yc = (rows as f64 - 1.0) / 2.0;
+    let xc = (cols as f64 - 1.0) / 2.0;
+    let hd = fx.half_diagonal_m();
+    let mut map = vec![0f32; rows * cols];
+    map.par_chunks_mut(cols).enumerate().for_each(|(i, row)| {
+        let y = (i as f64 - yc) * dx;
+        for (j, v) in row.iter_mut().enumerate() {
+            let h = ((j as f64 - xc) * dx).hypot(y) / hd;
+            let f = fx.falloff.as_ref().map_or(1.0, |f| f.factor(h));
+            *v = (scalar(h) * f) as f32;
+        }
+    });
+    map
+}
+
+/// The distortion / lateral-colour warp (per band with lateral colour, else per plane).
+fn apply_warp(
+    optics: &OpticsModel,
+    img: &mut SpectralImage,
+    dx: f64,
+    bands: &WavelengthGrid,
+) -> Result<(), OpticsError> {
+    let fx = &optics.effects;
+    if !fx.has_warp() {
+        return Ok(());
+    }
+    let wl = match (&img.basis, fx.lateral_color.is_some()) {
+        (camsim_core::SpectralBasis::Bands(g), true) => Some(g.wavelength_nm.clone()),
+        (_, true) => {
+            *img = into_bands(std::mem::replace(img, empty_image()), bands);
+            Some(bands.wavelength_nm.clone())
+        }
+        (_, false) => None,
+    };
+    effects::warp_planes(fx, img, dx, wl.as_deref())
+}
+
+fn empty_image() -> SpectralImage {
+    SpectralImage {
+        rows: 0,
+        cols: 0,
+        basis: camsim_core::SpectralBasis::Spectra(Vec::new()),
+        planes: Vec::new(),
+    }
+}
+
+/// The defocus block's blur, then the veiling-glare block.
+fn apply_defocus_and_glare(
+    optics: &OpticsModel,
+    img: &mut SpectralImage,
+    dx: f64,
+) -> Result<(), OpticsError> {
+    let fx = &optics.effects;
+    if let Some(d) = &fx.defocus {
+        effects::apply_defocus(d, img, dx, optics.padding)?;
+    }
+    if let Some(f) = fx.veiling_glare {
+        if f > 0.0 {
+            effects::apply_veiling_glare(fx, f, img, dx);
+        }
+    }
+    Ok(())
 }
 
 /// The optional diffuser (Gaussian, FWHM → σ).
@@ -389,7 +507,7 @@ fn into_bands(img: SpectralImage, bands: &WavelengthGrid) -> SpectralImage {
 }
 
 /// Convolve every plane `b` of `img` with `psf_of(b)` by FFT (one padded grid for all).
-fn convolve_planes_with(
+pub(crate) fn convolve_planes_with(
     img: &mut SpectralImage,
     padding: Padding,
     finish: Finish,

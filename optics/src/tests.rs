@@ -136,6 +136,7 @@ fn isetcam_diffraction_limited_default_oracle() {
         blur: Blur::Diffraction,
         diffuser: None,
         padding: Padding::Zero,
+        effects: Default::default(),
     };
     let out = form_image(&optics, &sc, &grid).unwrap();
     let e = &out.irradiance;

@@ -47,7 +47,9 @@ pub fn box_weights(
 }
 
 /// Mean photo-electron rate per pixel (step 2 without t): `p² · FF · ∫ QE_c(λ) Ē(λ) dλ`,
-/// Ē the irradiance (photons/(s·m²·nm)) area-averaged over the pixel's p × p square.
+/// Ē the irradiance (photons/(s·m²·nm)) area-averaged over the pixel's p × p square; with
+/// the effect blocks, QE_c is the effective QE (QE shift, IR leakage) and the result is
+/// shared by crosstalk ([`crate::effects`]).
 ///
 /// The spectral integral is exact for the piecewise-linear spectra of the image
 /// ([`camsim_core::SpectralImage::integrate_against`]); spectra are never expanded.
@@ -59,7 +61,8 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
         .map(|c| {
             let used = sensor.cfa.tile.iter().flatten().any(|&t| t == c);
             used.then(|| {
-                img.term_integrals(&sensor.channel_qe[c])
+                // Effective QE: QE shift and IR leakage blocks included.
+                crate::effects::channel_term_integrals(sensor, img, c)
                     .into_iter()
                     .enumerate()
                     .filter(|(_, w)| *w != 0.0)
@@ -114,11 +117,16 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
             }
         },
     );
-    ElectronRate {
+    let mut rate = ElectronRate {
         rows: sensor.rows,
         cols: sensor.cols,
         electrons_per_s: out,
+    };
+    // Crosstalk block: shares the mean photo-electrons (before the Poisson draw).
+    if let Some(ct) = &sensor.effects.crosstalk {
+        crate::effects::apply_crosstalk(ct, &mut rate);
     }
+    rate
 }
 
 pub(crate) fn channel_maps(

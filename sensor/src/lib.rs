@@ -20,6 +20,7 @@
 //! Units live in names: `_m`, `_s`, `_v`, `_e` (electrons), `_dn`.
 #![deny(missing_docs)]
 
+pub mod effects;
 mod integrate;
 pub mod isetcam;
 mod noise;
@@ -31,6 +32,11 @@ use camsim_core::Spectrum;
 use thiserror::Error;
 
 pub use camsim_core::{RawFrame, SensorIrradiance};
+pub use effects::{
+    apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map,
+    nonlinearity_magnitude, Crosstalk, HotPixel, HotPixels, IrLeakage, Nonlinearity, QeShift,
+    SensorEffects,
+};
 pub use integrate::{box_weights, electron_rate};
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
@@ -189,6 +195,9 @@ pub struct SensorModel {
     pub column_fpn: Option<ColumnFpn>,
     /// Optional reset (kTC) noise (effect block).
     pub reset_noise: Option<ResetNoise>,
+    /// Optional effect blocks of effects.md (hot pixels, nonlinearity, crosstalk, IR leakage,
+    /// QE shift); `SensorEffects::default()` = none.
+    pub effects: SensorEffects,
 }
 
 /// One shot's settings.
@@ -231,6 +240,8 @@ pub struct FixedPattern {
     pub dsnu_v: Vec<f32>,
     /// Per-column offset (V, step 5), `cols` values (zeros without column FPN).
     pub column_offset_v: Vec<f32>,
+    /// Hot pixels (effect block), sorted by (row, col); empty without the block.
+    pub hot_pixels: Vec<HotPixel>,
 }
 
 fn bad(field: impl Into<String>, value: impl std::fmt::Display, reason: &str) -> SensorError {
@@ -363,7 +374,7 @@ impl SensorModel {
         if let Some(r) = &self.reset_noise {
             nonneg("reset_noise.sigma_v", r.sigma_v)?;
         }
-        Ok(())
+        effects::validate(self)
     }
 }
 
@@ -395,6 +406,7 @@ pub(crate) mod test_util {
             noise: NoiseSwitches::default(),
             column_fpn: None,
             reset_noise: None,
+            effects: SensorEffects::default(),
         }
     }
 }

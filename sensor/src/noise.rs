@@ -2,6 +2,7 @@
 use crate::normal::Ziggurat;
 use crate::pixel_rng::PixelRng;
 use crate::poisson::PoissonSampler;
+use crate::effects::{hot_row, HotPixel, Nonlinearity};
 use crate::{ElectronRate, FixedPattern, SensorModel, Shot};
 use camsim_core::rng::stream;
 use camsim_core::RawFrame;
@@ -34,11 +35,12 @@ pub fn fixed_pattern(sensor: &SensorModel, seed: u64) -> FixedPattern {
         prnu_gain,
         dsnu_v,
         column_offset_v: column_offsets(sensor, seed),
+        hot_pixels: crate::effects::hot_pixel_map(sensor, seed),
     }
 }
 
 /// Per-shot constants of steps 3–7.
-struct Chain {
+pub(crate) struct Chain {
     t: f64,
     dark_e: f64,
     well: f64,
@@ -49,10 +51,12 @@ struct Chain {
     dn_per_v: f64,
     black: f64,
     max_dn: f64,
+    /// Optional pixel-voltage nonlinearity (effect block), step 5.
+    nl: Option<Nonlinearity>,
 }
 
 impl Chain {
-    fn new(sensor: &SensorModel, shot: &Shot) -> Self {
+    pub(crate) fn new(sensor: &SensorModel, shot: &Shot) -> Self {
         Chain {
             t: shot.exposure_s,
             // Step 3: d = t · dark_voltage / conversion_gain.
@@ -65,6 +69,7 @@ impl Chain {
             dn_per_v: sensor.dn_per_output_v(),
             black: sensor.black_level_dn,
             max_dn: sensor.max_dn(),
+            nl: sensor.effects.nonlinearity,
         }
     }
 
@@ -76,17 +81,21 @@ impl Chain {
 
     /// Step 7 without rounding: u / swing · (2^bits − 1) + black, clamped to [0, 2^bits − 1].
     #[inline]
-    fn dn(&self, u: f64) -> f64 {
+    pub(crate) fn dn(&self, u: f64) -> f64 {
         (u * self.dn_per_v + self.black).clamp(0.0, self.max_dn)
     }
 
     /// Expected output voltage u of a pixel with electron rate `rate` (all random terms at
     /// their means).
     #[inline]
-    fn expected_u(&self, rate: f64) -> f64 {
-        // Steps 2–4: n = min(e + d, well); step 5: v = n·g.
+    pub(crate) fn expected_u(&self, rate: f64) -> f64 {
+        // Steps 2–4: n = min(e + d, well); step 5: v = n·g (then the optional nonlinearity).
         let n = (rate * self.t + self.dark_e).min(self.well);
-        self.output_v(n * self.g)
+        let v = n * self.g;
+        match &self.nl {
+            None => self.output_v(v),
+            Some(nl) => self.output_v(nl.apply(v)),
+        }
     }
 }
 
@@ -202,6 +211,15 @@ pub fn expose_with(
     let (rows, cols) = (sensor.rows, sensor.cols);
     let sw = sensor.noise;
     let seeded_cols;
+    let seeded_hot;
+    // Hot pixels (effect block): the fixed map, or drawn once per frame from the seed.
+    let hot: &[HotPixel] = match pattern {
+        PatternSource::Maps(fixed) => &fixed.hot_pixels,
+        PatternSource::Seeded(s) => {
+            seeded_hot = crate::effects::hot_pixel_map(sensor, s);
+            &seeded_hot
+        }
+    };
     let col_off: &[f32] = match pattern {
         PatternSource::Maps(fixed) => {
             if sw.prnu {
@@ -269,7 +287,8 @@ pub fn expose_with(
             };
             electrons.resize(cols, 0.0);
             volts.resize(cols, 0.0);
-            k.row(rates, prnu, dsnu, col_off, &mut rng, electrons, volts, out);
+            let hot = hot_row(hot, r);
+            k.row(rates, prnu, dsnu, col_off, hot, &mut rng, electrons, volts, out);
         });
     RawFrame {
         rows,
@@ -321,6 +340,7 @@ impl Kernel {
         prnu: Option<&[f32]>,
         dsnu: Option<&[f32]>,
         col_off: &[f32],
+        hot: &[HotPixel],
         rng: &mut PixelRng,
         n: &mut [f64],
         noise: &mut [f64],
@@ -329,10 +349,10 @@ impl Kernel {
         #[cfg(target_arch = "x86_64")]
         if avx2() {
             // SAFETY: the CPU supports the features the function is compiled for.
-            unsafe { self.row_avx2(rates, prnu, dsnu, col_off, rng, n, noise, out) };
+            unsafe { self.row_avx2(rates, prnu, dsnu, col_off, hot, rng, n, noise, out) };
             return;
         }
-        self.row_impl(rates, prnu, dsnu, col_off, rng, n, noise, out);
+        self.row_impl(rates, prnu, dsnu, col_off, hot, rng, n, noise, out);
     }
 
     /// [`Kernel::row_impl`] compiled for AVX2/BMI2: wider vectors in the arithmetic passes
@@ -347,12 +367,13 @@ impl Kernel {
         prnu: Option<&[f32]>,
         dsnu: Option<&[f32]>,
         col_off: &[f32],
+        hot: &[HotPixel],
         rng: &mut PixelRng,
         n: &mut [f64],
         noise: &mut [f64],
         out: &mut [u16],
     ) {
-        self.row_impl(rates, prnu, dsnu, col_off, rng, n, noise, out);
+        self.row_impl(rates, prnu, dsnu, col_off, hot, rng, n, noise, out);
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -363,6 +384,7 @@ impl Kernel {
         prnu: Option<&[f32]>,
         dsnu: Option<&[f32]>,
         col_off: &[f32],
+        hot: &[HotPixel],
         rng: &mut PixelRng,
         n: &mut [f64],
         noise: &mut [f64],
@@ -386,7 +408,25 @@ impl Kernel {
         // well capacity.
         let mut pois = PoissonSampler::default();
         let (d, well) = (ch.dark_e, ch.well);
-        match (sw.shot, sw.dark) {
+        if !hot.is_empty() {
+            // A row with hot pixels (effect block): per-pixel dark charge d + t·V_hot/g, drawn
+            // like the dark charge.
+            let mut next = hot.iter().peekable();
+            for (c, e) in n.iter_mut().enumerate() {
+                let mut dc = d;
+                if let Some(h) = next.next_if(|h| h.col as usize == c) {
+                    dc += ch.t * h.dark_voltage_v_per_s as f64 / ch.g;
+                }
+                let v = match (sw.shot, sw.dark) {
+                    (true, true) => pois.sample(rng, *e + dc),
+                    (true, false) => pois.sample(rng, *e) + dc,
+                    (false, true) => *e + pois.sample(rng, dc),
+                    (false, false) => *e + dc,
+                };
+                *e = v.min(well);
+            }
+        } else {
+            match (sw.shot, sw.dark) {
             (true, true) => n
                 .iter_mut()
                 .for_each(|e| *e = pois.sample(rng, *e + d).min(well)),
@@ -397,6 +437,12 @@ impl Kernel {
                 .iter_mut()
                 .for_each(|e| *e = (*e + pois.sample(rng, d)).min(well)),
             (false, false) => n.iter_mut().for_each(|e| *e = (*e + d).min(well)),
+            }
+        }
+        // Step 5, effect block: the nonlinearity maps v = n·g (kept as n = v'/g).
+        if let Some(nl) = &ch.nl {
+            let g = ch.g;
+            n.iter_mut().for_each(|e| *e = nl.apply(*e * g) / g);
         }
         // (3) Step 5: read noise r (+ reset noise without CDS), volts.
         let zig = Ziggurat::new();

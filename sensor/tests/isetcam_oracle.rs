@@ -65,6 +65,7 @@ fn default_sensor(rows: usize, cols: usize) -> SensorModel {
         noise: NoiseSwitches::default(),
         column_fpn: None,
         reset_noise: None,
+        effects: Default::default(),
     }
 }
 

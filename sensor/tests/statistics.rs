@@ -28,6 +28,7 @@ fn mono(rows: usize, cols: usize) -> SensorModel {
         noise: NoiseSwitches::default(),
         column_fpn: None,
         reset_noise: None,
+        effects: Default::default(),
     }
 }
 

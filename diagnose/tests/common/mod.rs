@@ -31,6 +31,7 @@ pub fn bayer(rows: usize, cols: usize) -> SensorModel {
         noise: NoiseSwitches::default(),
         column_fpn: None,
         reset_noise: None,
+        effects: Default::default(),
     }
 }
 

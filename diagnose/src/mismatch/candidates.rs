@@ -1,0 +1,996 @@
+//! The candidate library: for every effect id, the parameters that model it, the evidence it
+//! needs in a capture set, and its maximum-likelihood fit (all other parameters held).
+//!
+//! Fits: 1-D parameters by a grid scan then Brent's method on the log-likelihood (on a square
+//! root scale for non-negative spreads and rates, so that small values are resolved);
+//! parameters that enter the photo-electron rates linearly (relative-illumination
+//! polynomial, veiling glare, IR leakage) by Gauss–Newton steps on the frame means with a
+//! step check on the exact likelihood; the others coordinate-wise.
+use super::effects::Effect;
+use super::like::{Ctx, Rates, RowSel};
+use super::model::{ModelState, RateSpec};
+use super::num::{median, minimize_1d};
+use camsim_sensor::{ColumnFpn, Crosstalk, HotPixels, Nonlinearity};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Result of fitting one candidate.
+#[derive(Debug, Clone)]
+pub(crate) enum FitOutcome {
+    /// The capture set holds no evidence for this effect.
+    NotTestable(String),
+    /// Maximum-likelihood fit.
+    Fitted {
+        state: ModelState,
+        /// −log L on the fit rows.
+        neg_ll: f64,
+        /// Parameters fitted.
+        k: usize,
+    },
+}
+
+/// What the data set offers (computed once).
+#[derive(Debug, Clone)]
+pub(crate) struct Evidence {
+    pub light: bool,
+    pub structured_light: bool,
+    pub uniform_light: bool,
+    pub exposed: bool,
+    pub channels: usize,
+    pub column_rows: bool,
+    /// Most photo-electrons any pixel collects in the believed model.
+    pub max_photo_e: f64,
+    /// The believed well capacity.
+    pub well_e: f64,
+}
+
+impl Evidence {
+    pub fn new(ctx: &Ctx, believed: &ModelState) -> Self {
+        let d = ctx.data;
+        let max_photo_e = ctx
+            .rates(believed)
+            .map(|r| {
+                d.shots
+                    .iter()
+                    .zip(&r)
+                    .filter(|(s, _)| s.target.is_light())
+                    .map(|(s, r)| {
+                        r.iter().fold(0f64, |m, &x| m.max(x as f64)) * s.exposure_s
+                            * believed.exposure_factor
+                    })
+                    .fold(0.0, f64::max)
+            })
+            .unwrap_or(f64::INFINITY);
+        Evidence {
+            max_photo_e,
+            well_e: believed.sensor.well_capacity_e,
+            light: d.shots.iter().any(|s| s.target.is_light() && s.exposure_s > 0.0),
+            structured_light: d
+                .shots
+                .iter()
+                .any(|s| s.target.is_structured() && s.exposure_s > 0.0),
+            uniform_light: d.shots.iter().any(|s| {
+                s.target == super::data::TargetClass::Uniform && s.exposure_s > 0.0
+            }),
+            exposed: d.shots.iter().any(|s| s.exposure_s > 0.0),
+            channels: d.channels(),
+            column_rows: ctx.column_term(RowSel::Fit),
+        }
+    }
+
+    /// Why `e` cannot be tested on this set, if so.
+    pub fn missing(&self, e: Effect) -> Option<String> {
+        use Effect::*;
+        let need_light = "no shot has light (every target is dark)";
+        match e {
+            ExposureScale | ConversionGain | Prnu | Nonlinearity | FullWell
+            | RelativeIllumination | VeilingGlare | Crosstalk | IrLeakage | QeShift
+                if !self.light =>
+            {
+                Some(need_light.into())
+            }
+            Defocus | Distortion if !self.structured_light => Some(
+                "no shot has a structured target (edge, patches, image) whose geometry or sharpness could show it"
+                    .into(),
+            ),
+            LateralColor if !self.structured_light || self.channels < 2 => Some(
+                "needs a structured target seen by two or more colour channels".into(),
+            ),
+            FullWell if self.max_photo_e < 0.5 * self.well_e => Some(format!(
+                "the brightest pixels collect about {:.0} e-, under half the believed well of {:.0} e-: saturation never shows",
+                self.max_photo_e, self.well_e
+            )),
+            DarkCurrent | HotPixels if !self.exposed => {
+                Some("every shot has zero exposure time".into())
+            }
+            ColumnFpn if !self.column_rows => Some(format!(
+                "fewer than {} rows: column offsets cannot be told from pixel offsets",
+                super::like::MIN_COLUMN_ROWS
+            )),
+            _ => None,
+        }
+    }
+}
+
+/// Data-derived scales that set the search ranges.
+#[derive(Debug, Clone, Copy)]
+struct Scales {
+    /// DN per pixel volt (largest over shots).
+    k: f64,
+    /// RMS residual of the frame means in the darkest shots (DN).
+    rms_dark: f64,
+    /// Mean residual of the darkest shots (DN).
+    mean_dark: f64,
+    /// Largest temporal variance (data, DN²).
+    var_max: f64,
+    /// Largest mean signal above the pedestal in light shots (DN).
+    signal_max: f64,
+    /// Largest relative RMS residual of light shots.
+    rel_rms_light: f64,
+    /// Photo-signal per shot: (exposure, mean residual, model mean above pedestal, k) of
+    /// dark shots (for the dark-current range).
+    dark_rate_est: f64,
+}
+
+fn scales(ctx: &Ctx, state: &ModelState) -> Result<Scales, String> {
+    let ev = ctx.evaluate(state, RowSel::Fit)?;
+    let d = ctx.data;
+    let nch = d.channels();
+    let consts = ctx.consts(state);
+    let mut k: f64 = 0.0;
+    let (mut r2, mut n_d, mut rs) = (0.0, 0.0, 0.0);
+    let mut var_max: f64 = 0.0;
+    let mut signal_max: f64 = 0.0;
+    let mut rel: f64 = 0.0;
+    let mut dark_rate: f64 = 0.0;
+    // darkest = the shots with the smallest model mean above the pedestal
+    let mut sig: Vec<(f64, usize)> = Vec::new();
+    for (s, sh) in d.shots.iter().enumerate() {
+        k = k.max(consts[s].k);
+        let (mut n, mut sm, mut sr, mut sr2, mut sv) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for c in 0..nch {
+            let x = &ev.per_sc[s * nch + c];
+            n += x.n;
+            sm += x.sum_model;
+            sr += x.sum_resid;
+            sr2 += x.sum_r2;
+            sv += x.sum_data_var;
+        }
+        if n < 1.0 {
+            continue;
+        }
+        let signal = sm / n - consts[s].base_dn;
+        if sh.has_variance() {
+            var_max = var_max.max(sv / n);
+        }
+        sig.push((signal, s));
+        if sh.target.is_light() {
+            signal_max = signal_max.max(signal);
+            if signal > 0.0 {
+                rel = rel.max((sr2 / n).sqrt() / signal);
+            }
+        } else if sh.exposure_s > 0.0 {
+            dark_rate = dark_rate.max((sr / n) / (consts[s].k * sh.exposure_s));
+        }
+        let _ = sh;
+    }
+    sig.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let low = sig.first().map_or(0.0, |x| x.0);
+    for &(signal, s) in &sig {
+        if signal > low + 0.2 * (low.abs() + 1.0) + 5.0 {
+            break;
+        }
+        for c in 0..nch {
+            let x = &ev.per_sc[s * nch + c];
+            r2 += x.sum_r2;
+            rs += x.sum_resid;
+            n_d += x.n;
+        }
+    }
+    Ok(Scales {
+        k: k.max(1e-12),
+        rms_dark: (r2 / n_d.max(1.0)).sqrt(),
+        mean_dark: rs / n_d.max(1.0),
+        var_max,
+        signal_max,
+        rel_rms_light: rel,
+        dark_rate_est: dark_rate,
+    })
+}
+
+/// −log L on the fit rows with rates from `base` transformed by the state.
+fn neg_ll_base(ctx: &Ctx, st: &ModelState, base: &[Arc<Vec<f32>>]) -> f64 {
+    let rates = ctx.transform(base, st);
+    let v = -ctx.evaluate_with(st, &rates, RowSel::Fit).logl;
+    if v.is_finite() {
+        v
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// 1-D maximum-likelihood fit of a parameter set by `set` over [lo, hi] (in the search
+/// variable x); keeps the current state when nothing is better.
+#[allow(clippy::too_many_arguments)]
+fn fit_1d(
+    eval: &dyn Fn(&ModelState) -> f64,
+    state: &ModelState,
+    current_neg_ll: f64,
+    set: &dyn Fn(&mut ModelState, f64),
+    lo: f64,
+    hi: f64,
+    grid: usize,
+    xtol: f64,
+) -> (ModelState, f64) {
+    let f = |x: f64| {
+        let mut st = state.clone();
+        set(&mut st, x);
+        eval(&st)
+    };
+    let (x, fx) = minimize_1d(f, lo, hi, grid, xtol);
+    if fx < current_neg_ll {
+        let mut st = state.clone();
+        set(&mut st, x);
+        (st, fx)
+    } else {
+        (state.clone(), current_neg_ll)
+    }
+}
+
+/// Per-shot sum of a base rate set and weighted basis sets (shared images stay shared).
+fn combine(base0: &Rates, basis: &[Rates], theta: &[f64]) -> Rates {
+    let mut out: Rates = Vec::with_capacity(base0.len());
+    for s in 0..base0.len() {
+        if let Some(j) = (0..s).find(|&j| Arc::ptr_eq(&base0[j], &base0[s])) {
+            out.push(out[j].clone());
+            continue;
+        }
+        let b0 = &base0[s];
+        let v: Vec<f32> = (0..b0.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut x = b0[i] as f64;
+                for (k, t) in theta.iter().enumerate() {
+                    x += t * basis[k][s][i] as f64;
+                }
+                x.max(0.0) as f32
+            })
+            .collect();
+        out.push(Arc::new(v));
+    }
+    out
+}
+
+/// `a − b` per shot (shared images stay shared).
+fn difference(a: &Rates, b: &Rates) -> Rates {
+    let mut out: Rates = Vec::with_capacity(a.len());
+    for s in 0..a.len() {
+        if let Some(j) = (0..s).find(|&j| Arc::ptr_eq(&b[j], &b[s]) && Arc::ptr_eq(&a[j], &a[s])) {
+            out.push(out[j].clone());
+            continue;
+        }
+        let v: Vec<f32> = a[s].par_iter().zip(b[s].par_iter()).map(|(x, y)| x - y).collect();
+        out.push(Arc::new(v));
+    }
+    out
+}
+
+fn max_abs(r: &Rates) -> f64 {
+    r.iter()
+        .map(|v| v.iter().fold(0f64, |m, &x| m.max((x as f64).abs())))
+        .fold(0.0, f64::max)
+}
+
+/// Gauss–Newton fit of parameters entering the base rates linearly:
+/// rates(θ) = base0 + Σ θ_k basis_k. Each step solves the weighted normal equations of the
+/// frame means and is kept only if the exact likelihood improves (halving otherwise).
+#[allow(clippy::too_many_arguments)]
+fn gauss_newton(
+    ctx: &Ctx,
+    state: &ModelState,
+    base0: &Rates,
+    basis: &[Rates],
+    theta0: &[f64],
+    lower: Option<f64>,
+    set: &dyn Fn(&mut ModelState, &[f64]),
+) -> (Vec<f64>, f64, ModelState) {
+    let make = |th: &[f64]| {
+        let mut st = state.clone();
+        set(&mut st, th);
+        st
+    };
+    let clampv = |th: &mut Vec<f64>| {
+        if let Some(l) = lower {
+            th.iter_mut().for_each(|x| *x = x.max(l));
+        }
+    };
+    let mut theta = theta0.to_vec();
+    clampv(&mut theta);
+    let mut st = make(&theta);
+    let mut f = neg_ll_base(ctx, &st, &combine(base0, basis, &theta));
+    let kk = basis.len();
+    for _ in 0..10 {
+        let rates = ctx.transform(&combine(base0, basis, &theta), &st);
+        let tb: Vec<Rates> = basis.iter().map(|b| ctx.transform(b, &st)).collect();
+        let (a, b) = ctx.normal_equations(&st, &rates, &tb, RowSel::Fit);
+        let mut m = nalgebra::DMatrix::from_row_slice(kk, kk, &a);
+        for k in 0..kk {
+            m[(k, k)] *= 1.0 + 1e-9;
+            m[(k, k)] += 1e-30;
+        }
+        let Some(step) = m.lu().solve(&nalgebra::DVector::from_row_slice(&b)) else {
+            break;
+        };
+        let mut improved = false;
+        let mut scale = 1.0;
+        for _ in 0..6 {
+            let mut th: Vec<f64> = theta
+                .iter()
+                .zip(step.iter())
+                .map(|(t, s)| t + scale * s)
+                .collect();
+            clampv(&mut th);
+            let s2 = make(&th);
+            let f2 = neg_ll_base(ctx, &s2, &combine(base0, basis, &th));
+            if f2 < f - 1e-9 {
+                let gain = f - f2;
+                theta = th;
+                st = s2;
+                f = f2;
+                improved = gain > 1e-3;
+                break;
+            }
+            scale *= 0.5;
+        }
+        if !improved {
+            break;
+        }
+    }
+    (theta, f, st)
+}
+
+/// 1-D ML fit of a parameter that enters the forward model nonlinearly (each evaluation of
+/// the forward model is expensive): the rates are interpolated quadratically (Lagrange)
+/// through three forward evaluations around a centre, the likelihood of the interpolated
+/// rates is minimised by Brent's method, the minimum is checked with the exact forward
+/// model, and the centre moves there until it stays (trust-region style), then one refinement
+/// with a smaller step.
+#[allow(clippy::too_many_arguments)]
+fn fit_surrogate_1d(
+    ctx: &Ctx,
+    state: &ModelState,
+    f0: f64,
+    x0: f64,
+    step: f64,
+    lo: f64,
+    hi: f64,
+    set: &dyn Fn(&mut ModelState, f64),
+) -> Result<(ModelState, f64), String> {
+    let at = |x: f64| -> ModelState {
+        let mut st = state.clone();
+        set(&mut st, x);
+        st
+    };
+    let rates_at = |x: f64| -> Result<Arc<Rates>, String> { ctx.base_rates(&at(x).rates) };
+    let mut best = (state.clone(), f0);
+    let mut center = x0.clamp(lo, hi);
+    let mut h = step;
+    let mut refined = false;
+    for _ in 0..6 {
+        let (xm, xp) = if center - h < lo {
+            (lo, lo + 2.0 * h)
+        } else if center + h > hi {
+            (hi - 2.0 * h, hi)
+        } else {
+            (center - h, center + h)
+        };
+        let xc = 0.5 * (xm + xp);
+        // A parameter value the forward model rejects (e.g. a distortion that folds the
+        // image over) ends the search with the best value so far.
+        let (rm, rc, rp) = match (rates_at(xm), rates_at(xc), rates_at(xp)) {
+            (Ok(a), Ok(b), Ok(c)) => (a, b, c),
+            _ => break,
+        };
+        let dm = difference(&rm, &rc);
+        let dp = difference(&rp, &rc);
+        let basis = [dm, dp];
+        // Lagrange weights of the outer nodes at x (the centre's weight is 1 − their sum).
+        let lag = |x: f64| -> [f64; 2] {
+            let l0 = (x - xc) * (x - xp) / ((xm - xc) * (xm - xp));
+            let l2 = (x - xm) * (x - xc) / ((xp - xm) * (xp - xc));
+            [l0, l2]
+        };
+        let (a, b) = ((xc - 3.0 * h).max(lo), (xc + 3.0 * h).min(hi));
+        let (x_star, f_sur) = minimize_1d(
+            |x| neg_ll_base(ctx, &at(x), &combine(&rc, &basis, &lag(x))),
+            a,
+            b,
+            13,
+            1e-4 * h,
+        );
+        // Not worth an exact evaluation when the interpolated improvement is negligible.
+        if best.1 - f_sur < 0.5 {
+            break;
+        }
+        let st = at(x_star);
+        let Ok(rates) = ctx.base_rates(&st.rates) else {
+            break;
+        };
+        let f = neg_ll_base(ctx, &st, &rates);
+        if f < best.1 {
+            best = (st, f);
+        }
+        if (x_star - xc).abs() <= 0.6 * h {
+            if refined {
+                break;
+            }
+            refined = true;
+            h = (h / 4.0).max((x_star - xc).abs());
+        }
+        center = x_star;
+    }
+    Ok(best)
+}
+
+/// Fits `effect` starting from `state` (all other parameters held).
+pub(crate) fn fit_effect(
+    ctx: &Ctx,
+    evidence: &Evidence,
+    effect: Effect,
+    state: &ModelState,
+) -> Result<FitOutcome, String> {
+    if let Some(why) = evidence.missing(effect) {
+        return Ok(FitOutcome::NotTestable(why));
+    }
+    let base = ctx.base_rates(&state.rates)?;
+    let eval_base = |st: &ModelState| neg_ll_base(ctx, st, &base);
+    let f0 = eval_base(state);
+    let sc = scales(ctx, state)?;
+    let s0 = &state.sensor;
+    let out = |st: ModelState, f: f64, k: usize| Ok(FitOutcome::Fitted { state: st, neg_ll: f, k });
+    let sq = |x: f64| x * x;
+    match effect {
+        Effect::ExposureScale => {
+            let x0 = state.exposure_factor.ln();
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.exposure_factor = x.exp(),
+                x0 - 1.0,
+                x0 + 1.0,
+                11,
+                1e-6,
+            );
+            out(st, f, 1)
+        }
+        Effect::ConversionGain => {
+            let g0 = s0.conversion_gain_v_per_e;
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.conversion_gain_v_per_e = g0 * x.exp(),
+                -1.0,
+                1.0,
+                11,
+                1e-6,
+            );
+            out(st, f, 1)
+        }
+        Effect::BlackLevel => {
+            let b0 = s0.black_level_dn;
+            let c = sc.mean_dark;
+            let w = (4.0 * c.abs()).max(4.0 * sc.rms_dark).max(8.0);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.black_level_dn = b0 + x,
+                c - w,
+                c + w,
+                17,
+                1e-4,
+            );
+            out(st, f, 1)
+        }
+        Effect::DarkCurrent => {
+            let v0 = s0.dark_voltage_v_per_s;
+            let hi = (4.0 * v0).max(4.0 * (v0 + sc.dark_rate_est)).max(1e-7);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.dark_voltage_v_per_s = x * x,
+                0.0,
+                hi.sqrt(),
+                17,
+                1e-7 * hi.sqrt(),
+            );
+            out(st, f, 1)
+        }
+        Effect::ReadNoise => {
+            let r0 = s0.read_noise_v;
+            let hi = (4.0 * r0).max(2.0 * sc.var_max.sqrt() / sc.k).max(2.0 * sc.rms_dark / sc.k);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.read_noise_v = x * x,
+                0.0,
+                hi.max(1e-9).sqrt(),
+                17,
+                1e-6 * hi.sqrt(),
+            );
+            out(st, f, 1)
+        }
+        Effect::Dsnu => {
+            let d0 = s0.dsnu_sigma_v;
+            let hi = (4.0 * d0).max(3.0 * sc.rms_dark / sc.k).max(1e-7);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.dsnu_sigma_v = x * x,
+                0.0,
+                hi.sqrt(),
+                17,
+                1e-6 * hi.sqrt(),
+            );
+            out(st, f, 1)
+        }
+        Effect::Prnu => {
+            let p0 = s0.prnu_sigma_percent;
+            let hi = (4.0 * p0).max(300.0 * sc.rel_rms_light).max(0.05);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.prnu_sigma_percent = x * x,
+                0.0,
+                hi.sqrt(),
+                17,
+                1e-6 * hi.sqrt(),
+            );
+            out(st, f, 1)
+        }
+        Effect::ColumnFpn => {
+            let c0 = s0.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+            let hi = (4.0 * c0).max(3.0 * sc.rms_dark / sc.k).max(1e-7);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| {
+                    st.sensor.column_fpn = Some(ColumnFpn {
+                        offset_sigma_v: x * x,
+                    })
+                },
+                0.0,
+                hi.sqrt(),
+                17,
+                1e-6 * hi.sqrt(),
+            );
+            out(st, f, 1)
+        }
+        Effect::HotPixels => fit_hot(ctx, state, &base, f0),
+        Effect::Nonlinearity => {
+            let a0 = match s0.effects.nonlinearity {
+                Some(Nonlinearity::Quadratic { coefficient_per_v }) => coefficient_per_v,
+                _ => 0.0,
+            };
+            let v_max = (sc.signal_max / sc.k).max(1e-6);
+            let hi = (4.0 * a0).max(1.0 / v_max);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| {
+                    st.sensor.effects.nonlinearity = Some(Nonlinearity::Quadratic {
+                        coefficient_per_v: x * x,
+                    })
+                },
+                0.0,
+                hi.sqrt(),
+                17,
+                1e-6 * hi.sqrt(),
+            );
+            out(st, f, 1)
+        }
+        Effect::FullWell => {
+            let w0 = s0.well_capacity_e.ln();
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.well_capacity_e = x.exp(),
+                w0 - 1.6,
+                w0 + 1.1,
+                19,
+                1e-5,
+            );
+            out(st, f, 1)
+        }
+        Effect::Crosstalk => {
+            let c0 = s0.effects.crosstalk.map_or(0.0, |c| c.total());
+            let hi = (2.0 * c0).max(0.3);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| st.sensor.effects.crosstalk = Some(Crosstalk::symmetric(x * x)),
+                0.0,
+                hi.sqrt(),
+                13,
+                1e-5,
+            );
+            out(st, f, 1)
+        }
+        Effect::RelativeIllumination => fit_falloff(ctx, state),
+        Effect::VeilingGlare => {
+            let mut s_zero = state.rates.clone();
+            s_zero.glare_fraction = Some(0.0);
+            let mut s_one = state.rates.clone();
+            s_one.glare_fraction = Some(1.0);
+            let b0 = ctx.base_rates(&s_zero)?;
+            let b1 = difference(&*ctx.base_rates(&s_one)?, &b0);
+            let g0 = state.rates.glare_fraction.unwrap_or(0.0);
+            let eval = |st: &ModelState| {
+                let g = st.rates.glare_fraction.unwrap_or(0.0);
+                neg_ll_base(ctx, st, &combine(&b0, std::slice::from_ref(&b1), &[g]))
+            };
+            let hi = (2.0 * g0).max(0.3);
+            let (st, f) = fit_1d(
+                &eval,
+                state,
+                f0,
+                &|st, x| st.rates.glare_fraction = Some(x * x),
+                0.0,
+                hi.sqrt(),
+                13,
+                1e-6,
+            );
+            out(st, f, 1)
+        }
+        Effect::IrLeakage => fit_ir(ctx, state, f0),
+        Effect::Defocus => {
+            // variable: σ² (the blur's effect on the pixels is nearly linear in it)
+            let p_um = s0.pixel_pitch_m * 1e6;
+            let s_cur = state.rates.defocus_sigma_um.unwrap_or(0.0);
+            let hi = sq((2.0 * s_cur).max(3.0 * p_um));
+            let (st, f) = fit_surrogate_1d(
+                ctx,
+                state,
+                f0,
+                sq(s_cur),
+                (0.25 * sq(p_um)).max(0.3 * sq(s_cur)),
+                0.0,
+                hi,
+                &|st, x| st.rates.defocus_sigma_um = Some(x.max(0.0).sqrt()),
+            )?;
+            out(st, f, 1)
+        }
+        Effect::LateralColor => {
+            let p_um = s0.pixel_pitch_m * 1e6;
+            let d0 = state.rates.lateral_color_um.unwrap_or(0.0);
+            let w = (2.0 * d0.abs()).max(4.0 * p_um);
+            let (st, f) = fit_surrogate_1d(
+                ctx,
+                state,
+                f0,
+                d0,
+                0.5 * p_um,
+                d0 - w,
+                d0 + w,
+                &|st, x| st.rates.lateral_color_um = Some(x),
+            )?;
+            out(st, f, 1)
+        }
+        Effect::Distortion => {
+            let [k10, k20] = state.rates.distortion.unwrap_or([0.0, 0.0]);
+            let mut st = state.clone();
+            let mut f = f0;
+            for coef in [0usize, 1, 0] {
+                let cur = st.rates.distortion.unwrap_or([k10, k20]);
+                let (s2, f2) = fit_surrogate_1d(
+                    ctx,
+                    &st,
+                    f,
+                    cur[coef],
+                    0.01,
+                    cur[coef] - 0.3,
+                    cur[coef] + 0.3,
+                    &|s, x| {
+                        let mut d = s.rates.distortion.unwrap_or([k10, k20]);
+                        d[coef] = x;
+                        s.rates.distortion = Some(d);
+                    },
+                )?;
+                st = s2;
+                f = f2;
+            }
+            out(st, f, 2)
+        }
+        Effect::QeShift => {
+            let nch = ctx.data.channels();
+            let mut st = state.clone();
+            let mut f = f0;
+            let mut k = 0;
+            for c in 0..nch {
+                if !ctx.data.channel.contains(&(c as u8)) {
+                    continue;
+                }
+                k += 1;
+                let cur = st
+                    .rates
+                    .qe_shift_nm
+                    .as_ref()
+                    .map_or(0.0, |v| v.get(c).copied().unwrap_or(0.0));
+                let (s2, f2) = fit_surrogate_1d(
+                    ctx,
+                    &st,
+                    f,
+                    cur,
+                    4.0,
+                    cur - 40.0,
+                    cur + 40.0,
+                    &|s, x| {
+                        let mut v = s.rates.qe_shift_nm.clone().unwrap_or(vec![0.0; nch]);
+                        v[c] = x;
+                        s.rates.qe_shift_nm = Some(v);
+                    },
+                )?;
+                st = s2;
+                f = f2;
+            }
+            out(st, f, k.max(1))
+        }
+    }
+    .map(|o| {
+        let _ = sq;
+        o
+    })
+}
+
+/// Hot pixels: start from the pixels whose residuals a per-pixel extra dark rate explains
+/// beyond 6σ, then coordinate-wise ML of (fraction, median rate, log-spread).
+fn fit_hot(
+    ctx: &Ctx,
+    state: &ModelState,
+    base: &Arc<Rates>,
+    f0: f64,
+) -> Result<FitOutcome, String> {
+    let rates = ctx.transform(base, state);
+    let eval = |st: &ModelState| neg_ll_base(ctx, st, base);
+    let (fr0, v0, ls0) = match state.sensor.effects.hot_pixels {
+        Some(h) if h.fraction > 0.0 && h.dark_voltage_v_per_s > 0.0 => {
+            (h.fraction, h.dark_voltage_v_per_s, h.log_sigma)
+        }
+        _ => {
+            let scan = ctx.hot_scan(state, &rates, 6.0);
+            if scan.is_empty() {
+                return Ok(FitOutcome::Fitted {
+                    state: state.clone(),
+                    neg_ll: f0,
+                    k: 2,
+                });
+            }
+            let n = ctx.data.pixels() as f64;
+            let lv: Vec<f64> = scan.iter().map(|x| x.1.max(1e-30).ln()).collect();
+            let med = median(&lv);
+            let spread = super::num::robust_sigma(&lv);
+            (
+                (scan.len() as f64 / n).min(0.2),
+                med.exp(),
+                spread.clamp(0.05, 1.5),
+            )
+        }
+    };
+    let set_h = |st: &mut ModelState, f: f64, v: f64, s: f64| {
+        st.sensor.effects.hot_pixels = Some(HotPixels {
+            fraction: f,
+            dark_voltage_v_per_s: v,
+            log_sigma: s,
+        })
+    };
+    let mut st = state.clone();
+    set_h(&mut st, fr0, v0, ls0);
+    let mut f = eval(&st);
+    for _ in 0..2 {
+        let h = st.sensor.effects.hot_pixels.expect("set");
+        let (s2, f2) = fit_1d(
+            &eval,
+            &st,
+            f,
+            &|s, x| {
+                let h = s.sensor.effects.hot_pixels.expect("set");
+                set_h(s, x.exp(), h.dark_voltage_v_per_s, h.log_sigma)
+            },
+            h.fraction.ln() - 1.5,
+            (h.fraction.ln() + 1.5).min(0.5f64.ln()),
+            7,
+            1e-3,
+        );
+        st = s2;
+        f = f2;
+        let h = st.sensor.effects.hot_pixels.expect("set");
+        let (s2, f2) = fit_1d(
+            &eval,
+            &st,
+            f,
+            &|s, x| {
+                let h = s.sensor.effects.hot_pixels.expect("set");
+                set_h(s, h.fraction, x.exp(), h.log_sigma)
+            },
+            h.dark_voltage_v_per_s.ln() - 1.0,
+            h.dark_voltage_v_per_s.ln() + 1.0,
+            7,
+            1e-3,
+        );
+        st = s2;
+        f = f2;
+        let h = st.sensor.effects.hot_pixels.expect("set");
+        let (s2, f2) = fit_1d(
+            &eval,
+            &st,
+            f,
+            &|s, x| {
+                let h = s.sensor.effects.hot_pixels.expect("set");
+                set_h(s, h.fraction, h.dark_voltage_v_per_s, x)
+            },
+            0.0,
+            (2.0 * h.log_sigma).max(1.5),
+            7,
+            1e-3,
+        );
+        st = s2;
+        f = f2;
+    }
+    if f < f0 {
+        Ok(FitOutcome::Fitted {
+            state: st,
+            neg_ll: f,
+            k: 3,
+        })
+    } else {
+        Ok(FitOutcome::Fitted {
+            state: state.clone(),
+            neg_ll: f0,
+            k: 3,
+        })
+    }
+}
+
+/// Relative illumination: polynomial fall-off 1 + a1 h² (+ a2 h⁴ + a3 h⁶); the order is chosen
+/// by BIC among 1–3 coefficients.
+fn fit_falloff(ctx: &Ctx, state: &ModelState) -> Result<FitOutcome, String> {
+    let spec_with = |c: Vec<f64>| RateSpec {
+        falloff: Some(c),
+        ..state.rates.clone()
+    };
+    let b0 = ctx.base_rates(&spec_with(vec![0.0; 3]))?;
+    let mut basis: Vec<Rates> = Vec::new();
+    for k in 0..3 {
+        let mut c = vec![0.0; 3];
+        c[k] = 1.0;
+        basis.push(difference(&*ctx.base_rates(&spec_with(c))?, &b0));
+    }
+    let n_obs = ctx.data.pixels() as f64 * ctx.data.shots.len() as f64;
+    let cur = state.rates.falloff.clone().unwrap_or_default();
+    let mut best: Option<(f64, Vec<f64>, f64, ModelState, usize)> = None;
+    for order in 1..=3usize {
+        let th0: Vec<f64> = (0..order).map(|k| cur.get(k).copied().unwrap_or(0.0)).collect();
+        let (th, f, st) = gauss_newton(
+            ctx,
+            state,
+            &b0,
+            &basis[..order],
+            &th0,
+            None,
+            &|s, th| {
+                let mut c = th.to_vec();
+                c.resize(3, 0.0);
+                while c.len() > 1 && c.last() == Some(&0.0) {
+                    c.pop();
+                }
+                s.rates.falloff = Some(c);
+            },
+        );
+        let crit = 2.0 * f + order as f64 * n_obs.ln();
+        if best.as_ref().is_none_or(|b| crit < b.0) {
+            best = Some((crit, th, f, st, order));
+        }
+    }
+    let (_, _, f, st, order) = best.expect("three orders tried");
+    Ok(FitOutcome::Fitted {
+        state: st,
+        neg_ll: f,
+        k: order,
+    })
+}
+
+/// IR leakage: a constant added QE on 700–1000 nm per channel (≥ 0), linear in the rates.
+fn fit_ir(ctx: &Ctx, state: &ModelState, f0: f64) -> Result<FitOutcome, String> {
+    let nch = ctx.data.channels();
+    let cur = state.rates.ir_leakage.clone().unwrap_or(vec![0.0; nch]);
+    let spec_with = |c: Vec<f64>| RateSpec {
+        ir_leakage: Some(c),
+        ..state.rates.clone()
+    };
+    let b0 = ctx.base_rates(&spec_with(vec![0.0; nch]))?;
+    let mut basis: Vec<Rates> = Vec::new();
+    let mut chans = Vec::new();
+    for c in 0..nch {
+        let mut v = vec![0.0; nch];
+        v[c] = 1.0;
+        let b = difference(&*ctx.base_rates(&spec_with(v))?, &b0);
+        if max_abs(&b) > 0.0 {
+            basis.push(b);
+            chans.push(c);
+        }
+    }
+    if basis.is_empty() {
+        return Ok(FitOutcome::NotTestable(
+            "no shot has light beyond 700 nm (the targets' radiance ends at or before 700 nm)"
+                .into(),
+        ));
+    }
+    let th0: Vec<f64> = chans.iter().map(|&c| cur[c]).collect();
+    let (_, f, st) = gauss_newton(ctx, state, &b0, &basis, &th0, Some(0.0), &|s, th| {
+        let mut v = vec![0.0; nch];
+        for (k, &c) in chans.iter().enumerate() {
+            v[c] = th[k];
+        }
+        s.rates.ir_leakage = Some(v);
+    });
+    if f < f0 {
+        Ok(FitOutcome::Fitted {
+            state: st,
+            neg_ll: f,
+            k: chans.len(),
+        })
+    } else {
+        Ok(FitOutcome::Fitted {
+            state: state.clone(),
+            neg_ll: f0,
+            k: chans.len(),
+        })
+    }
+}
+
+/// The magnitude of an effect in a fitted state (effects.md units).
+pub fn magnitude(effect: Effect, st: &ModelState, believed: &ModelState) -> f64 {
+    let s = &st.sensor;
+    let b = &believed.sensor;
+    match effect {
+        Effect::ExposureScale => st.exposure_factor / believed.exposure_factor,
+        Effect::ConversionGain => s.conversion_gain_v_per_e / b.conversion_gain_v_per_e,
+        Effect::BlackLevel => s.black_level_dn - b.black_level_dn,
+        Effect::DarkCurrent => s.dark_voltage_v_per_s,
+        Effect::ReadNoise => s.read_noise_v,
+        Effect::Dsnu => s.dsnu_sigma_v,
+        Effect::Prnu => s.prnu_sigma_percent,
+        Effect::ColumnFpn => s.column_fpn.map_or(0.0, |c| c.offset_sigma_v),
+        Effect::HotPixels => s.effects.hot_pixels.map_or(0.0, |h| h.fraction),
+        Effect::Nonlinearity => camsim_sensor::nonlinearity_magnitude(s, s.analog_gain),
+        Effect::FullWell => s.well_capacity_e,
+        Effect::RelativeIllumination => {
+            -st.rates.falloff.as_ref().map_or(0.0, |c| c.iter().sum::<f64>())
+        }
+        Effect::VeilingGlare => st.rates.glare_fraction.unwrap_or(0.0),
+        Effect::Defocus => st.rates.defocus_sigma_um.unwrap_or(0.0),
+        Effect::Crosstalk => s.effects.crosstalk.map_or(0.0, |c| c.total()),
+        Effect::IrLeakage => st
+            .rates
+            .ir_leakage
+            .as_ref()
+            .map_or(0.0, |v| v.iter().copied().fold(0.0, f64::max)),
+        Effect::QeShift => st.rates.qe_shift_nm.as_ref().map_or(0.0, |v| {
+            v.iter()
+                .copied()
+                .fold(0.0, |m, x| if x.abs() > f64::abs(m) { x } else { m })
+        }),
+        Effect::Distortion => st.rates.distortion.map_or(0.0, |[a, b]| a + b),
+        Effect::LateralColor => st.rates.lateral_color_um.unwrap_or(0.0),
+    }
+}

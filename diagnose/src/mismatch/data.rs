@@ -1,0 +1,238 @@
+//! The recording reduced once: per shot, the per-pixel mean over its frames, the per-pixel
+//! temporal (sample) variance and the number of frames at each ADC rail. Everything the
+//! diagnosis compares with the model is computed from these.
+use rayon::prelude::*;
+
+/// What a shot's target is, as far as the diagnosis is concerned.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TargetClass {
+    /// No light.
+    Dark,
+    /// One radiance everywhere.
+    Uniform,
+    /// A slanted edge at this angle (degrees, capture-format convention).
+    Edge {
+        /// Edge angle (degrees).
+        angle_deg: f64,
+    },
+    /// Any other structured target (patches, images, ...).
+    Structured,
+}
+
+impl TargetClass {
+    /// True for targets with light.
+    pub fn is_light(&self) -> bool {
+        !matches!(self, TargetClass::Dark)
+    }
+    /// True for targets with spatial structure (edges, patches, images).
+    pub fn is_structured(&self) -> bool {
+        matches!(self, TargetClass::Edge { .. } | TargetClass::Structured)
+    }
+}
+
+/// One shot reduced to per-pixel statistics.
+#[derive(Debug, Clone)]
+pub struct ShotData {
+    /// Shot id.
+    pub id: String,
+    /// Target class.
+    pub target: TargetClass,
+    /// A key naming the target (shots with equal keys look at the same scene).
+    pub target_key: String,
+    /// Exposure time (s).
+    pub exposure_s: f64,
+    /// Analog gain.
+    pub analog_gain: f64,
+    /// Number of frames.
+    pub frames: usize,
+    /// Per-pixel mean over frames (DN), row-major.
+    pub mean_dn: Vec<f32>,
+    /// Per-pixel unbiased temporal variance (DN²); empty with one frame.
+    pub var_dn: Vec<f32>,
+    /// Per-pixel number of frames at 0 DN.
+    pub n_low: Vec<u16>,
+    /// Per-pixel number of frames at the ADC maximum.
+    pub n_high: Vec<u16>,
+}
+
+impl ShotData {
+    /// True when the temporal variance is known (≥ 2 frames).
+    pub fn has_variance(&self) -> bool {
+        self.frames >= 2 && !self.var_dn.is_empty()
+    }
+}
+
+/// A capture set reduced for the diagnosis.
+#[derive(Debug, Clone)]
+pub struct DataSet {
+    /// Sensor rows.
+    pub rows: usize,
+    /// Sensor columns.
+    pub cols: usize,
+    /// Channel index of every pixel, row-major.
+    pub channel: Vec<u8>,
+    /// Channel names.
+    pub channel_names: Vec<String>,
+    /// Largest DN (2^bits − 1).
+    pub max_dn: f64,
+    /// The shots.
+    pub shots: Vec<ShotData>,
+}
+
+impl DataSet {
+    /// Number of pixels.
+    pub fn pixels(&self) -> usize {
+        self.rows * self.cols
+    }
+    /// Number of channels.
+    pub fn channels(&self) -> usize {
+        self.channel_names.len()
+    }
+    /// Field height h of pixel (r, c): distance of its centre from the sensor centre divided
+    /// by the half-diagonal (effects.md).
+    #[inline]
+    pub fn field_height(&self, r: usize, c: usize) -> f64 {
+        let (yc, xc) = (
+            (self.rows as f64 - 1.0) / 2.0,
+            (self.cols as f64 - 1.0) / 2.0,
+        );
+        let half_diag = 0.5 * ((self.rows * self.rows + self.cols * self.cols) as f64).sqrt();
+        ((r as f64 - yc).powi(2) + (c as f64 - xc).powi(2)).sqrt() / half_diag
+    }
+}
+
+/// Builds a [`ShotData`] from frames added one at a time (exact integer sums, so the result
+/// does not depend on the order of the rows' work or the thread count).
+#[derive(Debug, Clone)]
+pub struct ShotAccumulator {
+    rows: usize,
+    cols: usize,
+    max_dn: u16,
+    frames: usize,
+    sum: Vec<u32>,
+    sumsq: Vec<u64>,
+    n_low: Vec<u16>,
+    n_high: Vec<u16>,
+}
+
+impl ShotAccumulator {
+    /// An empty accumulator for `rows × cols` frames of an ADC whose maximum is `max_dn`.
+    pub fn new(rows: usize, cols: usize, max_dn: u16) -> Self {
+        let n = rows * cols;
+        ShotAccumulator {
+            rows,
+            cols,
+            max_dn,
+            frames: 0,
+            sum: vec![0; n],
+            sumsq: vec![0; n],
+            n_low: vec![0; n],
+            n_high: vec![0; n],
+        }
+    }
+
+    /// Adds a frame (row-major DN). Errors on a wrong size or a value above the ADC maximum.
+    pub fn add(&mut self, dn: &[u16]) -> Result<(), String> {
+        if dn.len() != self.rows * self.cols {
+            return Err(format!(
+                "frame has {} values but the sensor has {}×{} = {}",
+                dn.len(),
+                self.rows,
+                self.cols,
+                self.rows * self.cols
+            ));
+        }
+        if self.frames >= u16::MAX as usize {
+            return Err("more than 65535 frames in one shot".into());
+        }
+        if let Some(v) = dn.iter().find(|&&v| v > self.max_dn) {
+            return Err(format!(
+                "value {v} DN exceeds the camera's ADC maximum {}",
+                self.max_dn
+            ));
+        }
+        let max = self.max_dn;
+        let cols = self.cols.max(1);
+        self.sum
+            .par_chunks_mut(cols)
+            .zip(self.sumsq.par_chunks_mut(cols))
+            .zip(self.n_low.par_chunks_mut(cols))
+            .zip(self.n_high.par_chunks_mut(cols))
+            .zip(dn.par_chunks(cols))
+            .for_each(|((((s, q), lo), hi), d)| {
+                for i in 0..d.len() {
+                    let v = d[i];
+                    s[i] += v as u32;
+                    q[i] += (v as u64) * (v as u64);
+                    lo[i] += (v == 0) as u16;
+                    hi[i] += (v == max) as u16;
+                }
+            });
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// Frames added so far.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// The reduced shot.
+    pub fn finish(
+        self,
+        id: String,
+        target: TargetClass,
+        target_key: String,
+        exposure_s: f64,
+        analog_gain: f64,
+    ) -> ShotData {
+        let f = self.frames.max(1) as f64;
+        let mean_dn: Vec<f32> = self.sum.par_iter().map(|&s| (s as f64 / f) as f32).collect();
+        let var_dn: Vec<f32> = if self.frames >= 2 {
+            self.sum
+                .par_iter()
+                .zip(self.sumsq.par_iter())
+                .map(|(&s, &q)| {
+                    let s = s as f64;
+                    ((q as f64 - s * s / f) / (f - 1.0)).max(0.0) as f32
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        ShotData {
+            id,
+            target,
+            target_key,
+            exposure_s,
+            analog_gain,
+            frames: self.frames,
+            mean_dn,
+            var_dn,
+            n_low: self.n_low,
+            n_high: self.n_high,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accumulator_mean_variance_and_rails() {
+        let mut a = ShotAccumulator::new(1, 3, 10);
+        a.add(&[0, 5, 10]).unwrap();
+        a.add(&[2, 5, 10]).unwrap();
+        a.add(&[4, 8, 9]).unwrap();
+        assert!(a.add(&[1, 2]).is_err());
+        assert!(a.add(&[1, 2, 11]).unwrap_err().contains("11"));
+        let s = a.finish("s".into(), TargetClass::Dark, "k".into(), 0.1, 1.0);
+        assert_eq!(s.frames, 3);
+        assert_eq!(s.mean_dn, vec![2.0, 6.0, 29.0 / 3.0]);
+        assert!((s.var_dn[0] - 4.0).abs() < 1e-6);
+        assert!((s.var_dn[1] - 3.0).abs() < 1e-6);
+        assert_eq!(s.n_low, vec![1, 0, 0]);
+        assert_eq!(s.n_high, vec![0, 0, 2]);
+    }
+}

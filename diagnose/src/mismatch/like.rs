@@ -1,0 +1,835 @@
+//! The likelihood of the reduced recording under a [`ModelState`], and the fit statistic.
+//!
+//! Per pixel i, shot s with F frames: frame mean m, temporal sample variance v, rail counts.
+//! With the model's per-frame mean μ and temporal variance σ_t² ([`ShotConst::predict`]):
+//!
+//! * **temporal**: (F−1)·v/σ_t² ~ χ²(F−1) (a Gamma density in v);
+//! * **fixed pattern**: the residual vector r_s = m_s − μ_s of a pixel over all its shots is
+//!   Gaussian with covariance diag(σ_t²/F) + σ_D² u uᵀ + σ_P² w wᵀ: DSNU (u = DN per volt)
+//!   and PRNU (w = DN per unit gain error) are the same random offsets/gains in every shot,
+//!   so repeated frames separate temporal noise from fixed pattern and the shots' signal
+//!   levels separate DSNU from PRNU (Woodbury form, [`Woodbury`]);
+//! * **columns**: the residuals are split into per-column means (one "super-pixel" per
+//!   column, whose covariance adds the column-offset variance σ_c² u uᵀ) and the deviations
+//!   from them (within-column part), the exact decomposition of a Gaussian random-effects
+//!   model with equal pixel variances;
+//! * **hot pixels**: a two-component mixture per pixel: normal, or an extra dark rate V whose
+//!   logarithm is N(ln V_h, σ_h²) across hot pixels, integrated by Laplace's method;
+//! * **clipping**: a pixel-shot with any frame at 0 DN or at the ADC maximum contributes the
+//!   multinomial probability of its rail counts instead of its mean and variance.
+//!
+//! The reported χ²/dof sums, per pixel-shot, r²/Var(m) (marginal variance of the frame mean:
+//! temporal/F + every fixed-pattern term) + (F−1)v/σ_t² (F degrees of freedom), or the
+//! Pearson χ² of the rail counts (1 degree of freedom): close to 1 when the model explains
+//! the recording.
+use super::data::DataSet;
+use super::model::{crosstalk_image, Forward, ModelState, Pred, RateSpec, ShotConst};
+use super::num::{log_add_exp, Woodbury};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// Rows per work block (fixed, so sums do not depend on the thread count).
+const BLOCK_ROWS: usize = 8;
+/// Fewest rows for the column decomposition.
+pub(crate) const MIN_COLUMN_ROWS: usize = 8;
+
+/// Per-shot rate images.
+pub(crate) type Rates = Vec<Arc<Vec<f32>>>;
+
+/// Shared state of a diagnosis: the data, the forward model, the rows used and caches.
+pub(crate) struct Ctx<'a> {
+    pub data: &'a DataSet,
+    pub forward: &'a dyn Forward,
+    /// Rows used while fitting (all rows of small sensors, a subset of large ones).
+    pub fit_rows: Vec<usize>,
+    /// All rows.
+    pub all_rows: Vec<usize>,
+    /// Pixels left out of the column means (isolated outliers found in the data alone).
+    pub col_excluded: Vec<bool>,
+    /// Forward-model results by rate spec, with their insertion stamp (oldest evicted first).
+    cache: Mutex<HashMap<String, (u64, Arc<Rates>)>>,
+    stamp: std::sync::atomic::AtomicU64,
+}
+
+/// Which rows an evaluation covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum RowSel {
+    Fit,
+    All,
+}
+
+/// χ² and moments of one (shot, channel).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ScStat {
+    /// Σ χ² contributions.
+    pub chi2: f64,
+    /// Degrees of freedom.
+    pub dof: f64,
+    /// Pixels (uncensored).
+    pub n: f64,
+    /// Σ residual of the frame mean (DN).
+    pub sum_resid: f64,
+    /// Σ model mean (DN).
+    pub sum_model: f64,
+    /// Σ data mean (DN).
+    pub sum_data: f64,
+    /// Σ model temporal variance (DN²).
+    pub sum_model_var: f64,
+    /// Σ data temporal variance (DN²) (shots with ≥ 2 frames).
+    pub sum_data_var: f64,
+    /// Σ marginal variance of the frame mean (DN²).
+    pub sum_var_mean: f64,
+    /// Σ r² (DN²).
+    pub sum_r2: f64,
+    /// Pixel-shots with rail frames.
+    pub censored: f64,
+}
+
+impl ScStat {
+    fn add(&mut self, o: &ScStat) {
+        self.chi2 += o.chi2;
+        self.dof += o.dof;
+        self.n += o.n;
+        self.sum_resid += o.sum_resid;
+        self.sum_model += o.sum_model;
+        self.sum_data += o.sum_data;
+        self.sum_model_var += o.sum_model_var;
+        self.sum_data_var += o.sum_data_var;
+        self.sum_var_mean += o.sum_var_mean;
+        self.sum_r2 += o.sum_r2;
+        self.censored += o.censored;
+    }
+}
+
+/// Result of one evaluation.
+#[derive(Debug, Clone)]
+pub struct Eval {
+    /// Log-likelihood (constants dropped).
+    pub logl: f64,
+    /// Σ χ².
+    pub chi2: f64,
+    /// Σ degrees of freedom (before subtracting parameters).
+    pub dof: f64,
+    /// Per (shot, channel), shot-major.
+    pub per_sc: Vec<ScStat>,
+    /// Pixels classified as hot (posterior > 1/2).
+    pub hot_pixels: usize,
+    /// Column-term share of the log-likelihood.
+    pub logl_columns: f64,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct ColAcc {
+    n: f64,
+    sr: f64,
+    sa: f64,
+    su: f64,
+    sw2: f64,
+}
+
+/// Per-(shot, column) column-mean statistics.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct ColStat {
+    pub n: f64,
+    pub c_hat: f64,
+    pub var_diag: f64,
+    pub u_bar: f64,
+    pub w_rms: f64,
+}
+
+/// Hot-pixel mixture parameters.
+#[derive(Debug, Clone, Copy)]
+struct Hot {
+    fraction: f64,
+    ln_rate: f64,
+    log_sigma: f64,
+}
+
+impl<'a> Ctx<'a> {
+    pub fn new(data: &'a DataSet, forward: &'a dyn Forward, max_fit_pixels: usize) -> Self {
+        let all_rows: Vec<usize> = (0..data.rows).collect();
+        let fit_rows = if data.pixels() <= max_fit_pixels {
+            all_rows.clone()
+        } else {
+            // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
+            let keep = (max_fit_pixels / data.cols.max(1)).max(16) / 2;
+            let groups = data.rows / 2;
+            let mut rows = Vec::new();
+            for k in 0..keep.min(groups) {
+                let g = k * groups / keep.min(groups);
+                rows.push(2 * g);
+                rows.push(2 * g + 1);
+            }
+            rows
+        };
+        let col_excluded = outlier_pixels(data);
+        Ctx {
+            data,
+            forward,
+            fit_rows,
+            all_rows,
+            col_excluded,
+            cache: Mutex::new(HashMap::new()),
+            stamp: std::sync::atomic::AtomicU64::new(0),
+        }
+    }
+
+    /// Rates of the forward model for `spec` (cached; the cache holds up to ~512 MB).
+    pub fn base_rates(&self, spec: &RateSpec) -> Result<Arc<Rates>, String> {
+        let key = spec.key();
+        let next = || self.stamp.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if let Some(r) = self.cache.lock().expect("cache").get_mut(&key) {
+            r.0 = next();
+            return Ok(r.1.clone());
+        }
+        let r = self.forward.rates(spec)?;
+        if r.len() != self.data.shots.len() {
+            return Err(format!(
+                "forward model returned {} rate images for {} shots",
+                r.len(),
+                self.data.shots.len()
+            ));
+        }
+        for x in &r {
+            if x.len() != self.data.pixels() {
+                return Err("forward model returned a rate image of the wrong size".into());
+            }
+        }
+        let unique = (0..r.len())
+            .filter(|&i| !(0..i).any(|j| Arc::ptr_eq(&r[i], &r[j])))
+            .count()
+            .max(1);
+        let entry_bytes = unique * self.data.pixels() * 4;
+        let max_entries = ((512usize << 20) / entry_bytes.max(1)).clamp(8, 4096);
+        let r = Arc::new(r);
+        let mut c = self.cache.lock().expect("cache");
+        while c.len() >= max_entries {
+            let oldest = c
+                .iter()
+                .min_by_key(|(_, v)| v.0)
+                .map(|(k, _)| k.clone())
+                .expect("non-empty");
+            c.remove(&oldest);
+        }
+        c.insert(key, (next(), r.clone()));
+        Ok(r)
+    }
+
+    /// Rates with the state's exposure factor and crosstalk applied.
+    pub fn rates(&self, state: &ModelState) -> Result<Rates, String> {
+        let base = self.base_rates(&state.rates)?;
+        Ok(self.transform(&base, state))
+    }
+
+    /// Exposure factor and crosstalk applied to base rates (shots sharing an image share the
+    /// result).
+    pub fn transform(&self, base: &[Arc<Vec<f32>>], state: &ModelState) -> Rates {
+        let ct = state.sensor.effects.crosstalk;
+        let f = state.exposure_factor;
+        if f == 1.0 && ct.is_none() {
+            return base.to_vec();
+        }
+        let mut out: Vec<Arc<Vec<f32>>> = Vec::with_capacity(base.len());
+        for (i, b) in base.iter().enumerate() {
+            if let Some(j) = (0..i).find(|&j| Arc::ptr_eq(&base[j], b)) {
+                out.push(out[j].clone());
+                continue;
+            }
+            let mut v: Vec<f32> = if f == 1.0 {
+                b.to_vec()
+            } else {
+                b.par_iter().map(|&x| (x as f64 * f) as f32).collect()
+            };
+            if let Some(ct) = &ct {
+                v = crosstalk_image(ct, self.data.rows, self.data.cols, &v);
+            }
+            out.push(Arc::new(v));
+        }
+        out
+    }
+
+    fn rows(&self, sel: RowSel) -> &[usize] {
+        match sel {
+            RowSel::Fit => &self.fit_rows,
+            RowSel::All => &self.all_rows,
+        }
+    }
+
+    /// Whether the column decomposition is used for this row selection.
+    pub fn column_term(&self, sel: RowSel) -> bool {
+        self.rows(sel).len() >= MIN_COLUMN_ROWS
+    }
+
+    /// Log-likelihood and χ² of the state.
+    pub fn evaluate(&self, state: &ModelState, sel: RowSel) -> Result<Eval, String> {
+        let rates = self.rates(state)?;
+        Ok(self.evaluate_with(state, &rates, sel))
+    }
+
+    /// Per-shot chain constants.
+    pub fn consts(&self, state: &ModelState) -> Vec<ShotConst> {
+        self.data
+            .shots
+            .iter()
+            .map(|s| ShotConst::new(&state.sensor, s.exposure_s, s.analog_gain, s.frames))
+            .collect()
+    }
+
+    /// Column-mean statistics of the residuals (per shot, column), shot-major.
+    pub fn column_stats(
+        &self,
+        state: &ModelState,
+        rates: &Rates,
+        consts: &[ShotConst],
+        sel: RowSel,
+    ) -> Vec<ColStat> {
+        let d = self.data;
+        let (ns, cols) = (d.shots.len(), d.cols);
+        let rows = self.rows(sel);
+        let blocks: Vec<Vec<ColAcc>> = rows
+            .par_chunks(BLOCK_ROWS)
+            .map(|blk| {
+                let mut acc = vec![ColAcc::default(); ns * cols];
+                for &r in blk {
+                    for (s, sh) in d.shots.iter().enumerate() {
+                        let c = &consts[s];
+                        let rate = &rates[s];
+                        for j in 0..cols {
+                            let i = r * cols + j;
+                            if self.col_excluded[i] || sh.n_low[i] > 0 || sh.n_high[i] > 0 {
+                                continue;
+                            }
+                            let p = c.predict(rate[i] as f64 * c.t, 0.0);
+                            let a = &mut acc[s * cols + j];
+                            a.n += 1.0;
+                            a.sr += sh.mean_dn[i] as f64 - p.mean;
+                            a.sa += c.var_mean(&p);
+                            a.su += p.u;
+                            a.sw2 += p.w * p.w;
+                        }
+                    }
+                }
+                acc
+            })
+            .collect();
+        let mut tot = vec![ColAcc::default(); ns * cols];
+        for b in &blocks {
+            for (t, x) in tot.iter_mut().zip(b) {
+                t.n += x.n;
+                t.sr += x.sr;
+                t.sa += x.sa;
+                t.su += x.su;
+                t.sw2 += x.sw2;
+            }
+        }
+        let _ = state;
+        tot.iter()
+            .map(|a| {
+                if a.n < 1.0 {
+                    ColStat::default()
+                } else {
+                    ColStat {
+                        n: a.n,
+                        c_hat: a.sr / a.n,
+                        var_diag: a.sa / (a.n * a.n),
+                        u_bar: a.su / a.n,
+                        w_rms: (a.sw2 / a.n).sqrt(),
+                    }
+                }
+            })
+            .collect()
+    }
+
+    /// Evaluation with given (transformed) rates.
+    pub fn evaluate_with(&self, state: &ModelState, rates: &Rates, sel: RowSel) -> Eval {
+        let d = self.data;
+        let (ns, cols, nch) = (d.shots.len(), d.cols, d.channels());
+        let consts = self.consts(state);
+        let s = &state.sensor;
+        let sig_d = if s.noise.dsnu { s.dsnu_sigma_v } else { 0.0 };
+        let sig_p = if s.noise.prnu {
+            s.prnu_sigma_percent / 100.0
+        } else {
+            0.0
+        };
+        let sig_c = s.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+        let hot = s
+            .effects
+            .hot_pixels
+            .filter(|h| h.fraction > 0.0 && h.dark_voltage_v_per_s > 0.0)
+            .map(|h| Hot {
+                fraction: h.fraction.min(0.5),
+                ln_rate: h.dark_voltage_v_per_s.ln(),
+                log_sigma: h.log_sigma,
+            });
+        let use_cols = self.column_term(sel);
+        let col = if use_cols {
+            self.column_stats(state, rates, &consts, sel)
+        } else {
+            Vec::new()
+        };
+        // Column term: per column, the S-vector of column-mean residuals.
+        let mut logl_columns = 0.0;
+        if use_cols {
+            let terms: Vec<f64> = (0..cols)
+                .into_par_iter()
+                .map(|j| {
+                    let mut wb = Woodbury::default();
+                    let n_max = (0..ns).map(|s| col[s * cols + j].n).fold(0.0, f64::max);
+                    if n_max < 2.0 {
+                        return 0.0;
+                    }
+                    let b1 = (sig_d * sig_d / n_max + sig_c * sig_c).sqrt();
+                    let b2 = sig_p / n_max.sqrt();
+                    for s in 0..ns {
+                        let c = &col[s * cols + j];
+                        if c.n < 2.0 || c.var_diag <= 0.0 {
+                            continue;
+                        }
+                        wb.add(c.c_hat, c.var_diag, [b1 * c.u_bar, b2 * c.w_rms, 0.0]);
+                    }
+                    if wb.is_empty() {
+                        0.0
+                    } else {
+                        wb.log_likelihood()
+                    }
+                })
+                .collect();
+            logl_columns = terms.iter().sum();
+        }
+        // Pixel term.
+        let rows = self.rows(sel);
+        let blocks: Vec<(f64, Vec<ScStat>, usize)> = rows
+            .par_chunks(BLOCK_ROWS)
+            .map(|blk| {
+                let mut ll = 0.0;
+                let mut sc = vec![ScStat::default(); ns * nch];
+                let mut n_hot = 0usize;
+                let mut preds: Vec<Pred> = vec![Pred::default(); ns];
+                let mut es: Vec<f64> = vec![0.0; ns];
+                for &r in blk {
+                    for j in 0..cols {
+                        let i = r * cols + j;
+                        let ch = d.channel[i] as usize;
+                        for sidx in 0..ns {
+                            let c = &consts[sidx];
+                            es[sidx] = rates[sidx][i] as f64 * c.t;
+                            preds[sidx] = c.predict(es[sidx], 0.0);
+                        }
+                        let cs = |sidx: usize| -> Option<&ColStat> {
+                            if use_cols {
+                                let x = &col[sidx * cols + j];
+                                (x.n >= 2.0).then_some(x)
+                            } else {
+                                None
+                            }
+                        };
+                        let l0 = self.pixel_ll(
+                            i,
+                            &preds,
+                            &consts,
+                            &cs,
+                            sig_d,
+                            sig_p,
+                            if use_cols { 0.0 } else { sig_c },
+                        );
+                        let mut hot_post = 0.0;
+                        let mut hot_preds: Option<Vec<Pred>> = None;
+                        let li = match &hot {
+                            None => l0,
+                            Some(h) => {
+                                let (lh, hp) =
+                                    self.hot_ll(i, &preds, &es, &consts, &cs, sig_d, sig_p, sig_c, use_cols, h);
+                                let a = (1.0 - h.fraction).ln() + l0;
+                                let b = h.fraction.ln() + lh;
+                                let tot = log_add_exp(a, b);
+                                hot_post = (b - tot).exp();
+                                if hot_post > 0.5 {
+                                    n_hot += 1;
+                                    hot_preds = Some(hp);
+                                }
+                                tot
+                            }
+                        };
+                        ll += li;
+                        // Reported χ² (marginal per pixel-shot) with the pixel's class.
+                        let used = hot_preds.as_deref().unwrap_or(&preds);
+                        for sidx in 0..ns {
+                            let sh = &d.shots[sidx];
+                            let p = &used[sidx];
+                            let st = &mut sc[sidx * nch + ch];
+                            let f = consts[sidx].frames;
+                            let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
+                            if nlo + nhi > 0.0 {
+                                let p_rail = (p.p_lo + p.p_hi).clamp(1e-12, 1.0 - 1e-12);
+                                let x = nlo + nhi - f * p_rail;
+                                if std::env::var_os("CAMSIM_DEBUG").is_some() && x * x / (f * p_rail * (1.0 - p_rail)) > 1e6 {
+                                    eprintln!("DEBUG s{sidx} i{i} nlo{nlo} nhi{nhi} p_lo{} p_hi{} mean{} var{} e{}", p.p_lo, p.p_hi, p.mean, p.var_t, es[sidx]);
+                                }
+                                st.chi2 += x * x / (f * p_rail * (1.0 - p_rail));
+                                st.dof += 1.0;
+                                st.censored += 1.0;
+                                continue;
+                            }
+                            let m = sh.mean_dn[i] as f64;
+                            let rr = m - p.mean;
+                            let vm = consts[sidx].var_mean(p)
+                                + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
+                                + sig_p * sig_p * p.w * p.w;
+                            st.chi2 += rr * rr / vm;
+                            st.dof += 1.0;
+                            st.n += 1.0;
+                            st.sum_resid += rr;
+                            st.sum_model += p.mean;
+                            st.sum_data += m;
+                            st.sum_model_var += p.var_t;
+                            st.sum_var_mean += vm;
+                            st.sum_r2 += rr * rr;
+                            if sh.has_variance() {
+                                let v = sh.var_dn[i] as f64;
+                                st.chi2 += (f - 1.0) * v / p.var_t;
+                                st.dof += f - 1.0;
+                                st.sum_data_var += v;
+                            }
+                        }
+                        let _ = hot_post;
+                    }
+                }
+                (ll, sc, n_hot)
+            })
+            .collect();
+        let mut logl = logl_columns;
+        let mut per_sc = vec![ScStat::default(); ns * nch];
+        let mut hot_pixels = 0;
+        for (ll, sc, nh) in &blocks {
+            logl += ll;
+            for (t, x) in per_sc.iter_mut().zip(sc) {
+                t.add(x);
+            }
+            hot_pixels += nh;
+        }
+        let chi2 = per_sc.iter().map(|x| x.chi2).sum();
+        let dof = per_sc.iter().map(|x| x.dof).sum();
+        Eval {
+            logl,
+            chi2,
+            dof,
+            per_sc,
+            hot_pixels,
+            logl_columns,
+        }
+    }
+
+    /// Log-likelihood of one pixel over all shots (normal component).
+    #[allow(clippy::too_many_arguments)]
+    fn pixel_ll<'c>(
+        &self,
+        i: usize,
+        preds: &[Pred],
+        consts: &[ShotConst],
+        col: &dyn Fn(usize) -> Option<&'c ColStat>,
+        sig_d: f64,
+        sig_p: f64,
+        sig_c_pixel: f64,
+    ) -> f64 {
+        let d = self.data;
+        let mut wb = Woodbury::default();
+        let mut ll = 0.0;
+        let sig_u = (sig_d * sig_d + sig_c_pixel * sig_c_pixel).sqrt();
+        for (sidx, sh) in d.shots.iter().enumerate() {
+            let p = &preds[sidx];
+            let f = consts[sidx].frames;
+            let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
+            if nlo + nhi > 0.0 {
+                ll += rail_ll(p, f, nlo, nhi);
+                continue;
+            }
+            let mut r = sh.mean_dn[i] as f64 - p.mean;
+            let mut kappa = 1.0;
+            if let Some(c) = col(sidx) {
+                r -= c.c_hat;
+                kappa = 1.0 - 1.0 / c.n;
+            }
+            let a = kappa * consts[sidx].var_mean(p);
+            let sk = kappa.sqrt();
+            wb.add(r, a, [sk * sig_u * p.u, sk * sig_p * p.w, 0.0]);
+            if sh.has_variance() {
+                ll += temporal_ll(sh.var_dn[i] as f64, p.var_t, f);
+            }
+        }
+        if !wb.is_empty() {
+            ll += wb.log_likelihood();
+        }
+        ll
+    }
+
+    /// Log-likelihood of one pixel as a hot pixel (Laplace integral over its rate), and its
+    /// predictions at the most probable rate.
+    #[allow(clippy::too_many_arguments)]
+    fn hot_ll<'c>(
+        &self,
+        i: usize,
+        preds: &[Pred],
+        es: &[f64],
+        consts: &[ShotConst],
+        col: &dyn Fn(usize) -> Option<&'c ColStat>,
+        sig_d: f64,
+        sig_p: f64,
+        sig_c: f64,
+        use_cols: bool,
+        h: &Hot,
+    ) -> (f64, Vec<Pred>) {
+        let d = self.data;
+        // Linearised response to an extra dark rate V: h_s = c_s V, c_s = DN/e · t/g.
+        let (mut srr, mut scc) = (0.0, 0.0);
+        for (sidx, sh) in d.shots.iter().enumerate() {
+            if sh.n_low[i] + sh.n_high[i] > 0 {
+                continue;
+            }
+            let p = &preds[sidx];
+            let c = &consts[sidx];
+            let cs = p.dn_per_e * c.t / c.g;
+            let mut r = sh.mean_dn[i] as f64 - p.mean;
+            if let Some(x) = col(sidx) {
+                r -= x.c_hat;
+            }
+            let a = c.var_mean(p);
+            srr += r * cs / a;
+            scc += cs * cs / a;
+        }
+        let mu = h.ln_rate;
+        let (x_star, log_prior_term) = if h.log_sigma > 1e-6 && scc > 0.0 {
+            let v_hat = srr / scc;
+            let s2 = h.log_sigma * h.log_sigma;
+            // Newton on x = ln V of  −½ I (e^x − V̂)² − (x − μ)²/(2σ²).
+            let mut x = mu;
+            for _ in 0..30 {
+                let ex = x.exp();
+                let g = -scc * (ex - v_hat) * ex - (x - mu) / s2;
+                let hh = -scc * (2.0 * ex * ex - v_hat * ex) - 1.0 / s2;
+                let step = if hh < 0.0 { -g / hh } else { g.signum() * 0.5 };
+                let step = step.clamp(-2.0, 2.0);
+                x += step;
+                if step.abs() < 1e-8 {
+                    break;
+                }
+            }
+            let ex = x.exp();
+            let curv = scc * ex * ex + 1.0 / s2;
+            let lp = -0.5 * (x - mu) * (x - mu) / s2 - 0.5 * (2.0 * std::f64::consts::PI * s2).ln()
+                + 0.5 * (2.0 * std::f64::consts::PI / curv).ln();
+            (x, lp)
+        } else {
+            (mu, 0.0)
+        };
+        let v = x_star.exp();
+        let hp: Vec<Pred> = consts
+            .iter()
+            .zip(es)
+            .map(|(c, &e)| c.predict(e, c.t * v / c.g))
+            .collect();
+        let l = self.pixel_ll(
+            i,
+            &hp,
+            consts,
+            col,
+            sig_d,
+            sig_p,
+            if use_cols { 0.0 } else { sig_c },
+        );
+        (l + log_prior_term, hp)
+    }
+}
+
+/// Gamma log-density (constants dropped) of a sample variance v with F frames and true
+/// variance σ²: (F−1)v/σ² ~ χ²(F−1).
+#[inline]
+pub(crate) fn temporal_ll(v: f64, var: f64, f: f64) -> f64 {
+    -0.5 * (f - 1.0) * (v / var + var.ln())
+}
+
+/// Multinomial log-probability of the rail counts.
+#[inline]
+pub(crate) fn rail_ll(p: &Pred, f: f64, nlo: f64, nhi: f64) -> f64 {
+    let plo = p.p_lo.clamp(1e-300, 1.0);
+    let phi = p.p_hi.clamp(1e-300, 1.0);
+    let pmid = (1.0 - p.p_lo - p.p_hi).clamp(1e-300, 1.0);
+    let nmid = f - nlo - nhi;
+    let mut l = 0.0;
+    if nlo > 0.0 {
+        l += nlo * plo.ln();
+    }
+    if nhi > 0.0 {
+        l += nhi * phi.ln();
+    }
+    if nmid > 0.0 {
+        l += nmid * pmid.ln();
+    }
+    l
+}
+
+/// Pixels that stand out from their same-channel neighbours in the same column (±2, ±4
+/// rows) by more than 8 robust σ in some shot: excluded from the column means so that a few
+/// hot or dead pixels do not masquerade as column offsets. Depends on the data only.
+fn outlier_pixels(d: &DataSet) -> Vec<bool> {
+    let (rows, cols) = (d.rows, d.cols);
+    let mut out = vec![false; rows * cols];
+    if rows < 9 {
+        return out;
+    }
+    for sh in &d.shots {
+        let dev: Vec<f32> = (0..rows * cols)
+            .into_par_iter()
+            .map(|i| {
+                let (r, c) = (i / cols, i % cols);
+                let mut nb = [0f32; 4];
+                let mut k = 0;
+                for dr in [-4i64, -2, 2, 4] {
+                    let rr = r as i64 + dr;
+                    if rr >= 0 && (rr as usize) < rows {
+                        nb[k] = sh.mean_dn[rr as usize * cols + c];
+                        k += 1;
+                    }
+                }
+                let nb = &mut nb[..k];
+                nb.sort_by(|a, b| a.total_cmp(b));
+                let med = if k % 2 == 1 {
+                    nb[k / 2]
+                } else {
+                    0.5 * (nb[k / 2 - 1] + nb[k / 2])
+                };
+                sh.mean_dn[i] - med
+            })
+            .collect();
+        // robust σ from a strided sample
+        let step = (dev.len() / 20000).max(1);
+        let sample: Vec<f64> = dev.iter().step_by(step).map(|&x| x as f64).collect();
+        let sigma = super::num::robust_sigma(&sample).max(1e-3);
+        let med = super::num::median(&sample);
+        for (o, &x) in out.iter_mut().zip(&dev) {
+            if (x as f64 - med).abs() > 8.0 * sigma {
+                *o = true;
+            }
+        }
+    }
+    out
+}
+
+/// Weighted least-squares normal equations of the frame means for small changes of linear
+/// rate parameters: `d_k = ∂μ/∂θ_k = DN/e · t · basis_k`, weights 1/Var(m) (marginal),
+/// residuals r = m − μ. Returns (A, b) with A = Σ w d dᵀ (K×K, row-major), b = Σ w d r.
+impl Ctx<'_> {
+    pub(crate) fn normal_equations(
+        &self,
+        state: &ModelState,
+        rates: &Rates,
+        basis: &[Rates],
+        sel: RowSel,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let d = self.data;
+        let (ns, cols) = (d.shots.len(), d.cols);
+        let kk = basis.len();
+        let consts = self.consts(state);
+        let s = &state.sensor;
+        let sig_d = if s.noise.dsnu { s.dsnu_sigma_v } else { 0.0 };
+        let sig_p = if s.noise.prnu {
+            s.prnu_sigma_percent / 100.0
+        } else {
+            0.0
+        };
+        let sig_c = s.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+        let blocks: Vec<(Vec<f64>, Vec<f64>)> = self
+            .rows(sel)
+            .par_chunks(BLOCK_ROWS)
+            .map(|blk| {
+                let mut a = vec![0.0; kk * kk];
+                let mut b = vec![0.0; kk];
+                let mut dv = vec![0.0; kk];
+                for &r in blk {
+                    for j in 0..cols {
+                        let i = r * cols + j;
+                        for sidx in 0..ns {
+                            let sh = &d.shots[sidx];
+                            if sh.n_low[i] + sh.n_high[i] > 0 {
+                                continue;
+                            }
+                            let c = &consts[sidx];
+                            let p = c.predict(rates[sidx][i] as f64 * c.t, 0.0);
+                            let vm = c.var_mean(&p)
+                                + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
+                                + sig_p * sig_p * p.w * p.w;
+                            let w = 1.0 / vm;
+                            let rr = sh.mean_dn[i] as f64 - p.mean;
+                            for k in 0..kk {
+                                dv[k] = p.dn_per_e * c.t * basis[k][sidx][i] as f64;
+                            }
+                            for k in 0..kk {
+                                b[k] += w * dv[k] * rr;
+                                for l in 0..kk {
+                                    a[k * kk + l] += w * dv[k] * dv[l];
+                                }
+                            }
+                        }
+                    }
+                }
+                (a, b)
+            })
+            .collect();
+        let mut a = vec![0.0; kk * kk];
+        let mut b = vec![0.0; kk];
+        for (ba, bb) in &blocks {
+            a.iter_mut().zip(ba).for_each(|(x, y)| *x += y);
+            b.iter_mut().zip(bb).for_each(|(x, y)| *x += y);
+        }
+        (a, b)
+    }
+
+    /// Pixels whose residuals over the shots are best explained by an extra dark rate: per
+    /// pixel the least-squares rate V̂ and its significance z = V̂·√I (I: Fisher information);
+    /// returns (pixel, V̂, z) for z > `z_min`.
+    pub(crate) fn hot_scan(
+        &self,
+        state: &ModelState,
+        rates: &Rates,
+        z_min: f64,
+    ) -> Vec<(usize, f64, f64)> {
+        let d = self.data;
+        let (ns, cols) = (d.shots.len(), d.cols);
+        let consts = self.consts(state);
+        let blocks: Vec<Vec<(usize, f64, f64)>> = self
+            .all_rows
+            .par_chunks(BLOCK_ROWS)
+            .map(|blk| {
+                let mut out = Vec::new();
+                for &r in blk {
+                    for j in 0..cols {
+                        let i = r * cols + j;
+                        let (mut srr, mut scc) = (0.0, 0.0);
+                        for sidx in 0..ns {
+                            let sh = &d.shots[sidx];
+                            if sh.n_low[i] + sh.n_high[i] > 0 {
+                                continue;
+                            }
+                            let c = &consts[sidx];
+                            let p = c.predict(rates[sidx][i] as f64 * c.t, 0.0);
+                            let cs = p.dn_per_e * c.t / c.g;
+                            let a = c.var_mean(&p) + (state.sensor.dsnu_sigma_v * p.u).powi(2);
+                            srr += (sh.mean_dn[i] as f64 - p.mean) * cs / a;
+                            scc += cs * cs / a;
+                        }
+                        if scc > 0.0 {
+                            let v = srr / scc;
+                            let z = v * scc.sqrt();
+                            if z > z_min {
+                                out.push((i, v, z));
+                            }
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        blocks.into_iter().flatten().collect()
+    }
+}

@@ -1,0 +1,396 @@
+//! Numerical helpers of the mismatch diagnosis: the normal distribution, moments of a clipped
+//! (censored) normal variable, a small-rank Woodbury log-likelihood and 1-D minimisation.
+
+/// Standard normal density φ(x).
+#[inline]
+pub fn norm_pdf(x: f64) -> f64 {
+    0.398_942_280_401_432_7 * (-0.5 * x * x).exp()
+}
+
+/// Standard normal distribution function Φ(x) = erfc(−x/√2)/2.
+#[inline]
+pub fn norm_cdf(x: f64) -> f64 {
+    0.5 * statrs::function::erf::erfc(-x * std::f64::consts::FRAC_1_SQRT_2)
+}
+
+/// Moments of `Y = clamp(X, lo, hi)` for `X ~ N(m, s²)` (Tobit / censored normal moments:
+/// Greene, *Econometric Analysis*, §19.3): the mean, the variance, and the probabilities of
+/// the two clipped tails.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Censored {
+    /// E[Y].
+    pub mean: f64,
+    /// Var[Y].
+    pub var: f64,
+    /// P(X ≤ lo).
+    pub p_lo: f64,
+    /// P(X ≥ hi).
+    pub p_hi: f64,
+}
+
+/// See [`Censored`]; `lo` may be −∞ and `hi` +∞. With `s = 0` the variable is `clamp(m)`.
+pub fn censored(m: f64, s: f64, lo: f64, hi: f64) -> Censored {
+    if !(s > 0.0) {
+        let y = m.clamp(lo, hi);
+        return Censored {
+            mean: y,
+            var: 0.0,
+            p_lo: if m <= lo { 1.0 } else { 0.0 },
+            p_hi: if m >= hi { 1.0 } else { 0.0 },
+        };
+    }
+    let (a, b) = ((lo - m) / s, (hi - m) / s);
+    let (pa, pb) = (
+        if a.is_finite() { norm_cdf(a) } else { 0.0 },
+        if b.is_finite() { norm_cdf(b) } else { 1.0 },
+    );
+    let (fa, fb) = (
+        if a.is_finite() { norm_pdf(a) } else { 0.0 },
+        if b.is_finite() { norm_pdf(b) } else { 0.0 },
+    );
+    let mid = (pb - pa).max(0.0);
+    let lo_t = if a.is_finite() { lo * pa } else { 0.0 };
+    let hi_t = if b.is_finite() { hi * (1.0 - pb) } else { 0.0 };
+    // E[X; lo<X<hi] = m·ΔΦ + s(φa − φb)
+    let mean = lo_t + hi_t + m * mid + s * (fa - fb);
+    // E[X²; lo<X<hi] = (m²+s²)ΔΦ + s φa (m+lo) − s φb (m+hi)
+    let m2_mid = (m * m + s * s) * mid
+        + if a.is_finite() { s * fa * (m + lo) } else { 0.0 }
+        - if b.is_finite() { s * fb * (m + hi) } else { 0.0 };
+    let lo2 = if a.is_finite() { lo * lo * pa } else { 0.0 };
+    let hi2 = if b.is_finite() { hi * hi * (1.0 - pb) } else { 0.0 };
+    let var = (lo2 + hi2 + m2_mid - mean * mean).max(0.0);
+    Censored {
+        mean,
+        var,
+        p_lo: pa,
+        p_hi: 1.0 - pb,
+    }
+}
+
+/// Accumulates the Gaussian log-likelihood of a residual vector `r` with covariance
+/// `diag(a) + Σ_k b_k b_kᵀ` (rank ≤ 3) by the Woodbury identity and the matrix determinant
+/// lemma: `rᵀC⁻¹r = Σ r²/a − qᵀM⁻¹q`, `ln det C = Σ ln a + ln det M`, `M = I + BᵀA⁻¹B`,
+/// `q = BᵀA⁻¹r` (Golub & Van Loan, *Matrix Computations*, §2.1.4).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Woodbury {
+    rr: f64,
+    logdet_a: f64,
+    q: [f64; 3],
+    m: [[f64; 3]; 3],
+    n: usize,
+}
+
+impl Woodbury {
+    /// Adds one component: residual `r`, diagonal variance `a > 0`, low-rank loadings `b`.
+    #[inline]
+    pub fn add(&mut self, r: f64, a: f64, b: [f64; 3]) {
+        let ia = 1.0 / a;
+        self.rr += r * r * ia;
+        self.logdet_a += a.ln();
+        for k in 0..3 {
+            let bk = b[k] * ia;
+            self.q[k] += bk * r;
+            for l in 0..=k {
+                self.m[k][l] += bk * b[l];
+            }
+        }
+        self.n += 1;
+    }
+
+    /// Number of components added.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// True when nothing was added.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// (quadratic form rᵀC⁻¹r, ln det C).
+    pub fn finish(&self) -> (f64, f64) {
+        // Cholesky of M = I + BᵀA⁻¹B (symmetric positive definite, 3×3).
+        let mut l = [[0f64; 3]; 3];
+        let mut logdet_m = 0.0;
+        for i in 0..3 {
+            for j in 0..=i {
+                let mut s = self.m[i][j] + if i == j { 1.0 } else { 0.0 };
+                for k in 0..j {
+                    s -= l[i][k] * l[j][k];
+                }
+                if i == j {
+                    let d = s.max(1e-300).sqrt();
+                    l[i][i] = d;
+                    logdet_m += 2.0 * d.ln();
+                } else {
+                    l[i][j] = s / l[j][j];
+                }
+            }
+        }
+        // qᵀM⁻¹q = |L⁻¹q|²
+        let mut y = [0f64; 3];
+        let mut qmq = 0.0;
+        for i in 0..3 {
+            let mut s = self.q[i];
+            for k in 0..i {
+                s -= l[i][k] * y[k];
+            }
+            y[i] = s / l[i][i];
+            qmq += y[i] * y[i];
+        }
+        ((self.rr - qmq).max(0.0), self.logdet_a + logdet_m)
+    }
+
+    /// Gaussian log-likelihood without the `−n/2 ln 2π` constant.
+    pub fn log_likelihood(&self) -> f64 {
+        let (quad, logdet) = self.finish();
+        -0.5 * (quad + logdet)
+    }
+}
+
+/// `ln(e^a + e^b)` without overflow.
+#[inline]
+pub fn log_add_exp(a: f64, b: f64) -> f64 {
+    if a == f64::NEG_INFINITY {
+        return b;
+    }
+    if b == f64::NEG_INFINITY {
+        return a;
+    }
+    let m = a.max(b);
+    m + ((a - m).exp() + (b - m).exp()).ln()
+}
+
+/// Minimum of `f` on [lo, hi] by Brent's method (golden section with parabolic steps;
+/// Brent, *Algorithms for Minimization without Derivatives*, 1973, ch. 5), started from the
+/// best of `grid` evenly spaced points (so a coarse global search guards against local
+/// minima). Returns (x, f(x)).
+pub fn minimize_1d(
+    mut f: impl FnMut(f64) -> f64,
+    lo: f64,
+    hi: f64,
+    grid: usize,
+    xtol: f64,
+) -> (f64, f64) {
+    let grid = grid.max(3);
+    let mut best = (lo, f64::INFINITY);
+    let mut xs = Vec::with_capacity(grid);
+    let mut fs = Vec::with_capacity(grid);
+    for i in 0..grid {
+        let x = lo + (hi - lo) * i as f64 / (grid - 1) as f64;
+        let v = f(x);
+        let v = if v.is_finite() { v } else { f64::INFINITY };
+        xs.push(x);
+        fs.push(v);
+        if v < best.1 {
+            best = (x, v);
+        }
+    }
+    let i = xs.iter().position(|&x| x == best.0).unwrap_or(0);
+    let a = xs[i.saturating_sub(1)];
+    let b = xs[(i + 1).min(grid - 1)];
+    let (x, fx) = brent(&mut f, a, b, best.0, best.1, xtol);
+    if fx <= best.1 {
+        (x, fx)
+    } else {
+        best
+    }
+}
+
+/// Brent's minimisation on [a, b] from the point `x` with value `fx`.
+fn brent(
+    f: &mut impl FnMut(f64) -> f64,
+    mut a: f64,
+    mut b: f64,
+    x0: f64,
+    f0: f64,
+    xtol: f64,
+) -> (f64, f64) {
+    const CGOLD: f64 = 0.381_966_011_250_105;
+    let (mut x, mut w, mut v) = (x0, x0, x0);
+    let (mut fx, mut fw, mut fv) = (f0, f0, f0);
+    let mut d: f64 = 0.0;
+    let mut e: f64 = 0.0;
+    for _ in 0..60 {
+        let xm = 0.5 * (a + b);
+        let tol1 = xtol.max(1e-12 * x.abs());
+        let tol2 = 2.0 * tol1;
+        if (x - xm).abs() <= tol2 - 0.5 * (b - a) {
+            break;
+        }
+        let mut golden = true;
+        if e.abs() > tol1 {
+            let r = (x - w) * (fx - fv);
+            let mut q = (x - v) * (fx - fw);
+            let mut p = (x - v) * q - (x - w) * r;
+            q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            }
+            q = q.abs();
+            let etemp = e;
+            e = d;
+            if p.abs() < (0.5 * q * etemp).abs() && p > q * (a - x) && p < q * (b - x) {
+                d = p / q;
+                let u = x + d;
+                if u - a < tol2 || b - u < tol2 {
+                    d = if xm >= x { tol1 } else { -tol1 };
+                }
+                golden = false;
+            }
+        }
+        if golden {
+            e = if x >= xm { a - x } else { b - x };
+            d = CGOLD * e;
+        }
+        let u = if d.abs() >= tol1 {
+            x + d
+        } else {
+            x + if d >= 0.0 { tol1 } else { -tol1 }
+        };
+        let fu = f(u);
+        let fu = if fu.is_finite() { fu } else { f64::INFINITY };
+        if fu <= fx {
+            if u >= x {
+                a = x;
+            } else {
+                b = x;
+            }
+            v = w;
+            fv = fw;
+            w = x;
+            fw = fx;
+            x = u;
+            fx = fu;
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                b = u;
+            }
+            if fu <= fw || w == x {
+                v = w;
+                fv = fw;
+                w = u;
+                fw = fu;
+            } else if fu <= fv || v == x || v == w {
+                v = u;
+                fv = fu;
+            }
+        }
+    }
+    (x, fx)
+}
+
+/// Upper tail of the χ² distribution with `k` degrees of freedom.
+pub fn chi2_sf(x: f64, k: f64) -> f64 {
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    if !(x > 0.0) {
+        return 1.0;
+    }
+    ChiSquared::new(k.max(1e-9))
+        .map(|d| d.sf(x))
+        .unwrap_or(f64::NAN)
+}
+
+/// Median of a slice (NaNs ignored); NaN when empty.
+pub fn median(v: &[f64]) -> f64 {
+    let mut w: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if w.is_empty() {
+        return f64::NAN;
+    }
+    w.sort_by(|a, b| a.total_cmp(b));
+    let n = w.len();
+    if n % 2 == 1 {
+        w[n / 2]
+    } else {
+        0.5 * (w[n / 2 - 1] + w[n / 2])
+    }
+}
+
+/// Robust standard deviation: 1.4826 × the median absolute deviation.
+pub fn robust_sigma(v: &[f64]) -> f64 {
+    let m = median(v);
+    let d: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+    1.4826 * median(&d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn censored_moments_match_numerical_integration() {
+        for &(m, s, lo, hi) in &[
+            (0.3, 1.0, 0.0, 10.0),
+            (5.0, 2.0, 0.0, 6.0),
+            (-1.0, 0.5, 0.0, f64::INFINITY),
+            (3.0, 1.5, f64::NEG_INFINITY, 2.5),
+        ] {
+            let c = censored(m, s, lo, hi);
+            // midpoint rule over ±12 σ
+            let n = 200_000;
+            let (x0, x1) = (m - 12.0 * s, m + 12.0 * s);
+            let dx = (x1 - x0) / n as f64;
+            let (mut e1, mut e2, mut pl, mut ph) = (0.0, 0.0, 0.0, 0.0);
+            for i in 0..n {
+                let x = x0 + (i as f64 + 0.5) * dx;
+                let p = norm_pdf((x - m) / s) / s * dx;
+                let y = x.clamp(lo, hi);
+                e1 += y * p;
+                e2 += y * y * p;
+                if x <= lo {
+                    pl += p;
+                }
+                if x >= hi {
+                    ph += p;
+                }
+            }
+            let var = e2 - e1 * e1;
+            assert!((c.mean - e1).abs() < 1e-6, "{m} {s}: {} vs {e1}", c.mean);
+            assert!((c.var - var).abs() < 1e-5, "{m} {s}: {} vs {var}", c.var);
+            assert!(
+                (c.p_lo - pl).abs() < 1e-4 && (c.p_hi - ph).abs() < 1e-4,
+                "{} {} vs {pl} {ph}",
+                c.p_lo,
+                c.p_hi
+            );
+        }
+    }
+
+    #[test]
+    fn woodbury_matches_dense_inverse() {
+        // C = diag(a) + b1 b1ᵀ + b2 b2ᵀ, 4×4, against an explicit nalgebra computation.
+        let a = [1.0, 2.0, 0.5, 3.0];
+        let b1 = [0.3, -0.2, 0.7, 0.1];
+        let b2 = [0.5, 0.5, 0.0, -0.4];
+        let r = [0.2, -1.0, 0.4, 2.0];
+        let mut w = Woodbury::default();
+        for i in 0..4 {
+            w.add(r[i], a[i], [b1[i], b2[i], 0.0]);
+        }
+        let (q, ld) = w.finish();
+        let mut c = nalgebra::DMatrix::<f64>::zeros(4, 4);
+        for i in 0..4 {
+            for j in 0..4 {
+                c[(i, j)] = b1[i] * b1[j] + b2[i] * b2[j] + if i == j { a[i] } else { 0.0 };
+            }
+        }
+        let rv = nalgebra::DVector::from_row_slice(&r);
+        let ci = c.clone().try_inverse().unwrap();
+        let q_ref = (rv.transpose() * ci * rv)[(0, 0)];
+        let ld_ref = c.determinant().ln();
+        assert!((q - q_ref).abs() < 1e-10 && (ld - ld_ref).abs() < 1e-10);
+    }
+
+    #[test]
+    fn minimize_finds_parabola_minimum() {
+        let (x, fx) = minimize_1d(|x| (x - 0.37).powi(2) + 2.0, -3.0, 5.0, 9, 1e-9);
+        assert!((x - 0.37).abs() < 1e-6 && (fx - 2.0).abs() < 1e-10);
+        // a function with a local minimum: the grid start finds the global one
+        let f = |x: f64| (x * x - 4.0).powi(2) + x;
+        let (x, _) = minimize_1d(f, -3.0, 3.0, 13, 1e-9);
+        assert!(x < 0.0, "{x}");
+    }
+}

@@ -1,0 +1,314 @@
+//! Fit and select: every candidate fitted alone against the current model, the best accepted
+//! when its BIC improves by more than the threshold (ΔBIC = k ln n − 2 ΔlnL), the accepted
+//! ones refitted jointly, and again until nothing improves significantly (Schwarz, "Estimating
+//! the dimension of a model", Ann. Statist. 6, 1978; Kass & Raftery, JASA 90, 1995: ΔBIC < −10
+//! is very strong evidence). When an alike effect explains the data nearly as well, the
+//! diagnosis says it cannot tell them apart instead of guessing.
+use super::candidates::{fit_effect, magnitude, Evidence, FitOutcome};
+use super::effects::{alike, Effect};
+use super::like::{Ctx, Eval, RowSel};
+use super::model::ModelState;
+
+/// Settings of the selection.
+#[derive(Debug, Clone)]
+pub struct SelectOptions {
+    /// Accept a candidate when ΔBIC < −threshold.
+    pub bic_threshold: f64,
+    /// Alike candidates whose ΔBIC lie within this margin cannot be told apart.
+    pub alike_margin: f64,
+    /// Most acceptance rounds.
+    pub max_rounds: usize,
+    /// Effects to consider (default all).
+    pub effects: Vec<Effect>,
+}
+
+impl Default for SelectOptions {
+    fn default() -> Self {
+        SelectOptions {
+            bic_threshold: 10.0,
+            alike_margin: 10.0,
+            max_rounds: 8,
+            effects: Effect::ALL.to_vec(),
+        }
+    }
+}
+
+/// One candidate in one round.
+#[derive(Debug, Clone)]
+pub struct CandidateRow {
+    /// The effect.
+    pub effect: Effect,
+    /// ΔBIC against the model of that round (None when not testable).
+    pub delta_bic: Option<f64>,
+    /// Δ log-likelihood.
+    pub delta_logl: f64,
+    /// Parameters.
+    pub k: usize,
+    /// Magnitude of the candidate's fit (effects.md units).
+    pub magnitude: f64,
+    /// Why it could not be tested.
+    pub not_testable: Option<String>,
+}
+
+/// An accepted effect.
+#[derive(Debug, Clone)]
+pub struct Finding {
+    /// The effect.
+    pub effect: Effect,
+    /// ΔBIC when accepted.
+    pub delta_bic: f64,
+    /// Δ log-likelihood when accepted.
+    pub delta_logl: f64,
+    /// Parameters.
+    pub k: usize,
+    /// Round in which it was accepted.
+    pub round: usize,
+    /// Fit (all pixels) after it was accepted and the model refitted.
+    pub after: Eval,
+    /// The model just after it was accepted (before later findings).
+    pub state_after: ModelState,
+    /// The model just before.
+    pub state_before: ModelState,
+    /// The other candidates of that round, (effect, ΔBIC), best first.
+    pub alternatives: Vec<(Effect, f64)>,
+    /// Part of an undecided group: kept in the fitted camera, not reported as a finding.
+    pub undecided: bool,
+}
+
+/// Effects the set cannot tell apart.
+#[derive(Debug, Clone)]
+pub struct Undecided {
+    /// The effects (the first is the one kept in the fitted camera).
+    pub effects: Vec<Effect>,
+    /// Their ΔBIC.
+    pub delta_bic: Vec<f64>,
+    /// Their magnitudes.
+    pub magnitudes: Vec<f64>,
+    /// Evidence that would separate them.
+    pub separated_by: Vec<String>,
+    /// Round.
+    pub round: usize,
+}
+
+/// The outcome of the selection.
+#[derive(Debug, Clone)]
+pub struct Selection {
+    /// Findings in order of acceptance.
+    pub findings: Vec<Finding>,
+    /// Undecided groups.
+    pub undecided: Vec<Undecided>,
+    /// Effects that could not be tested, with the reason.
+    pub not_testable: Vec<(Effect, String)>,
+    /// Candidate table of every round.
+    pub rounds: Vec<Vec<CandidateRow>>,
+    /// The final model.
+    pub state: ModelState,
+    /// Observations behind the BIC penalty (fit rows).
+    pub n_obs: f64,
+}
+
+fn neg_ll(ctx: &Ctx, st: &ModelState) -> Result<f64, String> {
+    Ok(-ctx.evaluate(st, RowSel::Fit)?.logl)
+}
+
+/// Refits the effects in `model` one at a time (two sweeps), each from its current values.
+fn joint_refit(
+    ctx: &Ctx,
+    ev: &Evidence,
+    model: &[Effect],
+    mut state: ModelState,
+) -> Result<ModelState, String> {
+    if model.len() < 2 {
+        return Ok(state);
+    }
+    let mut f = neg_ll(ctx, &state)?;
+    for _ in 0..2 {
+        let f_start = f;
+        for &e in model {
+            if let FitOutcome::Fitted {
+                state: st, neg_ll, ..
+            } = fit_effect(ctx, ev, e, &state)?
+            {
+                if neg_ll < f {
+                    state = st;
+                    f = neg_ll;
+                }
+            }
+        }
+        if f_start - f < 0.5 {
+            break;
+        }
+    }
+    Ok(state)
+}
+
+/// Runs the greedy selection from the believed model.
+pub(crate) fn select(
+    ctx: &Ctx,
+    believed: &ModelState,
+    opts: &SelectOptions,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Selection, String> {
+    let ev = Evidence::new(ctx, believed);
+    let mut state = believed.clone();
+    let first = ctx.evaluate(&state, RowSel::Fit)?;
+    let n_obs = first.dof.max(2.0);
+    let ln_n = n_obs.ln();
+    let mut f_cur = -first.logl;
+    let mut model: Vec<Effect> = Vec::new();
+    let mut findings: Vec<Finding> = Vec::new();
+    let mut undecided: Vec<Undecided> = Vec::new();
+    let mut not_testable: Vec<(Effect, String)> = Vec::new();
+    let mut rounds = Vec::new();
+    for round in 0..opts.max_rounds {
+        let mut rows: Vec<CandidateRow> = Vec::new();
+        let mut fits: Vec<(Effect, ModelState, usize, f64)> = Vec::new();
+        for &e in &opts.effects {
+            if model.contains(&e) || not_testable.iter().any(|x| x.0 == e) {
+                continue;
+            }
+            progress(&format!("round {}: {}", round + 1, e.id()));
+            match fit_effect(ctx, &ev, e, &state)? {
+                FitOutcome::NotTestable(why) => {
+                    not_testable.push((e, why.clone()));
+                    rows.push(CandidateRow {
+                        effect: e,
+                        delta_bic: None,
+                        delta_logl: 0.0,
+                        k: 0,
+                        magnitude: f64::NAN,
+                        not_testable: Some(why),
+                    });
+                }
+                FitOutcome::Fitted {
+                    state: st,
+                    neg_ll,
+                    k,
+                } => {
+                    let dl = (f_cur - neg_ll).max(0.0);
+                    let dbic = k as f64 * ln_n - 2.0 * dl;
+                    rows.push(CandidateRow {
+                        effect: e,
+                        delta_bic: Some(dbic),
+                        delta_logl: dl,
+                        k,
+                        magnitude: magnitude(e, &st, believed),
+                        not_testable: None,
+                    });
+                    fits.push((e, st, k, dbic));
+                }
+            }
+        }
+        rows.sort_by(|a, b| {
+            a.delta_bic
+                .unwrap_or(f64::INFINITY)
+                .total_cmp(&b.delta_bic.unwrap_or(f64::INFINITY))
+        });
+        rounds.push(rows.clone());
+        fits.sort_by(|a, b| a.3.total_cmp(&b.3));
+        let Some((best, best_state, k, dbic)) = fits.first().cloned() else {
+            break;
+        };
+        if dbic > -opts.bic_threshold {
+            break;
+        }
+        let alternatives: Vec<(Effect, f64)> =
+            fits.iter().skip(1).map(|x| (x.0, x.3)).collect();
+        // An effect left undecided earlier and still needed now: both were present.
+        let partners: Vec<(Effect, f64, ModelState)> = fits
+            .iter()
+            .skip(1)
+            .filter(|x| {
+                alike(best, x.0).is_some()
+                    && x.3 < -opts.bic_threshold
+                    && x.3 - dbic < opts.alike_margin
+            })
+            .map(|x| (x.0, x.3, x.1.clone()))
+            .collect();
+        // Relative illumination seen only through structured targets could be the scene's own
+        // shading: without a uniform flat the set cannot tell.
+        let scene_content = best == Effect::RelativeIllumination && !ev.uniform_light;
+        let before = state.clone();
+        let dl = (dbic - k as f64 * ln_n) / -2.0;
+        state = best_state;
+        model.push(best);
+        state = joint_refit(ctx, &ev, &model, state)?;
+        f_cur = neg_ll(ctx, &state)?;
+        let after = ctx.evaluate(&state, RowSel::All)?;
+        if !partners.is_empty() || scene_content {
+            let mut effects = vec![best];
+            let mut dbics = vec![dbic];
+            let mut mags = vec![magnitude(best, &state, believed)];
+            let mut sep = Vec::new();
+            for (e, b, st) in &partners {
+                effects.push(*e);
+                dbics.push(*b);
+                mags.push(magnitude(*e, st, believed));
+                sep.push(alike(best, *e).expect("alike").separated_by.to_string());
+            }
+            if scene_content {
+                sep.push("a uniform flat-field shot: seen only on structured targets, a fall-off towards the corners could be the scene's own shading (relative illumination vs scene content)".to_string());
+            }
+            undecided.push(Undecided {
+                effects,
+                delta_bic: dbics,
+                magnitudes: mags,
+                separated_by: sep,
+                round,
+            });
+            // Kept in the model (the fitted camera must reproduce the recording) but not
+            // reported as a finding.
+            findings.push(Finding {
+                effect: best,
+                delta_bic: dbic,
+                delta_logl: dl,
+                k,
+                round,
+                after,
+                state_after: state.clone(),
+                state_before: before,
+                alternatives,
+                undecided: true,
+            });
+            continue;
+        }
+        // A partner of an earlier undecided group that is needed on top of it: both effects
+        // are present, so the group becomes two findings.
+        if let Some(pos) = undecided
+            .iter()
+            .position(|u| u.effects[1..].contains(&best))
+        {
+            let u = undecided.remove(pos);
+            if let Some(f) = findings.iter_mut().find(|f| f.effect == u.effects[0]) {
+                f.undecided = false;
+            }
+        }
+        findings.push(Finding {
+            effect: best,
+            delta_bic: dbic,
+            delta_logl: dl,
+            k,
+            round,
+            after,
+            state_after: state.clone(),
+            state_before: before,
+            alternatives,
+            undecided: false,
+        });
+    }
+    Ok(Selection {
+        findings,
+        undecided,
+        not_testable,
+        rounds,
+        state,
+        n_obs,
+    })
+}
+
+impl Selection {
+    /// Findings that are reported (not part of an undecided group).
+    pub fn reported(&self) -> impl Iterator<Item = &Finding> {
+        self.findings.iter().filter(|f| !f.undecided)
+    }
+}

@@ -1,0 +1,652 @@
+//! Batch real-ray tracing: the same exact trace as [`crate::trace`] for many rays at once, in a
+//! structure-of-arrays layout processed [`LANES`] rays at a time so the compiler vectorises
+//! every step (AVX-512 / AVX2 code paths are selected at run time on x86-64; results are
+//! bit-identical on every path because no operation is fused or reordered).
+//!
+//! Per wavelength a [`TraceSystem`] holds what the hot loop needs: vertex positions,
+//! curvatures, conic factors, the index ratios (glass dispersion is evaluated once, not per
+//! ray) and squared clear apertures. Per surface:
+//! * intersection with the quadric c(x² + y² + (1+k)z²) − 2z = 0 in the stable form
+//!   t = C/(−b + √(b² − A C)) (Spencer & Murty 1962), flat surfaces included (c = 0);
+//!   even aspheres fall back to the scalar Newton iteration of [`crate::trace::intersect`];
+//! * the unit normal of a sphere, (−c x, −c y, 1 − c z), needs no square root (it is unit on
+//!   the sphere); a conic's (−c x, −c y, 1 − (1+k) c z) is normalised;
+//! * vector Snell law d' = μ d + (cos θ' − μ cos θ) N (Welford §4.4); total internal
+//!   reflection, a miss, leaving a conic's domain, or (with clipping) a semi-diameter or a
+//!   backwards step kills the lane;
+//! * surfaces with the same medium on both sides (e.g. a stop in air) do not refract.
+//!
+//! Lost rays are marked, not removed; the arithmetic of a dead lane is discarded.
+use crate::prescription::LensPrescription;
+use crate::trace::{intersect, Clipping, FieldAim, Ray, TracedRay};
+use rayon::prelude::*;
+
+/// Rays per vectorised step.
+pub const LANES: usize = 32;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Shape {
+    /// c = 0.
+    Plane,
+    /// k = 0.
+    Sphere,
+    /// k ≠ 0, no aspheric terms.
+    Conic,
+    /// Aspheric terms: scalar Newton intersection.
+    Asphere,
+}
+
+/// One surface of a [`TraceSystem`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Surf {
+    z_mm: f64,
+    c: f64,
+    k1: f64,
+    shape: Shape,
+    /// Index before / after.
+    n1: f64,
+    n2: f64,
+    mu: f64,
+    refracts: bool,
+    /// Squared semi-diameter (∞ when none).
+    sd2: f64,
+}
+
+/// A lens prepared for batch tracing at one wavelength.
+#[derive(Debug, Clone)]
+pub struct TraceSystem<'a> {
+    lens: &'a LensPrescription,
+    wavelength_nm: f64,
+    surfs: Vec<Surf>,
+    z_image_mm: f64,
+    stop_index: usize,
+}
+
+/// Rays in structure-of-arrays form (lens frame, mm; unit directions).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RayBatch {
+    /// Position x.
+    pub x: Vec<f64>,
+    /// Position y.
+    pub y: Vec<f64>,
+    /// Position z.
+    pub z: Vec<f64>,
+    /// Direction cosine L.
+    pub l: Vec<f64>,
+    /// Direction cosine M.
+    pub m: Vec<f64>,
+    /// Direction cosine N.
+    pub n: Vec<f64>,
+    /// Optical path accumulated (mm).
+    pub opl: Vec<f64>,
+    /// The ray is still alive.
+    pub alive: Vec<bool>,
+    /// Where the ray crossed the stop surface (x, y); NaN until it does.
+    pub stop_x: Vec<f64>,
+    /// See `stop_x`.
+    pub stop_y: Vec<f64>,
+}
+
+impl RayBatch {
+    /// An empty batch with room for `n` rays.
+    pub fn with_capacity(n: usize) -> Self {
+        let v = || Vec::with_capacity(n);
+        RayBatch {
+            x: v(),
+            y: v(),
+            z: v(),
+            l: v(),
+            m: v(),
+            n: v(),
+            opl: v(),
+            alive: Vec::with_capacity(n),
+            stop_x: v(),
+            stop_y: v(),
+        }
+    }
+
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// True if the batch holds no ray.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Append a ray.
+    pub fn push(&mut self, r: &Ray) {
+        self.x.push(r.origin_mm[0]);
+        self.y.push(r.origin_mm[1]);
+        self.z.push(r.origin_mm[2]);
+        self.l.push(r.direction[0]);
+        self.m.push(r.direction[1]);
+        self.n.push(r.direction[2]);
+        self.opl.push(r.opl_mm);
+        self.alive.push(true);
+        self.stop_x.push(f64::NAN);
+        self.stop_y.push(f64::NAN);
+    }
+
+    /// The batch of `aim`'s rays through the normalised pupil points `pupil` (the same rays
+    /// as [`FieldAim::ray`]; built in parallel).
+    pub fn from_pupil(aim: &FieldAim, pupil: &[[f64; 2]]) -> Self {
+        let n = pupil.len();
+        let mut b = RayBatch {
+            x: vec![0.0; n],
+            y: vec![0.0; n],
+            z: vec![0.0; n],
+            l: vec![0.0; n],
+            m: vec![0.0; n],
+            n: vec![0.0; n],
+            opl: vec![0.0; n],
+            alive: vec![true; n],
+            stop_x: vec![f64::NAN; n],
+            stop_y: vec![f64::NAN; n],
+        };
+        const BLOCK: usize = 4096;
+        let r = aim.entrance_pupil_radius_mm;
+        let th = aim.field_deg.to_radians();
+        let (st, ct) = th.sin_cos();
+        let zs = aim.start_z_mm();
+        let ze = aim.entrance_pupil_z_mm;
+        b.x.par_chunks_mut(BLOCK)
+            .zip(b.y.par_chunks_mut(BLOCK))
+            .zip(b.z.par_chunks_mut(BLOCK))
+            .zip(b.l.par_chunks_mut(BLOCK))
+            .zip(b.m.par_chunks_mut(BLOCK))
+            .zip(b.n.par_chunks_mut(BLOCK))
+            .zip(b.opl.par_chunks_mut(BLOCK))
+            .zip(pupil.par_chunks(BLOCK))
+            .for_each(|(((((((x, y), z), l), m), nn), opl), pp)| {
+                for (i, p) in pp.iter().enumerate() {
+                    match aim.object_distance_mm {
+                        None => {
+                            // Collimated: the direction is the field's; the start point lies
+                            // on the plane z = start_z (as `FieldAim::ray`).
+                            let (ex, ey) = (p[0] * r, aim.aim_y_mm + p[1] * r);
+                            let s = (ze - zs) / ct;
+                            x[i] = ex;
+                            y[i] = ey - s * st;
+                            z[i] = ze - s * ct;
+                            l[i] = 0.0;
+                            m[i] = st;
+                            nn[i] = ct;
+                            opl[i] = ey * st + (ze - zs) * ct - s;
+                        }
+                        Some(_) => {
+                            let ray = aim.ray(p[0], p[1]);
+                            x[i] = ray.origin_mm[0];
+                            y[i] = ray.origin_mm[1];
+                            z[i] = ray.origin_mm[2];
+                            l[i] = ray.direction[0];
+                            m[i] = ray.direction[1];
+                            nn[i] = ray.direction[2];
+                            opl[i] = ray.opl_mm;
+                        }
+                    }
+                }
+            });
+        b
+    }
+
+    /// Ray `i` as a [`TracedRay`] (`None` if lost).
+    pub fn get(&self, i: usize) -> Option<TracedRay> {
+        self.alive[i].then(|| TracedRay {
+            image_mm: [self.x[i], self.y[i], self.z[i]],
+            direction: [self.l[i], self.m[i], self.n[i]],
+            opl_mm: self.opl[i],
+            stop_mm: [self.stop_x[i], self.stop_y[i], f64::NAN],
+        })
+    }
+
+    /// Rays that reached the image.
+    pub fn count_alive(&self) -> usize {
+        self.alive.iter().filter(|a| **a).count()
+    }
+}
+
+/// Mutable views of one chunk of a batch.
+struct Chunk<'b> {
+    x: &'b mut [f64],
+    y: &'b mut [f64],
+    z: &'b mut [f64],
+    l: &'b mut [f64],
+    m: &'b mut [f64],
+    n: &'b mut [f64],
+    opl: &'b mut [f64],
+    alive: &'b mut [bool],
+    sx: &'b mut [f64],
+    sy: &'b mut [f64],
+}
+
+impl<'a> TraceSystem<'a> {
+    /// Prepare `lens` for tracing at `wavelength_nm`.
+    pub fn new(lens: &'a LensPrescription, wavelength_nm: f64) -> Self {
+        let zs = lens.vertex_z_mm();
+        let mut n1 = 1.0;
+        let surfs = lens
+            .surfaces
+            .iter()
+            .enumerate()
+            .map(|(j, s)| {
+                let n2 = s.medium.index(wavelength_nm);
+                let shape = if !s.is_conic_only() {
+                    Shape::Asphere
+                } else if s.curvature_per_mm == 0.0 {
+                    Shape::Plane
+                } else if s.conic == 0.0 {
+                    Shape::Sphere
+                } else {
+                    Shape::Conic
+                };
+                let out = Surf {
+                    z_mm: zs[j],
+                    c: s.curvature_per_mm,
+                    k1: 1.0 + s.conic,
+                    shape,
+                    n1,
+                    n2,
+                    mu: n1 / n2,
+                    refracts: n1 != n2,
+                    sd2: s.semi_diameter_mm.map_or(f64::INFINITY, |d| d * d),
+                };
+                n1 = n2;
+                out
+            })
+            .collect();
+        TraceSystem {
+            lens,
+            wavelength_nm,
+            surfs,
+            z_image_mm: zs[lens.surfaces.len()],
+            stop_index: lens.stop_index,
+        }
+    }
+
+    /// The wavelength (nm).
+    pub fn wavelength_nm(&self) -> f64 {
+        self.wavelength_nm
+    }
+
+    /// Trace every ray of `batch` to the image plane in place (rayon over blocks of rays;
+    /// the result does not depend on the thread count).
+    pub fn trace(&self, batch: &mut RayBatch, clipping: Clipping) {
+        const BLOCK: usize = 64 * LANES;
+        let clip = clipping == Clipping::SemiDiameters;
+        let RayBatch {
+            x,
+            y,
+            z,
+            l,
+            m,
+            n,
+            opl,
+            alive,
+            stop_x,
+            stop_y,
+        } = batch;
+        x.par_chunks_mut(BLOCK)
+            .zip(y.par_chunks_mut(BLOCK))
+            .zip(z.par_chunks_mut(BLOCK))
+            .zip(l.par_chunks_mut(BLOCK))
+            .zip(m.par_chunks_mut(BLOCK))
+            .zip(n.par_chunks_mut(BLOCK))
+            .zip(opl.par_chunks_mut(BLOCK))
+            .zip(alive.par_chunks_mut(BLOCK))
+            .zip(stop_x.par_chunks_mut(BLOCK))
+            .zip(stop_y.par_chunks_mut(BLOCK))
+            .for_each(|(((((((((x, y), z), l), m), n), opl), alive), sx), sy)| {
+                let mut c = Chunk {
+                    x,
+                    y,
+                    z,
+                    l,
+                    m,
+                    n,
+                    opl,
+                    alive,
+                    sx,
+                    sy,
+                };
+                self.trace_block(&mut c, clip);
+            });
+    }
+
+    /// Trace `aim`'s rays through the normalised pupil points `pupil`.
+    pub fn trace_pupil(&self, aim: &FieldAim, pupil: &[[f64; 2]], clipping: Clipping) -> RayBatch {
+        let mut b = RayBatch::from_pupil(aim, pupil);
+        self.trace(&mut b, clipping);
+        b
+    }
+
+    fn trace_block(&self, c: &mut Chunk<'_>, clip: bool) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU supports AVX-512F (checked above).
+                unsafe { self.trace_block_avx512(c, clip) };
+                return;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked above).
+                unsafe { self.trace_block_avx2(c, clip) };
+                return;
+            }
+        }
+        self.trace_block_generic(c, clip);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn trace_block_avx512(&self, c: &mut Chunk<'_>, clip: bool) {
+        self.trace_block_generic(c, clip);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn trace_block_avx2(&self, c: &mut Chunk<'_>, clip: bool) {
+        self.trace_block_generic(c, clip);
+    }
+
+    #[inline(always)]
+    fn trace_block_generic(&self, c: &mut Chunk<'_>, clip: bool) {
+        let len = c.x.len();
+        let mut i = 0;
+        while i < len {
+            let k = (len - i).min(LANES);
+            let mut v = Lanes::load(c, i, k);
+            self.trace_lanes(&mut v, clip);
+            v.store(c, i, k);
+            i += k;
+        }
+    }
+
+    #[inline(always)]
+    fn trace_lanes(&self, v: &mut Lanes, clip: bool) {
+        // Each step is a separate loop over all lanes: the LANES/8 independent vectors of a
+        // step overlap in the pipeline (a fused loop per surface is latency-bound).
+        for (j, s) in self.surfs.iter().enumerate() {
+            if s.shape == Shape::Asphere {
+                self.asphere_lanes(v, j, clip);
+                continue;
+            }
+            let mut t = [0.0f64; LANES];
+            if s.shape == Shape::Plane {
+                for i in 0..LANES {
+                    let pz = v.z[i] - s.z_mm;
+                    v.alive[i] &= mask(v.n[i] != 0.0);
+                    t[i] = -pz / v.n[i];
+                }
+            } else {
+                for i in 0..LANES {
+                    let px = v.x[i];
+                    let py = v.y[i];
+                    let pz = v.z[i] - s.z_mm;
+                    let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
+                    let a = s.c * (dx * dx + dy * dy + s.k1 * dz * dz);
+                    let b = s.c * (px * dx + py * dy + s.k1 * pz * dz) - dz;
+                    let cc = s.c * (px * px + py * py + s.k1 * pz * pz) - 2.0 * pz;
+                    let disc = b * b - a * cc;
+                    let den = -b + pos(disc).sqrt();
+                    v.alive[i] &= mask(disc >= 0.0) & mask(den != 0.0);
+                    t[i] = cc / den;
+                }
+            }
+            let (mut qx, mut qy, mut qz) = ([0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+            for i in 0..LANES {
+                qx[i] = v.x[i] + t[i] * v.l[i];
+                qy[i] = v.y[i] + t[i] * v.m[i];
+                qz[i] = v.z[i] - s.z_mm + t[i] * v.n[i];
+            }
+            if s.shape != Shape::Plane {
+                // Stay inside the conic's domain 1 − (1+k)c²r² ≥ 0 (as the scalar trace).
+                let kc2 = s.k1 * s.c * s.c;
+                for i in 0..LANES {
+                    let r2 = qx[i] * qx[i] + qy[i] * qy[i];
+                    v.alive[i] &= mask(1.0 - kc2 * r2 >= 0.0);
+                }
+            }
+            if clip {
+                let back_ok = j == 0;
+                let lim = s.sd2 * (1.0 + 1e-12);
+                for i in 0..LANES {
+                    let r2 = qx[i] * qx[i] + qy[i] * qy[i];
+                    v.alive[i] &= mask(back_ok | (t[i] >= -1e-9)) & mask(r2 <= lim);
+                }
+            }
+            for i in 0..LANES {
+                v.opl[i] += s.n1 * t[i];
+                v.x[i] = qx[i];
+                v.y[i] = qy[i];
+                v.z[i] = qz[i] + s.z_mm;
+            }
+            if j == self.stop_index {
+                v.sx = qx;
+                v.sy = qy;
+            }
+            if !s.refracts {
+                continue;
+            }
+            // Unit normal oriented towards +z: (−c x, −c y, 1 − (1+k) c z), unit on a sphere,
+            // normalised for a conic; (0, 0, 1) on a plane.
+            let (mut nx, mut ny, mut nz) = ([0.0f64; LANES], [0.0f64; LANES], [1.0f64; LANES]);
+            if s.shape != Shape::Plane {
+                let ck = s.c * s.k1;
+                for i in 0..LANES {
+                    nx[i] = -s.c * qx[i];
+                    ny[i] = -s.c * qy[i];
+                    nz[i] = 1.0 - ck * qz[i];
+                }
+                if s.shape == Shape::Conic {
+                    for i in 0..LANES {
+                        let inv = 1.0 / (nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]).sqrt();
+                        nx[i] *= inv;
+                        ny[i] *= inv;
+                        nz[i] *= inv;
+                    }
+                }
+            }
+            for i in 0..LANES {
+                let (l, m, n, good) =
+                    refract_lane(s.mu, v.l[i], v.m[i], v.n[i], nx[i], ny[i], nz[i]);
+                v.alive[i] &= good;
+                v.l[i] = l;
+                v.m[i] = m;
+                v.n[i] = n;
+            }
+        }
+        // Image plane.
+        let n_img = self.surfs.last().map_or(1.0, |s| s.n2);
+        for i in 0..LANES {
+            v.alive[i] &= mask(v.n[i] > 0.0);
+            let t = (self.z_image_mm - v.z[i]) / v.n[i];
+            v.x[i] += t * v.l[i];
+            v.y[i] += t * v.m[i];
+            v.z[i] = self.z_image_mm;
+            v.opl[i] += n_img * t;
+        }
+    }
+
+    /// An even-asphere surface: the scalar Newton intersection and normal per lane.
+    fn asphere_lanes(&self, v: &mut Lanes, j: usize, clip: bool) {
+        let s = &self.surfs[j];
+        let surf = &self.lens.surfaces[j];
+        let lim = s.sd2 * (1.0 + 1e-12);
+        for i in 0..LANES {
+            let r = Ray {
+                origin_mm: [v.x[i], v.y[i], v.z[i]],
+                direction: [v.l[i], v.m[i], v.n[i]],
+                opl_mm: 0.0,
+            };
+            let hit = if v.alive[i] != 0 {
+                intersect(surf, s.z_mm, &r)
+            } else {
+                None
+            };
+            let Some((t, q)) = hit else {
+                v.alive[i] = 0;
+                continue;
+            };
+            let local = [q[0], q[1], q[2] - s.z_mm];
+            let r2 = q[0] * q[0] + q[1] * q[1];
+            if clip && ((t < -1e-9 && j > 0) || r2 > lim) {
+                v.alive[i] = 0;
+            }
+            v.opl[i] += s.n1 * t;
+            v.x[i] = q[0];
+            v.y[i] = q[1];
+            v.z[i] = q[2];
+            if j == self.stop_index {
+                v.sx[i] = q[0];
+                v.sy[i] = q[1];
+            }
+            if s.refracts {
+                match crate::trace::normal(surf, local) {
+                    Some(nn) => {
+                        let (l, m, n, good) = refract_lane(
+                            s.mu,
+                            r.direction[0],
+                            r.direction[1],
+                            r.direction[2],
+                            nn[0],
+                            nn[1],
+                            nn[2],
+                        );
+                        v.alive[i] &= good;
+                        v.l[i] = l;
+                        v.m[i] = m;
+                        v.n[i] = n;
+                    }
+                    None => v.alive[i] = 0,
+                }
+            }
+        }
+    }
+}
+
+/// Lane mask: all ones when `b`.
+#[inline(always)]
+fn mask(b: bool) -> u64 {
+    (b as u64).wrapping_neg()
+}
+
+/// max(x, 0) written as a select (vectorises; NaN → 0).
+#[inline(always)]
+fn pos(x: f64) -> f64 {
+    if x > 0.0 {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// Vector Snell law for a unit direction d and unit normal N with μ = n/n': the refracted
+/// direction μ d + (cos θ' − μ cos θ) N (N flipped to the side of d) and the mask of "no
+/// total internal reflection".
+#[inline(always)]
+fn refract_lane(
+    mu: f64,
+    dx: f64,
+    dy: f64,
+    dz: f64,
+    nx: f64,
+    ny: f64,
+    nz: f64,
+) -> (f64, f64, f64, u64) {
+    let c0 = dx * nx + dy * ny + dz * nz;
+    let sgn = if c0 < 0.0 { -1.0 } else { 1.0 };
+    let cos_i = c0 * sgn;
+    let sin2_t = mu * mu * (1.0 - cos_i * cos_i);
+    let cos_t = pos(1.0 - sin2_t).sqrt();
+    let g = (cos_t - mu * cos_i) * sgn;
+    (
+        mu * dx + g * nx,
+        mu * dy + g * ny,
+        mu * dz + g * nz,
+        mask(sin2_t <= 1.0),
+    )
+}
+
+/// One vector of rays.
+struct Lanes {
+    x: [f64; LANES],
+    y: [f64; LANES],
+    z: [f64; LANES],
+    l: [f64; LANES],
+    m: [f64; LANES],
+    n: [f64; LANES],
+    opl: [f64; LANES],
+    /// All ones = alive.
+    alive: [u64; LANES],
+    sx: [f64; LANES],
+    sy: [f64; LANES],
+}
+
+/// `k ≤ LANES` values of `src[i..]` in a vector padded with `pad`.
+#[inline(always)]
+fn ld(src: &[f64], i: usize, k: usize, pad: f64) -> [f64; LANES] {
+    if k == LANES {
+        src[i..i + LANES].try_into().unwrap()
+    } else {
+        let mut a = [pad; LANES];
+        a[..k].copy_from_slice(&src[i..i + k]);
+        a
+    }
+}
+
+#[inline(always)]
+fn st(dst: &mut [f64], i: usize, k: usize, a: &[f64; LANES]) {
+    if k == LANES {
+        dst[i..i + LANES].copy_from_slice(a);
+    } else {
+        dst[i..i + k].copy_from_slice(&a[..k]);
+    }
+}
+
+impl Lanes {
+    /// Unused lanes of a partial vector trace a harmless axial ray and are discarded.
+    #[inline(always)]
+    fn load(c: &Chunk<'_>, i: usize, k: usize) -> Self {
+        let mut alive = [0u64; LANES];
+        for (a, b) in alive.iter_mut().zip(&c.alive[i..i + k]) {
+            *a = (*b as u64).wrapping_neg();
+        }
+        Lanes {
+            x: ld(c.x, i, k, 0.0),
+            y: ld(c.y, i, k, 0.0),
+            z: ld(c.z, i, k, 0.0),
+            l: ld(c.l, i, k, 0.0),
+            m: ld(c.m, i, k, 0.0),
+            n: ld(c.n, i, k, 1.0),
+            opl: ld(c.opl, i, k, 0.0),
+            alive,
+            sx: ld(c.sx, i, k, f64::NAN),
+            sy: ld(c.sy, i, k, f64::NAN),
+        }
+    }
+
+    #[inline(always)]
+    fn store(&self, c: &mut Chunk<'_>, i: usize, k: usize) {
+        st(c.x, i, k, &self.x);
+        st(c.y, i, k, &self.y);
+        st(c.z, i, k, &self.z);
+        st(c.l, i, k, &self.l);
+        st(c.m, i, k, &self.m);
+        st(c.n, i, k, &self.n);
+        st(c.opl, i, k, &self.opl);
+        st(c.sx, i, k, &self.sx);
+        st(c.sy, i, k, &self.sy);
+        for (b, a) in c.alive[i..i + k].iter_mut().zip(&self.alive) {
+            *b = *a != 0;
+        }
+    }
+}
+
+impl LensPrescription {
+    /// A [`TraceSystem`] of this lens at `wavelength_nm`.
+    pub fn trace_system(&self, wavelength_nm: f64) -> TraceSystem<'_> {
+        TraceSystem::new(self, wavelength_nm)
+    }
+}

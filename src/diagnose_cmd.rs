@@ -1,0 +1,543 @@
+//! `camsim diagnose CAPTURES.json --out DIR`: find the physics the camera model leaves out.
+//!
+//! The recording is reduced once (per shot: per-pixel frame mean, temporal variance, rail
+//! counts); the believed camera's forward model (this crate's `simulate` stages, through the
+//! [`Forward`] trait of `camsim_diagnose::mismatch`) gives the photo-electron rates, and the
+//! diagnosis (fit check → locate → candidates → BIC selection) runs in camsim-diagnose.
+//! Outputs, all or nothing: `DIR/report.json` (spec/effects.md), `DIR/fitted_camera.json`
+//! (the camera format with the fitted effect blocks; `camsim simulate --camera` reproduces
+//! the recording with it) and `DIR/report.html` with its figures.
+mod figures;
+
+use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure};
+use crate::error::CliError;
+use crate::raw_input::read_frame_with;
+use crate::simulate::{shot_electron_rate, wavelength_grid};
+use crate::staging::with_staging;
+use camsim_core::scene::Target;
+use camsim_diagnose::mismatch::{
+    diagnose, DataSet, DiagnoseOptions, Diagnosis, Effect, Forward, ModelState, RateSpec,
+    ShotAccumulator, TargetClass,
+};
+use rayon::prelude::*;
+use serde_json::{json, Map, Value};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// Options of one `diagnose` run.
+#[derive(Debug, Clone)]
+pub struct DiagnoseCmdOptions {
+    /// Accept a candidate when its ΔBIC is below −threshold.
+    pub bic_threshold: f64,
+    /// Restrict the candidates to these effect ids (empty: all).
+    pub effects: Vec<String>,
+    /// Show progress on a terminal.
+    pub progress: bool,
+}
+
+impl Default for DiagnoseCmdOptions {
+    fn default() -> Self {
+        DiagnoseCmdOptions {
+            bic_threshold: 10.0,
+            effects: Vec::new(),
+            progress: false,
+        }
+    }
+}
+
+/// The forward model of the believed camera with a [`RateSpec`] applied: the camera file is
+/// edited as JSON (the effect blocks of the effects contract), parsed like any camera, and
+/// `simulate`'s scene → optics → pixel-integration stages give each shot's electron rates.
+struct SimForward {
+    /// The capture set whose camera is replaced per call (behind a lock: calls are
+    /// sequential, each internally parallel).
+    set: Mutex<CaptureSet>,
+    camera_json: Value,
+    camera_path: PathBuf,
+    /// Indices in the capture set of the data set's shots.
+    shots: Vec<usize>,
+}
+
+impl Forward for SimForward {
+    fn rates(&self, spec: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
+        let mut v = self.camera_json.clone();
+        let names: Vec<String> = self
+            .set
+            .lock()
+            .map_err(|_| "forward model lock poisoned".to_string())?
+            .camera
+            .sensor
+            .channel_names
+            .clone();
+        apply_rate_spec(&mut v, spec, &names);
+        // The diagnosis applies crosstalk itself.
+        if let Some(s) = v.get_mut("sensor").and_then(Value::as_object_mut) {
+            s.remove("crosstalk");
+        }
+        let raw: CameraFile = serde_json::from_value(v).map_err(|e| {
+            format!(
+                "{}: the camera with the candidate effect is invalid: {e}",
+                self.camera_path.display()
+            )
+        })?;
+        let cam = camera_from_file(&self.camera_path, raw).map_err(|e| e.one_line())?;
+        let mut set = self
+            .set
+            .lock()
+            .map_err(|_| "forward model lock poisoned".to_string())?;
+        set.camera = cam;
+        let grid = wavelength_grid(&set);
+        let mut cache: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
+        let mut out = Vec::with_capacity(self.shots.len());
+        for &si in &self.shots {
+            let key = set.shots[si].target_key.clone();
+            if let Some(r) = cache.get(&key) {
+                out.push(r.clone());
+                continue;
+            }
+            let r = Arc::new(
+                shot_electron_rate(&set, si, &grid)
+                    .map_err(|e| e.one_line())?
+                    .electrons_per_s,
+            );
+            cache.insert(key, r.clone());
+            out.push(r);
+        }
+        Ok(out)
+    }
+}
+
+/// Writes the blocks of `spec` into a camera file (JSON), in their fitted forms.
+fn apply_rate_spec(cam: &mut Value, spec: &RateSpec, channel_names: &[String]) {
+    let optics = &mut cam["optics"];
+    if let Some(c) = &spec.falloff {
+        let model = match &optics["relative_illumination"] {
+            Value::String(m) => m.clone(),
+            Value::Object(o) => o
+                .get("model")
+                .and_then(Value::as_str)
+                .unwrap_or("cos4")
+                .to_string(),
+            _ => "cos4".to_string(),
+        };
+        optics["relative_illumination"] = json!({"model": model,
+            "falloff": {"kind": "polynomial", "coefficients": c}});
+    }
+    if let Some(f) = spec.glare_fraction {
+        optics["veiling_glare"] = json!({ "fraction": f });
+    }
+    if let Some(s) = spec.defocus_sigma_um {
+        optics["defocus"] = json!({"kind": "gaussian", "sigma_um": s});
+    }
+    if let Some([k1, k2]) = spec.distortion {
+        optics["distortion"] = json!({"kind": "polynomial", "k1": k1, "k2": k2});
+    }
+    if let Some(d) = spec.lateral_color_um {
+        optics["lateral_color"] = json!({"kind": "linear", "displacement_um": d});
+    }
+    let sensor = &mut cam["sensor"];
+    if let Some(v) = &spec.ir_leakage {
+        let mut m = Map::new();
+        for (c, q) in v.iter().enumerate() {
+            if *q != 0.0 {
+                if let Some(n) = channel_names.get(c) {
+                    m.insert(n.clone(), json!(q));
+                }
+            }
+        }
+        if m.is_empty() {
+            if let Some(o) = sensor.as_object_mut() {
+                o.remove("ir_leakage");
+            }
+        } else {
+            sensor["ir_leakage"] = json!({ "channels": m });
+        }
+    }
+    if let Some(v) = &spec.qe_shift_nm {
+        let mut m = Map::new();
+        for (c, s) in v.iter().enumerate() {
+            if *s != 0.0 {
+                if let Some(n) = channel_names.get(c) {
+                    m.insert(n.clone(), json!(s));
+                }
+            }
+        }
+        if m.is_empty() {
+            if let Some(o) = sensor.as_object_mut() {
+                o.remove("qe_shift");
+            }
+        } else {
+            sensor["qe_shift"] = json!({ "shift_nm": m });
+        }
+    }
+}
+
+/// The believed camera file with every fitted parameter and block written in.
+fn fitted_camera_json(
+    believed_json: &Value,
+    camera_dir: &Path,
+    d: &Diagnosis,
+    names: &[String],
+) -> Value {
+    let mut cam = believed_json.clone();
+    // paths inside the camera stay valid from the output folder
+    if let Some(blur) = cam["optics"]["blur"].as_object_mut() {
+        for k in ["lens_file", "psf_file"] {
+            if let Some(p) = blur.get(k).and_then(Value::as_str) {
+                let abs = camera_dir.join(p);
+                let abs = abs.canonicalize().unwrap_or(abs);
+                blur.insert(k.into(), json!(abs.to_string_lossy()));
+            }
+        }
+    }
+    apply_rate_spec(&mut cam, &d.fitted.rates, names);
+    let (b, f) = (&d.believed, &d.fitted);
+    let (bs, fs) = (&b.sensor, &f.sensor);
+    let s = &mut cam["sensor"];
+    let mut set = |k: &str, old: f64, new: f64| {
+        if old != new {
+            s[k] = json!(new);
+        }
+    };
+    set(
+        "conversion_gain_v_per_e",
+        bs.conversion_gain_v_per_e,
+        fs.conversion_gain_v_per_e,
+    );
+    set("black_level_dn", bs.black_level_dn, fs.black_level_dn);
+    set(
+        "dark_voltage_v_per_s",
+        bs.dark_voltage_v_per_s,
+        fs.dark_voltage_v_per_s,
+    );
+    set("read_noise_v", bs.read_noise_v, fs.read_noise_v);
+    set("dsnu_sigma_v", bs.dsnu_sigma_v, fs.dsnu_sigma_v);
+    set(
+        "prnu_sigma_percent",
+        bs.prnu_sigma_percent,
+        fs.prnu_sigma_percent,
+    );
+    set("well_capacity_e", bs.well_capacity_e, fs.well_capacity_e);
+    if fs.column_fpn != bs.column_fpn {
+        if let Some(c) = fs.column_fpn {
+            s["column_fpn"] = json!({"sigma_v": c.offset_sigma_v});
+        }
+    }
+    if fs.effects.hot_pixels != bs.effects.hot_pixels {
+        if let Some(h) = fs.effects.hot_pixels {
+            s["hot_pixels"] = json!({"fraction": h.fraction,
+                "dark_voltage_v_per_s": h.dark_voltage_v_per_s, "log_sigma": h.log_sigma});
+        }
+    }
+    if fs.effects.nonlinearity != bs.effects.nonlinearity {
+        if let Some(camsim_sensor::Nonlinearity::Quadratic { coefficient_per_v }) =
+            fs.effects.nonlinearity
+        {
+            s["nonlinearity"] = json!({"kind": "quadratic", "coefficient_per_v": coefficient_per_v});
+        }
+    }
+    if fs.effects.crosstalk != bs.effects.crosstalk {
+        if let Some(c) = fs.effects.crosstalk {
+            s["crosstalk"] = json!({"fraction": c.total()});
+        }
+    }
+    if f.exposure_factor != b.exposure_factor {
+        let old = cam["optics"]["exposure_scale"]["factor"]
+            .as_f64()
+            .unwrap_or(1.0);
+        cam["optics"]["exposure_scale"] = json!({"factor": old * f.exposure_factor / b.exposure_factor});
+    }
+    cam
+}
+
+fn target_class(t: &Target) -> TargetClass {
+    match t {
+        Target::Dark => TargetClass::Dark,
+        Target::Uniform { .. } => TargetClass::Uniform,
+        Target::SlantedEdge { angle_deg, .. } => TargetClass::Edge {
+            angle_deg: *angle_deg,
+        },
+        _ => TargetClass::Structured,
+    }
+}
+
+/// Reads and reduces every frame of the shots with a known exposure time.
+fn load_data(
+    set: &CaptureSet,
+    progress: bool,
+) -> Result<(DataSet, Vec<usize>, Vec<String>), CliError> {
+    let s = &set.camera.sensor;
+    let (rows, cols) = (s.rows, s.cols);
+    let max_dn = s.max_dn() as u16;
+    let total: usize = set.shots.iter().map(|x| x.frames.len()).sum();
+    let bar = crate::progress::bar(
+        progress,
+        total as u64,
+        "{spinner} reading frames [{bar:30}] {pos}/{len}",
+    );
+    let mut shots = Vec::new();
+    let mut used = Vec::new();
+    let mut skipped = Vec::new();
+    for (si, shot) in set.shots.iter().enumerate() {
+        let exposure_s = match shot.exposure {
+            Exposure::Fixed(t) => t,
+            Exposure::Auto(_) => {
+                skipped.push(format!(
+                    "{}: auto_exposure gives no known exposure time; not used",
+                    shot.id
+                ));
+                continue;
+            }
+        };
+        if shot.frames.is_empty() {
+            skipped.push(format!("{}: no frames; not used", shot.id));
+            continue;
+        }
+        let mut acc = ShotAccumulator::new(rows, cols, max_dn);
+        for chunk in shot.frames.chunks(8) {
+            let frames: Vec<Result<(PathBuf, camsim_core::RawFrame), CliError>> = chunk
+                .par_iter()
+                .map(|f| {
+                    let p = set.dir.join(f);
+                    read_frame_with(&p, set.raw_format.as_ref()).map(|fr| (p, fr))
+                })
+                .collect();
+            for r in frames {
+                let (p, fr) = r?;
+                if fr.rows != rows || fr.cols != cols {
+                    return Err(CliError::input(
+                        &p,
+                        format!(
+                            "frame is {}×{} (rows×cols) but the sensor is {rows}×{cols}",
+                            fr.rows, fr.cols
+                        ),
+                    ));
+                }
+                acc.add(&fr.dn).map_err(|m| CliError::input(&p, m))?;
+                bar.inc(1);
+            }
+        }
+        shots.push(acc.finish(
+            shot.id.clone(),
+            target_class(&shot.target.target),
+            shot.target_key.clone(),
+            exposure_s,
+            shot.analog_gain,
+        ));
+        used.push(si);
+    }
+    bar.finish_and_clear();
+    if shots.is_empty() {
+        return Err(CliError::input(
+            &set.path,
+            "no shot has both frames and a fixed exposure_s: nothing to diagnose",
+        ));
+    }
+    let channel = (0..rows * cols)
+        .map(|i| s.cfa.channel_at(i / cols, i % cols) as u8)
+        .collect();
+    Ok((
+        DataSet {
+            rows,
+            cols,
+            channel,
+            channel_names: s.channel_names.clone(),
+            max_dn: s.max_dn(),
+            shots,
+        },
+        used,
+        skipped,
+    ))
+}
+
+/// Run the diagnosis and write its outputs into `out` (all or nothing). Returns report.json.
+pub fn run_diagnose(
+    set: &CaptureSet,
+    out: &Path,
+    opts: &DiagnoseCmdOptions,
+) -> Result<Value, CliError> {
+    let camera_text = std::fs::read_to_string(&set.camera_path)
+        .map_err(|e| CliError::input(&set.camera_path, format!("cannot read: {e}")))?;
+    let camera_json: Value = serde_json::from_str(&camera_text)
+        .map_err(|e| CliError::input(&set.camera_path, format!("invalid: {e}")))?;
+    let mut effects = Vec::new();
+    for id in &opts.effects {
+        effects.push(Effect::from_id(id).ok_or_else(|| {
+            CliError::Other(format!(
+                "--effects: unknown effect id \"{id}\" (expected one of: {})",
+                Effect::ALL.map(|e| e.id()).join(", ")
+            ))
+        })?);
+    }
+    if !(opts.bic_threshold.is_finite() && opts.bic_threshold >= 0.0) {
+        return Err(CliError::Other(format!(
+            "--bic-threshold must be ≥ 0, got {}",
+            opts.bic_threshold
+        )));
+    }
+    let (data, used, skipped) = load_data(set, opts.progress)?;
+    let forward = SimForward {
+        set: Mutex::new(set.clone()),
+        camera_json: camera_json.clone(),
+        camera_path: set.camera_path.clone(),
+        shots: used,
+    };
+    let believed = ModelState {
+        sensor: set.camera.sensor.clone(),
+        exposure_factor: 1.0,
+        rates: RateSpec::default(),
+    };
+    let mut dopts = DiagnoseOptions::default();
+    dopts.select.bic_threshold = opts.bic_threshold;
+    if !effects.is_empty() {
+        dopts.select.effects = effects;
+    }
+    let spinner = crate::progress::bar(opts.progress, 0, "{spinner} diagnose {msg} ({elapsed})");
+    let profile = std::env::var_os("CAMSIM_PROFILE").is_some();
+    let t0 = std::time::Instant::now();
+    let progress = |m: &str| {
+        if profile {
+            eprintln!("camsim: {:8.3} s  {m}", t0.elapsed().as_secs_f64());
+        }
+        spinner.set_message(m.to_string())
+    };
+    let diag = diagnose(&data, &forward, &believed, &dopts, &progress)
+        .map_err(|e| CliError::Other(format!("diagnose: {e}")))?;
+    spinner.finish_and_clear();
+    let names = &set.camera.sensor.channel_names;
+    let camera_dir = set.camera_path.parent().unwrap_or(Path::new("."));
+    let fitted = fitted_camera_json(&camera_json, camera_dir, &diag, names);
+    // The fitted camera must be one `camsim simulate` reads.
+    let fitted_path = out.join("fitted_camera.json");
+    let raw: CameraFile = serde_json::from_value(fitted.clone()).map_err(|e| {
+        CliError::Other(format!("internal: the fitted camera does not parse: {e}"))
+    })?;
+    camera_from_file(&fitted_path, raw)?;
+    let report = report_json(&diag, &data, &skipped);
+    with_staging(out, |st| {
+        let mut files: Vec<PathBuf> = Vec::new();
+        let p = st.join("fitted_camera.json");
+        std::fs::write(&p, serde_json::to_string_pretty(&fitted).expect("json"))
+            .map_err(|e| CliError::output(&p, e))?;
+        files.push("fitted_camera.json".into());
+        let p = st.join("report.json");
+        std::fs::write(&p, serde_json::to_string_pretty(&report).expect("json"))
+            .map_err(|e| CliError::output(&p, e))?;
+        files.push("report.json".into());
+        let figs = figures::write_figures(st, &diag, &data)?;
+        for f in &figs {
+            files.push(PathBuf::from(&f.file));
+        }
+        let p = st.join("report.html");
+        std::fs::write(&p, figures::report_html(&report, &diag, &data, &figs))
+            .map_err(|e| CliError::output(&p, e))?;
+        files.push("report.html".into());
+        Ok(files)
+    })?;
+    Ok(report)
+}
+
+fn r4(x: f64) -> Value {
+    if x.is_finite() {
+        json!(x)
+    } else {
+        Value::Null
+    }
+}
+
+/// report.json (spec/effects.md) plus what the diagnosis could not decide or test, the
+/// ranked candidates and the locate summaries.
+fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
+    let findings: Vec<Value> = d
+        .findings
+        .iter()
+        .map(|f| {
+            json!({
+                "effect": f.effect.id(),
+                "magnitude": r4(f.magnitude),
+                "unit": f.effect.unit(),
+                "where": f.where_,
+                "explanation": f.explanation,
+                "evidence": {
+                    "delta_bic": r4(f.delta_bic),
+                    "delta_log_likelihood": r4(f.delta_logl),
+                    "parameters": f.k,
+                    "chi2_per_dof_before": r4(f.chi2_before),
+                    "next_best": f.alternatives.first().map(|(e, b)| json!({"effect": e.id(), "delta_bic": r4(*b)})),
+                },
+                "fit_after": {"chi2_per_dof": r4(f.chi2_after)},
+            })
+        })
+        .collect();
+    let undecided: Vec<Value> = d
+        .selection
+        .undecided
+        .iter()
+        .map(|u| {
+            json!({
+                "effects": u.effects.iter().map(|e| e.id()).collect::<Vec<_>>(),
+                "delta_bic": u.delta_bic.iter().map(|x| r4(*x)).collect::<Vec<_>>(),
+                "magnitudes": u.magnitudes.iter().map(|x| r4(*x)).collect::<Vec<_>>(),
+                "kept_in_fitted_camera": u.effects[0].id(),
+                "explanation": format!(
+                    "the capture set cannot tell {} apart: each explains the residuals about equally well (ΔBIC within the margin)",
+                    u.effects.iter().map(|e| e.id()).collect::<Vec<_>>().join(" and ")
+                ),
+                "would_separate": u.separated_by,
+            })
+        })
+        .collect();
+    let not_testable: Vec<Value> = d
+        .selection
+        .not_testable
+        .iter()
+        .map(|(e, why)| json!({"effect": e.id(), "reason": why}))
+        .collect();
+    let table = |rows: &[camsim_diagnose::mismatch::CandidateRow]| -> Vec<Value> {
+        rows.iter()
+            .filter(|r| r.not_testable.is_none())
+            .map(|r| {
+                json!({"effect": r.effect.id(), "delta_bic": r.delta_bic.map(r4),
+                       "delta_log_likelihood": r4(r.delta_logl), "parameters": r.k,
+                       "magnitude": r4(r.magnitude)})
+            })
+            .collect()
+    };
+    let rounds: Vec<Value> = d
+        .selection
+        .rounds
+        .iter()
+        .map(|r| json!(table(r)))
+        .collect();
+    let sc = |l: &camsim_diagnose::mismatch::Located| -> Vec<Value> {
+        l.shot_channels
+            .iter()
+            .map(|x| {
+                json!({"shot": data.shots[x.shot].id, "channel": data.channel_names[x.channel],
+                       "chi2_per_dof": r4(x.chi2_per_dof), "dof": x.dof,
+                       "data_mean_dn": r4(x.data_mean_dn), "model_mean_dn": r4(x.model_mean_dn),
+                       "mean_residual_z": r4(x.mean_z),
+                       "data_temporal_var_dn2": r4(x.data_temporal_var),
+                       "model_temporal_var_dn2": r4(x.model_temporal_var),
+                       "data_fixed_var_dn2": r4(x.data_fixed_var),
+                       "model_fixed_var_dn2": r4(x.model_fixed_var),
+                       "censored_pixel_shots": x.censored})
+            })
+            .collect()
+    };
+    json!({
+        "fit_before": {"chi2_per_dof": r4(d.before.chi2_per_dof), "dof": d.before.dof},
+        "findings": findings,
+        "fit_after": {"chi2_per_dof": r4(d.after.chi2_per_dof), "dof": d.dof_after},
+        "fitted_camera": "fitted_camera.json",
+        "undecided": undecided,
+        "not_testable": not_testable,
+        "candidates": {"rounds": rounds},
+        "locate": {"before": sc(&d.before), "after": sc(&d.after),
+                   "hot_pixels_classified": {"before": d.before.hot_pixels, "after": d.after.hot_pixels}},
+        "settings": {"fit_pixels": d.fit_pixels, "observations": d.selection.n_obs,
+                     "bic_threshold": d.bic_threshold},
+        "skipped_shots": skipped,
+    })
+}
