@@ -9,6 +9,7 @@ pub mod calibrate_cmd;
 pub mod color_eval;
 pub mod config;
 pub mod datasets;
+pub mod demo;
 pub mod diagnose_cmd;
 pub mod error;
 pub mod frames;

@@ -110,6 +110,11 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         effects: Vec<String>,
     },
+    /// Generated capture sets with concealed effects and their truth (`demo diagnose`).
+    Demo {
+        #[command(subcommand)]
+        cmd: camsim::demo::DemoCommand,
+    },
     /// Lens prescriptions (.json, .zmx, ISET .dat/.json): report, spot, field-model, psf.
     Lens {
         #[command(subcommand)]
@@ -241,6 +246,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             );
             Ok(())
         }
+        Command::Demo { cmd } => camsim::demo::run_demo(cmd),
         Command::Lens { cmd } => camsim::lens_cmd::run_lens(cmd),
     }
 }

@@ -279,7 +279,10 @@ fn uniform_electron_rate(
             } else {
                 1.0
             };
-            ri * fx.falloff.as_ref().map_or(1.0, |f| f.factor(x.hypot(y) / hd))
+            ri * fx
+                .falloff
+                .as_ref()
+                .map_or(1.0, |f| f.factor(x.hypot(y) / hd))
         };
         let glare = match fx.veiling_glare {
             Some(g) if g > 0.0 => {
@@ -298,20 +301,20 @@ fn uniform_electron_rate(
             }
         });
     } else {
-    out.par_chunks_mut(s.cols).enumerate().for_each(|(r, row)| {
-        let k = &k_rows[r % k_rows.len()];
-        if cos4 {
-            let fy = f2 + ((r as f64 - yc) * dx).powi(2);
-            for ((o, &k), &x2) in row.iter_mut().zip(k).zip(&x2) {
-                let c2 = f2 / (fy + x2);
-                *o = (k * (c2 * c2)) as f32;
+        out.par_chunks_mut(s.cols).enumerate().for_each(|(r, row)| {
+            let k = &k_rows[r % k_rows.len()];
+            if cos4 {
+                let fy = f2 + ((r as f64 - yc) * dx).powi(2);
+                for ((o, &k), &x2) in row.iter_mut().zip(k).zip(&x2) {
+                    let c2 = f2 / (fy + x2);
+                    *o = (k * (c2 * c2)) as f32;
+                }
+            } else {
+                for (o, &k) in row.iter_mut().zip(k) {
+                    *o = k as f32;
+                }
             }
-        } else {
-            for (o, &k) in row.iter_mut().zip(k) {
-                *o = k as f32;
-            }
-        }
-    });
+        });
     }
     let mut rate = ElectronRate {
         rows: s.rows,

@@ -1,9 +1,7 @@
 //! The effect blocks of effects.md (docs/effects.md) end to end: camera.json parsing and the
 //! Serialize round trip, one-line errors, and every block's physics through `camsim simulate`'s
 //! library path (scene → optics → sensor), each against a closed form or a direct computation.
-use camsim::config::{
-    camera_file_json, load_camera, load_captures, read_camera_file, CaptureSet,
-};
+use camsim::config::{camera_file_json, load_camera, load_captures, read_camera_file, CaptureSet};
 use camsim::simulate::{shot_electron_rate, shot_irradiance, wavelength_grid};
 use camsim_sensor::{electron_rate, expected_dn, ElectronRate, Shot};
 use serde_json::{json, Value};
@@ -117,7 +115,11 @@ fn every_block_parses_and_round_trips_through_serialize() {
         let text = camera_file_json(&raw).unwrap();
         // The written JSON is the input (same keys and values) …
         let back: Value = serde_json::from_str(&text).unwrap();
-        assert_eq!(numbers_as_f64(&back), numbers_as_f64(&cam), "generator {generator}");
+        assert_eq!(
+            numbers_as_f64(&back),
+            numbers_as_f64(&cam),
+            "generator {generator}"
+        );
         // … and parses to the same camera.
         let q = dir.path().join("again.json");
         std::fs::write(&q, &text).unwrap();
@@ -166,30 +168,134 @@ fn numbers_as_f64(v: &Value) -> Value {
 fn bad_blocks_give_one_line_errors_naming_the_key() {
     let dir = tempfile::tempdir().unwrap();
     let cases: Vec<(&str, &str, Value, &str)> = vec![
-        ("sensor", "crosstalk", json!({"fraction": 1.5}), "sensor.crosstalk.fraction = 1.5: must be in [0, 1)"),
-        ("sensor", "crosstalk", json!({"fraction": 0.1, "left": 0.1}), "sensor.crosstalk.left"),
+        (
+            "sensor",
+            "crosstalk",
+            json!({"fraction": 1.5}),
+            "sensor.crosstalk.fraction = 1.5: must be in [0, 1)",
+        ),
+        (
+            "sensor",
+            "crosstalk",
+            json!({"fraction": 0.1, "left": 0.1}),
+            "sensor.crosstalk.left",
+        ),
         ("sensor", "crosstalk", json!({"fractoin": 0.1}), "fractoin"),
-        ("sensor", "crosstalk", json!({"left": 0.5, "right": 0.6}), "must be < 1"),
-        ("sensor", "hot_pixels", json!({"fraction": 0.1}), "dark_voltage_v_per_s"),
-        ("sensor", "hot_pixels", json!({"fraction": 2.0, "dark_voltage_v_per_s": 1.0}), "sensor.hot_pixels.fraction = 2"),
-        ("sensor", "nonlinearity", json!({"kind": "quadratic", "coefficient_per_v": -1.0}), "sensor.nonlinearity.coefficient_per_v = -1"),
-        ("sensor", "nonlinearity", json!({"kind": "cubic", "a": 1.0}), "cubic"),
-        ("sensor", "ir_leakage", json!({"channels": {"x": 0.1}}), "sensor.ir_leakage.channels.x: no such channel"),
-        ("sensor", "ir_leakage", json!({"channels": {"m": -0.1}}), "sensor.ir_leakage.channels.m = -0.1"),
-        ("sensor", "qe_shift", json!({"shift_nm": {"q": 3.0}}), "sensor.qe_shift.shift_nm.q"),
+        (
+            "sensor",
+            "crosstalk",
+            json!({"left": 0.5, "right": 0.6}),
+            "must be < 1",
+        ),
+        (
+            "sensor",
+            "hot_pixels",
+            json!({"fraction": 0.1}),
+            "dark_voltage_v_per_s",
+        ),
+        (
+            "sensor",
+            "hot_pixels",
+            json!({"fraction": 2.0, "dark_voltage_v_per_s": 1.0}),
+            "sensor.hot_pixels.fraction = 2",
+        ),
+        (
+            "sensor",
+            "nonlinearity",
+            json!({"kind": "quadratic", "coefficient_per_v": -1.0}),
+            "sensor.nonlinearity.coefficient_per_v = -1",
+        ),
+        (
+            "sensor",
+            "nonlinearity",
+            json!({"kind": "cubic", "a": 1.0}),
+            "cubic",
+        ),
+        (
+            "sensor",
+            "ir_leakage",
+            json!({"channels": {"x": 0.1}}),
+            "sensor.ir_leakage.channels.x: no such channel",
+        ),
+        (
+            "sensor",
+            "ir_leakage",
+            json!({"channels": {"m": -0.1}}),
+            "sensor.ir_leakage.channels.m = -0.1",
+        ),
+        (
+            "sensor",
+            "qe_shift",
+            json!({"shift_nm": {"q": 3.0}}),
+            "sensor.qe_shift.shift_nm.q",
+        ),
         ("sensor", "qe_shift", json!({"shift": {"m": 3.0}}), "shift"),
-        ("optics", "exposure_scale", json!({"factor": 0.0}), "optics.exposure_scale.factor = 0"),
-        ("optics", "veiling_glare", json!({"fraction": -0.1}), "optics.veiling_glare.fraction = -0.1"),
-        ("optics", "defocus", json!({"kind": "gaussian", "sigma": 1.0}), "sigma"),
-        ("optics", "defocus", json!({"kind": "box", "radius_um": 1.0}), "box"),
-        ("optics", "defocus", json!({"kind": "pillbox", "radius_um": -2.0}), "optics.defocus.radius_um = -2"),
-        ("optics", "distortion", json!({"kind": "division", "k": 1.5}), "optics.distortion.k = 1.5"),
-        ("optics", "lateral_color", json!({"kind": "linear"}), "displacement_um"),
-        ("optics", "relative_illumination", json!({"modle": "cos4"}), "modle"),
-        ("optics", "relative_illumination", json!({"model": "cos4", "falloff": {"kind": "two_circle", "separation_at_h1": 3.0}}),
-         "optics.relative_illumination.falloff.separation_at_h1 = 3"),
-        ("optics", "relative_illumination", json!({"model": "cos5"}), "cos5"),
-        ("optics", "exposure_scale", json!({"factor": 1.0, "extra": 1}), "extra"),
+        (
+            "optics",
+            "exposure_scale",
+            json!({"factor": 0.0}),
+            "optics.exposure_scale.factor = 0",
+        ),
+        (
+            "optics",
+            "veiling_glare",
+            json!({"fraction": -0.1}),
+            "optics.veiling_glare.fraction = -0.1",
+        ),
+        (
+            "optics",
+            "defocus",
+            json!({"kind": "gaussian", "sigma": 1.0}),
+            "sigma",
+        ),
+        (
+            "optics",
+            "defocus",
+            json!({"kind": "box", "radius_um": 1.0}),
+            "box",
+        ),
+        (
+            "optics",
+            "defocus",
+            json!({"kind": "pillbox", "radius_um": -2.0}),
+            "optics.defocus.radius_um = -2",
+        ),
+        (
+            "optics",
+            "distortion",
+            json!({"kind": "division", "k": 1.5}),
+            "optics.distortion.k = 1.5",
+        ),
+        (
+            "optics",
+            "lateral_color",
+            json!({"kind": "linear"}),
+            "displacement_um",
+        ),
+        (
+            "optics",
+            "relative_illumination",
+            json!({"modle": "cos4"}),
+            "modle",
+        ),
+        (
+            "optics",
+            "relative_illumination",
+            json!({"model": "cos4", "falloff": {"kind": "two_circle", "separation_at_h1": 3.0}}),
+            "optics.relative_illumination.falloff.separation_at_h1 = 3",
+        ),
+        (
+            "optics",
+            "relative_illumination",
+            json!({"model": "cos5"}),
+            "cos5",
+        ),
+        (
+            "optics",
+            "exposure_scale",
+            json!({"factor": 1.0, "extra": 1}),
+            "extra",
+        ),
     ];
     for (section, key, block, want) in cases {
         let mut cam = mono_camera(8, 8);
@@ -294,7 +400,10 @@ fn relative_illumination_falloff_matches_the_analytic_vignetting() {
     cam["optics"]["exposure_scale"] = json!({"factor": 0.9});
     let poly = load(dir.path(), &cam, shots.clone(), None);
     cam["optics"]["relative_illumination"] = json!("none");
-    cam["optics"].as_object_mut().unwrap().remove("exposure_scale");
+    cam["optics"]
+        .as_object_mut()
+        .unwrap()
+        .remove("exposure_scale");
     let none = load(dir.path(), &cam, shots, None);
     let (a, b) = (rate(&none, 0), rate(&poly, 0));
     let h = h_of(rows, cols, 0, 0);
@@ -328,7 +437,11 @@ fn veiling_glare_adds_exactly_f_times_the_mean() {
     let mean = a.electrons_per_s.iter().map(|&v| v as f64).sum::<f64>() / (rows * cols) as f64;
     for (x, y) in a.electrons_per_s.iter().zip(&b.electrons_per_s) {
         let add = *y as f64 - *x as f64;
-        assert!((add - f * mean).abs() < 2e-5 * mean, "{add} vs {}", f * mean);
+        assert!(
+            (add - f * mean).abs() < 2e-5 * mean,
+            "{add} vs {}",
+            f * mean
+        );
     }
     // Uniform target, fast path and general path agree.
     cam["optics"]["blur"] = json!({"kind": "none"});
@@ -405,7 +518,11 @@ fn defocus_mtf_on_a_slanted_edge_matches_gaussian_and_disk_closed_forms() {
     for ((f, a), b) in freqs.iter().zip(&m0).zip(&m1) {
         let fu = f / p_um;
         let want = (-2.0 * PI * PI * sigma * sigma * fu * fu).exp();
-        assert!((b / a - want).abs() < 0.015, "gaussian f={f}: {} vs {want}", b / a);
+        assert!(
+            (b / a - want).abs() < 0.015,
+            "gaussian f={f}: {} vs {want}",
+            b / a
+        );
     }
     // Generator form: MTF ratio = 2 J1(2πrf)/(2πrf) (J1 by its integral representation).
     let r = 2.5;
@@ -425,7 +542,11 @@ fn defocus_mtf_on_a_slanted_edge_matches_gaussian_and_disk_closed_forms() {
         let x = 2.0 * PI * r * f / p_um;
         // The edge MTF is a modulus: |2 J1(x)/x| (negative beyond the first zero, x = 3.83).
         let want = (2.0 * j1(x) / x).abs();
-        assert!((b / a - want).abs() < 0.02, "pillbox f={f}: {} vs {want}", b / a);
+        assert!(
+            (b / a - want).abs() < 0.02,
+            "pillbox f={f}: {} vs {want}",
+            b / a
+        );
     }
     // The magnitude: σ of the least-squares Gaussian of the disk (between the small-disk
     // moment match r/2 and r).
@@ -487,7 +608,13 @@ fn distortion_moves_a_point_to_h_times_d_of_h() {
         let set = point_set(dir.path(), &cam, json!(1e18));
         let rt = rate(&set, 0);
         // Scene points at multiples of 15 px from the axis (the central point on the axis).
-        for (xs, ys) in [(45.0, 30.0), (-45.0, -30.0), (30.0, -15.0), (-45.0, 15.0), (0.0, 0.0)] {
+        for (xs, ys) in [
+            (45.0, 30.0),
+            (-45.0, -30.0),
+            (30.0, -15.0),
+            (-45.0, 15.0),
+            (0.0, 0.0),
+        ] {
             let h: f64 = f64::hypot(xs, ys) / half_diag;
             let d = d_of_h(h);
             let (xi, yi) = (xs * d, ys * d);
@@ -510,7 +637,8 @@ fn lateral_color_displaces_650_nm_against_450_nm_by_d_at_the_corner() {
     let (rows, cols) = (96, 128);
     let half_diag = 0.5 * ((rows * rows + cols * cols) as f64).sqrt();
     let p_um = 2.0;
-    let narrow = |l: f64| json!({"wavelength_nm": [l - 10.0, l, l + 10.0], "values": [0.0, 1e18, 0.0]});
+    let narrow =
+        |l: f64| json!({"wavelength_nm": [l - 10.0, l, l + 10.0], "values": [0.0, 1e18, 0.0]});
     for (kind, d_um) in [("linear", 3.0), ("cauchy", -4.0)] {
         let mut cam = mono_camera(rows, cols);
         cam["optics"]["lateral_color"] = json!({"kind": kind, "displacement_um": d_um});
@@ -573,7 +701,12 @@ fn qe_shift_via_camera_json_equals_shifted_curves() {
     let b = rate(&load(dir.path(), &moved, shots.clone(), None), 0);
     let c = rate(&load(dir.path(), &cam, shots, None), 0);
     let mut changed = 0;
-    for ((x, y), z) in a.electrons_per_s.iter().zip(&b.electrons_per_s).zip(&c.electrons_per_s) {
+    for ((x, y), z) in a
+        .electrons_per_s
+        .iter()
+        .zip(&b.electrons_per_s)
+        .zip(&c.electrons_per_s)
+    {
         assert!((x - y).abs() <= 1e-5 * y.abs() + 1e-3, "{x} vs {y}");
         if (x - z).abs() > 1e-3 * z.abs() {
             changed += 1;
@@ -588,7 +721,9 @@ fn ir_leakage_via_camera_json_adds_the_closed_form_and_extends_the_grid() {
     let mut cam = mono_camera(8, 8);
     // Photon radiance L = 1e18 from 400 to 1100 nm; no fall-off, T = 1.
     let l = 1e18;
-    let shots = json!([uniform_shot(json!({"wavelength_nm": [400, 1100], "values": [l, l]}))]);
+    let shots = json!([uniform_shot(
+        json!({"wavelength_nm": [400, 1100], "values": [l, l]})
+    )]);
     let base = load(dir.path(), &cam, shots.clone(), None);
     let v = 0.03;
     cam["sensor"]["ir_leakage"] = json!({"channels": {"m": v}});
@@ -600,7 +735,18 @@ fn ir_leakage_via_camera_json_adds_the_closed_form_and_extends_the_grid() {
     assert!((got / want - 1.0).abs() < 1e-5, "{got} vs {want}");
     let g = wavelength_grid(&ir);
     assert!(*g.wavelength_nm.last().unwrap() >= 1000.0);
-    assert!((ir.camera.sensor.effects.ir_leakage.as_ref().unwrap().magnitude() - v).abs() < 1e-12);
+    assert!(
+        (ir.camera
+            .sensor
+            .effects
+            .ir_leakage
+            .as_ref()
+            .unwrap()
+            .magnitude()
+            - v)
+            .abs()
+            < 1e-12
+    );
 }
 
 #[test]
@@ -664,15 +810,35 @@ fn expected_images_reflect_every_mean_effect_and_omit_hot_pixels() {
     let reference = run(&base, "base");
     let mean_blocks: Vec<(&str, &str, Value)> = vec![
         ("optics", "exposure_scale", json!({"factor": 1.05})),
-        ("optics", "relative_illumination", json!({"model": "none", "falloff": {"kind": "polynomial", "coefficients": [-0.2]}})),
+        (
+            "optics",
+            "relative_illumination",
+            json!({"model": "none", "falloff": {"kind": "polynomial", "coefficients": [-0.2]}}),
+        ),
         ("optics", "veiling_glare", json!({"fraction": 0.03})),
-        ("optics", "defocus", json!({"kind": "gaussian", "sigma_um": 2.0})),
-        ("optics", "distortion", json!({"kind": "division", "k": 0.05})),
-        ("optics", "lateral_color", json!({"kind": "linear", "displacement_um": 3.0})),
+        (
+            "optics",
+            "defocus",
+            json!({"kind": "gaussian", "sigma_um": 2.0}),
+        ),
+        (
+            "optics",
+            "distortion",
+            json!({"kind": "division", "k": 0.05}),
+        ),
+        (
+            "optics",
+            "lateral_color",
+            json!({"kind": "linear", "displacement_um": 3.0}),
+        ),
         ("sensor", "crosstalk", json!({"fraction": 0.05})),
         ("sensor", "ir_leakage", json!({"channels": {"r": 0.05}})),
         ("sensor", "qe_shift", json!({"shift_nm": {"g": 5.0}})),
-        ("sensor", "nonlinearity", json!({"kind": "quadratic", "coefficient_per_v": 0.2})),
+        (
+            "sensor",
+            "nonlinearity",
+            json!({"kind": "quadratic", "coefficient_per_v": 0.2}),
+        ),
     ];
     for (section, key, block) in mean_blocks {
         let mut cam = base.clone();
@@ -683,11 +849,17 @@ fn expected_images_reflect_every_mean_effect_and_omit_hot_pixels() {
             .zip(&reference)
             .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
             .fold(0f32, f32::max);
-        assert!(max_diff > 0.5, "{key}: --expected unchanged (max |Δ| {max_diff} DN)");
+        assert!(
+            max_diff > 0.5,
+            "{key}: --expected unchanged (max |Δ| {max_diff} DN)"
+        );
     }
     // Fixed patterns are not part of the expected image.
     for (key, block) in [
-        ("hot_pixels", json!({"fraction": 0.05, "dark_voltage_v_per_s": 1.0})),
+        (
+            "hot_pixels",
+            json!({"fraction": 0.05, "dark_voltage_v_per_s": 1.0}),
+        ),
         ("column_fpn", json!({"sigma_v": 0.01})),
     ] {
         let mut cam = base.clone();
@@ -726,12 +898,16 @@ fn nonlinearity_and_hot_pixels_in_simulated_frames() {
         },
     )
     .unwrap();
-    let img = image::open(dir.path().join("out/flat.png")).unwrap().to_luma16();
+    let img = image::open(dir.path().join("out/flat.png"))
+        .unwrap()
+        .to_luma16();
     let hot = camsim_sensor::hot_pixel_map(s, 9);
     assert_eq!(hot.len(), 13); // round(0.05 · 256)
     for (i, px) in img.pixels().enumerate() {
         let (r, c) = (i / 16, i % 16);
-        let is_hot = hot.iter().any(|h| h.row as usize == r && h.col as usize == c);
+        let is_hot = hot
+            .iter()
+            .any(|h| h.row as usize == r && h.col as usize == c);
         let n_v = rt.electrons_per_s[i] as f64 * t * 5e-5 + if is_hot { t * 2.0 } else { 0.0 };
         let want = (64.0 + 4095.0 * (n_v - a * n_v * n_v)).round();
         assert_eq!(px.0[0] as f64, want, "pixel ({r},{c}) hot={is_hot}");

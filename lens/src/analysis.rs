@@ -21,7 +21,6 @@ use crate::error::LensError;
 use crate::paraxial::FirstOrder;
 use crate::prescription::LensPrescription;
 use crate::trace::{Clipping, FieldAim, TracedRay};
-use rayon::prelude::*;
 use rustfft::{num_complex::Complex64, FftPlanner};
 
 /// Normalised pupil coordinates of the n×n grid ((i + ½)/n·2 − 1) clipped to the unit disc.
@@ -202,10 +201,10 @@ impl LensPrescription {
     ) -> Result<RayFan, LensError> {
         let fo = self.first_order(aim_wavelength_nm)?;
         let aim = self.aim_field(field_deg, aim_wavelength_nm, &fo)?;
-        let rays = pupil
-            .par_iter()
-            .map(|p| self.trace(&aim.ray(p[0], p[1]), wavelength_nm, clipping))
-            .collect();
+        let b = self
+            .trace_system(wavelength_nm)
+            .trace_pupil(&aim, pupil, clipping);
+        let rays = (0..b.len()).map(|i| b.get(i)).collect();
         Ok(RayFan {
             aim,
             wavelength_nm,
@@ -400,19 +399,20 @@ impl LensPrescription {
                 }
             })
             .collect();
-        let waves: Vec<f64> = (0..n * n)
-            .into_par_iter()
-            .map(|k| {
-                let (px, py) = (v[k % n], v[k / n]);
-                if px * px + py * py > 1.0 {
-                    return f64::NAN;
-                }
-                match self.trace(&aim.ray(px, py), wavelength_nm, Clipping::None) {
-                    Some(r) => (opl_chief - to_sphere(&r)) / wl_mm,
-                    None => f64::NAN,
-                }
-            })
+        // In-disc grid points traced as one batch.
+        let idx: Vec<usize> = (0..n * n)
+            .filter(|&k| v[k % n] * v[k % n] + v[k / n] * v[k / n] <= 1.0)
             .collect();
+        let pts: Vec<[f64; 2]> = idx.iter().map(|&k| [v[k % n], v[k / n]]).collect();
+        let b = self
+            .trace_system(wavelength_nm)
+            .trace_pupil(&aim, &pts, Clipping::None);
+        let mut waves = vec![f64::NAN; n * n];
+        for (i, &k) in idx.iter().enumerate() {
+            if let Some(r) = b.get(i) {
+                waves[k] = (opl_chief - to_sphere(&r)) / wl_mm;
+            }
+        }
         let ok: Vec<f64> = waves.iter().copied().filter(|w| w.is_finite()).collect();
         let mean = ok.iter().sum::<f64>() / ok.len().max(1) as f64;
         let rms =

@@ -85,6 +85,8 @@ pub struct RayBatch {
     pub stop_x: Vec<f64>,
     /// See `stop_x`.
     pub stop_y: Vec<f64>,
+    /// See `stop_x` (z).
+    pub stop_z: Vec<f64>,
 }
 
 impl RayBatch {
@@ -102,6 +104,7 @@ impl RayBatch {
             alive: Vec::with_capacity(n),
             stop_x: v(),
             stop_y: v(),
+            stop_z: v(),
         }
     }
 
@@ -127,6 +130,7 @@ impl RayBatch {
         self.alive.push(true);
         self.stop_x.push(f64::NAN);
         self.stop_y.push(f64::NAN);
+        self.stop_z.push(f64::NAN);
     }
 
     /// The batch of `aim`'s rays through the normalised pupil points `pupil` (the same rays
@@ -144,6 +148,7 @@ impl RayBatch {
             alive: vec![true; n],
             stop_x: vec![f64::NAN; n],
             stop_y: vec![f64::NAN; n],
+            stop_z: vec![f64::NAN; n],
         };
         const BLOCK: usize = 4096;
         let r = aim.entrance_pupil_radius_mm;
@@ -197,7 +202,7 @@ impl RayBatch {
             image_mm: [self.x[i], self.y[i], self.z[i]],
             direction: [self.l[i], self.m[i], self.n[i]],
             opl_mm: self.opl[i],
-            stop_mm: [self.stop_x[i], self.stop_y[i], f64::NAN],
+            stop_mm: [self.stop_x[i], self.stop_y[i], self.stop_z[i]],
         })
     }
 
@@ -219,6 +224,7 @@ struct Chunk<'b> {
     alive: &'b mut [bool],
     sx: &'b mut [f64],
     sy: &'b mut [f64],
+    sz: &'b mut [f64],
 }
 
 impl<'a> TraceSystem<'a> {
@@ -286,6 +292,7 @@ impl<'a> TraceSystem<'a> {
             alive,
             stop_x,
             stop_y,
+            stop_z,
         } = batch;
         x.par_chunks_mut(BLOCK)
             .zip(y.par_chunks_mut(BLOCK))
@@ -297,21 +304,25 @@ impl<'a> TraceSystem<'a> {
             .zip(alive.par_chunks_mut(BLOCK))
             .zip(stop_x.par_chunks_mut(BLOCK))
             .zip(stop_y.par_chunks_mut(BLOCK))
-            .for_each(|(((((((((x, y), z), l), m), n), opl), alive), sx), sy)| {
-                let mut c = Chunk {
-                    x,
-                    y,
-                    z,
-                    l,
-                    m,
-                    n,
-                    opl,
-                    alive,
-                    sx,
-                    sy,
-                };
-                self.trace_block(&mut c, clip);
-            });
+            .zip(stop_z.par_chunks_mut(BLOCK))
+            .for_each(
+                |((((((((((x, y), z), l), m), n), opl), alive), sx), sy), sz)| {
+                    let mut c = Chunk {
+                        x,
+                        y,
+                        z,
+                        l,
+                        m,
+                        n,
+                        opl,
+                        alive,
+                        sx,
+                        sy,
+                        sz,
+                    };
+                    self.trace_block(&mut c, clip);
+                },
+            );
     }
 
     /// Trace `aim`'s rays through the normalised pupil points `pupil`.
@@ -425,6 +436,9 @@ impl<'a> TraceSystem<'a> {
             if j == self.stop_index {
                 v.sx = qx;
                 v.sy = qy;
+                for i in 0..LANES {
+                    v.sz[i] = qz[i] + s.z_mm;
+                }
             }
             if !s.refracts {
                 continue;
@@ -501,6 +515,7 @@ impl<'a> TraceSystem<'a> {
             if j == self.stop_index {
                 v.sx[i] = q[0];
                 v.sy[i] = q[1];
+                v.sz[i] = q[2];
             }
             if s.refracts {
                 match crate::trace::normal(surf, local) {
@@ -582,6 +597,7 @@ struct Lanes {
     alive: [u64; LANES],
     sx: [f64; LANES],
     sy: [f64; LANES],
+    sz: [f64; LANES],
 }
 
 /// `k ≤ LANES` values of `src[i..]` in a vector padded with `pad`.
@@ -624,6 +640,7 @@ impl Lanes {
             alive,
             sx: ld(c.sx, i, k, f64::NAN),
             sy: ld(c.sy, i, k, f64::NAN),
+            sz: ld(c.sz, i, k, f64::NAN),
         }
     }
 
@@ -638,6 +655,7 @@ impl Lanes {
         st(c.opl, i, k, &self.opl);
         st(c.sx, i, k, &self.sx);
         st(c.sy, i, k, &self.sy);
+        st(c.sz, i, k, &self.sz);
         for (b, a) in c.alive[i..i + k].iter_mut().zip(&self.alive) {
             *b = *a != 0;
         }

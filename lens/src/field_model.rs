@@ -355,8 +355,13 @@ fn entry(
             }
         }
         PsfKind::Geometric => {
-            for p in pupil_grid(opts.pupil_n) {
-                if let Some(r) = lens.trace(&aim.ray(p[0], p[1]), w, Clipping::SemiDiameters) {
+            let b = lens.trace_system(w).trace_pupil(
+                &aim,
+                &pupil_grid(opts.pupil_n),
+                Clipping::SemiDiameters,
+            );
+            for r in (0..b.len()).filter_map(|i| b.get(i)) {
+                {
                     let fx = ((r.image_mm[0] - chief.image_mm[0]) / pitch_mm + c0 + 0.5).floor();
                     let fy = ((r.image_mm[1] - chief.image_mm[1]) / pitch_mm + c0 + 0.5).floor();
                     if fx >= 0.0 && fy >= 0.0 && (fx as usize) < psf_n && (fy as usize) < psf_n {

@@ -129,14 +129,16 @@ impl LensPrescription {
             .map(|i| -1.0 + 2.0 * i as f64 / (pupil_n - 1) as f64)
             .collect();
         // Secondary sources: Q (relative to p), path difference L − L_c, direction.
-        let sources: Vec<([f64; 3], f64, [f64; 3])> = (0..pupil_n * pupil_n)
-            .into_par_iter()
-            .filter_map(|k| {
-                let (px, py) = (v[k % pupil_n], v[k / pupil_n]);
-                if px * px + py * py > 1.0 {
-                    return None;
-                }
-                let r = self.trace(&aim.ray(px, py), wavelength_nm, clipping)?;
+        let pts: Vec<[f64; 2]> = (0..pupil_n * pupil_n)
+            .map(|k| [v[k % pupil_n], v[k / pupil_n]])
+            .filter(|q| q[0] * q[0] + q[1] * q[1] <= 1.0)
+            .collect();
+        let batch = self
+            .trace_system(wavelength_nm)
+            .trace_pupil(&aim, &pts, clipping);
+        let sources: Vec<([f64; 3], f64, [f64; 3])> = (0..batch.len())
+            .filter_map(|i| {
+                let r = batch.get(i)?;
                 let (q, l) = on_sphere(r.image_mm, r.direction, r.opl_mm);
                 Some((
                     [q[0] - p[0], q[1] - p[1], q[2] - p[2]],

@@ -48,10 +48,7 @@ fn batch_trace_equals_the_scalar_trace() {
                                     );
                                 }
                                 assert!((s.opl_mm - t.opl_mm).abs() < 1e-9, "{name}: OPL");
-                                assert!(
-                                    (s.stop_mm[0] - t.stop_mm[0]).abs() < 1e-9
-                                        && (s.stop_mm[1] - t.stop_mm[1]).abs() < 1e-9
-                                );
+                                assert!((0..3).all(|k| (s.stop_mm[k] - t.stop_mm[k]).abs() < 1e-9));
                                 checked += 1;
                             }
                             (s, t) => panic!(
@@ -96,6 +93,7 @@ fn batch_trace_does_not_depend_on_the_thread_count() {
         (&a.opl, &b.opl),
         (&a.stop_x, &b.stop_x),
         (&a.stop_y, &b.stop_y),
+        (&a.stop_z, &b.stop_z),
     ] {
         assert_eq!(bits(u), bits(v));
     }

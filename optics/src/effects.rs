@@ -151,7 +151,9 @@ pub fn equivalent_gaussian_sigma_um(
 ) -> f64 {
     let nyquist = 0.5 / pixel_pitch_um;
     let n = 256;
-    let fs: Vec<f64> = (0..n).map(|k| nyquist * k as f64 / (n - 1) as f64).collect();
+    let fs: Vec<f64> = (0..n)
+        .map(|k| nyquist * k as f64 / (n - 1) as f64)
+        .collect();
     let target: Vec<f64> = fs.iter().map(|&f| mtf(f)).collect();
     let cost = |s: f64| -> f64 {
         fs.iter()
@@ -288,8 +290,7 @@ impl OpticsEffects {
         let err = |m: String| Err(OpticsError::Effect(m));
         let needs_geometry =
             self.falloff.is_some() || self.distortion.is_some() || self.lateral_color.is_some();
-        if needs_geometry && !(self.half_diagonal_m().is_finite() && self.half_diagonal_m() > 0.0)
-        {
+        if needs_geometry && !(self.half_diagonal_m().is_finite() && self.half_diagonal_m() > 0.0) {
             return err("optics effects: field-height blocks need the sensor size".into());
         }
         if let Some(s) = self.exposure_scale {
@@ -326,7 +327,9 @@ impl OpticsEffects {
             Some(Defocus::Pillbox { radius_um })
                 if !(radius_um.is_finite() && radius_um >= 0.0) =>
             {
-                return err(format!("optics.defocus.radius_um = {radius_um}: must be ≥ 0"));
+                return err(format!(
+                    "optics.defocus.radius_um = {radius_um}: must be ≥ 0"
+                ));
             }
             _ => {}
         }
@@ -516,7 +519,8 @@ fn sample_clamped(plane: &[f32], rows: usize, cols: usize, fr: f64, fc: f64) -> 
     let (r1, c1) = ((r0 + 1).min(rows - 1), (c0 + 1).min(cols - 1));
     let (tr, tc) = (fr - r0 as f64, fc - c0 as f64);
     let g = |r: usize, c: usize| plane[r * cols + c] as f64;
-    (g(r0, c0) * (1.0 - tc) + g(r0, c1) * tc) * (1.0 - tr) + (g(r1, c0) * (1.0 - tc) + g(r1, c1) * tc) * tr
+    (g(r0, c0) * (1.0 - tc) + g(r0, c1) * tc) * (1.0 - tr)
+        + (g(r1, c0) * (1.0 - tc) + g(r1, c1) * tc) * tr
 }
 
 /// Distortion and lateral colour: every output sample at image radius r takes the scene value
@@ -547,10 +551,9 @@ pub(crate) fn warp_planes(
     } else {
         vec![RadialInverse::new(fx, None, r_max)?]
     };
-    img.planes
-        .par_iter_mut()
-        .enumerate()
-        .for_each_init(Vec::new, |out: &mut Vec<f32>, (k, plane)| {
+    img.planes.par_iter_mut().enumerate().for_each_init(
+        Vec::new,
+        |out: &mut Vec<f32>, (k, plane)| {
             let map = if maps.len() == 1 { &maps[0] } else { &maps[k] };
             out.clear();
             out.resize(rows * cols, 0.0);
@@ -574,7 +577,8 @@ pub(crate) fn warp_planes(
                 }
             }
             plane.copy_from_slice(out);
-        });
+        },
+    );
     Ok(())
 }
 
@@ -614,7 +618,9 @@ pub(crate) fn apply_veiling_glare(fx: &OpticsEffects, f: f64, img: &mut Spectral
             return (0, n);
         }
         let half = 0.5 * size / dx;
-        let lo = (0..n).find(|&i| (i as f64 - c).abs() < half + 1e-9).unwrap_or(0);
+        let lo = (0..n)
+            .find(|&i| (i as f64 - c).abs() < half + 1e-9)
+            .unwrap_or(0);
         let hi = (0..n)
             .rev()
             .find(|&i| (i as f64 - c).abs() < half + 1e-9)
@@ -657,7 +663,11 @@ mod tests {
                     4.0 * (1.0 - x * x).sqrt() * h
                 })
                 .sum();
-            assert_relative_eq!(two_circle_overlap_fraction(d), area / PI, max_relative = 1e-6);
+            assert_relative_eq!(
+                two_circle_overlap_fraction(d),
+                area / PI,
+                max_relative = 1e-6
+            );
         }
         // Monte Carlo-free check at d = 1: (2π/3 − √3/2)/π.
         assert_relative_eq!(
@@ -672,7 +682,10 @@ mod tests {
         let f = Falloff::Polynomial {
             coefficients: vec![-0.2, 0.05, -0.01],
         };
-        assert_relative_eq!(f.factor(0.5), 1.0 - 0.2 * 0.25 + 0.05 * 0.0625 - 0.01 * 0.015625);
+        assert_relative_eq!(
+            f.factor(0.5),
+            1.0 - 0.2 * 0.25 + 0.05 * 0.0625 - 0.01 * 0.015625
+        );
         assert_relative_eq!(f.magnitude(), 0.2 - 0.05 + 0.01, epsilon = 1e-15);
         let t = Falloff::TwoCircle {
             separation_at_h1: 0.4,
@@ -684,7 +697,10 @@ mod tests {
     fn distortion_and_lateral_colour_definitions() {
         let d = Distortion::Division { k: 0.05 };
         assert_relative_eq!(d.magnitude(), 1.0 / 0.95 - 1.0, epsilon = 1e-15);
-        let p = Distortion::Polynomial { k1: -0.03, k2: 0.01 };
+        let p = Distortion::Polynomial {
+            k1: -0.03,
+            k2: 0.01,
+        };
         assert_relative_eq!(p.magnitude(), -0.02, epsilon = 1e-15);
         for kind in [LateralColorKind::Linear, LateralColorKind::Cauchy] {
             let l = LateralColor {
@@ -878,7 +894,10 @@ pub(crate) mod warp_tests {
                     let (us, vs) = (x * g, y * g);
                     let want = (-((us - x0).powi(2) + (vs - y0).powi(2)) / 18.0).exp();
                     let got = img.planes[0][i] as f64;
-                    assert!((got - want).abs() < 0.03, "{lam} ({x0},{y0}) at ({x},{y}): {got} vs {want}");
+                    assert!(
+                        (got - want).abs() < 0.03,
+                        "{lam} ({x0},{y0}) at ({x},{y}): {got} vs {want}"
+                    );
                     s0 += want;
                     sx0 += want * x;
                     sy0 += want * y;
@@ -890,7 +909,11 @@ pub(crate) mod warp_tests {
                 // And to first order in the spot's size the centroid is the forward image of
                 // its centre (second-order bias ∝ σ²: < 0.1 sample here).
                 let r0 = f64::hypot(x0, y0) * dx;
-                let k = if r0 > 0.0 { fx.warp_forward_m(r0, Some(lam)) / r0 } else { 1.0 };
+                let k = if r0 > 0.0 {
+                    fx.warp_forward_m(r0, Some(lam)) / r0
+                } else {
+                    1.0
+                };
                 assert!((sx1 / s1 - x0 * k).abs() < 0.1 && (sy1 / s1 - y0 * k).abs() < 0.1);
             }
         }

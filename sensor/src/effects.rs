@@ -84,7 +84,9 @@ impl Nonlinearity {
     #[inline]
     pub fn apply(&self, v: f64) -> f64 {
         match *self {
-            Nonlinearity::Quadratic { coefficient_per_v: a } => {
+            Nonlinearity::Quadratic {
+                coefficient_per_v: a,
+            } => {
                 if a <= 0.0 {
                     v
                 } else if v < 0.5 / a {
@@ -149,7 +151,12 @@ impl IrLeakage {
     /// 1001 nm.
     pub fn band(value: f64) -> Spectrum {
         Spectrum::Sampled {
-            wavelength_nm: vec![IR_BAND_LO_NM - 1.0, IR_BAND_LO_NM, IR_BAND_HI_NM, IR_BAND_HI_NM + 1.0],
+            wavelength_nm: vec![
+                IR_BAND_LO_NM - 1.0,
+                IR_BAND_LO_NM,
+                IR_BAND_HI_NM,
+                IR_BAND_HI_NM + 1.0,
+            ],
             values: vec![0.0, value, value, 0.0],
         }
     }
@@ -443,7 +450,11 @@ pub(crate) fn validate(sensor: &SensorModel) -> Result<(), SensorError> {
         }
         Some(Nonlinearity::Tanh { saturation_v }) => {
             if !(saturation_v.is_finite() && saturation_v > 0.0) {
-                return Err(bad("nonlinearity.saturation_v", saturation_v, "must be > 0"));
+                return Err(bad(
+                    "nonlinearity.saturation_v",
+                    saturation_v,
+                    "must be > 0",
+                ));
             }
         }
         None => {}
@@ -460,7 +471,11 @@ pub(crate) fn validate(sensor: &SensorModel) -> Result<(), SensorError> {
             }
         }
         if c.total() >= 1.0 {
-            return Err(bad("crosstalk", c.total(), "the total fraction must be < 1"));
+            return Err(bad(
+                "crosstalk",
+                c.total(),
+                "the total fraction must be < 1",
+            ));
         }
     }
     let n_ch = sensor.channel_qe.len();

@@ -1,8 +1,8 @@
 //! Steps 3–7 of the baseline forward model: electrons, noise, volts, ADC.
+use crate::effects::{hot_row, HotPixel, Nonlinearity};
 use crate::normal::Ziggurat;
 use crate::pixel_rng::PixelRng;
 use crate::poisson::PoissonSampler;
-use crate::effects::{hot_row, HotPixel, Nonlinearity};
 use crate::{ElectronRate, FixedPattern, SensorModel, Shot};
 use camsim_core::rng::stream;
 use camsim_core::RawFrame;
@@ -288,7 +288,9 @@ pub fn expose_with(
             electrons.resize(cols, 0.0);
             volts.resize(cols, 0.0);
             let hot = hot_row(hot, r);
-            k.row(rates, prnu, dsnu, col_off, hot, &mut rng, electrons, volts, out);
+            k.row(
+                rates, prnu, dsnu, col_off, hot, &mut rng, electrons, volts, out,
+            );
         });
     RawFrame {
         rows,
@@ -427,16 +429,16 @@ impl Kernel {
             }
         } else {
             match (sw.shot, sw.dark) {
-            (true, true) => n
-                .iter_mut()
-                .for_each(|e| *e = pois.sample(rng, *e + d).min(well)),
-            (true, false) => n
-                .iter_mut()
-                .for_each(|e| *e = (pois.sample(rng, *e) + d).min(well)),
-            (false, true) => n
-                .iter_mut()
-                .for_each(|e| *e = (*e + pois.sample(rng, d)).min(well)),
-            (false, false) => n.iter_mut().for_each(|e| *e = (*e + d).min(well)),
+                (true, true) => n
+                    .iter_mut()
+                    .for_each(|e| *e = pois.sample(rng, *e + d).min(well)),
+                (true, false) => n
+                    .iter_mut()
+                    .for_each(|e| *e = (pois.sample(rng, *e) + d).min(well)),
+                (false, true) => n
+                    .iter_mut()
+                    .for_each(|e| *e = (*e + pois.sample(rng, d)).min(well)),
+                (false, false) => n.iter_mut().for_each(|e| *e = (*e + d).min(well)),
             }
         }
         // Step 5, effect block: the nonlinearity maps v = n·g (kept as n = v'/g).

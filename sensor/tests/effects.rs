@@ -113,15 +113,27 @@ fn crosstalk_acts_in_electron_rate_on_photo_charge_only() {
     let base = electron_rate(&s, &irr);
     s.effects.crosstalk = Some(Crosstalk::symmetric(0.1));
     let with = electron_rate(&s, &irr);
-    let (b, w) = (base.electrons_per_s[2 * 6 + 2], with.electrons_per_s[2 * 6 + 2]);
-    assert!((w / b - 1.0).abs() < 1e-6, "interior of a flat field: {w} vs {b}");
+    let (b, w) = (
+        base.electrons_per_s[2 * 6 + 2],
+        with.electrons_per_s[2 * 6 + 2],
+    );
+    assert!(
+        (w / b - 1.0).abs() < 1e-6,
+        "interior of a flat field: {w} vs {b}"
+    );
     let (b, w) = (base.electrons_per_s[0], with.electrons_per_s[0]);
-    assert!((w as f64 / b as f64 - 0.95).abs() < 1e-6, "corner loses 2 × f/4");
+    assert!(
+        (w as f64 / b as f64 - 0.95).abs() < 1e-6,
+        "corner loses 2 × f/4"
+    );
     let dark = flat_rate(&s, 0.0);
     let shot = Shot::new(&s, 1.0);
     let mut s0 = s.clone();
     s0.effects = Default::default();
-    assert_eq!(expected_dn(&s, &dark, &shot), expected_dn(&s0, &dark, &shot));
+    assert_eq!(
+        expected_dn(&s, &dark, &shot),
+        expected_dn(&s0, &dark, &shot)
+    );
 }
 
 #[test]
@@ -179,8 +191,9 @@ fn ir_leakage_adds_the_expected_electrons_for_a_known_nir_radiance() {
     let v_r = 0.03;
     let mut channels = vec![None; 3];
     channels[2] = Some(IrLeakage::band(v_r)); // r: fitted form
-    // b: a generator spectrum, 0.02 at 800 nm falling linearly to 0 at 1000 nm.
-    channels[0] = Some(Spectrum::sampled(vec![700.0, 800.0, 1000.0], vec![0.0, 0.02, 0.0]).unwrap());
+                                              // b: a generator spectrum, 0.02 at 800 nm falling linearly to 0 at 1000 nm.
+    channels[0] =
+        Some(Spectrum::sampled(vec![700.0, 800.0, 1000.0], vec![0.0, 0.02, 0.0]).unwrap());
     s.effects.ir_leakage = Some(IrLeakage { channels });
     let with = electron_rate(&s, &irr);
     let area = s.pixel_pitch_m * s.pixel_pitch_m * s.fill_factor;
@@ -316,7 +329,10 @@ fn hot_pixel_fraction_and_rate_recovered_from_a_dark_frame() {
     let var = excess.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (excess.len() - 1) as f64;
     let v_est = m / (k * t);
     let se = (var / excess.len() as f64).sqrt() / (k * t);
-    assert!((v_est - v_hot).abs() < 4.0 * se + 1e-6, "{v_est} vs {v_hot} (se {se})");
+    assert!(
+        (v_est - v_hot).abs() < 4.0 * se + 1e-6,
+        "{v_est} vs {v_hot} (se {se})"
+    );
     // The expected image does not contain them (fixed pattern, like DSNU/PRNU).
     let mut s0 = s.clone();
     s0.effects = Default::default();
@@ -325,7 +341,14 @@ fn hot_pixel_fraction_and_rate_recovered_from_a_dark_frame() {
         expected_dn(&s0, &dark, &Shot::new(&s0, t))
     );
     // Seeded and map sources give the same frame.
-    let f2 = expose_with(&s, &dark, &Shot::new(&s, t), PatternSource::Seeded(11), 11, &[0, 0]);
+    let f2 = expose_with(
+        &s,
+        &dark,
+        &Shot::new(&s, t),
+        PatternSource::Seeded(11),
+        11,
+        &[0, 0],
+    );
     assert_eq!(f2.dn, frame.dn);
 }
 
@@ -351,7 +374,11 @@ fn hot_pixel_lognormal_rates() {
     let n = logs.len() as f64;
     let m = logs.iter().sum::<f64>() / n;
     let sd = (logs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    assert!((m - v.ln()).abs() < 4.0 * sig / n.sqrt(), "{m} vs {}", v.ln());
+    assert!(
+        (m - v.ln()).abs() < 4.0 * sig / n.sqrt(),
+        "{m} vs {}",
+        v.ln()
+    );
     assert!((sd / sig - 1.0).abs() < 4.0 * (0.5 / n).sqrt(), "{sd}");
     // Positions are uniform: rows of the hot pixels have mean ≈ (rows − 1)/2.
     let mr = map.iter().map(|h| h.row as f64).sum::<f64>() / n;
@@ -376,7 +403,14 @@ fn blocks_absent_leave_frames_bit_identical() {
         dark_voltage_v_per_s: 1.0,
         log_sigma: 0.0,
     });
-    let b = expose(&s1, &rate, &Shot::new(&s1, 0.01), &fixed_pattern(&s1, 2), 2, &[0, 0]);
+    let b = expose(
+        &s1,
+        &rate,
+        &Shot::new(&s1, 0.01),
+        &fixed_pattern(&s1, 2),
+        2,
+        &[0, 0],
+    );
     assert_eq!(a.dn, b.dn);
 }
 

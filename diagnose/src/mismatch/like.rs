@@ -462,14 +462,20 @@ impl<'a> Ctx<'a> {
                             let f = consts[sidx].frames;
                             let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
                             if nlo + nhi > 0.0 {
+                                // Pearson χ² of the rail count (1 dof); a term whose minority
+                                // outcome is expected in under half a frame and not seen
+                                // carries no information and is left out (χ² ≈ 0, not 1).
                                 let p_rail = (p.p_lo + p.p_hi).clamp(1e-12, 1.0 - 1e-12);
-                                let x = nlo + nhi - f * p_rail;
-                                if std::env::var_os("CAMSIM_DEBUG").is_some() && x * x / (f * p_rail * (1.0 - p_rail)) > 1e6 {
-                                    eprintln!("DEBUG s{sidx} i{i} nlo{nlo} nhi{nhi} p_lo{} p_hi{} mean{} var{} e{}", p.p_lo, p.p_hi, p.mean, p.var_t, es[sidx]);
+                                let n_rail = nlo + nhi;
+                                st.censored += 1.0;
+                                let q = p_rail.min(1.0 - p_rail);
+                                let minority = if p_rail > 0.5 { f - n_rail } else { n_rail };
+                                if f * q < 0.5 && minority == 0.0 {
+                                    continue;
                                 }
+                                let x = n_rail - f * p_rail;
                                 st.chi2 += x * x / (f * p_rail * (1.0 - p_rail));
                                 st.dof += 1.0;
-                                st.censored += 1.0;
                                 continue;
                             }
                             let m = sh.mean_dn[i] as f64;

@@ -187,18 +187,22 @@ impl ShotConst {
         let var_n = if self.shot_on { e } else { 0.0 } + if self.dark_on { dark } else { 0.0 };
         let var_p = (self.prnu * e).powi(2);
         let var_ne = var_n + var_p;
-        // Step 4: the well, as censoring of the electron count (temporal + PRNU spread).
-        let (n_mean, n_var_t, n_var_f, rho_w) =
-            if var_ne > 0.0 && self.well - lam < CENSOR_SIGMAS * var_ne.sqrt() {
+        // Step 4: the well, as censoring of the electron count (temporal + PRNU spread) —
+        // unless the ADC saturates below the well's DN, when the ADC clip alone matters.
+        let adc_first = self.base_dn + self.k * self.nonlinear(self.well * self.g).0
+            > self.hi_dn - CENSOR_SIGMAS * self.const_var.sqrt();
+        let (n_mean, n_var_t, n_var_f, rho_w) = if adc_first {
+            (lam, var_n, var_p, 1.0)
+        } else if var_ne > 0.0 && self.well - lam < CENSOR_SIGMAS * var_ne.sqrt() {
                 let c = censored(lam, var_ne.sqrt(), f64::NEG_INFINITY, self.well);
                 let unsat = 1.0 - c.p_hi;
                 let t = var_n * unsat;
                 (c.mean, t, (c.var - t).max(0.0), unsat)
-            } else if lam >= self.well {
-                (self.well, 0.0, 0.0, 0.0)
-            } else {
-                (lam, var_n, var_p, 1.0)
-            };
+        } else if lam >= self.well {
+            (self.well, 0.0, 0.0, 0.0)
+        } else {
+            (lam, var_n, var_p, 1.0)
+        };
         // Step 5: v = NL(n g).
         let (v, slope) = self.nonlinear(n_mean * self.g);
         let dn_per_e = self.k * slope * self.g;
