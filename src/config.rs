@@ -810,6 +810,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
                 dir,
                 b,
                 (0.5 * pixel_pitch_m * (r * r + c * c).sqrt()).max(pixel_pitch_m),
+                o.object_distance_m,
             )?
         }
     };
@@ -854,6 +855,7 @@ fn blur_from_file(
     dir: &Path,
     b: &BlurFile,
     sensor_half_diagonal_m: f64,
+    object_distance_m: Option<f64>,
 ) -> Result<Blur, CliError> {
     let allowed: &[&str] = match b.kind.as_str() {
         "none" | "diffraction" => &[],
@@ -936,7 +938,9 @@ fn blur_from_file(
                 &camsim_optics::lens::GlassCatalog::bundled(),
             )
             .map_err(|e| CliError::input(&p, e))?;
-            let opts = camsim_optics::LensBlurOptions::covering(sensor_half_diagonal_m * 1e3);
+            let mut opts = camsim_optics::LensBlurOptions::covering(sensor_half_diagonal_m * 1e3);
+            // optics.object_distance_m: the lens is focused on that object (lens_blur.rs docs).
+            opts.object_distance_mm = object_distance_m.map(|d| d * 1e3);
             Blur::Lens(
                 camsim_optics::LensBlur::from_prescription(&lens, &opts)
                     .map_err(|e| CliError::input(&p, e))?,

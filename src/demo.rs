@@ -342,13 +342,8 @@ fn radial_scene(dir: &Path, rows: usize, cols: usize) -> Result<Plan, CliError> 
         .iter()
         .map(|s| weight.iter().map(|w| w * *s as f32 * 0.01).collect())
         .collect();
-    let img = SpectralImage::new(
-        r,
-        c,
-        camsim_core::image::SpectralBasis::Bands(grid),
-        planes,
-    )
-    .map_err(|e| CliError::Other(e.to_string()))?;
+    let img = SpectralImage::new(r, c, camsim_core::image::SpectralBasis::Bands(grid), planes)
+        .map_err(|e| CliError::Other(e.to_string()))?;
     let rel = Path::new("scenes/radial.exr");
     std::fs::create_dir_all(dir.join("scenes")).map_err(|e| CliError::output(dir, e))?;
     camsim_core::exr_io::write_spectral_exr(&dir.join(rel), &img, "W.m^-2.sr^-1.nm^-1", None)
@@ -535,7 +530,12 @@ fn add_effect(cam: &mut Value, id: &str, m: f64, believed: &CameraFile) -> Resul
             cam["sensor"]["nonlinearity"] = json!({"kind": "tanh", "saturation_v": sat});
         }
         "relative_illumination" => {
-            need(m > 0.0 && m < 1.0, id, m, "in (0, 1) (two-circle vignetting)")?;
+            need(
+                m > 0.0 && m < 1.0,
+                id,
+                m,
+                "in (0, 1) (two-circle vignetting)",
+            )?;
             let sep = solve(two_circle_overlap_fraction, 1.0 - m, 0.0, 2.0);
             cam["optics"]["relative_illumination"] = json!({"model": "cos4",
                 "falloff": {"kind": "two_circle", "separation_at_h1": sep}});

@@ -661,20 +661,21 @@ pub fn lens_report(
         })
         .collect();
     // Dense field-curvature curves for the figure.
-    let field_curvature_curve: Vec<(f64, Vec<(f64, f64, f64)>)> = wls
-        .iter()
-        .map(|&w| {
-            let pts = (0..=20)
-                .filter_map(|k| {
-                    let th = max_deg * k as f64 / 20.0;
-                    let fc = lens.field_curvature(th, w).ok()?;
-                    (fc.sagittal_mm.is_finite() && fc.tangential_mm.is_finite())
-                        .then_some((th, fc.sagittal_mm, fc.tangential_mm))
-                })
-                .collect();
-            (w, pts)
-        })
-        .collect();
+    let field_curvature_curve: Vec<(f64, Vec<(f64, f64, f64)>)> =
+        wls.iter()
+            .map(|&w| {
+                let pts =
+                    (0..=20)
+                        .filter_map(|k| {
+                            let th = max_deg * k as f64 / 20.0;
+                            let fc = lens.field_curvature(th, w).ok()?;
+                            (fc.sagittal_mm.is_finite() && fc.tangential_mm.is_finite())
+                                .then_some((th, fc.sagittal_mm, fc.tangential_mm))
+                        })
+                        .collect();
+                (w, pts)
+            })
+            .collect();
     // Huygens PSFs of the report fields at the primary wavelength, on the MTF's image plane.
     let mut huygens = Vec::new();
     let mut huygens_json = Vec::new();

@@ -913,3 +913,286 @@ fn nonlinearity_and_hot_pixels_in_simulated_frames() {
         assert_eq!(px.0[0] as f64, want, "pixel ({r},{c}) hot={is_hot}");
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// The concealed-effect generator (`camsim demo diagnose`)
+
+use camsim::demo::{generate_capture_set, Concealment, DemoSpec, EFFECT_IDS};
+
+fn demo_spec(effects: &[(&str, f64)], concealment: Concealment, seed: u64) -> DemoSpec {
+    DemoSpec {
+        effects: effects.iter().map(|(i, m)| (i.to_string(), *m)).collect(),
+        concealment,
+        rows: 32,
+        cols: 48,
+        seed,
+    }
+}
+
+/// A requested magnitude per effect id (effects.md units).
+fn demo_magnitude(id: &str) -> f64 {
+    match id {
+        "exposure_scale" => 1.08,
+        "conversion_gain" => 0.9,
+        "black_level" => 6.5,
+        "dark_current" => 0.02,
+        "read_noise" => 2.0e-3,
+        "dsnu" => 2.0e-3,
+        "prnu" => 2.0,
+        "column_fpn" => 1.0e-3,
+        "hot_pixels" => 0.004,
+        "nonlinearity" => 0.06,
+        "full_well" => 7000.0,
+        "relative_illumination" => 0.25,
+        "veiling_glare" => 0.03,
+        "defocus" => 1.5,
+        "crosstalk" => 0.05,
+        "ir_leakage" => 0.03,
+        "qe_shift" => -6.0,
+        "distortion" => -0.04,
+        "lateral_color" => 2.5,
+        _ => unreachable!(),
+    }
+}
+
+fn read_truth(dir: &Path) -> Vec<(String, f64)> {
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
+    v["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            (
+                e["effect"].as_str().unwrap().to_string(),
+                e["magnitude"].as_f64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn demo_generates_every_effect_with_its_true_magnitude() {
+    let root = tempfile::tempdir().unwrap();
+    for id in EFFECT_IDS {
+        let m = demo_magnitude(id);
+        let dir = root.path().join(id);
+        let truth = generate_capture_set(&demo_spec(&[(id, m)], Concealment::None, 3), &dir)
+            .unwrap_or_else(|e| panic!("{id}: {e}"));
+        assert_eq!(truth.captures_json, dir.join("captures.json"));
+        // truth.json holds what the function returned.
+        let file = read_truth(&dir);
+        assert_eq!(file.len(), 1);
+        assert_eq!(file[0].0, id);
+        // (serde_json's default float parsing may differ in the last bit)
+        assert!((file[0].1 - truth.effects[0].magnitude).abs() <= 1e-14 * file[0].1.abs());
+        let got = truth.effects[0].magnitude;
+        // Solved generator parameters reproduce the request; drawn patterns are realised
+        // values (hot pixels: round(f·N)/N; column offsets: sample σ of 48 columns).
+        let tol = match id {
+            "hot_pixels" => 0.5 / (32.0 * 48.0),
+            "column_fpn" => 0.35 * m,
+            _ => 1e-6 * m.abs(),
+        };
+        assert!((got - m).abs() <= tol, "{id}: truth {got} vs requested {m}");
+        // The set parses, its camera is the believed one (no effect blocks), and every frame
+        // is there with the sensor's size.
+        let set = load_captures(&truth.captures_json, None).unwrap();
+        assert!(set.camera.optics.effects.is_empty() && set.camera.sensor.effects.is_empty());
+        assert_eq!(set.camera.sensor.channel_names, ["b", "g", "r"]);
+        for shot in &set.shots {
+            for f in &shot.frames {
+                let img = image::open(dir.join(f)).unwrap().to_luma16();
+                assert_eq!((img.height(), img.width()), (32, 48), "{id} {f}");
+            }
+        }
+        // No staging or true-camera file is left behind.
+        let names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .collect();
+        assert!(names.iter().all(|n| !n.starts_with('.')), "{names:?}");
+    }
+}
+
+#[test]
+fn demo_null_set_is_the_believed_camera_exactly_and_effects_change_the_frames() {
+    let root = tempfile::tempdir().unwrap();
+    let null = root.path().join("null");
+    let t = generate_capture_set(&demo_spec(&[], Concealment::None, 7), &null).unwrap();
+    assert!(t.effects.is_empty() && read_truth(&null).is_empty());
+    // Re-simulating the set with its own (believed) camera and seed gives the same frames.
+    let set = load_captures(&t.captures_json, None).unwrap();
+    let again = root.path().join("again");
+    camsim::simulate::simulate(
+        &set,
+        &camsim::simulate::SimulateOptions {
+            out_dir: again.clone(),
+            seed: 7,
+            expected: false,
+            progress: false,
+        },
+    )
+    .unwrap();
+    for shot in &set.shots {
+        for f in &shot.frames {
+            assert_eq!(
+                std::fs::read(null.join(f)).unwrap(),
+                std::fs::read(again.join(f)).unwrap(),
+                "{f}"
+            );
+        }
+    }
+    // Deterministic in the seed; another seed gives other frames.
+    let same = root.path().join("same");
+    generate_capture_set(&demo_spec(&[], Concealment::None, 7), &same).unwrap();
+    let other = root.path().join("other");
+    generate_capture_set(&demo_spec(&[], Concealment::None, 8), &other).unwrap();
+    let f = &set.shots[3].frames[0];
+    assert_eq!(
+        std::fs::read(null.join(f)).unwrap(),
+        std::fs::read(same.join(f)).unwrap()
+    );
+    assert_ne!(
+        std::fs::read(null.join(f)).unwrap(),
+        std::fs::read(other.join(f)).unwrap()
+    );
+    // With exposure_scale = 1.1 the flats' mean signal above black rises by 1.1 (same seed:
+    // the noise is common; tolerance from the shot noise of ~1500 pixels).
+    let fx = root.path().join("fx");
+    generate_capture_set(
+        &demo_spec(&[("exposure_scale", 1.1)], Concealment::None, 7),
+        &fx,
+    )
+    .unwrap();
+    let mean = |p: &Path| -> f64 {
+        let img = image::open(p).unwrap().to_luma16();
+        img.pixels().map(|p| p.0[0] as f64 - 64.0).sum::<f64>() / (32.0 * 48.0)
+    };
+    let flat = "raw/flat-50-0.png";
+    let ratio = mean(&fx.join(flat)) / mean(&null.join(flat));
+    assert!((ratio - 1.1).abs() < 0.01, "{ratio}");
+}
+
+#[test]
+fn demo_concealment_variants_shape_the_capture_set() {
+    let root = tempfile::tempdir().unwrap();
+    let shots = |c: Concealment, fx: &[(&str, f64)]| -> Vec<(String, Value, usize)> {
+        let dir = root.path().join(format!("{c:?}-{}", fx.len()));
+        let t = generate_capture_set(&demo_spec(fx, c, 5), &dir).unwrap();
+        let v: Value =
+            serde_json::from_str(&std::fs::read_to_string(&t.captures_json).unwrap()).unwrap();
+        load_captures(&t.captures_json, None).unwrap(); // parses (image targets included)
+        v["shots"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| {
+                (
+                    s["id"].as_str().unwrap().to_string(),
+                    s["target"].clone(),
+                    s["frames"].as_array().unwrap().len(),
+                )
+            })
+            .collect()
+    };
+    let count = |s: &[(String, Value, usize)], kind: &str| -> usize {
+        s.iter().filter(|x| x.1["kind"] == kind).map(|x| x.2).sum()
+    };
+    let none = shots(Concealment::None, &[("prnu", 1.0)]);
+    // Default: darks at 3 exposures with repeats, ≥ 5 flat levels × 2, two charts, edge, points.
+    assert!(count(&none, "dark") >= 9 && count(&none, "uniform") >= 10);
+    assert_eq!(count(&none, "macbeth"), 2);
+    assert!(count(&none, "slanted_edge") >= 1 && count(&none, "point_array") >= 1);
+    // Below noise: more repeats of everything.
+    let below = shots(Concealment::BelowNoise, &[("prnu", 0.2)]);
+    assert!(count(&below, "uniform") >= 2 * count(&none, "uniform"));
+    assert!(count(&below, "dark") >= 2 * count(&none, "dark"));
+    // Under the scene: no flat field.
+    let under = shots(Concealment::UnderScene, &[("relative_illumination", 0.2)]);
+    assert_eq!(count(&under, "uniform"), 0);
+    assert!(count(&under, "macbeth") >= 4);
+    // Mimicked conversion gain: an exposure series of flats with ≥ 4 repeats per level,
+    // no charts (their means would scale alike too).
+    let mim = shots(Concealment::Mimicked, &[("conversion_gain", 1.1)]);
+    let flats: Vec<&(String, Value, usize)> =
+        mim.iter().filter(|x| x.1["kind"] == "uniform").collect();
+    assert!(flats.len() >= 5 && flats.iter().all(|x| x.2 >= 4));
+    assert_eq!(count(&mim, "macbeth"), 0);
+    // Mimicked vignetting: a scene whose own radiance falls off radially, no flat field.
+    let mim = shots(
+        Concealment::Mimicked,
+        &[("relative_illumination", 0.2), ("prnu", 1.0)],
+    );
+    assert!(count(&mim, "image") >= 1);
+}
+
+#[test]
+fn demo_cli_writes_the_set_and_rejects_bad_effects_in_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = crate::util::camsim()
+        .args([
+            "demo",
+            "diagnose",
+            "--effect",
+            "veiling_glare=0.02",
+            "--conceal",
+            "under-scene",
+            "--rows",
+            "24",
+            "--cols",
+            "32",
+            "--seed",
+            "4",
+            "--out",
+            "set",
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        read_truth(&dir.path().join("set")),
+        [("veiling_glare".to_string(), 0.02)]
+    );
+    // The set simulates with `camsim simulate --expected`.
+    let out = crate::util::camsim()
+        .args([
+            "simulate",
+            "set/captures.json",
+            "--expected",
+            "--out",
+            "exp",
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for (args, want) in [
+        (vec!["--effect", "vignette=0.2"], "unknown effect id"),
+        (vec!["--effect", "crosstalk=lots"], "not a number"),
+        (vec!["--effect", "crosstalk"], "ID=MAGNITUDE"),
+        (vec!["--effect", "crosstalk=1.5"], "crosstalk=1.5"),
+    ] {
+        let mut a = vec!["demo", "diagnose", "--out", "bad"];
+        a.extend(args);
+        let out = crate::util::camsim()
+            .args(&a)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(want), "{a:?}: {err}");
+        assert!(!dir.path().join("bad").exists());
+    }
+}

@@ -85,3 +85,44 @@ fn missing_lens_file_is_one_error_line_naming_it() {
     assert!(err.contains("no_such_lens.json"), "{err}");
     assert!(!dir.path().join("out/flat.exr").exists());
 }
+
+/// `optics.object_distance_m` with blur kind "lens": the lens is focused on an object 0.5 m
+/// from its first vertex, so the camera equation uses the lens's working F-number at that
+/// conjugate. Near the axis the signal relative to the object at infinity is
+/// (N_w(∞)/N_w(0.5 m))², N_w = 1/(2 n'u') of the paraxial marginal ray (within 2 %); for this
+/// near-symmetric lens that is close to the thin-lens (1 + |m|)⁻² (within 5 %).
+#[test]
+fn object_distance_focuses_the_lens_and_sets_its_working_f_number() {
+    let mut caps = captures(0.0005, 0.02);
+    caps["simulation"] = json!({"wavelength_nm": {"start_nm": 400, "stop_nm": 700, "step_nm": 50}});
+    let mut cam = camera(32, 32);
+    cam["sensor"]["pixel_pitch_um"] = json!(5.0);
+    cam["optics"]["blur"] = json!({"kind": "lens", "lens_file": lens_path()});
+    let far = tempfile::tempdir().unwrap();
+    write_set(far.path(), &cam, &caps);
+    simulate(far.path());
+    let near = tempfile::tempdir().unwrap();
+    cam["optics"]["object_distance_m"] = json!(0.5);
+    write_set(near.path(), &cam, &caps);
+    simulate(near.path());
+    let black = 64.0;
+    let (_, _, dn_far) = centre_dn(far.path());
+    let (_, _, dn_near) = centre_dn(near.path());
+    let ratio = (dn_near - black) / (dn_far - black);
+    let lens = camsim_lens::LensPrescription::from_json_file(
+        lens_path(),
+        &camsim_lens::GlassCatalog::bundled(),
+    )
+    .unwrap();
+    let w = lens.primary_nm;
+    let nw_far = lens.focus_at(None).unwrap().first_order(w).unwrap();
+    let nw_near = lens.focus_at(Some(500.0)).unwrap().first_order(w).unwrap();
+    let want = (nw_far.working_f_number / nw_near.working_f_number).powi(2);
+    assert!((ratio / want - 1.0).abs() < 0.02, "ratio {ratio} vs {want}");
+    let m = nw_near.magnification;
+    assert!(m < -0.05 && m > -0.2, "m {m}");
+    assert!(
+        (want * (1.0 + m.abs()).powi(2) - 1.0).abs() < 0.05,
+        "{want} {m}"
+    );
+}

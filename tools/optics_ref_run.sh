@@ -11,6 +11,11 @@
 # E.g. {"": "--backends optiland", "paraxial_aiming": "--backends optiland --optiland-aiming paraxial"}
 # for a lens with a glass that rayoptics' catalogue lacks. Without the key: one run, default args.
 #
+# An input may also carry "extra_runs": an object mapping a tool of tools/optics_ref_extra.py
+# (field_curvature, finite) to extra arguments; each writes <name>.<tool>.ref.json. An input
+# with "ref_lens_runs": {} runs only its extra tools (e.g. a finite-conjugate lens, which
+# ref_lens.py cannot express).
+#
 # Usage: tools/optics_ref_run.sh [name ...]     (default: every *.json that is not *.ref.json)
 # Env:   PYTHON (interpreter used to create the venv, default python3)
 #        REF_LENS_ARGS (extra arguments appended to every ref_lens.py run, e.g. "--no-psf")
@@ -18,6 +23,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 REF_LENS="$ROOT/../shared/tools/optics_ref/ref_lens.py"
+EXTRA="$ROOT/tools/optics_ref_extra.py"
 DATA="$ROOT/lens/tests/data/optics_ref"
 VENV="$ROOT/.venv-optics"
 
@@ -52,19 +58,29 @@ fi
 
 failed=0
 for f in "${inputs[@]}"; do
-    # one "tag|args" line per run
+    # one "kind|tag|args" line per run
     runs="$("$VENV/bin/python" -c '
 import json, sys
-d = json.load(open(sys.argv[1])).get("ref_lens_runs", {"": ""})
-for tag, args in d.items():
-    print(tag + "|" + args)
+j = json.load(open(sys.argv[1]))
+for tag, args in j.get("ref_lens_runs", {"": ""}).items():
+    print("ref_lens|" + tag + "|" + args)
+for tool, args in j.get("extra_runs", {}).items():
+    print("extra|" + tool + "|" + args)
 ' "$f")"
-    while IFS='|' read -r tag args; do
+    while IFS='|' read -r kind tag args; do
+        [[ -z "$kind" ]] && continue
         if [[ -z "$tag" ]]; then out="${f%.json}.ref.json"; else out="${f%.json}.$tag.ref.json"; fi
-        echo "== $(basename "$f") ${args:+[$args] }-> $(basename "$out")"
+        echo "== $(basename "$f") ${kind} ${args:+[$args] }-> $(basename "$out")"
         start=$SECONDS
+        if [[ "$kind" == extra ]]; then
+            cmd=("$VENV/bin/python" "$EXTRA" "$tag" "$f" -o "$out")
+            common=""
+        else
+            cmd=("$VENV/bin/python" "$REF_LENS" "$f" -o "$out")
+            common="${REF_LENS_ARGS:-}"
+        fi
         # shellcheck disable=SC2086
-        if "$VENV/bin/python" "$REF_LENS" "$f" -o "$out" $args ${REF_LENS_ARGS:-} > /dev/null; then
+        if "${cmd[@]}" $args $common > /dev/null; then
             echo "   done in $((SECONDS - start)) s"
         else
             echo "   FAILED (see the traceback above); $(basename "$out") not updated" >&2

@@ -1,7 +1,8 @@
 //! Batch real-ray tracing: the same exact trace as [`crate::trace`] for many rays at once, in a
 //! structure-of-arrays layout processed [`LANES`] rays at a time so the compiler vectorises
-//! every step (AVX-512 / AVX2 code paths are selected at run time on x86-64; results are
-//! bit-identical on every path because no operation is fused or reordered).
+//! every step (AVX-512 / AVX2 code paths with fused multiply-adds are selected at run time on
+//! x86-64, a portable path without them elsewhere; a given machine always takes the same path,
+//! so results do not depend on the thread count, and paths differ by rounding only).
 //!
 //! Per wavelength a [`TraceSystem`] holds what the hot loop needs: vertex positions,
 //! curvatures, conic factors, the index ratios (glass dispersion is evaluated once, not per
@@ -335,47 +336,49 @@ impl<'a> TraceSystem<'a> {
     fn trace_block(&self, c: &mut Chunk<'_>, clip: bool) {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU supports AVX-512F (checked above).
+            let fma = std::arch::is_x86_feature_detected!("fma");
+            if fma && std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU supports AVX-512F and FMA (checked above).
                 unsafe { self.trace_block_avx512(c, clip) };
                 return;
             }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked above).
+            if fma && std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 and FMA (checked above).
                 unsafe { self.trace_block_avx2(c, clip) };
                 return;
             }
         }
-        self.trace_block_generic(c, clip);
+        self.trace_block_generic::<false>(c, clip);
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
+    #[target_feature(enable = "avx512f,fma")]
     unsafe fn trace_block_avx512(&self, c: &mut Chunk<'_>, clip: bool) {
-        self.trace_block_generic(c, clip);
+        self.trace_block_generic::<true>(c, clip);
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     unsafe fn trace_block_avx2(&self, c: &mut Chunk<'_>, clip: bool) {
-        self.trace_block_generic(c, clip);
+        self.trace_block_generic::<true>(c, clip);
     }
 
     #[inline(always)]
-    fn trace_block_generic(&self, c: &mut Chunk<'_>, clip: bool) {
+    fn trace_block_generic<const FMA: bool>(&self, c: &mut Chunk<'_>, clip: bool) {
         let len = c.x.len();
         let mut i = 0;
         while i < len {
             let k = (len - i).min(LANES);
             let mut v = Lanes::load(c, i, k);
-            self.trace_lanes(&mut v, clip);
+            self.trace_lanes::<FMA>(&mut v, clip);
             v.store(c, i, k);
             i += k;
         }
     }
 
     #[inline(always)]
-    fn trace_lanes(&self, v: &mut Lanes, clip: bool) {
+    fn trace_lanes<const FMA: bool>(&self, v: &mut Lanes, clip: bool) {
+        let fma = madd::<FMA>;
         // Each step is a separate loop over all lanes: the LANES/8 independent vectors of a
         // step overlap in the pipeline (a fused loop per surface is latency-bound).
         for (j, s) in self.surfs.iter().enumerate() {
@@ -396,10 +399,10 @@ impl<'a> TraceSystem<'a> {
                     let py = v.y[i];
                     let pz = v.z[i] - s.z_mm;
                     let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
-                    let a = s.c * (dx * dx + dy * dy + s.k1 * dz * dz);
-                    let b = s.c * (px * dx + py * dy + s.k1 * pz * dz) - dz;
-                    let cc = s.c * (px * px + py * py + s.k1 * pz * pz) - 2.0 * pz;
-                    let disc = b * b - a * cc;
+                    let a = s.c * fma(dx, dx, fma(dy, dy, s.k1 * dz * dz));
+                    let b = fma(s.c, fma(px, dx, fma(py, dy, s.k1 * pz * dz)), -dz);
+                    let cc = fma(s.c, fma(px, px, fma(py, py, s.k1 * pz * pz)), -2.0 * pz);
+                    let disc = fma(b, b, -(a * cc));
                     let den = -b + pos(disc).sqrt();
                     v.alive[i] &= mask(disc >= 0.0) & mask(den != 0.0);
                     t[i] = cc / den;
@@ -407,9 +410,9 @@ impl<'a> TraceSystem<'a> {
             }
             let (mut qx, mut qy, mut qz) = ([0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
             for i in 0..LANES {
-                qx[i] = v.x[i] + t[i] * v.l[i];
-                qy[i] = v.y[i] + t[i] * v.m[i];
-                qz[i] = v.z[i] - s.z_mm + t[i] * v.n[i];
+                qx[i] = fma(t[i], v.l[i], v.x[i]);
+                qy[i] = fma(t[i], v.m[i], v.y[i]);
+                qz[i] = fma(t[i], v.n[i], v.z[i] - s.z_mm);
             }
             if s.shape != Shape::Plane {
                 // Stay inside the conic's domain 1 − (1+k)c²r² ≥ 0 (as the scalar trace).
@@ -464,7 +467,7 @@ impl<'a> TraceSystem<'a> {
             }
             for i in 0..LANES {
                 let (l, m, n, good) =
-                    refract_lane(s.mu, v.l[i], v.m[i], v.n[i], nx[i], ny[i], nz[i]);
+                    refract_lane::<FMA>(s.mu, v.l[i], v.m[i], v.n[i], nx[i], ny[i], nz[i]);
                 v.alive[i] &= good;
                 v.l[i] = l;
                 v.m[i] = m;
@@ -520,7 +523,7 @@ impl<'a> TraceSystem<'a> {
             if s.refracts {
                 match crate::trace::normal(surf, local) {
                     Some(nn) => {
-                        let (l, m, n, good) = refract_lane(
+                        let (l, m, n, good) = refract_lane::<false>(
                             s.mu,
                             r.direction[0],
                             r.direction[1],
@@ -538,6 +541,16 @@ impl<'a> TraceSystem<'a> {
                 }
             }
         }
+    }
+}
+
+/// a·b + c: fused (one rounding) on the FMA code paths, separately rounded otherwise.
+#[inline(always)]
+fn madd<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
+    if FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
     }
 }
 
@@ -561,7 +574,7 @@ fn pos(x: f64) -> f64 {
 /// direction μ d + (cos θ' − μ cos θ) N (N flipped to the side of d) and the mask of "no
 /// total internal reflection".
 #[inline(always)]
-fn refract_lane(
+fn refract_lane<const FMA: bool>(
     mu: f64,
     dx: f64,
     dy: f64,
@@ -570,16 +583,17 @@ fn refract_lane(
     ny: f64,
     nz: f64,
 ) -> (f64, f64, f64, u64) {
-    let c0 = dx * nx + dy * ny + dz * nz;
+    let fma = madd::<FMA>;
+    let c0 = fma(dx, nx, fma(dy, ny, dz * nz));
     let sgn = if c0 < 0.0 { -1.0 } else { 1.0 };
     let cos_i = c0 * sgn;
-    let sin2_t = mu * mu * (1.0 - cos_i * cos_i);
+    let sin2_t = mu * mu * fma(-cos_i, cos_i, 1.0);
     let cos_t = pos(1.0 - sin2_t).sqrt();
-    let g = (cos_t - mu * cos_i) * sgn;
+    let g = fma(-mu, cos_i, cos_t) * sgn;
     (
-        mu * dx + g * nx,
-        mu * dy + g * ny,
-        mu * dz + g * nz,
+        fma(mu, dx, g * nx),
+        fma(mu, dy, g * ny),
+        fma(mu, dz, g * nz),
         mask(sin2_t <= 1.0),
     )
 }

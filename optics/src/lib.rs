@@ -15,7 +15,10 @@
 //!    or, with [`Blur::Lens`], the ISET ray-trace method (§2.B.3) of a lens prescription, which
 //!    replaces steps 1–3 (distortion, traced relative illumination, the lens's working
 //!    F-number, shift-variant PSFs; see [`LensBlur`]);
-//! 4. an optional Gaussian diffuser (§3.A: FWHM = pixel width).
+//! 4. an optional Gaussian diffuser (§3.A: FWHM = pixel width);
+//! 5. the optional effect blocks of `spec/effects.md` ([`effects`], [`OpticsModel::effects`]):
+//!    an extra fall-off with step 2, an exposure scale, a distortion / lateral-colour warp
+//!    before the blur, a defocus blur and veiling glare after it.
 //!
 //! The baseline follows the project spec (capture-format.md, step 1). ISETCam conventions are
 //! available as explicit options ([`CameraEquation::IsetCam`],
@@ -45,7 +48,7 @@ pub use formulas::{
     relative_illumination_isetcam, sigma_from_fwhm, thin_lens_image_distance_m,
 };
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
-pub use lens_blur::{LensBlur, LensBlurOptions};
+pub use lens_blur::{LensBlur, LensBlurOptions, LensFocus};
 pub use psf_set::PsfSet;
 
 use camsim_core::SpectralImage;

@@ -238,10 +238,13 @@ impl SensorModel {
         } else {
             base.clone()
         }];
-        if let Some(Some(ir)) = self.effects.ir_leakage.as_ref().map(|l| l.channels.get(c)) {
-            if let Some(ir) = ir {
-                parts.push(ir.clone());
-            }
+        if let Some(Some(ir)) = self
+            .effects
+            .ir_leakage
+            .as_ref()
+            .and_then(|l| l.channels.get(c))
+        {
+            parts.push(ir.clone());
         }
         parts
     }

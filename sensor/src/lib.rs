@@ -12,7 +12,10 @@
 //! 7. `DN = clamp(round(u / swing · (2^bits − 1) + black_level), 0, 2^bits − 1)`.
 //!
 //! [`expected_dn`] is the same chain with every random term at its mean and no rounding;
-//! [`expose`] draws a frame; [`fixed_pattern`] draws the per-camera PRNU/DSNU/column maps.
+//! [`expose`] draws a frame; [`fixed_pattern`] draws the per-camera PRNU/DSNU/column maps
+//! and hot pixels. The optional effect blocks of `spec/effects.md` (hot pixels,
+//! nonlinearity, crosstalk, IR leakage, QE shift) live in [`effects`] and
+//! [`SensorModel::effects`]; absent, they cost nothing.
 //! The [`isetcam`] module holds documented ISETCam-compatible variants (bilinear pixel
 //! sampling, Riemann spectral sums, ISETCam auto-exposure, SNR components) used only for
 //! oracle tests; they are never the default.

@@ -31,6 +31,10 @@ pub const GRID_PATCH_CORE: f64 = 0.8;
 pub const MAX_ZERO_FRACTION: f64 = 0.01;
 /// A point is saturated when any pixel reaches this fraction of the clipping level.
 pub const SATURATION_FRACTION: f64 = 0.98;
+/// Radiance below this fraction of its peak is its "floor" (a filter's blocking band).
+pub const FLOOR_FRACTION: f64 = 0.01;
+/// Observations whose predicted signal comes more than this share from the floor are left out.
+pub const MAX_FLOOR_SHARE: f64 = 0.5;
 /// Patch illumination factors need this many exposure series (filters).
 pub const MIN_SERIES_FOR_GAINS: usize = 3;
 /// Alternation stops when no factor changes by more than this.
@@ -135,6 +139,15 @@ pub struct PatchSpectral {
     pub patch_illumination: Option<Vec<PatchGain>>,
     /// Curve fits run (alternations).
     pub gain_iterations: usize,
+    /// Relative scatter ε of the patch signal rates beyond their measurement noise (the
+    /// model error: radiance errors, filter leakage, non-uniform light), estimated so that
+    /// χ² = N − (fitted factors); every observation's σ in `fit` is σ_measured ⊕ ε·signal.
+    /// 0 when the measurement noise explains the residuals.
+    pub model_error_fraction: f64,
+    /// Observations left out because their predicted signal comes mostly from the
+    /// radiance's floor (below [`FLOOR_FRACTION`] of its peak): with narrowband filters, the
+    /// blocking band, whose measured transmittance is the spectrometer's noise floor.
+    pub leak_dominated: Vec<String>,
     /// Pedestal used as the prior intercept (DN) and its uncertainty.
     pub pedestal_dn: f64,
     /// Its uncertainty (DN).
@@ -234,6 +247,27 @@ fn relative_illumination(optics: &OpticsModel, s: &SensorModel, r: usize, c: usi
             )
         }
     }
+}
+
+/// The part of a sampled spectrum below [`FLOOR_FRACTION`] of its peak (0 elsewhere);
+/// None when there is none.
+fn floor_part(l: &Spectrum) -> Option<Spectrum> {
+    let Spectrum::Sampled {
+        wavelength_nm,
+        values,
+    } = l
+    else {
+        return None;
+    };
+    let peak = values.iter().cloned().fold(0.0f64, f64::max);
+    let v: Vec<f64> = values
+        .iter()
+        .map(|&x| if x < FLOOR_FRACTION * peak { x } else { 0.0 })
+        .collect();
+    v.iter()
+        .any(|&x| x > 0.0)
+        .then(|| Spectrum::sampled(wavelength_nm.clone(), v).ok())
+        .flatten()
 }
 
 /// Weighted straight line y = a + b·x; returns (a, b, σa, σb, χ²).
@@ -542,7 +576,25 @@ pub fn patch_spectral(
     let grid = chart_grid(grid);
     let mut gains = vec![1.0; n_patches];
     let mut gain_sigma = vec![f64::NAN; n_patches];
+    let mut eps = 0.0f64;
     let mut iterations = 0;
+    // the part of each radiance below FLOOR_FRACTION of its peak (a filter's blocking band)
+    let floor_parts: Vec<Option<Spectrum>> = obs.iter().map(|o| floor_part(&o.radiance)).collect();
+    let mut leak = vec![false; obs.len()];
+    let mut leak_dominated = Vec::new();
+    // the observations as the solver sees them: scale × I_p, σ ⊕ ε·signal
+    let scaled = |gains: &[f64], eps: f64, leak: &[bool]| -> Vec<SpectralObservation> {
+        obs.iter()
+            .zip(&obs_patch)
+            .zip(leak)
+            .filter(|(_, &l)| !l)
+            .map(|((o, &p), _)| SpectralObservation {
+                scale: o.scale * gains[p],
+                sigma: o.sigma.hypot(eps * o.signal),
+                ..o.clone()
+            })
+            .collect()
+    };
     let fit = loop {
         if shots.is_empty() {
             break Outcome::NotEstimable {
@@ -550,20 +602,14 @@ pub fn patch_spectral(
             };
         }
         iterations += 1;
-        let scaled: Vec<SpectralObservation> = obs
-            .iter()
-            .zip(&obs_patch)
-            .map(|(o, &p)| SpectralObservation {
-                scale: o.scale * gains[p],
-                ..o.clone()
-            })
-            .collect();
-        let fit = fit_spectral_efficiency(&scaled, &grid, &sensor.channel_names, method);
+        let fit = fit_spectral_efficiency(
+            &scaled(&gains, eps, &leak),
+            &grid,
+            &sensor.channel_names,
+            method,
+        );
         let Some(f) = fit.get() else { break fit };
-        if !estimate_gains {
-            break fit;
-        }
-        // I_p = Σ w s u / Σ w u² over the patch's observations, u = the unit-gain prediction
+        // u_i: the prediction of observation i at unit illumination factor
         let curves: Vec<Option<Spectrum>> = (0..sensor.channel_names.len())
             .map(|c| {
                 f.qe.channels
@@ -574,59 +620,118 @@ pub fn patch_spectral(
                     })
             })
             .collect();
-        let mut num = vec![0.0; n_patches];
-        let mut den = vec![0.0; n_patches];
-        let mut units = vec![0.0; obs.len()];
-        for (i, o) in obs.iter().enumerate() {
-            let Some(q) = &curves[o.channel] else { continue };
-            let u = o.scale * Spectrum::integrate_product(q, &o.radiance).unwrap_or(0.0);
-            units[i] = u;
-            let w = 1.0 / (o.sigma * o.sigma);
-            num[obs_patch[i]] += w * o.signal * u;
-            den[obs_patch[i]] += w * u * u;
-        }
-        let mut new: Vec<f64> = (0..n_patches)
-            .map(|p| if den[p] > 0.0 { num[p] / den[p] } else { 1.0 })
+        let units: Vec<Option<f64>> = obs
+            .iter()
+            .map(|o| {
+                curves[o.channel].as_ref().map(|q| {
+                    o.scale * Spectrum::integrate_product(q, &o.radiance).unwrap_or(0.0)
+                })
+            })
             .collect();
-        let mean = new.iter().sum::<f64>() / n_patches as f64;
-        new.iter_mut().for_each(|g| *g /= mean);
-        // 1σ: 1/√Σwu², inflated by the patch's √(χ²/dof) when above 1
-        for p in 0..n_patches {
-            let (mut chi2, mut n) = (0.0, 0usize);
+        // observations whose predicted signal comes mostly from the floor part
+        let new_leak: Vec<bool> = obs
+            .iter()
+            .enumerate()
+            .map(|(i, o)| match (&curves[o.channel], &floor_parts[i], units[i]) {
+                (Some(q), Some(fl), Some(u)) if u > 0.0 => {
+                    o.scale * Spectrum::integrate_product(q, fl).unwrap_or(0.0)
+                        > MAX_FLOOR_SHARE * u
+                }
+                _ => false,
+            })
+            .collect();
+        let units: Vec<Option<f64>> = units
+            .into_iter()
+            .zip(&new_leak)
+            .map(|(u, &l)| if l { None } else { u })
+            .collect();
+        let sig = |i: usize, e: f64| obs[i].sigma.hypot(e * obs[i].signal);
+        // I_p = Σ w s u / Σ w u² over the patch's observations (weighted least squares)
+        let mut new = gains.clone();
+        if estimate_gains {
+            let mut num = vec![0.0; n_patches];
+            let mut den = vec![0.0; n_patches];
             for (i, o) in obs.iter().enumerate() {
-                if obs_patch[i] == p && units[i] > 0.0 {
-                    chi2 += ((o.signal - new[p] * mean * units[i]) / o.sigma).powi(2);
-                    n += 1;
+                let Some(u) = units[i] else { continue };
+                let w = sig(i, eps).powi(-2);
+                num[obs_patch[i]] += w * o.signal * u;
+                den[obs_patch[i]] += w * u * u;
+            }
+            for p in 0..n_patches {
+                new[p] = if den[p] > 0.0 { num[p] / den[p] } else { 1.0 };
+            }
+            let mean = new.iter().sum::<f64>() / n_patches as f64;
+            new.iter_mut().for_each(|g| *g /= mean);
+            for p in 0..n_patches {
+                gain_sigma[p] = 1.0 / den[p].sqrt() / mean;
+            }
+        }
+        // ε: the relative scatter beyond the measurement noise, from
+        // Σ r²/(σ² + ε² s²) = N − (illumination factors fitted)   (0 when χ² ≤ that already)
+        let n_used = units.iter().filter(|u| u.is_some()).count();
+        let target =
+            (n_used as f64 - if estimate_gains { n_patches as f64 } else { 0.0 }).max(1.0);
+        let chi2 = |e: f64| -> f64 {
+            obs.iter()
+                .enumerate()
+                .filter_map(|(i, o)| {
+                    units[i].map(|u| ((o.signal - new[obs_patch[i]] * u) / sig(i, e)).powi(2))
+                })
+                .sum()
+        };
+        let new_eps = if chi2(0.0) <= target {
+            0.0
+        } else {
+            let (mut lo, mut hi) = (0.0f64, 1.0f64);
+            while chi2(hi) > target && hi < 1e3 {
+                hi *= 2.0;
+            }
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                if chi2(mid) > target {
+                    lo = mid;
+                } else {
+                    hi = mid;
                 }
             }
-            let infl = if n > 1 {
-                (chi2 / (n - 1) as f64).max(1.0).sqrt()
-            } else {
-                1.0
-            };
-            gain_sigma[p] = infl / den[p].sqrt() / mean;
-        }
-        let change = new
+            hi
+        };
+        let mut change = new
             .iter()
             .zip(&gains)
-            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+            .fold((new_eps - eps).abs(), |a, (x, y)| a.max((x - y).abs()));
+        if new_leak != leak {
+            change = f64::INFINITY;
+        }
         gains = new;
+        eps = new_eps;
+        leak = new_leak;
         if change < GAIN_TOLERANCE || iterations >= MAX_GAIN_ITERATIONS {
             if change >= GAIN_TOLERANCE {
                 notes.push(format!(
-                    "patch illumination factors: not converged after {iterations} iterations (last change {change:.1e})"
+                    "illumination factors / model error: not converged after {iterations} iterations (last change {change:.1e})"
                 ));
             }
-            // final fit with the final factors
-            let scaled: Vec<SpectralObservation> = obs
+            let n_leak = leak.iter().filter(|&&l| l).count();
+            if n_leak > 0 {
+                notes.push(format!(
+                    "{n_leak} observations left out of the fit: more than {:.0} % of their predicted signal comes from wavelengths where the radiance is below {:.0} % of its peak (a filter's blocking band, where a spectrometer measures its own floor, not the blocking)",
+                    100.0 * MAX_FLOOR_SHARE,
+                    100.0 * FLOOR_FRACTION
+                ));
+            }
+            leak_dominated = obs
                 .iter()
-                .zip(&obs_patch)
-                .map(|(o, &p)| SpectralObservation {
-                    scale: o.scale * gains[p],
-                    ..o.clone()
-                })
+                .zip(&leak)
+                .filter(|(_, &l)| l)
+                .map(|(o, _)| o.id.clone())
                 .collect();
-            break fit_spectral_efficiency(&scaled, &grid, &sensor.channel_names, method);
+            break fit_spectral_efficiency(
+                &scaled(&gains, eps, &leak),
+                &grid,
+                &sensor.channel_names,
+                method,
+            );
         }
     };
     let patch_illumination = estimate_gains.then(|| {
@@ -645,6 +750,8 @@ pub fn patch_spectral(
         fit,
         patch_illumination,
         gain_iterations: iterations,
+        model_error_fraction: eps,
+        leak_dominated,
         pedestal_dn: pedestal,
         pedestal_sigma_dn: ped_sigma,
         pedestal_source,

@@ -53,6 +53,9 @@ pub struct ShotData {
     pub n_low: Vec<u16>,
     /// Per-pixel number of frames at the ADC maximum.
     pub n_high: Vec<u16>,
+    /// Pixels treated as censored (see [`censored_pixel`]): compared with the model through
+    /// their rail counts only.
+    pub censored: Vec<bool>,
 }
 
 impl ShotData {
@@ -200,6 +203,41 @@ impl ShotAccumulator {
         } else {
             Vec::new()
         };
+        let max = self.max_dn as f64;
+        let (rows, cols) = (self.rows, self.cols);
+        let censored = (0..mean_dn.len())
+            .into_par_iter()
+            .map(|i| {
+                let (r, c) = (i / cols.max(1), i % cols.max(1));
+                let mut m = [0f64; 8];
+                let mut v = [0f64; 8];
+                let mut k = 0;
+                for dr in [-2i64, 0, 2] {
+                    for dc in [-2i64, 0, 2] {
+                        let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                        if (dr, dc) == (0, 0)
+                            || rr < 0
+                            || cc < 0
+                            || rr >= rows as i64
+                            || cc >= cols as i64
+                        {
+                            continue;
+                        }
+                        let j = rr as usize * cols + cc as usize;
+                        m[k] = mean_dn[j] as f64;
+                        v[k] = var_dn.get(j).map_or(0.0, |&x| x as f64);
+                        k += 1;
+                    }
+                }
+                censored_pixel(
+                    self.n_low[i] + self.n_high[i],
+                    &mut m[..k],
+                    &mut v[..k],
+                    mean_dn[i] as f64,
+                    max,
+                )
+            })
+            .collect();
         ShotData {
             id,
             target,
@@ -211,8 +249,50 @@ impl ShotAccumulator {
             var_dn,
             n_low: self.n_low,
             n_high: self.n_high,
+            censored,
         }
     }
+}
+
+/// Whether a pixel of a shot is compared through its rail counts rather than its mean and
+/// variance: any frame at 0 DN or at the maximum, or a neighbourhood (same-channel
+/// neighbours two pixels away) whose level lies within 6 local standard deviations (temporal
+/// + spread of the neighbours, at least 3 DN) of a rail. The rule uses the data only, so the
+/// censored set does not change with the model, and it looks at the neighbours rather than
+/// the pixel's own noise, so keeping a pixel does not truncate its own distribution.
+pub fn censored_pixel(
+    n_rail: u16,
+    neighbour_means: &mut [f64],
+    neighbour_vars: &mut [f64],
+    own_mean: f64,
+    max_dn: f64,
+) -> bool {
+    if n_rail > 0 {
+        return true;
+    }
+    let med = |x: &mut [f64]| -> f64 {
+        x.sort_by(|a, b| a.total_cmp(b));
+        let n = x.len();
+        if n == 0 {
+            f64::NAN
+        } else if n % 2 == 1 {
+            x[n / 2]
+        } else {
+            0.5 * (x[n / 2 - 1] + x[n / 2])
+        }
+    };
+    let level = if neighbour_means.is_empty() {
+        own_mean
+    } else {
+        med(neighbour_means)
+    };
+    let mut dev: Vec<f64> = neighbour_means.iter().map(|x| (x - level).abs()).collect();
+    let mad = 1.4826 * med(&mut dev);
+    let var_t = med(neighbour_vars);
+    let s = (var_t.max(0.0) + if mad.is_finite() { mad * mad } else { 0.0 })
+        .max(9.0)
+        .sqrt();
+    level - 6.0 * s <= 0.0 || level + 6.0 * s >= max_dn
 }
 
 #[cfg(test)]
@@ -234,5 +314,6 @@ mod tests {
         assert!((s.var_dn[1] - 3.0).abs() < 1e-6);
         assert_eq!(s.n_low, vec![1, 0, 0]);
         assert_eq!(s.n_high, vec![0, 0, 2]);
+        assert_eq!(s.censored, vec![true, true, true]);
     }
 }

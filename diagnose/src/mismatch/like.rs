@@ -297,7 +297,7 @@ impl<'a> Ctx<'a> {
                         let rate = &rates[s];
                         for j in 0..cols {
                             let i = r * cols + j;
-                            if self.col_excluded[i] || sh.n_low[i] > 0 || sh.n_high[i] > 0 {
+                            if self.col_excluded[i] || sh.censored[i] {
                                 continue;
                             }
                             let p = c.predict(rate[i] as f64 * c.t, 0.0);
@@ -461,7 +461,7 @@ impl<'a> Ctx<'a> {
                             let st = &mut sc[sidx * nch + ch];
                             let f = consts[sidx].frames;
                             let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
-                            if nlo + nhi > 0.0 {
+                            if sh.censored[i] {
                                 // Pearson χ² of the rail count (1 dof); a term whose minority
                                 // outcome is expected in under half a frame and not seen
                                 // carries no information and is left out (χ² ≈ 0, not 1).
@@ -484,6 +484,9 @@ impl<'a> Ctx<'a> {
                                 + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
                                 + sig_p * sig_p * p.w * p.w;
                             st.chi2 += rr * rr / vm;
+                            if std::env::var_os("CAMSIM_DEBUG").is_some() && rr * rr / vm > 8.0 && sidx == 7 {
+                                eprintln!("DEBUG s{sidx} i{i} m{m} mu{} vt{} vx{} u{} w{} e{}", p.mean, p.var_t, p.var_x, p.u, p.w, es[sidx]);
+                            }
                             st.dof += 1.0;
                             st.n += 1.0;
                             st.sum_resid += rr;
@@ -547,7 +550,7 @@ impl<'a> Ctx<'a> {
             let p = &preds[sidx];
             let f = consts[sidx].frames;
             let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
-            if nlo + nhi > 0.0 {
+            if sh.censored[i] {
                 ll += rail_ll(p, f, nlo, nhi);
                 continue;
             }
@@ -590,7 +593,7 @@ impl<'a> Ctx<'a> {
         // Linearised response to an extra dark rate V: h_s = c_s V, c_s = DN/e · t/g.
         let (mut srr, mut scc) = (0.0, 0.0);
         for (sidx, sh) in d.shots.iter().enumerate() {
-            if sh.n_low[i] + sh.n_high[i] > 0 {
+            if sh.censored[i] {
                 continue;
             }
             let p = &preds[sidx];
@@ -757,7 +760,7 @@ impl Ctx<'_> {
                         let i = r * cols + j;
                         for sidx in 0..ns {
                             let sh = &d.shots[sidx];
-                            if sh.n_low[i] + sh.n_high[i] > 0 {
+                            if sh.censored[i] {
                                 continue;
                             }
                             let c = &consts[sidx];
@@ -814,7 +817,7 @@ impl Ctx<'_> {
                         let (mut srr, mut scc) = (0.0, 0.0);
                         for sidx in 0..ns {
                             let sh = &d.shots[sidx];
-                            if sh.n_low[i] + sh.n_high[i] > 0 {
+                            if sh.censored[i] {
                                 continue;
                             }
                             let c = &consts[sidx];

@@ -194,7 +194,7 @@ impl Ctx<'_> {
         for r in 0..rows {
             for j in 0..cols {
                 let i = r * cols + j;
-                if sh.n_low[i] + sh.n_high[i] > 0 {
+                if sh.censored[i] {
                     continue;
                 }
                 let m = sh.mean_dn[i] as f64;
@@ -254,7 +254,7 @@ impl Ctx<'_> {
         for r in 0..d.rows {
             for j in 0..d.cols {
                 let i = r * d.cols + j;
-                if d.channel[i] != ch || sh.n_low[i] + sh.n_high[i] > 0 {
+                if d.channel[i] != ch || sh.censored[i] {
                     continue;
                 }
                 let dist = (j as f64 - xc) * ca + (r as f64 - yc) * sa;

@@ -1,0 +1,246 @@
+#!/usr/bin/env python3
+"""Reference numbers that shared/tools/optics_ref/ref_lens.py does not produce, computed with the
+same packages (Optiland, rayoptics) through their public APIs. ref_lens.py is imported in place
+(not copied) for its prescription reader and lens builders. Run by tools/optics_ref_run.sh.
+
+  optics_ref_extra.py field_curvature INPUT.json -o OUT.json
+      Sagittal / tangential focus shifts from the paraxial image plane (object at infinity, image
+      plane at the paraxial focus of the primary wavelength, as ref_lens.py) on 11 fields from 0
+      to the largest of fields_deg, per wavelength:
+        * optiland: optiland.analysis.FieldCurvature (parabasal ray pairs, Δp = 1e-5);
+        * rayoptics: rayoptics.raytr.trace.trace_astigmatism_coddington_fan (Coddington along the
+          chief ray, spherical surfaces only) and trace_astigmatism (ray pairs, Δp = 1e-3).
+
+  optics_ref_extra.py finite INPUT.json -o OUT.json
+      A finite-conjugate lens (INPUT has "object_distance_mm" and "object_heights_mm"; the glass
+      of a monochromatic lens may be given as {"n": value}): first-order data (EFL, paraxial
+      image distance, magnification), real chief-ray image heights (chief ray aimed at the stop
+      centre) on the paraxial image plane and RMS spot radii there (33 x 33 grid clipped to the
+      unit disc), from optiland (object-height fields, EPD aperture; spots with paraxial aiming,
+      which samples the paraxial entrance pupil like camsim on axis) and rayoptics (object-height
+      fields, EPD; aim point shifts the grid off axis, as camsim).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import warnings
+
+import numpy as np
+
+warnings.filterwarnings("ignore")
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "..", "shared", "tools", "optics_ref"))
+import ref_lens as R  # noqa: E402  (shared harness, called in place)
+
+
+def version(pkg):
+    from importlib.metadata import version as v
+    return v(pkg)
+
+
+# ----------------------------------------------------------------------------------------------
+# field curvature
+# ----------------------------------------------------------------------------------------------
+def field_curvature(lens, n_points=11):
+    out = {}
+    fmax = max(lens["fields_deg"])
+    fields = [fmax * k / (n_points - 1) for k in range(n_points)]
+    # optiland
+    from optiland.analysis import FieldCurvature
+    ob = R.OptilandBackend(lens)
+    fc = FieldCurvature(ob.op, wavelengths="all", num_points=n_points)
+    out["optiland"] = {
+        "version": version("optiland"),
+        "method": "optiland.analysis.FieldCurvature (parabasal ray pairs)",
+        "field_deg": [float(f) for f in np.linspace(0, 1, n_points) * ob.op.fields.max_field],
+        "wavelengths_nm": [w["value"] if isinstance(w, dict) else float(w.value) * 1000.0
+                           for w in fc.wavelengths],
+        "tangential_mm": [[float(x) for x in np.asarray(d[0]).ravel()] for d in fc.data],
+        "sagittal_mm": [[float(x) for x in np.asarray(d[1]).ravel()] for d in fc.data],
+    }
+    # rayoptics
+    try:
+        from rayoptics.raytr import trace as rt
+        from rayoptics.raytr.opticalspec import Field
+        rb = R.RayopticsBackend(lens)
+        opm = rb.opm
+        fov = opm["optical_spec"]["fov"]
+        res = {"coddington": {"tangential_mm": [], "sagittal_mm": []},
+               "ray_pairs": {"tangential_mm": [], "sagittal_mm": []}}
+        for w in lens["wavelengths_nm"]:
+            for key in res:
+                res[key]["tangential_mm"].append([])
+                res[key]["sagittal_mm"].append([])
+            for f in fields:
+                fld = Field(fov=fov)
+                fld.y = f / fov.value if fov.is_relative else f
+                fld.aim_info = rt.aim_chief_ray(opm, fld, lens["primary_nm"])
+                s, t = rt.trace_astigmatism_coddington_fan(opm, fld, w, 0.0)
+                res["coddington"]["sagittal_mm"][-1].append(float(s))
+                res["coddington"]["tangential_mm"][-1].append(float(t))
+                ref_sphere, cr_pkg = rt.setup_pupil_coords(opm, fld, w, 0.0)
+                fld.chief_ray = cr_pkg
+                fld.ref_sphere = ref_sphere
+                s, t = rt.trace_astigmatism(opm, fld, w, 0.0)
+                res["ray_pairs"]["sagittal_mm"][-1].append(float(s))
+                res["ray_pairs"]["tangential_mm"][-1].append(float(t))
+        out["rayoptics"] = {"version": version("rayoptics"), "field_deg": fields,
+                            "wavelengths_nm": lens["wavelengths_nm"],
+                            "chief_ray": "aimed at the stop centre at the primary wavelength",
+                            **res}
+    except ImportError as e:
+        out["rayoptics"] = {"error": f"not importable: {e}"}
+    except Exception as e:  # e.g. a V_d = 0 glass, which opticalglass cannot model
+        out["rayoptics"] = {"error": f"rayoptics cannot build the lens: {e!r}"[:300]}
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# finite conjugate
+# ----------------------------------------------------------------------------------------------
+def finite_optiland(lens, aiming):
+    from optiland import optic
+    from optiland.materials import IdealMaterial
+    op = optic.Optic()
+    op.surfaces.add(index=0, radius=math.inf, thickness=lens["object_distance_mm"])
+    for i, s in enumerate(lens["surfaces"], start=1):
+        kw = dict(index=i, radius=s["radius_mm"], thickness=s["thickness_mm"],
+                  is_stop=bool(s.get("stop", False)))
+        m = s.get("material", "air")
+        if isinstance(m, dict) and "glass" in m:
+            kw["material"] = (m["glass"], m.get("catalog", "schott"))
+        elif isinstance(m, dict) and "n" in m:
+            kw["material"] = IdealMaterial(n=m["n"])
+        op.surfaces.add(**kw)
+    op.surfaces.add(index=len(lens["surfaces"]) + 1)
+    op.set_aperture(aperture_type="EPD", value=lens["aperture"]["value_mm"])
+    op.fields.set_type(field_type="object_height")
+    hmax = max(lens["object_heights_mm"]) or 1.0
+    for h in lens["object_heights_mm"]:
+        op.fields.add(y=h)
+    for w in lens["wavelengths_nm"]:
+        op.wavelengths.add(value=w / 1000.0, is_primary=(w == lens["primary_nm"]))
+    op.ray_tracer.set_aiming(aiming)
+    op.updater.image_solve()
+    nsurf = len(lens["surfaces"])
+    p = op.paraxial
+    fo = {"efl_mm": float(p.f2()), "image_distance_mm": float(op.surfaces[nsurf].thickness),
+          "magnification": float(p.magnification()) if hasattr(p, "magnification") else None,
+          "epd_mm": float(p.EPD()), "enp_from_s1_mm": float(p.EPL())}
+    wp = lens["primary_nm"] / 1000.0
+    px, py = R.pupil_grid(33)
+    chief, spots = [], []
+    for h in lens["object_heights_mm"]:
+        hy = h / hmax
+        r = op.trace_generic(Hx=0.0, Hy=hy, Px=0.0, Py=0.0, wavelength=wp)
+        chief.append({"object_height_mm": h, "x_mm": float(np.ravel(r.x)[0]),
+                      "y_mm": float(np.ravel(r.y)[0])})
+        r = op.trace_generic(Hx=np.zeros_like(px), Hy=np.full_like(px, hy), Px=px, Py=py,
+                             wavelength=wp)
+        x, y = np.asarray(r.x, float).ravel(), np.asarray(r.y, float).ravel()
+        ok = np.isfinite(x) & np.isfinite(y)
+        spots.append({"object_height_mm": h,
+                      "rms_um": 1000.0 * R.rms_about_centroid(x[ok], y[ok]),
+                      "centroid_y_mm": float(np.mean(y[ok])), "rays": int(ok.sum())})
+    return {"version": version("optiland"), "aiming": aiming, "first_order": fo,
+            "chief": chief, "spots": spots}
+
+
+def finite_rayoptics(lens):
+    from rayoptics.environment import OpticalModel, PupilSpec, FieldSpec, WvlSpec
+    from rayoptics.raytr import trace as rt
+    opm = OpticalModel()
+    sm, osp = opm["seq_model"], opm["optical_spec"]
+    osp["pupil"] = PupilSpec(osp, key=["object", "epd"], value=lens["aperture"]["value_mm"])
+    hs = lens["object_heights_mm"]
+    hmax = max(hs) or 1.0
+    osp["fov"] = FieldSpec(osp, key=["object", "height"], value=hmax,
+                           flds=[h / hmax for h in hs], is_relative=True)
+    wl = lens["wavelengths_nm"]
+    osp["wvls"] = WvlSpec([(w, 1.0) for w in wl], ref_wl=wl.index(lens["primary_nm"]))
+    opm.radius_mode = True
+    sm.gaps[0].thi = lens["object_distance_mm"]
+    for s in lens["surfaces"]:
+        r = s["radius_mm"]
+        r = 0.0 if r is None or math.isinf(r) else r
+        m = s.get("material", "air")
+        if isinstance(m, dict) and "n" in m:
+            from opticalglass.opticalmedium import ConstantIndex
+            args = [r, s["thickness_mm"], ConstantIndex(m["n"], f"n={m['n']}")]
+        elif isinstance(m, dict):
+            args = [r, s["thickness_mm"], m["glass"], m.get("catalog", "schott").capitalize()]
+        else:
+            args = [r, s["thickness_mm"]]
+        sm.add_surface(args)
+        if s.get("stop"):
+            sm.set_stop()
+    opm.update_model()
+    fod = opm["analysis_results"]["parax_data"].fod
+    sm.gaps[-1].thi = float(fod.img_dist)
+    opm.update_model()
+    fod = opm["analysis_results"]["parax_data"].fod
+    w = lens["primary_nm"]
+    px, py = R.pupil_grid(33)
+    chief, spots = [], []
+    for fld, h in zip(osp["fov"].fields, hs):
+        fld.aim_info = rt.aim_chief_ray(opm, fld, w)
+        pkg, _ = rt.trace_ray(opm, [0.0, 0.0], fld, w)
+        p = pkg.ray[-1][0]
+        chief.append({"object_height_mm": h, "x_mm": float(p[0]), "y_mm": float(p[1])})
+        xs, ys = [], []
+        for a, b in zip(px, py):
+            try:
+                rp = rt.trace_base(opm, [float(a), float(b)], fld, w, apply_vignetting=False)
+                q = rp[0][-1][0]
+                xs.append(q[0])
+                ys.append(q[1])
+            except Exception:
+                pass
+        xs, ys = np.array(xs), np.array(ys)
+        spots.append({"object_height_mm": h, "rms_um": 1000.0 * R.rms_about_centroid(xs, ys),
+                      "centroid_y_mm": float(ys.mean()), "rays": int(len(xs))})
+    return {"version": version("rayoptics"),
+            "first_order": {"efl_mm": float(fod.efl), "image_distance_mm": float(fod.img_dist),
+                            "magnification": float(fod.m), "epd_mm": 2 * float(fod.enp_radius),
+                            "enp_from_s1_mm": float(fod.enp_dist)},
+            "chief": chief, "spots": spots}
+
+
+def finite(lens):
+    out = {"optiland": finite_optiland(lens, "iterative"),
+           "optiland_paraxial_aiming": finite_optiland(lens, "paraxial")}
+    try:
+        out["rayoptics"] = finite_rayoptics(lens)
+    except ImportError as e:
+        out["rayoptics"] = {"error": f"not importable: {e}"}
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("what", choices=["field_curvature", "finite"])
+    ap.add_argument("lens_json")
+    ap.add_argument("-o", "--output", required=True)
+    a = ap.parse_args()
+    if a.what == "field_curvature":
+        lens = R.load_lens(a.lens_json)
+        res = field_curvature(lens)
+    else:
+        with open(a.lens_json) as f:
+            lens = json.load(f)
+        for s in lens["surfaces"]:
+            r = s.get("radius_mm")
+            s["radius_mm"] = math.inf if r is None else float(r)
+        res = finite(lens)
+    doc = {"lens": a.lens_json.split("/")[-1], "what": a.what, "python": sys.version.split()[0],
+           "results": res}
+    with open(a.output, "w") as f:
+        f.write(json.dumps(doc, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
