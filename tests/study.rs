@@ -557,6 +557,24 @@ fn codesign_ci_reproduces_the_expected_trends() {
     assert_eq!(n_fig, 3 + 12, "3 plots and 12 edge images in the report");
 }
 
+/// The shipped co-design study is valid as a whole (every point checked, the plan written,
+/// nothing evaluated): 2 lenses × 3 f-numbers × 3 light levels × 5 pitches.
+#[test]
+fn shipped_codesign_spec_plans_90_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let e = study(
+        &repo().join("examples/study_codesign/spec.json"),
+        &out,
+        &["--max-points", "0"],
+    );
+    assert_eq!(counts(&e), (0, 0, 90), "{e}");
+    let list = std::fs::read_to_string(out.join("pending.txt")).unwrap();
+    assert_eq!(list.lines().count(), 90);
+    assert_eq!(rows(&out).len(), 90);
+    assert!(out.join("report.html").is_file());
+}
+
 /// Bad input is one error line naming the file and the place: a bad value in one point, an
 /// unknown metric option, a parameter path through a number, a missing $file.
 #[test]
@@ -610,4 +628,49 @@ fn bad_specs_are_one_line_errors() {
             assert!(err.contains(w), "case {i}: `{w}` not in {err}");
         }
     }
+}
+
+/// A lens point gives the same result.json whether evaluated in-process by `camsim study`
+/// (rayon over points and inside the optics) or alone by `camsim --threads 1 study-point`
+/// (what the Ray and Slurm workers run).
+#[test]
+fn lens_point_is_independent_of_threads_and_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cam = codesign_camera(json!({"kind": "lens"}));
+    cam["sensor"]["rows"] = json!(32);
+    cam["sensor"]["cols"] = json!(32);
+    let spec = json!({
+        "name": "lens_point",
+        "point": {"camera": cam,
+                  "lens": {"$file": repo().join("lenses/iset_petzval_50mm.json").display().to_string()},
+                  "conditions": {"luminance_cd_m2": 500, "exposure_s": 0.01},
+                  "simulation": {"wavelength_nm": {"start_nm": 400, "stop_nm": 700, "step_nm": 50}, "oversample": 2},
+                  "metrics": {"mtf50": {}, "snr": {}}},
+        "parameters": [{"name": "f_number", "set": {"lens.aperture": {"f_number": "$value"}}, "values": [4.0]}]
+    });
+    let p = dir.path().join("s.json");
+    std::fs::write(&p, spec.to_string()).unwrap();
+    let out = dir.path().join("out");
+    study(&p, &out, &[]);
+    let folder = rows(&out)[0]["folder"].as_str().unwrap().to_string();
+    let a = out.join("points").join(&folder);
+    let b = dir.path().join("alone");
+    let o = camsim()
+        .args(["--threads", "1", "study-point"])
+        .arg(a.join("point.json"))
+        .arg("--out")
+        .arg(&b)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let ra: Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("result.json")).unwrap()).unwrap();
+    let rb: Value =
+        serde_json::from_str(&std::fs::read_to_string(b.join("result.json")).unwrap()).unwrap();
+    assert!(ra["metrics"]["mtf50_cy_per_mm"].as_f64().unwrap() > 0.0);
+    assert_eq!(ra, rb);
+    assert_eq!(
+        std::fs::read(a.join("edge.png")).unwrap(),
+        std::fs::read(b.join("edge.png")).unwrap()
+    );
 }

@@ -876,7 +876,7 @@ fn vsnr(ctx: &Ctx, o: &VsnrOpts, raw: &camsim_core::image::RawFrame) -> Result<f
         .map(|p| srgb_to_xyz([p[0] as f64, p[1] as f64, p[2] as f64])[1])
         .sum::<f64>()
         / rgb.data.len() as f64;
-    if !(ys > 0.0) {
+    if ys.is_nan() || ys <= 0.0 {
         return Err(CliError::Other(
             "metrics.vsnr: the processed grey field has no signal".into(),
         ));
