@@ -22,5 +22,6 @@ pub mod run;
 pub mod scene_cmd;
 pub mod simulate;
 pub mod staging;
+pub mod study;
 pub mod targets;
 pub mod validate_cmd;

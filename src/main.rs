@@ -120,6 +120,40 @@ enum Command {
         #[command(subcommand)]
         cmd: camsim::lens_cmd::LensCommand,
     },
+    /// Run a parameter study (docs/study.md): every point of the sweep evaluated once
+    /// (finished points are reused), then DIR/table.csv, table.json and report.html.
+    Study {
+        /// The study file (JSON).
+        spec: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "out/study")]
+        out: PathBuf,
+        /// Where the points run.
+        #[arg(long, value_enum, default_value_t = camsim::study::EngineKind::Local)]
+        engine: camsim::study::EngineKind,
+        /// Evaluate at most this many unfinished points, then stop (run again to resume).
+        #[arg(long)]
+        max_points: Option<usize>,
+        /// Ray: address of a running cluster (default RAY_ADDRESS, else a local cluster).
+        #[arg(long)]
+        ray_address: Option<String>,
+        /// Ray: CPUs of the local cluster started for the run.
+        #[arg(long)]
+        ray_num_cpus: Option<usize>,
+        /// Ray: the Python with Ray (default CAMSIM_RAY_PYTHON, else .venv-ray/bin/python).
+        #[arg(long)]
+        ray_python: Option<PathBuf>,
+    },
+    /// Evaluate one study point (POINT.json written by `camsim study`) into DIR; used by the
+    /// Ray and Slurm launchers.
+    #[command(hide = true)]
+    StudyPoint {
+        /// The point.json.
+        point: PathBuf,
+        /// The point's folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
@@ -248,6 +282,41 @@ fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::Demo { cmd } => camsim::demo::run_demo(cmd),
         Command::Lens { cmd } => camsim::lens_cmd::run_lens(cmd),
+        Command::Study {
+            spec,
+            out,
+            engine,
+            max_points,
+            ray_address,
+            ray_num_cpus,
+            ray_python,
+        } => {
+            let opts = camsim::study::StudyOptions {
+                out: out.clone(),
+                engine,
+                max_points,
+                ray: camsim::study::ray::RayOptions {
+                    address: ray_address,
+                    num_cpus: ray_num_cpus,
+                    python: ray_python,
+                },
+                progress: true,
+            };
+            let s = camsim::study::run_study(&spec, &opts)?;
+            eprintln!(
+                "camsim: study: {} points: {} evaluated, {} reused, {} pending; wrote {} (open report.html)",
+                s.points,
+                s.evaluated,
+                s.reused,
+                s.pending,
+                out.display()
+            );
+            Ok(())
+        }
+        Command::StudyPoint { point, out } => {
+            camsim::study::run_point_file(&point, &out)?;
+            Ok(())
+        }
     }
 }
 

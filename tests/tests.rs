@@ -8,5 +8,6 @@ mod oracles;
 mod real_data;
 mod run;
 mod statistics;
+mod study;
 mod util;
 mod validate;
