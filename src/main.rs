@@ -97,6 +97,8 @@ enum Command {
         #[command(subcommand)]
         cmd: camsim::lens_cmd::LensCommand,
     },
+    /// Path-trace a glTF 2.0 scene into a spectral EXR (band radiance + Z depth).
+    Render(camsim::render_cmd::RenderArgs),
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
@@ -201,6 +203,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
             Ok(())
         }
         Command::Lens { cmd } => camsim::lens_cmd::run_lens(cmd),
+        Command::Render(a) => {
+            let s = camsim::render_cmd::run_render(&a, true)?;
+            println!("{s}");
+            Ok(())
+        }
     }
 }
 

@@ -5,6 +5,7 @@ mod lens_blur;
 mod lens_cli;
 mod oracles;
 mod real_data;
+mod render;
 mod run;
 mod statistics;
 mod util;
