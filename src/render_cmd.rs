@@ -190,13 +190,20 @@ fn write_lightfield_products(
     };
     for z in depths {
         if !(z > 0.0 && z.is_finite()) {
-            return Err(CliError::Other(format!("--refocus-m {z}: must be a positive distance in m")));
+            return Err(CliError::Other(format!(
+                "--refocus-m {z}: must be a positive distance in m"
+            )));
         }
         let shift = lf.disparity_per_view(z);
         let planes: Vec<(String, Vec<f32>)> = views
             .iter()
             .enumerate()
-            .map(|(b, vb)| (channel_name(out.bands.center_nm(b)), refocus(vb, n, vw, vh, shift)))
+            .map(|(b, vb)| {
+                (
+                    channel_name(out.bands.center_nm(b)),
+                    refocus(vb, n, vw, vh, shift),
+                )
+            })
             .collect();
         let p = PathBuf::from(format!("{}.refocus_{z}m.exr", stem.display()));
         camsim_render::output::write_planes_exr(&p, vw, vh, planes, IRRADIANCE_UNITS)

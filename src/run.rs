@@ -737,15 +737,17 @@ fn render_scene(
     grid: &WavelengthGrid,
 ) -> Result<camsim_core::SceneRadiance, CliError> {
     use camsim_render::job::{prepare, CameraChoice, RenderJob};
-    let step = grid.step_nm().ok_or_else(|| {
-        CliError::input(&rf.scene, "render: the wavelength grid must be regular")
-    })?;
+    let step = grid
+        .step_nm()
+        .ok_or_else(|| CliError::input(&rf.scene, "render: the wavelength grid must be regular"))?;
     let (w0, wn) = (grid.wavelength_nm[0], grid.wavelength_nm[grid.len() - 1]);
     let bands = camsim_render::Bands::new(w0 - step / 2.0, wn + step / 2.0, step)
         .map_err(|e| CliError::input(&rf.scene, format!("render bands: {e}")))?;
     let camera: CameraChoice = match &rf.camera {
         None => CameraChoice::Auto,
-        Some(c) => c.parse().map_err(|e: String| CliError::input(&rf.scene, e))?,
+        Some(c) => c
+            .parse()
+            .map_err(|e: String| CliError::input(&rf.scene, e))?,
     };
     let job = RenderJob {
         scene: rf.scene.clone(),
@@ -773,9 +775,16 @@ fn render_scene(
             "render.camera: camsim run needs a radiance camera (pinhole or thinlens); the optics stage forms the image",
         ));
     }
-    let out = camsim_render::render(&p.scene, p.camera.as_ref(), p.camera_to_world, &job.settings, None);
-    let mut sr = camsim_render::output::scene_radiance(&out, sensor.pixel_pitch_m / os as f64, None)
-        .map_err(err)?;
+    let out = camsim_render::render(
+        &p.scene,
+        p.camera.as_ref(),
+        p.camera_to_world,
+        &job.settings,
+        None,
+    );
+    let mut sr =
+        camsim_render::output::scene_radiance(&out, sensor.pixel_pitch_m / os as f64, None)
+            .map_err(err)?;
     // resample the band-centre cube onto the run's grid (same wavelengths)
     sr.radiance = sr.radiance.to_bands(grid);
     Ok(sr)

@@ -11,7 +11,8 @@ fn main() {
     std::fs::create_dir_all(&dir).expect("create the output folder");
     for (name, b) in camsim_render::test_scenes::all() {
         let p = dir.join(format!("{name}.gltf"));
-        b.write(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        b.write(&p)
+            .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         println!("wrote {}", p.display());
     }
 }

@@ -25,27 +25,51 @@ fn main() {
     };
     let t = std::time::Instant::now();
     let p = prepare(&job).unwrap();
-    eprintln!("load {:.3}s: {}", t.elapsed().as_secs_f64(), p.camera_description);
-    let out = render(&p.scene, p.camera.as_ref(), p.camera_to_world, &job.settings, None);
-    eprintln!("render {:.3}s, {:.3} M samples/s", out.render_s, out.samples_per_s() / 1e6);
+    eprintln!(
+        "load {:.3}s: {}",
+        t.elapsed().as_secs_f64(),
+        p.camera_description
+    );
+    let out = render(
+        &p.scene,
+        p.camera.as_ref(),
+        p.camera_to_world,
+        &job.settings,
+        None,
+    );
+    eprintln!(
+        "render {:.3}s, {:.3} M samples/s",
+        out.render_s,
+        out.samples_per_s() / 1e6
+    );
     let refm: Option<Vec<(String, f64)>> = a.get(2).filter(|s| s.ends_with(".exr")).map(|r| {
         let (_, _, ch, _) = camsim_core::exr_io::read_channels(std::path::Path::new(r)).unwrap();
         ch.iter()
             .filter(|(n, _)| n.starts_with("band_") || n.starts_with("depth"))
-            .map(|(n, v)| (n.clone(), v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64))
+            .map(|(n, v)| {
+                (
+                    n.clone(),
+                    v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64,
+                )
+            })
             .collect()
     });
     for b in 0..out.bands.count {
-        let m: f64 = out.band_planes[b].iter().map(|x| *x as f64).sum::<f64>() / out.band_planes[b].len() as f64;
+        let m: f64 = out.band_planes[b].iter().map(|x| *x as f64).sum::<f64>()
+            / out.band_planes[b].len() as f64;
         let name = out.bands.mitsuba_name(b);
-        let r = refm.as_ref().and_then(|v| v.iter().find(|(n, _)| *n == name).map(|x| x.1));
+        let r = refm
+            .as_ref()
+            .and_then(|v| v.iter().find(|(n, _)| *n == name).map(|x| x.1));
         match r {
             Some(r) => println!("{name} ours {m:.5} ref {r:.5} ratio {:.4}", m / r),
             None => println!("{name} ours {m:.5}"),
         }
     }
-    let dc: f64 = out.depth_center_m.iter().map(|x| *x as f64).sum::<f64>() / out.depth_center_m.len() as f64;
-    let dm: f64 = out.depth_mean_m.iter().map(|x| *x as f64).sum::<f64>() / out.depth_mean_m.len() as f64;
+    let dc: f64 =
+        out.depth_center_m.iter().map(|x| *x as f64).sum::<f64>() / out.depth_center_m.len() as f64;
+    let dm: f64 =
+        out.depth_mean_m.iter().map(|x| *x as f64).sum::<f64>() / out.depth_mean_m.len() as f64;
     println!("depth_center mean {dc:.5} depth.T mean {dm:.5}");
     if let Some(v) = &refm {
         for (n, m) in v.iter().filter(|(n, _)| n.starts_with("depth")) {

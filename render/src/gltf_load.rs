@@ -102,9 +102,12 @@ pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
         }
     }
     drop(raw);
-    let gltf = gltf::Gltf::from_slice(&bytes)
-        .map_err(|e| cx.err(format!("invalid glTF 2.0: {e}")))?;
-    let base = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let gltf =
+        gltf::Gltf::from_slice(&bytes).map_err(|e| cx.err(format!("invalid glTF 2.0: {e}")))?;
+    let base = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     // 2. buffers
     let mut blob = gltf.blob.clone();
     let mut buffers: Vec<Vec<u8>> = Vec::new();
@@ -134,7 +137,13 @@ pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
     let mut materials: Vec<Material> = Vec::new();
     let mut texture_cache: HashMap<usize, (u32, u32, Vec<[f32; 3]>)> = HashMap::new();
     for m in doc.materials() {
-        materials.push(convert_material(&cx, &m, base, &buffers, &mut texture_cache)?);
+        materials.push(convert_material(
+            &cx,
+            &m,
+            base,
+            &buffers,
+            &mut texture_cache,
+        )?);
     }
     let default_material = materials.len();
     materials.push(Material {
@@ -170,10 +179,14 @@ pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
         if depth > 256 {
             return Err(cx.err("node hierarchy deeper than 256 (a cycle?)"));
         }
-        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|v| v as f64)));
+        let local =
+            DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|v| v as f64)));
         let world = parent * local;
         if !world.is_finite() {
-            return Err(cx.err(format!("node {}: transform is not finite", node_label(&node))));
+            return Err(cx.err(format!(
+                "node {}: transform is not finite",
+                node_label(&node)
+            )));
         }
         if let Some(cam) = node.camera() {
             cameras.push(convert_camera(&cx, &node, &cam, &world)?);
@@ -182,7 +195,16 @@ pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
             punctual.push(convert_light(&cx, &light, &world)?);
         }
         if let Some(mesh) = node.mesh() {
-            add_mesh(&cx, &node, &mesh, &world, &buffers, default_material, &mut tris, &mut shading)?;
+            add_mesh(
+                &cx,
+                &node,
+                &mesh,
+                &world,
+                &buffers,
+                default_material,
+                &mut tris,
+                &mut shading,
+            )?;
         }
         let kids: Vec<_> = node.children().collect();
         for c in kids.into_iter().rev() {
@@ -232,7 +254,10 @@ fn convert_camera(
         let col = m.col(c).truncate();
         let l = col.length();
         if !(l > 0.0) {
-            return Err(cx.err(format!("camera node {}: singular transform", node_label(node))));
+            return Err(cx.err(format!(
+                "camera node {}: singular transform",
+                node_label(node)
+            )));
         }
         *m.col_mut(c) = (col / l).extend(0.0);
     }
@@ -275,9 +300,8 @@ fn convert_camera(
 }
 
 fn spectral_extra(cx: &Ctx, what: &str, v: &Value) -> Result<Spectrum, RenderError> {
-    let arr = |k: &str| -> Option<Vec<f64>> {
-        v.get(k)?.as_array()?.iter().map(Value::as_f64).collect()
-    };
+    let arr =
+        |k: &str| -> Option<Vec<f64>> { v.get(k)?.as_array()?.iter().map(Value::as_f64).collect() };
     let w = arr("wavelength_nm").or_else(|| arr("wavelengths_nm"));
     let vals = arr("values");
     match (w, vals) {
@@ -315,7 +339,9 @@ fn convert_light(
         let e = spectral::rgb_emission(c);
         let k = i / (camsim_core::constants::LUMINOUS_EFFICACY_LM_PER_W * ybar);
         let _ = per;
-        Ok(TabulatedSpectrum::from_fn(300.0, 830.0, |w| e.eval(w as f32) as f64 * k))
+        Ok(TabulatedSpectrum::from_fn(300.0, 830.0, |w| {
+            e.eval(w as f32) as f64 * k
+        }))
     };
     Ok(match light.kind() {
         Kind::Directional => {
@@ -358,7 +384,12 @@ fn convert_light(
 }
 
 /// Check that an accessor's bytes lie inside its buffer (so reading cannot go out of bounds).
-fn check_accessor(cx: &Ctx, a: &gltf::Accessor, buffers: &[Vec<u8>], what: &str) -> Result<(), RenderError> {
+fn check_accessor(
+    cx: &Ctx,
+    a: &gltf::Accessor,
+    buffers: &[Vec<u8>],
+    what: &str,
+) -> Result<(), RenderError> {
     if a.sparse().is_some() {
         return Err(cx.err(format!("{what}: sparse accessors are not supported")));
     }
@@ -406,7 +437,9 @@ fn add_mesh(
         let what = format!(
             "node {} mesh {} primitive {}",
             node_label(node),
-            mesh.name().map(|s| format!("\"{s}\"")).unwrap_or_else(|| mesh.index().to_string()),
+            mesh.name()
+                .map(|s| format!("\"{s}\""))
+                .unwrap_or_else(|| mesh.index().to_string()),
             prim.index()
         );
         if prim.mode() != gltf::mesh::Mode::Triangles {
@@ -441,14 +474,24 @@ fn add_mesh(
             .map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
             .collect();
         if let Some(i) = pos.iter().position(|p| !p.is_finite()) {
-            return Err(cx.err(format!("{what}: POSITION[{i}] = {:?} is not finite", pos[i])));
+            return Err(cx.err(format!(
+                "{what}: POSITION[{i}] = {:?} is not finite",
+                pos[i]
+            )));
         }
-        let pos: Vec<Vec3> = pos.iter().map(|p| world.transform_point3(*p).as_vec3()).collect();
+        let pos: Vec<Vec3> = pos
+            .iter()
+            .map(|p| world.transform_point3(*p).as_vec3())
+            .collect();
         let normals: Option<Vec<Vec3>> = match reader.read_normals() {
             Some(it) => {
                 let n: Vec<[f32; 3]> = it.collect();
                 if n.len() != pos.len() {
-                    return Err(cx.err(format!("{what}: NORMAL has {} entries, POSITION {}", n.len(), pos.len())));
+                    return Err(cx.err(format!(
+                        "{what}: NORMAL has {} entries, POSITION {}",
+                        n.len(),
+                        pos.len()
+                    )));
                 }
                 if let Some(i) = n.iter().position(|v| !v.iter().all(|x| x.is_finite())) {
                     return Err(cx.err(format!("{what}: NORMAL[{i}] is not finite")));
@@ -483,7 +526,10 @@ fn add_mesh(
             )));
         }
         if idx.len() % 3 != 0 {
-            return Err(cx.err(format!("{what}: {} indices is not a multiple of 3", idx.len())));
+            return Err(cx.err(format!(
+                "{what}: {} indices is not a multiple of 3",
+                idx.len()
+            )));
         }
         for t in idx.chunks_exact(3) {
             let (a, b, c) = if flip {
@@ -526,7 +572,12 @@ fn add_mesh(
 /// A spectrum from a Mitsuba dict value: a number, {"type":"rgb","value":[r,g,b]},
 /// {"type":"spectrum","value": number | [[λ, v], …]}, {"type":"regular"/"irregular", …} is not
 /// supported.
-fn mitsuba_spectrum(cx: &Ctx, what: &str, v: &Value, emission: bool) -> Result<TabulatedSpectrum, RenderError> {
+fn mitsuba_spectrum(
+    cx: &Ctx,
+    what: &str,
+    v: &Value,
+    emission: bool,
+) -> Result<TabulatedSpectrum, RenderError> {
     if let Some(x) = v.as_f64() {
         return Ok(TabulatedSpectrum::constant(x as f32));
     }
@@ -584,7 +635,11 @@ fn ior_value(cx: &Ctx, what: &str, v: Option<&Value>, default: f64) -> Result<f6
             .ok_or_else(|| {
                 cx.err(format!(
                     "{what}: unknown index name \"{s}\" (known: {})",
-                    IOR_NAMES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                    IOR_NAMES
+                        .iter()
+                        .map(|(n, _)| *n)
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ))
             }),
         Some(v) => Err(cx.err(format!("{what}: expected a number or a name, got {v}"))),
@@ -606,7 +661,9 @@ fn alpha_of(cx: &Ctx, what: &str, d: &serde_json::Map<String, Value>) -> Result<
         }
     }
     if d.contains_key("alpha_u") || d.contains_key("alpha_v") {
-        return Err(cx.err(format!("{what}: anisotropic alpha_u/alpha_v is not supported; give alpha")));
+        return Err(cx.err(format!(
+            "{what}: anisotropic alpha_u/alpha_v is not supported; give alpha"
+        )));
     }
     let a = match d.get("alpha") {
         None => 0.1,
@@ -621,7 +678,11 @@ fn alpha_of(cx: &Ctx, what: &str, d: &serde_json::Map<String, Value>) -> Result<
 }
 
 /// A Mitsuba BSDF dict → (lobe, reflectance, two-sided).
-fn mitsuba_bsdf(cx: &Ctx, what: &str, v: &Value) -> Result<(Lobe, TabulatedSpectrum, bool), RenderError> {
+fn mitsuba_bsdf(
+    cx: &Ctx,
+    what: &str,
+    v: &Value,
+) -> Result<(Lobe, TabulatedSpectrum, bool), RenderError> {
     let d = v
         .as_object()
         .ok_or_else(|| cx.err(format!("{what}: must be an object")))?;
@@ -726,11 +787,23 @@ fn mitsuba_bsdf(cx: &Ctx, what: &str, v: &Value) -> Result<(Lobe, TabulatedSpect
     })
 }
 
-fn dispersion_of(cx: &Ctx, what: &str, m: &gltf::Material, extras: &Option<Value>, n_d: f32) -> Result<Ior, RenderError> {
+fn dispersion_of(
+    cx: &Ctx,
+    what: &str,
+    m: &gltf::Material,
+    extras: &Option<Value>,
+    n_d: f32,
+) -> Result<Ior, RenderError> {
     if let Some(dv) = extras.as_ref().and_then(|e| e.get("dispersion")) {
         let num = |k: &str| dv.get(k).and_then(Value::as_f64);
         let arr3 = |k: &str| -> Option<[f32; 3]> {
-            let a: Vec<f32> = dv.get(k)?.as_array()?.iter().filter_map(Value::as_f64).map(|x| x as f32).collect();
+            let a: Vec<f32> = dv
+                .get(k)?
+                .as_array()?
+                .iter()
+                .filter_map(Value::as_f64)
+                .map(|x| x as f32)
+                .collect();
             (a.len() == 3).then(|| [a[0], a[1], a[2]])
         };
         if let Some(v) = num("abbe_number") {
@@ -740,7 +813,10 @@ fn dispersion_of(cx: &Ctx, what: &str, m: &gltf::Material, extras: &Option<Value
             return Ok(Ior::from_abbe(n_d, v as f32));
         }
         if let (Some(a), Some(b)) = (num("cauchy_a"), num("cauchy_b_um2")) {
-            return Ok(Ior::Cauchy { a: a as f32, b_um2: b as f32 });
+            return Ok(Ior::Cauchy {
+                a: a as f32,
+                b_um2: b as f32,
+            });
         }
         if let (Some(b), Some(c)) = (arr3("sellmeier_b"), arr3("sellmeier_c_um2")) {
             return Ok(Ior::Sellmeier { b, c_um2: c });
@@ -770,7 +846,10 @@ fn convert_material(
     buffers: &[Vec<u8>],
     textures: &mut HashMap<usize, (u32, u32, Vec<[f32; 3]>)>,
 ) -> Result<Material, RenderError> {
-    let name = m.name().map(str::to_string).unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
+    let name = m
+        .name()
+        .map(str::to_string)
+        .unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
     let what = format!("material {} (\"{name}\")", m.index().unwrap_or(0));
     let extras = extras_json(m.extras());
     let pbr = m.pbr_metallic_roughness();
@@ -785,7 +864,9 @@ fn convert_material(
     };
     let rough = pbr.roughness_factor();
     let metallic = pbr.metallic_factor();
-    let (lobe, mut reflectance, mut two_sided) = if let Some(mb) = extras.as_ref().and_then(|e| e.get("mitsuba_bsdf")) {
+    let (lobe, mut reflectance, mut two_sided) = if let Some(mb) =
+        extras.as_ref().and_then(|e| e.get("mitsuba_bsdf"))
+    {
         let (l, r, ts) = mitsuba_bsdf(cx, &format!("{what}: extras.mitsuba_bsdf"), mb)?;
         (l, SpectralTexture::Constant(r), ts)
     } else {
@@ -795,20 +876,37 @@ fn convert_material(
         let mut refl = SpectralTexture::Constant(refl_const);
         if spectral_refl.is_none() {
             if let Some(info) = pbr.base_color_texture() {
-                refl = image_texture(cx, &what, &info, base, buffers, textures, [base_rgb[0], base_rgb[1], base_rgb[2]])?;
+                refl = image_texture(
+                    cx,
+                    &what,
+                    &info,
+                    base,
+                    buffers,
+                    textures,
+                    [base_rgb[0], base_rgb[1], base_rgb[2]],
+                )?;
             }
         }
-        let trans = m.transmission().map(|t| t.transmission_factor()).unwrap_or(0.0);
+        let trans = m
+            .transmission()
+            .map(|t| t.transmission_factor())
+            .unwrap_or(0.0);
         let alpha = rough * rough;
         let distr = (rough > 1e-3).then(|| Ggx::new(alpha));
         if trans > 0.0 {
             let n_d = m.ior().unwrap_or(1.5);
             if !(n_d >= 1.0) {
-                return Err(cx.err(format!("{what}: KHR_materials_ior.ior = {n_d}, expected ≥ 1")));
+                return Err(cx.err(format!(
+                    "{what}: KHR_materials_ior.ior = {n_d}, expected ≥ 1"
+                )));
             }
             let ior = dispersion_of(cx, &what, m, &extras, n_d)?;
             (
-                Lobe::Dielectric { distr, int_ior: ior, ext_ior: 1.0 },
+                Lobe::Dielectric {
+                    distr,
+                    int_ior: ior,
+                    ext_ior: 1.0,
+                },
                 SpectralTexture::Constant(TabulatedSpectrum::constant(1.0)),
                 false,
             )
@@ -835,9 +933,13 @@ fn convert_material(
             let s = m.emissive_strength().unwrap_or(1.0);
             let e = m.emissive_factor().map(|v| (v * s) as f64);
             if e.iter().any(|v| !v.is_finite() || *v < 0.0) {
-                return Err(cx.err(format!("{what}: emissiveFactor × emissiveStrength must be finite and ≥ 0")));
+                return Err(cx.err(format!(
+                    "{what}: emissiveFactor × emissiveStrength must be finite and ≥ 0"
+                )));
             }
-            e.iter().any(|v| *v > 0.0).then(|| spectral::rgb_emission(e))
+            e.iter()
+                .any(|v| *v > 0.0)
+                .then(|| spectral::rgb_emission(e))
         }
     };
     Ok(Material {
@@ -859,7 +961,8 @@ fn coefficient_table() -> &'static Vec<[f32; 3]> {
             .into_par_iter()
             .map(|i| {
                 let (r, g, b) = (i / (N * N), (i / N) % N, i % N);
-                let lin = |k: usize| srgb_to_linear((k as f64 / (N - 1) as f64).clamp(0.004, 0.996));
+                let lin =
+                    |k: usize| srgb_to_linear((k as f64 / (N - 1) as f64).clamp(0.004, 0.996));
                 spectral::fit_rgb([lin(r), lin(g), lin(b)]).c
             })
             .collect()
@@ -901,7 +1004,9 @@ fn table_lookup(rgb: [f64; 3]) -> SigmoidPoly {
             c[k] += w * t[idx][k] as f64;
         }
     }
-    SigmoidPoly { c: c.map(|v| v as f32) }
+    SigmoidPoly {
+        c: c.map(|v| v as f32),
+    }
 }
 
 fn image_texture(
@@ -917,9 +1022,16 @@ fn image_texture(
     let img = tex.source();
     let key = img.index();
     if !cache.contains_key(&key) {
-        let bufs: Vec<gltf::buffer::Data> = buffers.iter().map(|b| gltf::buffer::Data(b.clone())).collect();
-        let data = gltf::image::Data::from_source(img.source(), Some(base), &bufs)
-            .map_err(|e| cx.err(format!("{what}: baseColorTexture image {key}: cannot load: {e}")))?;
+        let bufs: Vec<gltf::buffer::Data> = buffers
+            .iter()
+            .map(|b| gltf::buffer::Data(b.clone()))
+            .collect();
+        let data =
+            gltf::image::Data::from_source(img.source(), Some(base), &bufs).map_err(|e| {
+                cx.err(format!(
+                    "{what}: baseColorTexture image {key}: cannot load: {e}"
+                ))
+            })?;
         use gltf::image::Format;
         let ch = match data.format {
             Format::R8 => 1,
@@ -932,7 +1044,10 @@ fn image_texture(
             .pixels
             .chunks_exact(ch)
             .map(|p| {
-                let g = |k: usize| srgb_to_linear(p[k.min(ch - 1).min(if ch == 2 { 0 } else { 2 })] as f64 / 255.0) as f32;
+                let g = |k: usize| {
+                    srgb_to_linear(p[k.min(ch - 1).min(if ch == 2 { 0 } else { 2 })] as f64 / 255.0)
+                        as f32
+                };
                 if ch >= 3 {
                     [g(0), g(1), g(2)]
                 } else {
@@ -946,7 +1061,13 @@ fn image_texture(
     let (w, h, px) = &cache[&key];
     let coeffs: Vec<SigmoidPoly> = px
         .iter()
-        .map(|p| table_lookup([(p[0] * factor[0]) as f64, (p[1] * factor[1]) as f64, (p[2] * factor[2]) as f64]))
+        .map(|p| {
+            table_lookup([
+                (p[0] * factor[0]) as f64,
+                (p[1] * factor[1]) as f64,
+                (p[2] * factor[2]) as f64,
+            ])
+        })
         .collect();
     let mean = {
         let n = coeffs.len().max(1) as f32;
@@ -971,7 +1092,12 @@ pub fn pick_camera<'a>(scene: &'a Scene, name: Option<&str>) -> Result<&'a Scene
         Some(n) => scene.cameras.iter().find(|c| c.name == n).ok_or_else(|| {
             format!(
                 "no camera named \"{n}\" (cameras: {})",
-                scene.cameras.iter().map(|c| c.name.as_str()).collect::<Vec<_>>().join(", ")
+                scene
+                    .cameras
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )
         }),
     }

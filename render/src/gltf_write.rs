@@ -78,7 +78,12 @@ pub fn sphere(center: [f32; 3], radius: f32, rings: u32, segments: u32, inward: 
     let w = segments + 1;
     for r in 0..rings {
         for s in 0..segments {
-            let (a, b, c, d) = (r * w + s, (r + 1) * w + s, (r + 1) * w + s + 1, r * w + s + 1);
+            let (a, b, c, d) = (
+                r * w + s,
+                (r + 1) * w + s,
+                (r + 1) * w + s + 1,
+                r * w + s + 1,
+            );
             // outward CCW: a, b, c / a, c, d (θ down, φ around)
             if inward {
                 m.indices.extend_from_slice(&[a, c, b, a, d, c]);
@@ -151,14 +156,17 @@ impl GltfBuilder {
         }
         let off = self.bin.len();
         self.bin.extend_from_slice(bytes);
-        self.buffer_views.push(json!({"buffer": 0, "byteOffset": off, "byteLength": bytes.len(), "target": target}));
+        self.buffer_views.push(
+            json!({"buffer": 0, "byteOffset": off, "byteLength": bytes.len(), "target": target}),
+        );
         self.buffer_views.len() - 1
     }
 
     fn accessor_f32(&mut self, data: &[f32], n: usize, ty: &str, minmax: bool) -> usize {
         let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
         let v = self.view(&bytes, 34962);
-        let mut a = json!({"bufferView": v, "componentType": 5126, "count": data.len() / n, "type": ty});
+        let mut a =
+            json!({"bufferView": v, "componentType": 5126, "count": data.len() / n, "type": ty});
         if minmax && !data.is_empty() {
             let mut lo = vec![f32::INFINITY; n];
             let mut hi = vec![f32::NEG_INFINITY; n];
@@ -208,13 +216,18 @@ impl GltfBuilder {
         if let Some(a) = aspect {
             p["aspectRatio"] = json!(a);
         }
-        self.cameras.push(json!({"name": name, "type": "perspective", "perspective": p}));
+        self.cameras
+            .push(json!({"name": name, "type": "perspective", "perspective": p}));
         self.cameras.len() - 1
     }
 
     /// Add a KHR_lights_punctual light (the light object); returns its index.
     pub fn light(&mut self, l: Value) -> usize {
-        if !self.extensions_used.iter().any(|e| e == "KHR_lights_punctual") {
+        if !self
+            .extensions_used
+            .iter()
+            .any(|e| e == "KHR_lights_punctual")
+        {
             self.extensions_used.push("KHR_lights_punctual".into());
         }
         self.lights.push(l);
@@ -281,7 +294,8 @@ impl GltfBuilder {
             .map(|n| n.to_string_lossy().to_string())
             .unwrap_or_default();
         std::fs::write(&bin_path, &self.bin)?;
-        let text = serde_json::to_string_pretty(&self.document(&uri)).map_err(std::io::Error::other)?;
+        let text =
+            serde_json::to_string_pretty(&self.document(&uri)).map_err(std::io::Error::other)?;
         std::fs::write(path, text)
     }
 
@@ -315,8 +329,11 @@ impl GltfBuilder {
     /// it; returns the texture index.
     pub fn png_texture(&mut self, png: &[u8]) -> usize {
         let v = self.view(png, 0);
-        self.buffer_views[v].as_object_mut().map(|o| o.remove("target"));
-        self.images.push(json!({"bufferView": v, "mimeType": "image/png"}));
+        self.buffer_views[v]
+            .as_object_mut()
+            .map(|o| o.remove("target"));
+        self.images
+            .push(json!({"bufferView": v, "mimeType": "image/png"}));
         self.textures.push(json!({"source": self.images.len() - 1}));
         self.textures.len() - 1
     }
@@ -338,8 +355,16 @@ pub fn base64(data: &[u8]) -> String {
         let n = ((b[0] as u32) << 16) | ((b[1] as u32) << 8) | b[2] as u32;
         s.push(T[(n >> 18) as usize & 63] as char);
         s.push(T[(n >> 12) as usize & 63] as char);
-        s.push(if c.len() > 1 { T[(n >> 6) as usize & 63] as char } else { '=' });
-        s.push(if c.len() > 2 { T[n as usize & 63] as char } else { '=' });
+        s.push(if c.len() > 1 {
+            T[(n >> 6) as usize & 63] as char
+        } else {
+            '='
+        });
+        s.push(if c.len() > 2 {
+            T[n as usize & 63] as char
+        } else {
+            '='
+        });
     }
     s
 }

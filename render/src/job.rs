@@ -98,11 +98,15 @@ pub fn prepare(job: &RenderJob) -> Result<PreparedJob, RenderError> {
     }
     if let Some(h) = job.height {
         if h == 0 || h > 16384 {
-            return Err(settings_err(format!("--height {h}: must be 1–16384 pixels")));
+            return Err(settings_err(format!(
+                "--height {h}: must be 1–16384 pixels"
+            )));
         }
     }
     if job.settings.spp == 0 {
-        return Err(settings_err("--spp 0: need at least one sample per pixel".into()));
+        return Err(settings_err(
+            "--spp 0: need at least one sample per pixel".into(),
+        ));
     }
     if job.settings.max_depth == 0 || job.settings.max_depth < -1 {
         return Err(settings_err(format!(
@@ -116,7 +120,9 @@ pub fn prepare(job: &RenderJob) -> Result<PreparedJob, RenderError> {
     ] {
         if let Some(v) = v {
             if !(v.is_finite() && v >= 0.0) || (name == "--focus-distance" && v <= 0.0) {
-                return Err(settings_err(format!("{name} {v}: must be a positive number of metres")));
+                return Err(settings_err(format!(
+                    "{name} {v}: must be a positive number of metres"
+                )));
             }
         }
     }

@@ -29,8 +29,12 @@ pub struct ExrChannels {
 
 /// The band-centre wavelength grid of an output.
 pub fn band_grid(out: &RenderOutput) -> WavelengthGrid {
-    WavelengthGrid::new((0..out.bands.count).map(|b| out.bands.center_nm(b)).collect())
-        .expect("band centres increase")
+    WavelengthGrid::new(
+        (0..out.bands.count)
+            .map(|b| out.bands.center_nm(b))
+            .collect(),
+    )
+    .expect("band centres increase")
 }
 
 /// Write the render as a spectral EXR (atomically: temp file + rename).
@@ -63,7 +67,10 @@ pub fn write_exr(path: &Path, out: &RenderOutput, ch: ExrChannels) -> Result<(),
             }
         }
     }
-    channels.push(AnyChannel::new("Z", FlatSamples::F32(out.depth_z_m.clone())));
+    channels.push(AnyChannel::new(
+        "Z",
+        FlatSamples::F32(out.depth_z_m.clone()),
+    ));
     if ch.mitsuba {
         channels.push(AnyChannel::new(
             "depth_center.T",

@@ -144,7 +144,10 @@ impl Distribution1D {
     /// Sample an item with `u` ∈ [0,1): (index, probability, `u` rescaled to [0,1) within it).
     #[inline]
     pub fn sample(&self, u: f32) -> (usize, f32, f32) {
-        let i = self.cdf.partition_point(|&c| c <= u).min(self.cdf.len() - 1);
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u)
+            .min(self.cdf.len() - 1);
         let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
         let p = self.pmf[i];
         let ur = if p > 0.0 {

@@ -114,7 +114,11 @@ impl SpectralTexture {
                 ..
             } => {
                 let wrap = |x: f32, n: u32, rep: bool| -> usize {
-                    let t = if rep { x - x.floor() } else { x.clamp(0.0, 1.0) };
+                    let t = if rep {
+                        x - x.floor()
+                    } else {
+                        x.clamp(0.0, 1.0)
+                    };
                     ((t * n as f32) as usize).min(n as usize - 1)
                 };
                 let i = wrap(uv.x, *width, repeat[0]);
@@ -406,13 +410,7 @@ impl Scene {
     /// Sample a light as seen from `p` (next-event estimation). `u` picks the light, `u2` the
     /// point on it. Returns None when the light faces away or has no power.
     #[inline]
-    pub fn sample_light(
-        &self,
-        p: Vec3,
-        u: f32,
-        u2: Vec2,
-        wl: &[f32; N_WL],
-    ) -> Option<LightSample> {
+    pub fn sample_light(&self, p: Vec3, u: f32, u2: Vec2, wl: &[f32; N_WL]) -> Option<LightSample> {
         let distr = self.light_distr.as_ref()?;
         let (li, pmf, _) = distr.sample(u);
         if pmf <= 0.0 {

@@ -285,7 +285,10 @@ fn fit_tables() -> &'static FitTables {
         let n = ((hi - lo) / step).round() as usize + 1;
         let wl: Vec<f64> = (0..n).map(|i| lo + step * i as f64).collect();
         let ybar_int: f64 = wl.iter().map(|&w| cmf[1].eval(w) * step).sum();
-        let d65y: f64 = wl.iter().map(|&w| d65.eval(w) * cmf[1].eval(w) * step).sum();
+        let d65y: f64 = wl
+            .iter()
+            .map(|&w| d65.eval(w) * cmf[1].eval(w) * step)
+            .sum();
         let w_xyz: Vec<[f64; 3]> = wl
             .iter()
             .map(|&w| {
@@ -544,7 +547,10 @@ mod tests {
     fn white_emission_has_unit_luminance() {
         let e = rgb_emission([1.0, 1.0, 1.0]);
         let cmf = cmf_table();
-        let num: f64 = cmf.iter().map(|(w, c)| e.eval(*w as f32) as f64 * c[1]).sum();
+        let num: f64 = cmf
+            .iter()
+            .map(|(w, c)| e.eval(*w as f32) as f64 * c[1])
+            .sum();
         let den: f64 = cmf.iter().map(|(_, c)| c[1]).sum();
         assert!((num / den - 1.0).abs() < 0.01, "{}", num / den);
     }

@@ -13,7 +13,9 @@
 //!   D65-shaped emitter sphere: patch radiance = ρ(λ)·Le(λ);
 //! * [`showcase`] — a Cornell-like room with a dispersive glass sphere, a rough gold sphere, a
 //!   rough-plastic block and a thin-lens camera.
-use crate::gltf_write::{cuboid, flat_spectrum, quad, sampled_spectrum, sphere, GltfBuilder, MeshData};
+use crate::gltf_write::{
+    cuboid, flat_spectrum, quad, sampled_spectrum, sphere, GltfBuilder, MeshData,
+};
 use camsim_core::Spectrum;
 use serde_json::{json, Value};
 
@@ -44,7 +46,12 @@ fn camera_down(b: &mut GltfBuilder, h: f64, yfov_deg: f64) {
 }
 
 fn ground(b: &mut GltfBuilder, half: f32, material: usize) {
-    let q = quad([[-half, 0.0, half], [half, 0.0, half], [half, 0.0, -half], [-half, 0.0, -half]]);
+    let q = quad([
+        [-half, 0.0, half],
+        [half, 0.0, half],
+        [half, 0.0, -half],
+        [-half, 0.0, -half],
+    ]);
     let mesh = b.mesh("plane", &q, material);
     b.node(json!({"name": "plane", "mesh": mesh}), true);
 }
@@ -62,7 +69,10 @@ pub fn furnace(rho: f64, le: f64) -> GltfBuilder {
     let mesh = b.mesh("sphere", &sp, m);
     b.node(json!({"name": "sphere", "mesh": mesh}), true);
     let c = b.camera("camera", 60f64.to_radians(), Some(1.0), 0.001);
-    b.node(json!({"name": "camera", "camera": c, "rotation": [0.1, 0.2, 0.0, 0.9746794]}), true);
+    b.node(
+        json!({"name": "camera", "camera": c, "rotation": [0.1, 0.2, 0.0, 0.9746794]}),
+        true,
+    );
     b
 }
 
@@ -83,8 +93,10 @@ pub fn point_source(rho: f64, intensity: f64, h: f64) -> GltfBuilder {
     let mut b = GltfBuilder::new();
     let m = b.material(diffuse("plane", flat_spectrum(rho), false));
     ground(&mut b, 4.0, m);
-    let l = b.light(json!({"type": "point", "intensity": 1.0, "color": [1.0, 1.0, 1.0],
-                           "extras": {"spectral_intensity": flat_spectrum(intensity)}}));
+    let l = b.light(
+        json!({"type": "point", "intensity": 1.0, "color": [1.0, 1.0, 1.0],
+                           "extras": {"spectral_intensity": flat_spectrum(intensity)}}),
+    );
     b.node(json!({"name": "point_light", "translation": [0.0, h, 0.0], "extensions": {"KHR_lights_punctual": {"light": l}}}), true);
     camera_down(&mut b, 2.0 * h, 60.0);
     b
@@ -138,10 +150,19 @@ pub fn color_chart() -> GltfBuilder {
     ground(&mut b, 1.5, board);
     let refl = camsim_core::data::macbeth_reflectances_row_major().expect("embedded Macbeth");
     for (i, s) in refl.iter().enumerate() {
-        let m = b.material(diffuse(&format!("patch{i:02}"), sampled_spectrum(s, 5.0), false));
+        let m = b.material(diffuse(
+            &format!("patch{i:02}"),
+            sampled_spectrum(s, 5.0),
+            false,
+        ));
         let ([x, z], side) = chart_patch(i);
         let h = side / 2.0;
-        let q = quad([[x - h, 0.001, z + h], [x + h, 0.001, z + h], [x + h, 0.001, z - h], [x - h, 0.001, z - h]]);
+        let q = quad([
+            [x - h, 0.001, z + h],
+            [x + h, 0.001, z + h],
+            [x + h, 0.001, z - h],
+            [x - h, 0.001, z - h],
+        ]);
         let mesh = b.mesh(&format!("patch{i:02}"), &q, m);
         b.node(json!({"name": format!("patch{i:02}"), "mesh": mesh}), true);
     }
@@ -155,7 +176,11 @@ pub fn color_chart() -> GltfBuilder {
 pub fn showcase() -> GltfBuilder {
     let mut b = GltfBuilder::new();
     let white = b.material(diffuse("white", flat_spectrum(0.75), false));
-    let red = b.material(diffuse("red", json!({"wavelength_nm": [360.0, 580.0, 610.0, 830.0], "values": [0.06, 0.08, 0.65, 0.7]}), false));
+    let red = b.material(diffuse(
+        "red",
+        json!({"wavelength_nm": [360.0, 580.0, 610.0, 830.0], "values": [0.06, 0.08, 0.65, 0.7]}),
+        false,
+    ));
     let green = b.material(diffuse("green", json!({"wavelength_nm": [360.0, 480.0, 530.0, 580.0, 830.0], "values": [0.06, 0.1, 0.5, 0.1, 0.06]}), false));
     let light = b.material(json!({"name": "light", "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0},
         "emissiveFactor": [1.0, 1.0, 1.0], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 15.0}}}));
@@ -172,11 +197,31 @@ pub fn showcase() -> GltfBuilder {
                     "diffuse_reflectance": {"type": "rgb", "value": [0.1, 0.2, 0.6]}}}}));
     let s = 1.0f32;
     let walls: [(&str, [[f32; 3]; 4], usize); 5] = [
-        ("floor", [[-s, 0.0, s], [s, 0.0, s], [s, 0.0, -s], [-s, 0.0, -s]], white),
-        ("ceiling", [[-s, 2.0, -s], [s, 2.0, -s], [s, 2.0, s], [-s, 2.0, s]], white),
-        ("back", [[-s, 0.0, -s], [s, 0.0, -s], [s, 2.0, -s], [-s, 2.0, -s]], white),
-        ("left", [[-s, 0.0, s], [-s, 0.0, -s], [-s, 2.0, -s], [-s, 2.0, s]], red),
-        ("right", [[s, 0.0, -s], [s, 0.0, s], [s, 2.0, s], [s, 2.0, -s]], green),
+        (
+            "floor",
+            [[-s, 0.0, s], [s, 0.0, s], [s, 0.0, -s], [-s, 0.0, -s]],
+            white,
+        ),
+        (
+            "ceiling",
+            [[-s, 2.0, -s], [s, 2.0, -s], [s, 2.0, s], [-s, 2.0, s]],
+            white,
+        ),
+        (
+            "back",
+            [[-s, 0.0, -s], [s, 0.0, -s], [s, 2.0, -s], [-s, 2.0, -s]],
+            white,
+        ),
+        (
+            "left",
+            [[-s, 0.0, s], [-s, 0.0, -s], [-s, 2.0, -s], [-s, 2.0, s]],
+            red,
+        ),
+        (
+            "right",
+            [[s, 0.0, -s], [s, 0.0, s], [s, 2.0, s], [s, 2.0, -s]],
+            green,
+        ),
     ];
     for (name, q, m) in walls {
         let mesh = b.mesh(name, &quad(q), m);
@@ -187,16 +232,25 @@ pub fn showcase() -> GltfBuilder {
     let lm = b.mesh("light", &lq, light);
     b.node(json!({"name": "light", "mesh": lm}), true);
     let gs = b.mesh("glass_sphere", &sphere([0.0; 3], 0.3, 32, 64, false), glass);
-    b.node(json!({"name": "glass_sphere", "mesh": gs, "translation": [0.4, 0.3, 0.2]}), true);
+    b.node(
+        json!({"name": "glass_sphere", "mesh": gs, "translation": [0.4, 0.3, 0.2]}),
+        true,
+    );
     let au = b.mesh("gold_sphere", &sphere([0.0; 3], 0.3, 32, 64, false), gold);
-    b.node(json!({"name": "gold_sphere", "mesh": au, "translation": [-0.45, 0.3, -0.3]}), true);
+    b.node(
+        json!({"name": "gold_sphere", "mesh": au, "translation": [-0.45, 0.3, -0.3]}),
+        true,
+    );
     let mut blk = MeshData::default();
     blk.append(&cuboid([-0.2, 0.0, -0.2], [0.2, 0.6, 0.2], false));
     let pb = b.mesh("plastic_block", &blk, plastic);
     b.node(json!({"name": "plastic_block", "mesh": pb, "translation": [0.35, 0.0, -0.5], "rotation": [0.0, 0.2588190, 0.0, 0.9659258]}), true);
     let c = b.camera("camera", 40f64.to_radians(), Some(1.0), 0.01);
-    b.node(json!({"name": "camera", "camera": c, "translation": [0.0, 1.0, 3.9],
-                  "extras": {"thinlens": {"aperture_radius": 0.03, "focus_distance": 3.7}}}), true);
+    b.node(
+        json!({"name": "camera", "camera": c, "translation": [0.0, 1.0, 3.9],
+                  "extras": {"thinlens": {"aperture_radius": 0.03, "focus_distance": 3.7}}}),
+        true,
+    );
     b
 }
 

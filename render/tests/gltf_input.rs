@@ -12,7 +12,12 @@ fn emitter_scene() -> GltfBuilder {
     let mut b = GltfBuilder::new();
     let m = b.material(json!({"name": "em", "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0},
         "extras": {"spectral_reflectance": flat_spectrum(0.0), "spectral_emission": flat_spectrum(3.0)}}));
-    let q = quad([[-1.0, -1.0, -2.0], [1.0, -1.0, -2.0], [1.0, 1.0, -2.0], [-1.0, 1.0, -2.0]]);
+    let q = quad([
+        [-1.0, -1.0, -2.0],
+        [1.0, -1.0, -2.0],
+        [1.0, 1.0, -2.0],
+        [-1.0, 1.0, -2.0],
+    ]);
     let mesh = b.mesh("quad", &q, m);
     b.node(json!({"name": "quad", "mesh": mesh}), true);
     let c = b.camera("cam", 30f64.to_radians(), Some(1.0), 0.01);
@@ -35,8 +40,15 @@ fn err_of(p: &Path) -> String {
 fn mean_band0(path: &Path) -> f64 {
     let scene = load_gltf(path).unwrap();
     let c = pick_camera(&scene, None).unwrap();
-    let cam = Pinhole { perspective: c.perspective(16, 16) };
-    let s = RenderSettings { spp: 4, bands: Bands::parse("500:600:100").unwrap(), depth_spp: 0, ..Default::default() };
+    let cam = Pinhole {
+        perspective: c.perspective(16, 16),
+    };
+    let s = RenderSettings {
+        spp: 4,
+        bands: Bands::parse("500:600:100").unwrap(),
+        depth_spp: 0,
+        ..Default::default()
+    };
     let out = render(&scene, &cam, c.to_world, &s, None);
     out.band_planes[0].iter().map(|v| *v as f64).sum::<f64>() / 256.0
 }
@@ -45,7 +57,11 @@ fn mean_band0(path: &Path) -> f64 {
 fn gltf_and_glb_load_alike() {
     let d = tempfile::tempdir().unwrap();
     let b = emitter_scene();
-    let (p1, p2, p3) = (d.path().join("a.gltf"), d.path().join("b.glb"), d.path().join("c.gltf"));
+    let (p1, p2, p3) = (
+        d.path().join("a.gltf"),
+        d.path().join("b.glb"),
+        d.path().join("c.gltf"),
+    );
     b.write(&p1).unwrap();
     b.write_glb(&p2).unwrap();
     b.write_embedded(&p3).unwrap();
@@ -71,10 +87,18 @@ fn node_hierarchy_and_mirroring() {
     let m = b.material(json!({"name": "em", "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0},
         "extras": {"spectral_reflectance": flat_spectrum(0.0), "spectral_emission": flat_spectrum(2.0)}}));
     // quad at z = +2 facing −z (towards the origin) in local space...
-    let q = quad([[-1.0, -1.0, 2.0], [-1.0, 1.0, 2.0], [1.0, 1.0, 2.0], [1.0, -1.0, 2.0]]);
+    let q = quad([
+        [-1.0, -1.0, 2.0],
+        [-1.0, 1.0, 2.0],
+        [1.0, 1.0, 2.0],
+        [1.0, -1.0, 2.0],
+    ]);
     let mesh = b.mesh("quad", &q, m);
     // ...mirrored by the parent's scale z → −z: it lands at z = −2 and must face +z
-    let child = b.node(json!({"name": "child", "mesh": mesh, "translation": [0.0, 0.0, 0.5]}), false);
+    let child = b.node(
+        json!({"name": "child", "mesh": mesh, "translation": [0.0, 0.0, 0.5]}),
+        false,
+    );
     b.node(json!({"name": "parent", "scale": [1.0, 1.0, -1.0], "translation": [0.0, 0.0, 0.5], "children": [child]}), true);
     let c = b.camera("cam", 30f64.to_radians(), Some(1.0), 0.01);
     b.node(json!({"name": "cam", "camera": c}), true);
@@ -98,8 +122,15 @@ fn node_hierarchy_and_mirroring() {
 fn base_color_texture_is_sampled_at_the_hit() {
     let d = tempfile::tempdir().unwrap();
     let mut png = Vec::new();
-    let img = image::RgbImage::from_fn(2, 1, |x, _| if x == 0 { image::Rgb([230, 20, 20]) } else { image::Rgb([20, 20, 230]) });
-    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).unwrap();
+    let img = image::RgbImage::from_fn(2, 1, |x, _| {
+        if x == 0 {
+            image::Rgb([230, 20, 20])
+        } else {
+            image::Rgb([20, 20, 230])
+        }
+    });
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
     let mut b = GltfBuilder::new();
     let tex = b.png_texture(&png);
     let m = b.material(json!({"name": "tex", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0,
@@ -107,18 +138,34 @@ fn base_color_texture_is_sampled_at_the_hit() {
     let em = b.material(json!({"name": "sky", "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0},
         "extras": {"spectral_reflectance": flat_spectrum(0.0), "spectral_emission": flat_spectrum(1.0)}}));
     // plane facing +z at z = −2 with u along +x; behind the camera an emitter sphere
-    let q = quad([[-1.0, -1.0, -2.0], [1.0, -1.0, -2.0], [1.0, 1.0, -2.0], [-1.0, 1.0, -2.0]]);
+    let q = quad([
+        [-1.0, -1.0, -2.0],
+        [1.0, -1.0, -2.0],
+        [1.0, 1.0, -2.0],
+        [-1.0, 1.0, -2.0],
+    ]);
     let mesh = b.mesh("plane", &q, m);
     b.node(json!({"name": "plane", "mesh": mesh}), true);
-    let sky = b.mesh("sky", &camsim_render::gltf_write::sphere([0.0; 3], 10.0, 16, 32, true), em);
+    let sky = b.mesh(
+        "sky",
+        &camsim_render::gltf_write::sphere([0.0; 3], 10.0, 16, 32, true),
+        em,
+    );
     b.node(json!({"name": "sky", "mesh": sky}), true);
     let c = b.camera("cam", 30f64.to_radians(), Some(1.0), 0.01);
     b.node(json!({"name": "cam", "camera": c}), true);
     let p = d.path().join("t.gltf");
     b.write(&p).unwrap();
     let scene = load_gltf(&p).unwrap();
-    let cam = Pinhole { perspective: scene.cameras[0].perspective(16, 16) };
-    let s = RenderSettings { spp: 16, bands: Bands::parse("400:700:100").unwrap(), depth_spp: 0, ..Default::default() };
+    let cam = Pinhole {
+        perspective: scene.cameras[0].perspective(16, 16),
+    };
+    let s = RenderSettings {
+        spp: 16,
+        bands: Bands::parse("400:700:100").unwrap(),
+        depth_spp: 0,
+        ..Default::default()
+    };
     let out = render(&scene, &cam, scene.cameras[0].to_world, &s, None);
     let half = |b: usize, left: bool| -> f64 {
         let mut v = 0.0;
@@ -132,8 +179,18 @@ fn base_color_texture_is_sampled_at_the_hit() {
         v / 128.0
     };
     // blue (400–500) brighter on the right, red (600–700) brighter on the left
-    assert!(half(2, true) > 3.0 * half(2, false), "red {} vs {}", half(2, true), half(2, false));
-    assert!(half(0, false) > 3.0 * half(0, true), "blue {} vs {}", half(0, false), half(0, true));
+    assert!(
+        half(2, true) > 3.0 * half(2, false),
+        "red {} vs {}",
+        half(2, true),
+        half(2, false)
+    );
+    assert!(
+        half(0, false) > 3.0 * half(0, true),
+        "blue {} vs {}",
+        half(0, false),
+        half(0, true)
+    );
 }
 
 #[test]
@@ -143,7 +200,10 @@ fn missing_buffer_is_a_clear_error() {
     emitter_scene().write(&p).unwrap();
     std::fs::remove_file(d.path().join("a.bin")).unwrap();
     let e = err_of(&p);
-    assert!(e.contains("buffer 0") && e.contains("a.bin") && e.contains("cannot load"), "{e}");
+    assert!(
+        e.contains("buffer 0") && e.contains("a.bin") && e.contains("cannot load"),
+        "{e}"
+    );
     // a truncated buffer
     emitter_scene().write(&p).unwrap();
     let bin = std::fs::read(d.path().join("a.bin")).unwrap();
@@ -160,7 +220,10 @@ fn unsupported_required_extension_is_refused() {
     b.use_extension("KHR_draco_mesh_compression", true);
     b.write(&p).unwrap();
     let e = err_of(&p);
-    assert!(e.contains("KHR_draco_mesh_compression") && e.contains("extensionsRequired"), "{e}");
+    assert!(
+        e.contains("KHR_draco_mesh_compression") && e.contains("extensionsRequired"),
+        "{e}"
+    );
     // used but not required: fine
     let mut b = emitter_scene();
     b.use_extension("KHR_materials_clearcoat", false);
@@ -174,7 +237,12 @@ fn nan_vertices_are_refused() {
     let p = d.path().join("a.gltf");
     let mut b = GltfBuilder::new();
     let m = b.material(json!({"name": "w"}));
-    let mut q = quad([[-1.0, -1.0, -2.0], [1.0, -1.0, -2.0], [1.0, 1.0, -2.0], [-1.0, 1.0, -2.0]]);
+    let mut q = quad([
+        [-1.0, -1.0, -2.0],
+        [1.0, -1.0, -2.0],
+        [1.0, 1.0, -2.0],
+        [-1.0, 1.0, -2.0],
+    ]);
     q.positions[2][1] = f32::NAN;
     let mesh = b.mesh("bad", &q, m);
     b.node(json!({"name": "bad", "mesh": mesh}), true);
@@ -191,7 +259,16 @@ fn a_scene_without_camera_is_refused() {
     let p = d.path().join("a.gltf");
     let mut b = GltfBuilder::new();
     let m = b.material(json!({"name": "w"}));
-    let mesh = b.mesh("q", &quad([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]), m);
+    let mesh = b.mesh(
+        "q",
+        &quad([
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ]),
+        m,
+    );
     b.node(json!({"mesh": mesh}), true);
     b.write(&p).unwrap();
     let e = err_of(&p);
@@ -217,27 +294,36 @@ fn other_bad_inputs_give_one_line_errors() {
     let mut b = emitter_scene();
     b.material(json!({"name": "x"}));
     let mut doc = b.document("a.bin");
-    doc["materials"][0]["extras"]["mitsuba_bsdf"] = json!({"type": "roughconductor", "material": "Au", "alpha": 0.2});
+    doc["materials"][0]["extras"]["mitsuba_bsdf"] =
+        json!({"type": "roughconductor", "material": "Au", "alpha": 0.2});
     std::fs::write(&p, doc.to_string()).unwrap();
     let e = err_of(&p);
     assert!(e.contains("ggx") && e.contains("beckmann"), "{e}");
     // an unknown metal
-    doc["materials"][0]["extras"]["mitsuba_bsdf"] = json!({"type": "roughconductor", "material": "Xx", "alpha": 0.2, "distribution": "ggx"});
+    doc["materials"][0]["extras"]["mitsuba_bsdf"] =
+        json!({"type": "roughconductor", "material": "Xx", "alpha": 0.2, "distribution": "ggx"});
     std::fs::write(&p, doc.to_string()).unwrap();
     assert!(err_of(&p).contains("unknown metal \"Xx\""));
     // a malformed spectral extra
-    doc["materials"][0]["extras"] = json!({"spectral_emission": {"wavelength_nm": [500, 400], "values": [1, 1]}});
+    doc["materials"][0]["extras"] =
+        json!({"spectral_emission": {"wavelength_nm": [500, 400], "values": [1, 1]}});
     std::fs::write(&p, doc.to_string()).unwrap();
     assert!(err_of(&p).contains("spectral_emission"));
     // a bad thin lens
     let mut doc = emitter_scene().document("a.bin");
-    doc["nodes"][1]["extras"] = json!({"thinlens": {"aperture_radius": -1.0, "focus_distance": 2.0}});
+    doc["nodes"][1]["extras"] =
+        json!({"thinlens": {"aperture_radius": -1.0, "focus_distance": 2.0}});
     std::fs::write(&p, doc.to_string()).unwrap();
     assert!(err_of(&p).contains("thinlens"));
     // an index past the vertex count
     let mut b = GltfBuilder::new();
     let m = b.material(json!({"name": "w"}));
-    let mut q = quad([[0.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 1.0, -1.0], [0.0, 1.0, -1.0]]);
+    let mut q = quad([
+        [0.0, 0.0, -1.0],
+        [1.0, 0.0, -1.0],
+        [1.0, 1.0, -1.0],
+        [0.0, 1.0, -1.0],
+    ]);
     q.indices[4] = 7;
     let mesh = b.mesh("q", &q, m);
     b.node(json!({"mesh": mesh}), true);

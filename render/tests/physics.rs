@@ -20,7 +20,12 @@ fn load(b: &GltfBuilder, name: &str) -> (tempfile::TempDir, Scene) {
 
 fn pinhole(scene: &Scene, w: u32, h: u32) -> (Pinhole, Mat4) {
     let c = &scene.cameras[0];
-    (Pinhole { perspective: c.perspective(w, h) }, c.to_world)
+    (
+        Pinhole {
+            perspective: c.perspective(w, h),
+        },
+        c.to_world,
+    )
 }
 
 fn settings(spp: u32, bands: &str) -> RenderSettings {
@@ -36,7 +41,12 @@ fn settings(spp: u32, bands: &str) -> RenderSettings {
 
 /// z-score of the mean over `pixels` of band `b` against `expected`, using the per-pixel
 /// variance estimates (pixels are independent).
-fn z_of(out: &RenderOutput, b: usize, pixels: &[usize], expected: impl Fn(usize) -> f64) -> (f64, f64) {
+fn z_of(
+    out: &RenderOutput,
+    b: usize,
+    pixels: &[usize],
+    expected: impl Fn(usize) -> f64,
+) -> (f64, f64) {
     let var = out.variance_planes.as_ref().unwrap();
     let n = pixels.len() as f64;
     let (mut d, mut v) = (0.0, 0.0);
@@ -72,16 +82,24 @@ fn furnace_radiance_is_le_over_one_minus_rho() {
     assert!(zall.abs() < 4.0, "overall z {zall}");
     // a path-length limit: N = 3 → 1 + ρ + ρ² = 1.75; N = 1 → Le
     for (n, expect) in [(3, 1.75), (1, 1.0)] {
-        let s = RenderSettings { max_depth: n, ..settings(16, "380:780:100") };
+        let s = RenderSettings {
+            max_depth: n,
+            ..settings(16, "380:780:100")
+        };
         let out = render(&scene, &cam, m, &s, None);
         for b in 0..out.bands.count {
             let (z, bias) = z_of(&out, b, &px, |_| expect);
-            let var_zero = out.variance_planes.as_ref().unwrap()[b].iter().all(|v| *v == 0.0);
+            let var_zero = out.variance_planes.as_ref().unwrap()[b]
+                .iter()
+                .all(|v| *v == 0.0);
             if var_zero {
                 // max_depth 1: emission only, no noise at all
                 assert!(bias.abs() < 1e-5, "max_depth {n}: bias {bias}");
             } else {
-                assert!(z.abs() < 4.0, "max_depth {n} band {b}: z = {z:.2} (bias {bias:.4})");
+                assert!(
+                    z.abs() < 4.0,
+                    "max_depth {n} band {b}: z = {z:.2} (bias {bias:.4})"
+                );
             }
         }
     }
@@ -127,7 +145,10 @@ fn point_source_inverse_square_and_cosine() {
             let k = 8;
             for a in 0..k {
                 for b in 0..k {
-                    let f = Vec2::new(x as f32 + (a as f32 + 0.5) / k as f32, y as f32 + (b as f32 + 0.5) / k as f32);
+                    let f = Vec2::new(
+                        x as f32 + (a as f32 + 0.5) / k as f32,
+                        y as f32 + (b as f32 + 0.5) / k as f32,
+                    );
                     let d = persp.film_to_plane(f) * cam_h; // camera space, z = −2h
                     let r2 = (d.x * d.x + d.y * d.y) as f64;
                     e += rho * i0 * h / (std::f64::consts::PI * (h * h + r2).powf(1.5));
@@ -142,7 +163,10 @@ fn point_source_inverse_square_and_cosine() {
         let px: Vec<usize> = (0..n).filter(|&i| ring[i] == g).collect();
         for b in 0..out.bands.count {
             let (z, bias) = z_of(&out, b, &px, |i| expect[i]);
-            assert!(z.abs() < 4.0, "ring {g} band {b}: z = {z:.2} (bias {bias:.4})");
+            assert!(
+                z.abs() < 4.0,
+                "ring {g} band {b}: z = {z:.2} (bias {bias:.4})"
+            );
         }
     }
 }
@@ -157,11 +181,21 @@ fn color_chart_patches_are_reflectance_times_illuminant() {
     let bands = "400:700:50";
     let out = render(&scene, &cam, m, &settings(16, bands), None);
     let d65 = test_scenes::d65_unit_at_560();
-    let d65s = camsim_core::Spectrum::sampled((0..=94).map(|i| 360.0 + 5.0 * i as f64).collect(), (0..=94).map(|i| d65.eval(360.0 + 5.0 * i as f64)).collect()).unwrap();
+    let d65s = camsim_core::Spectrum::sampled(
+        (0..=94).map(|i| 360.0 + 5.0 * i as f64).collect(),
+        (0..=94).map(|i| d65.eval(360.0 + 5.0 * i as f64)).collect(),
+    )
+    .unwrap();
     let refl = camsim_core::data::macbeth_reflectances_row_major().unwrap();
     let refl5: Vec<camsim_core::Spectrum> = refl
         .iter()
-        .map(|s| camsim_core::Spectrum::sampled((0..=94).map(|i| 360.0 + 5.0 * i as f64).collect(), (0..=94).map(|i| s.eval(360.0 + 5.0 * i as f64)).collect()).unwrap())
+        .map(|s| {
+            camsim_core::Spectrum::sampled(
+                (0..=94).map(|i| 360.0 + 5.0 * i as f64).collect(),
+                (0..=94).map(|i| s.eval(360.0 + 5.0 * i as f64)).collect(),
+            )
+            .unwrap()
+        })
         .collect();
     let persp = cam.perspective;
     let mut worst_z = 0.0f64;
@@ -171,11 +205,13 @@ fn color_chart_patches_are_reflectance_times_illuminant() {
         let px: Vec<usize> = (0..(w * h) as usize)
             .filter(|&k| {
                 let (cx, cy) = ((k % w as usize) as f32, (k / w as usize) as f32);
-                [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)].iter().all(|(dx, dy)| {
-                    let p = persp.film_to_plane(Vec2::new(cx + dx, cy + dy)) * 1.999;
-                    let (wx, wz) = (p.x, -p.y);
-                    (wx - x).abs() < side / 2.0 - 0.005 && (wz - z).abs() < side / 2.0 - 0.005
-                })
+                [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)]
+                    .iter()
+                    .all(|(dx, dy)| {
+                        let p = persp.film_to_plane(Vec2::new(cx + dx, cy + dy)) * 1.999;
+                        let (wx, wz) = (p.x, -p.y);
+                        (wx - x).abs() < side / 2.0 - 0.005 && (wz - z).abs() < side / 2.0 - 0.005
+                    })
             })
             .collect();
         assert!(px.len() >= 20, "patch {i}: only {} pixels", px.len());
@@ -183,10 +219,14 @@ fn color_chart_patches_are_reflectance_times_illuminant() {
             let (lo, hi) = out.bands.edges(b);
             let boxf = camsim_core::Spectrum::sampled(vec![lo, hi], vec![1.0, 1.0]).unwrap();
             let prod = camsim_core::Spectrum::multiply(s, &d65s);
-            let expect = camsim_core::Spectrum::integrate_product(&prod, &boxf).unwrap() / (hi - lo);
+            let expect =
+                camsim_core::Spectrum::integrate_product(&prod, &boxf).unwrap() / (hi - lo);
             let (zv, bias) = z_of(&out, b, &px, |_| expect);
             worst_z = worst_z.max(zv.abs());
-            assert!(zv.abs() < 4.5, "patch {i} band {b}: z = {zv:.2}, bias {bias:.4} of {expect:.4}");
+            assert!(
+                zv.abs() < 4.5,
+                "patch {i} band {b}: z = {zv:.2}, bias {bias:.4} of {expect:.4}"
+            );
         }
     }
     eprintln!("worst |z| over 24 patches × 6 bands: {worst_z:.2}");
@@ -201,8 +241,14 @@ fn thin_lens_tends_to_pinhole() {
     )))
     .unwrap();
     let c = &scene.cameras[0];
-    let p = Pinhole { perspective: c.perspective(32, 32) };
-    let t = ThinLens { perspective: c.perspective(32, 32), aperture_radius_m: 1e-7, focus_distance_m: 3.7 };
+    let p = Pinhole {
+        perspective: c.perspective(32, 32),
+    };
+    let t = ThinLens {
+        perspective: c.perspective(32, 32),
+        aperture_radius_m: 1e-7,
+        focus_distance_m: 3.7,
+    };
     let s = settings(8, "380:780:100");
     let a = render(&scene, &p, c.to_world, &s, None);
     let b = render(&scene, &t, c.to_world, &s, None);
@@ -240,8 +286,18 @@ fn thin_lens_blur_matches_the_circle_of_confusion() {
     let (a, f) = (0.05f32, 4.0f32);
     let n = 64u32;
     let sc = &scene.cameras[0];
-    let cam = ThinLens { perspective: sc.perspective(n, n), aperture_radius_m: a, focus_distance_m: f };
-    let out = render(&scene, &cam, sc.to_world, &settings(256, "500:600:100"), None);
+    let cam = ThinLens {
+        perspective: sc.perspective(n, n),
+        aperture_radius_m: a,
+        focus_distance_m: f,
+    };
+    let out = render(
+        &scene,
+        &cam,
+        sc.to_world,
+        &settings(256, "500:600:100"),
+        None,
+    );
     let img = &out.band_planes[0];
     let (mut s0, mut sx2) = (0.0f64, 0.0f64);
     let c0 = n as f64 / 2.0;
@@ -261,9 +317,14 @@ fn thin_lens_blur_matches_the_circle_of_confusion() {
     // pixel box adds 1/12
     let dot_px = r as f64 * f as f64 / z_obj as f64 * px_per_m;
     let expect = r_px * r_px / 4.0 + dot_px * dot_px / 4.0 + 1.0 / 12.0;
-    assert!((var_px - expect).abs() / expect < 0.08, "⟨x²⟩ = {var_px:.3} px², expected {expect:.3} (R = {r_px:.2} px)");
+    assert!(
+        (var_px - expect).abs() / expect < 0.08,
+        "⟨x²⟩ = {var_px:.3} px², expected {expect:.3} (R = {r_px:.2} px)"
+    );
     // total flux does not depend on the aperture: compare with the pinhole render
-    let p = Pinhole { perspective: sc.perspective(n, n) };
+    let p = Pinhole {
+        perspective: sc.perspective(n, n),
+    };
     let outp = render(&scene, &p, sc.to_world, &settings(256, "500:600:100"), None);
     let sp: f64 = outp.band_planes[0].iter().map(|v| *v as f64).sum();
     assert!((s0 - sp).abs() / sp < 0.05, "flux {s0} vs pinhole {sp}");
@@ -277,22 +338,43 @@ fn planar_depth_is_exact_for_a_plane() {
     let mut b = GltfBuilder::new();
     let m = b.material(json!({"name": "w", "pbrMetallicRoughness": {"metallicFactor": 0.0}, "extras": {"spectral_reflectance": flat_spectrum(0.5)}}));
     // plane z = −3 − 0.5 x (tilted), large
-    let q = quad([[-10.0, -10.0, 2.0], [10.0, -10.0, -8.0], [10.0, 10.0, -8.0], [-10.0, 10.0, 2.0]]);
+    let q = quad([
+        [-10.0, -10.0, 2.0],
+        [10.0, -10.0, -8.0],
+        [10.0, 10.0, -8.0],
+        [-10.0, 10.0, 2.0],
+    ]);
     let mesh = b.mesh("plane", &q, m);
     b.node(json!({"name": "plane", "mesh": mesh}), true);
     let c = b.camera("cam", 50f64.to_radians(), Some(1.5), 0.01);
     b.node(json!({"name": "cam", "camera": c}), true);
     let (_d, scene) = load(&b, "plane");
     let sc = &scene.cameras[0];
-    let cam = Pinhole { perspective: sc.perspective(48, 32) };
-    let out = render(&scene, &cam, sc.to_world, &RenderSettings { depth_spp: 4, ..settings(1, "500:600:100") }, None);
+    let cam = Pinhole {
+        perspective: sc.perspective(48, 32),
+    };
+    let out = render(
+        &scene,
+        &cam,
+        sc.to_world,
+        &RenderSettings {
+            depth_spp: 4,
+            ..settings(1, "500:600:100")
+        },
+        None,
+    );
     for y in 0..32 {
         for x in 0..48 {
-            let d = cam.perspective.film_to_plane(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
+            let d = cam
+                .perspective
+                .film_to_plane(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
             // along the ray p = t·d (d.z = −1): z = −Z, plane z = −3 − 0.5x → Z = 3/(1 − 0.5 d.x)
             let z_expect = 3.0 / (1.0 - 0.5 * d.x as f64);
             let got = out.depth_z_m[y * 48 + x] as f64;
-            assert!((got - z_expect).abs() < 1e-4 * z_expect, "({x},{y}): Z {got} vs {z_expect}");
+            assert!(
+                (got - z_expect).abs() < 1e-4 * z_expect,
+                "({x},{y}): Z {got} vs {z_expect}"
+            );
             let t_expect = z_expect * (d.length() as f64);
             let tc = out.depth_center_m[y * 48 + x] as f64;
             assert!((tc - t_expect).abs() < 1e-4 * t_expect);
@@ -309,8 +391,15 @@ fn output_is_identical_at_one_and_two_threads() {
     )))
     .unwrap();
     let c = &scene.cameras[0];
-    let cam = ThinLens { perspective: c.perspective(24, 24), aperture_radius_m: 0.03, focus_distance_m: 3.7 };
-    let s = RenderSettings { depth_spp: 2, ..settings(4, "380:780:20") };
+    let cam = ThinLens {
+        perspective: c.perspective(24, 24),
+        aperture_radius_m: 0.03,
+        focus_distance_m: 3.7,
+    };
+    let s = RenderSettings {
+        depth_spp: 2,
+        ..settings(4, "380:780:20")
+    };
     let run = |n: usize| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -323,7 +412,51 @@ fn output_is_identical_at_one_and_two_threads() {
     assert_eq!(a.variance_planes, b.variance_planes);
     assert_eq!(a.depth_mean_m, b.depth_mean_m);
     // and a different seed gives a different image
-    let s2 = RenderSettings { seed: 2, ..s.clone() };
+    let s2 = RenderSettings {
+        seed: 2,
+        ..s.clone()
+    };
     let c2 = render(&scene, &cam, c.to_world, &s2, None);
     assert_ne!(a.band_planes, c2.band_planes);
+}
+
+/// A glass sphere in a uniform radiance field (closed, non-reflecting emitter sphere): a
+/// non-absorbing smooth dielectric leaves the field unchanged (radiance / n² is conserved), so
+/// every pixel sees Le; a rough one may only lose the single-scattering microfacet deficit.
+#[test]
+fn glass_in_a_uniform_field_is_invisible() {
+    use camsim_render::gltf_write::{flat_spectrum, sphere};
+    use serde_json::json;
+    // rough: the single-scattering GGX model may only lose energy, by less than 6 % here
+    for (rough, max_loss) in [(0.0, 0.0), (0.3, 0.06)] {
+        let mut b = GltfBuilder::new();
+        let em = b.material(json!({"name": "sky", "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0},
+            "extras": {"spectral_reflectance": flat_spectrum(0.0), "spectral_emission": flat_spectrum(1.0)}}));
+        let sky = b.mesh("sky", &sphere([0.0; 3], 10.0, 16, 32, true), em);
+        b.node(json!({"name": "sky", "mesh": sky}), true);
+        let g = b.material(json!({"name": "glass", "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": rough},
+            "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}, "KHR_materials_ior": {"ior": 1.5}}}));
+        let gs = b.mesh("glass", &sphere([0.0, 0.0, -3.0], 1.0, 48, 96, false), g);
+        b.node(json!({"name": "glass", "mesh": gs}), true);
+        let c = b.camera("cam", 40f64.to_radians(), Some(1.0), 0.01);
+        b.node(json!({"name": "cam", "camera": c}), true);
+        let (_d, scene) = load(&b, "glass");
+        let (cam, m) = pinhole(&scene, 24, 24);
+        let out = render(&scene, &cam, m, &settings(32, "400:700:100"), None);
+        let px = all_pixels(&out);
+        for band in 0..out.bands.count {
+            let (z, bias) = z_of(&out, band, &px, |_| 1.0);
+            if max_loss == 0.0 {
+                assert!(
+                    z.abs() < 4.0,
+                    "smooth glass band {band}: z = {z:.2} (bias {bias:.4})"
+                );
+            } else {
+                assert!(
+                    bias < 4.0 * (bias / z).abs() && bias > -max_loss,
+                    "rough glass band {band}: bias {bias:.4} (z {z:.2})"
+                );
+            }
+        }
+    }
 }

@@ -27,7 +27,13 @@ fn bin_of(w: Vec3) -> usize {
 
 /// Chi-square test of directions from `sample` against density `pdf` (per sr) on equal-area
 /// (z, φ) bins; bins with expected count < 5 are pooled. Returns the p-value.
-fn chi_square(n: usize, sub: usize, mut sample: impl FnMut(&mut CamRng) -> Option<Vec3>, pdf: impl Fn(Vec3) -> f64, seed: u64) -> f64 {
+fn chi_square(
+    n: usize,
+    sub: usize,
+    mut sample: impl FnMut(&mut CamRng) -> Option<Vec3>,
+    pdf: impl Fn(Vec3) -> f64,
+    seed: u64,
+) -> f64 {
     let mut obs = vec![0f64; NZ * NPHI];
     let mut rng = stream(seed, &[1]);
     for _ in 0..n {
@@ -50,7 +56,8 @@ fn chi_square(n: usize, sub: usize, mut sample: impl FnMut(&mut CamRng) -> Optio
                 let th = th0 + dth * (a as f64 + 0.5);
                 let (st, ct) = th.sin_cos();
                 for b in 0..sub {
-                    let phi = -std::f64::consts::PI + dphi * (ip as f64 + (b as f64 + 0.5) / sub as f64);
+                    let phi =
+                        -std::f64::consts::PI + dphi * (ip as f64 + (b as f64 + 0.5) / sub as f64);
                     let w = Vec3::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
                     s += pdf(w) * st;
                 }
@@ -59,10 +66,22 @@ fn chi_square(n: usize, sub: usize, mut sample: impl FnMut(&mut CamRng) -> Optio
         }
     }
     if std::env::var("CHI_DEBUG").is_ok() {
-        let mut v: Vec<(f64, usize)> = obs.iter().zip(&exp).enumerate().filter(|(_, (_, e))| **e >= 5.0).map(|(i, (o, e))| ((o - e) / e.sqrt(), i)).collect();
+        let mut v: Vec<(f64, usize)> = obs
+            .iter()
+            .zip(&exp)
+            .enumerate()
+            .filter(|(_, (_, e))| **e >= 5.0)
+            .map(|(i, (o, e))| ((o - e) / e.sqrt(), i))
+            .collect();
         v.sort_by(|a, b| b.0.abs().partial_cmp(&a.0.abs()).unwrap());
         for (z, i) in v.iter().take(6) {
-            eprintln!("bin z{} phi{}: obs {} exp {:.1} ({z:.1}σ)", i / NPHI, i % NPHI, obs[*i], exp[*i]);
+            eprintln!(
+                "bin z{} phi{}: obs {} exp {:.1} ({z:.1}σ)",
+                i / NPHI,
+                i % NPHI,
+                obs[*i],
+                exp[*i]
+            );
         }
     }
     let (mut chi2, mut dof) = (0.0, 0usize);
@@ -89,19 +108,69 @@ fn bsdfs() -> Vec<(&'static str, Bsdf, [f32; 4])> {
     let mk = |lobe, two_sided| Bsdf { lobe, two_sided };
     vec![
         ("diffuse", mk(Lobe::Diffuse, false), [0.7; 4]),
-        ("rough conductor α=0.3 (mirror)", mk(Lobe::Conductor { distr: Some(Ggx::new(0.3)), eta_k: None }, false), [1.0; 4]),
+        (
+            "rough conductor α=0.3 (mirror)",
+            mk(
+                Lobe::Conductor {
+                    distr: Some(Ggx::new(0.3)),
+                    eta_k: None,
+                },
+                false,
+            ),
+            [1.0; 4],
+        ),
         (
             "rough conductor α=0.5 (Au)",
-            mk(Lobe::Conductor { distr: Some(Ggx::new(0.5)), eta_k: camsim_render::bsdf::metals::metal("Au", 1.0) }, true),
+            mk(
+                Lobe::Conductor {
+                    distr: Some(Ggx::new(0.5)),
+                    eta_k: camsim_render::bsdf::metals::metal("Au", 1.0),
+                },
+                true,
+            ),
             [1.0; 4],
         ),
-        ("rough dielectric α=0.3", mk(Lobe::Dielectric { distr: Some(Ggx::new(0.3)), int_ior: Ior::Constant(1.5), ext_ior: 1.0 }, false), [1.0; 4]),
+        (
+            "rough dielectric α=0.3",
+            mk(
+                Lobe::Dielectric {
+                    distr: Some(Ggx::new(0.3)),
+                    int_ior: Ior::Constant(1.5),
+                    ext_ior: 1.0,
+                },
+                false,
+            ),
+            [1.0; 4],
+        ),
+        (
+            "rough dielectric α=0.09",
+            mk(
+                Lobe::Dielectric {
+                    distr: Some(Ggx::new(0.09)),
+                    int_ior: Ior::Constant(1.5),
+                    ext_ior: 1.0,
+                },
+                false,
+            ),
+            [1.0; 4],
+        ),
         (
             "rough dielectric α=0.4 dispersive",
-            mk(Lobe::Dielectric { distr: Some(Ggx::new(0.4)), int_ior: Ior::from_abbe(1.6, 30.0), ext_ior: 1.0 }, false),
+            mk(
+                Lobe::Dielectric {
+                    distr: Some(Ggx::new(0.4)),
+                    int_ior: Ior::from_abbe(1.6, 30.0),
+                    ext_ior: 1.0,
+                },
+                false,
+            ),
             [1.0; 4],
         ),
-        ("rough plastic α=0.3", mk(rough_plastic(0.3, 1.5, 0.5, false), false), [0.5; 4]),
+        (
+            "rough plastic α=0.3",
+            mk(rough_plastic(0.3, 1.5, 0.5, false), false),
+            [0.5; 4],
+        ),
     ]
 }
 
@@ -117,15 +186,22 @@ fn bsdf_samplers_match_their_densities() {
                 continue;
             }
         }
-        for (k, wi) in [Vec3::new(0.3, 0.1, 0.95), Vec3::new(-0.8, 0.3, 0.5), Vec3::new(0.2, -0.6, -0.77)]
-            .into_iter()
-            .enumerate()
+        for (k, wi) in [
+            Vec3::new(0.3, 0.1, 0.95),
+            Vec3::new(-0.8, 0.3, 0.5),
+            Vec3::new(0.2, -0.6, -0.77),
+        ]
+        .into_iter()
+        .enumerate()
         {
             let wi = wi.normalize();
             if wi.z < 0.0 && !matches!(bsdf.lobe, Lobe::Dielectric { .. }) && !bsdf.two_sided {
                 continue;
             }
-            let n: usize = std::env::var("CHI_N").ok().and_then(|v| v.parse().ok()).unwrap_or(200_000);
+            let n: usize = std::env::var("CHI_N")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(200_000);
             let p = chi_square(
                 n,
                 16,
@@ -139,11 +215,20 @@ fn bsdf_samplers_match_their_densities() {
                         "{name}: weight {} vs f/pdf {w}",
                         s.weight[0]
                     );
-                    assert!((s.pdf - pdf[0]).abs() <= 2e-3 * pdf[0] + 1e-5, "{name}: pdf {} vs {}", s.pdf, pdf[0]);
+                    assert!(
+                        (s.pdf - pdf[0]).abs() <= 2e-3 * pdf[0] + 1e-5,
+                        "{name}: pdf {} vs {}",
+                        s.pdf,
+                        pdf[0]
+                    );
                     Some(s.wo)
                 },
                 |w| bsdf.eval_pdf(wi, w, &refl, &WL).1[0] as f64,
-                17 + k as u64,
+                117 + k as u64
+                    + std::env::var("CHI_SEED")
+                        .ok()
+                        .and_then(|v| v.parse::<u64>().ok())
+                        .unwrap_or(0),
             );
             if p < 1e-3 {
                 failures.push(format!("{name} wi#{k}: p = {p:.2e}"));
@@ -160,15 +245,30 @@ fn bsdf_samplers_match_their_densities() {
 fn bsdfs_conserve_energy() {
     for (name, bsdf, _) in bsdfs() {
         let refl = [1.0f32; 4];
-        for wi in [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.95, 0.0, 0.3122)] {
+        for wi in [
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.6, 0.0, 0.8),
+            Vec3::new(0.95, 0.0, 0.3122),
+            Vec3::new(0.2, 0.0, -0.98),
+            Vec3::new(0.6, 0.0, -0.8),
+        ] {
             let wi = wi.normalize();
+            if wi.z < 0.0 && !matches!(bsdf.lobe, Lobe::Dielectric { .. }) {
+                continue;
+            }
             let n = 200_000;
             let mut rng = stream(5, &[2]);
             let (mut s1, mut s2) = (0.0f64, 0.0f64);
             let (mut e1, mut e2) = (0.0f64, 0.0f64);
             for _ in 0..n {
                 let mut x = 0.0f64;
-                if let Some(s) = bsdf.sample(wi, u(&mut rng), Vec2::new(u(&mut rng), u(&mut rng)), &refl, &WL) {
+                if let Some(s) = bsdf.sample(
+                    wi,
+                    u(&mut rng),
+                    Vec2::new(u(&mut rng), u(&mut rng)),
+                    &refl,
+                    &WL,
+                ) {
                     x = s.weight[0] as f64;
                     if s.wo.z * wi.z < 0.0 {
                         x *= (s.eta as f64).powi(2); // undo the (η_i/η_t)² radiance scaling
@@ -181,33 +281,69 @@ fn bsdfs_conserve_energy() {
                 let (f, _) = bsdf.eval_pdf(wi, w, &refl, &WL);
                 let mut y = f[0] as f64 * 4.0 * std::f64::consts::PI;
                 if w.z * wi.z < 0.0 {
-                    if let Lobe::Dielectric { int_ior, ext_ior, .. } = &bsdf.lobe {
+                    if let Lobe::Dielectric {
+                        int_ior, ext_ior, ..
+                    } = &bsdf.lobe
+                    {
                         let eta = (int_ior.at(WL[0]) / ext_ior) as f64;
-                        y *= if wi.z > 0.0 { eta * eta } else { 1.0 / (eta * eta) };
+                        y *= if wi.z > 0.0 {
+                            eta * eta
+                        } else {
+                            1.0 / (eta * eta)
+                        };
                     }
                 }
                 e1 += y;
                 e2 += y * y;
             }
-            let (m, v) = (s1 / n as f64, (s2 / n as f64 - (s1 / n as f64).powi(2)) / n as f64);
-            let (me, ve) = (e1 / n as f64, (e2 / n as f64 - (e1 / n as f64).powi(2)) / n as f64);
-            eprintln!("{name} wi.z={:.2}: sampled albedo {m:.4} ± {:.4}, eval-based {me:.4} ± {:.4}", wi.z, v.sqrt(), ve.sqrt());
+            let (m, v) = (
+                s1 / n as f64,
+                (s2 / n as f64 - (s1 / n as f64).powi(2)) / n as f64,
+            );
+            let (me, ve) = (
+                e1 / n as f64,
+                (e2 / n as f64 - (e1 / n as f64).powi(2)) / n as f64,
+            );
+            eprintln!(
+                "{name} wi.z={:.2}: sampled albedo {m:.4} ± {:.4}, eval-based {me:.4} ± {:.4}",
+                wi.z,
+                v.sqrt(),
+                ve.sqrt()
+            );
             assert!(m <= 1.0 + 4.0 * v.sqrt() + 1e-6, "{name}: albedo {m} > 1");
             assert!(m > 0.2, "{name}: albedo {m} implausibly low");
             let z = (m - me) / (v + ve).sqrt();
-            assert!(z.abs() < 4.5, "{name} wi.z={}: sampled {m} vs eval-based {me} (z = {z:.2})", wi.z);
+            assert!(
+                z.abs() < 4.5,
+                "{name} wi.z={}: sampled {m} vs eval-based {me} (z = {z:.2})",
+                wi.z
+            );
         }
     }
     // a white Lambertian reflects everything, exactly
-    let d = Bsdf { lobe: Lobe::Diffuse, two_sided: false };
-    let s = d.sample(Vec3::Z, 0.3, Vec2::new(0.2, 0.9), &[1.0; 4], &WL).unwrap();
+    let d = Bsdf {
+        lobe: Lobe::Diffuse,
+        two_sided: false,
+    };
+    let s = d
+        .sample(Vec3::Z, 0.3, Vec2::new(0.2, 0.9), &[1.0; 4], &WL)
+        .unwrap();
     assert_eq!(s.weight, [1.0; 4]);
     // a smooth dielectric splits energy exactly: R + T = 1
-    let g = Bsdf { lobe: Lobe::Dielectric { distr: None, int_ior: Ior::Constant(1.5), ext_ior: 1.0 }, two_sided: false };
+    let g = Bsdf {
+        lobe: Lobe::Dielectric {
+            distr: None,
+            int_ior: Ior::Constant(1.5),
+            ext_ior: 1.0,
+        },
+        two_sided: false,
+    };
     let wi = Vec3::new(0.5, 0.0, 0.866).normalize();
     let (f, _, _, _) = camsim_render::bsdf::fresnel_dielectric(wi.z, 1.5);
     let r = g.sample(wi, f * 0.5, Vec2::ZERO, &[1.0; 4], &WL).unwrap();
-    let t = g.sample(wi, 0.5 + f * 0.5, Vec2::ZERO, &[1.0; 4], &WL).unwrap();
+    let t = g
+        .sample(wi, 0.5 + f * 0.5, Vec2::ZERO, &[1.0; 4], &WL)
+        .unwrap();
     assert!(r.wo.z > 0.0 && t.wo.z < 0.0);
     assert!((t.weight[0] * 1.5 * 1.5 - 1.0).abs() < 1e-5);
     // Snell: sin θt = sin θi / η
@@ -226,19 +362,37 @@ fn area_light_sampling_matches_its_density() {
         Vec3::new(-0.5, 1.2, 0.6),
     ];
     // a tilted quad (two triangles of different area) and a second, smaller triangle
-    let tris = vec![[v[0], v[1], v[2]], [v[0], v[2], v[3]], [Vec3::new(1.0, 0.5, 1.0), Vec3::new(1.0, 0.5, 1.4), Vec3::new(1.3, 0.9, 1.2)]];
+    let tris = vec![
+        [v[0], v[1], v[2]],
+        [v[0], v[2], v[3]],
+        [
+            Vec3::new(1.0, 0.5, 1.0),
+            Vec3::new(1.0, 0.5, 1.4),
+            Vec3::new(1.3, 0.9, 1.2),
+        ],
+    ];
     let shading: Vec<TriShading> = tris
         .iter()
         .map(|t| {
             let c = (t[1] - t[0]).cross(t[2] - t[0]);
-            TriShading { ng: c.normalize(), n: [c.normalize(); 3], uv: [Vec2::ZERO; 3], material: 0, light: 0, area: 0.5 * c.length() }
+            TriShading {
+                ng: c.normalize(),
+                n: [c.normalize(); 3],
+                uv: [Vec2::ZERO; 3],
+                material: 0,
+                light: 0,
+                area: 0.5 * c.length(),
+            }
         })
         .collect();
     // the light faces down (−y): make sure the winding gives −y normals
     assert!(shading[0].ng.y < 0.0 && shading[1].ng.y < 0.0);
     let mat = Material {
         name: "light".into(),
-        bsdf: Bsdf { lobe: Lobe::Diffuse, two_sided: false },
+        bsdf: Bsdf {
+            lobe: Lobe::Diffuse,
+            two_sided: false,
+        },
         reflectance: SpectralTexture::Constant(TabulatedSpectrum::constant(0.0)),
         emission: Some(TabulatedSpectrum::constant(1.0)),
     };

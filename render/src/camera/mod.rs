@@ -232,9 +232,7 @@ mod tests {
         let f = Vec2::new(40.3, 177.9);
         let target = cam.perspective.film_to_plane(f) * 2.5;
         for &(u, v) in &[(0.1, 0.2), (0.9, 0.5), (0.33, 0.77)] {
-            let r = cam
-                .generate_ray(f, Vec2::new(u, v), &[550.0; 4])
-                .unwrap();
+            let r = cam.generate_ray(f, Vec2::new(u, v), &[550.0; 4]).unwrap();
             assert!(r.origin_m.truncate().length() <= 0.05 + 1e-6);
             let t = (-2.5 - r.origin_m.z) / r.direction.z;
             let hit = r.origin_m + r.direction * t;
