@@ -17,6 +17,7 @@ pub mod lens_cmd;
 pub mod plots;
 pub mod progress;
 pub mod raw_input;
+pub mod render_cmd;
 pub mod report;
 pub mod run;
 pub mod scene_cmd;

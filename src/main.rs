@@ -154,6 +154,8 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Path-trace a glTF 2.0 scene into a spectral EXR (band radiance + Z depth).
+    Render(camsim::render_cmd::RenderArgs),
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
@@ -315,6 +317,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::StudyPoint { point, out } => {
             camsim::study::run_point_file(&point, &out)?;
+            Ok(())
+        }
+        Command::Render(a) => {
+            let s = camsim::render_cmd::run_render(&a, true)?;
+            println!("{s}");
             Ok(())
         }
     }

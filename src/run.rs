@@ -43,8 +43,12 @@ pub struct RunFile {
     /// Camera: a path (relative to the config) or an inline camera object; default Table 1.
     #[serde(default)]
     pub camera: Option<Value>,
-    /// The scene target (a captures.json target object).
+    /// The scene target (a captures.json target object); not with `render`.
+    #[serde(default)]
     pub target: Value,
+    /// A glTF scene rendered by the path tracer instead of a target (docs/render.md).
+    #[serde(default)]
+    pub render: Option<RenderRunFile>,
     /// Fixed exposure (s); default auto-exposure.
     #[serde(default)]
     pub exposure_s: Option<f64>,
@@ -63,6 +67,26 @@ pub struct RunFile {
     /// Display settings.
     #[serde(default)]
     pub display: Option<DisplayFile>,
+}
+
+/// `render` section: a glTF scene path-traced at the sensor's sampling grid.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderRunFile {
+    /// The glTF scene (relative to the config).
+    pub scene: PathBuf,
+    /// Samples per pixel (default 16).
+    #[serde(default)]
+    pub spp: Option<u32>,
+    /// Camera model: pinhole | thinlens | lens:FILE | lightfield:CONFIG (default: auto).
+    #[serde(default)]
+    pub camera: Option<String>,
+    /// glTF camera name (default: the first).
+    #[serde(default)]
+    pub camera_name: Option<String>,
+    /// Mitsuba-style path-length limit (default −1, unlimited).
+    #[serde(default)]
+    pub max_depth: Option<i32>,
 }
 
 /// `processor` section.
@@ -109,6 +133,7 @@ fn bad(path: &Path, msg: impl std::fmt::Display) -> CliError {
 /// Validated run settings.
 struct Run {
     set: CaptureSet,
+    render: Option<RenderRunFile>,
     seed: u64,
     demosaic: DemosaicMethod,
     white_balance: String,
@@ -159,8 +184,22 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         ),
     };
     let camera = camera_from_file(&camera_path, camera_file)?;
-    let target = target_from_value(&raw.target, &dir, &camera.sensor)
-        .map_err(|m| bad(&path, format!("target{m}")))?;
+    let render = raw.render.clone().map(|mut r| {
+        r.scene = dir.join(&r.scene);
+        r
+    });
+    let target = match (&render, &raw.target) {
+        (Some(_), Value::Null) => crate::targets::ParsedTarget {
+            target: Target::Dark,
+            mean_luminance_cd_m2: None,
+            illuminant: None,
+            patch_labels: None,
+        },
+        (Some(_), _) => return Err(bad(&path, "give either target or render, not both")),
+        (None, Value::Null) => return Err(bad(&path, "target: required (or a render section)")),
+        (None, t) => target_from_value(t, &dir, &camera.sensor)
+            .map_err(|m| bad(&path, format!("target{m}")))?,
+    };
     let exposure = match (raw.exposure_s, raw.auto_exposure) {
         (Some(t), None) if t >= 0.0 && t.is_finite() => Exposure::Fixed(t),
         (None, a) => {
@@ -247,6 +286,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
     };
     Ok(Run {
         set,
+        render,
         seed: raw.seed.unwrap_or(0),
         demosaic,
         white_balance,
@@ -377,14 +417,17 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         10.0,
     )
     .expect("grid");
-    let scene = shot_scene(set, 0, &grid)?;
+    let (os, margin) =
+        crate::simulate::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
+    let scene = match &r.render {
+        Some(rf) => render_scene(rf, r.seed, sensor, os, margin, &grid)?,
+        None => shot_scene(set, 0, &grid)?,
+    };
     let window = (
         sensor.cols as f64 * sensor.pixel_pitch_m,
         sensor.rows as f64 * sensor.pixel_pitch_m,
     );
     let scene_luminance = mean_luminance(&scene, Some(window), &SI);
-    let (os, margin) =
-        crate::simulate::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
     let mut rad_w =
         to_sensor_pixels(&scene.radiance, os, margin, sensor.rows, sensor.cols).to_bands(&exr_grid);
     bands_energy_to_photons(&mut rad_w, &SI, true);
@@ -681,6 +724,71 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     bar.inc(1);
     bar.finish_and_clear();
     Ok((report, files))
+}
+
+/// Path-trace the glTF scene of a `render` section on the scene sampling grid of the sensor
+/// ((rows + 2·margin)·os × (cols + 2·margin)·os samples of pitch pixel_pitch/os; the glTF
+/// camera's field of view spans the whole grid), bands centred on the run's wavelengths.
+fn render_scene(
+    rf: &RenderRunFile,
+    seed: u64,
+    sensor: &camsim_sensor::SensorModel,
+    os: usize,
+    margin: usize,
+    grid: &WavelengthGrid,
+) -> Result<camsim_core::SceneRadiance, CliError> {
+    use camsim_render::job::{prepare, CameraChoice, RenderJob};
+    let step = grid
+        .step_nm()
+        .ok_or_else(|| CliError::input(&rf.scene, "render: the wavelength grid must be regular"))?;
+    let (w0, wn) = (grid.wavelength_nm[0], grid.wavelength_nm[grid.len() - 1]);
+    let bands = camsim_render::Bands::new(w0 - step / 2.0, wn + step / 2.0, step)
+        .map_err(|e| CliError::input(&rf.scene, format!("render bands: {e}")))?;
+    let camera: CameraChoice = match &rf.camera {
+        None => CameraChoice::Auto,
+        Some(c) => c
+            .parse()
+            .map_err(|e: String| CliError::input(&rf.scene, e))?,
+    };
+    let job = RenderJob {
+        scene: rf.scene.clone(),
+        camera_name: rf.camera_name.clone(),
+        camera,
+        width: ((sensor.cols + 2 * margin) * os) as u32,
+        height: Some(((sensor.rows + 2 * margin) * os) as u32),
+        aperture_radius_m: None,
+        focus_distance_m: None,
+        settings: camsim_render::RenderSettings {
+            spp: rf.spp.unwrap_or(16),
+            seed,
+            bands,
+            max_depth: rf.max_depth.unwrap_or(-1),
+            rr_depth: 5,
+            variance: false,
+            depth_spp: 0,
+        },
+    };
+    let err = |e: camsim_render::RenderError| CliError::input(&rf.scene, e.to_string());
+    let p = prepare(&job).map_err(err)?;
+    if p.camera.output_quantity() != camsim_render::camera::OutputQuantity::Radiance {
+        return Err(CliError::input(
+            &rf.scene,
+            "render.camera: camsim run needs a radiance camera (pinhole or thinlens); the optics stage forms the image",
+        ));
+    }
+    let out = camsim_render::render(
+        &p.scene,
+        p.camera.as_ref(),
+        p.camera_to_world,
+        &job.settings,
+        None,
+    );
+    let mut sr =
+        camsim_render::output::scene_radiance(&out, sensor.pixel_pitch_m / os as f64, None)
+            .map_err(err)?;
+    // resample the band-centre cube onto the run's grid (same wavelengths)
+    sr.radiance = sr.radiance.to_bands(grid);
+    Ok(sr)
 }
 
 fn write_rgb16(path: &Path, data: &[u16], rows: usize, cols: usize) -> Result<(), CliError> {

@@ -6,6 +6,7 @@ mod lens_blur;
 mod lens_cli;
 mod oracles;
 mod real_data;
+mod render;
 mod run;
 mod statistics;
 mod study;

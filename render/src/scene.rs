@@ -1,0 +1,504 @@
+//! The render scene: world-space triangles in a CWBVH (obvhs: Ylitie et al., "Efficient
+//! Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs", HPG 2017), their shading
+//! attributes, materials, emitters and cameras.
+use crate::bsdf::Bsdf;
+use crate::camera::Perspective;
+use crate::sampling::{square_to_triangle, Distribution1D};
+use crate::spectral::{SigmoidPoly, TabulatedSpectrum, N_WL};
+use glam::{Mat4, Vec2, Vec3, Vec3A};
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::{Ray, RayHit};
+
+/// Intersection data of one triangle (Möller & Trumbore 1997): vertex 0 and two edges.
+#[derive(Debug, Clone, Copy)]
+pub struct TriGeom {
+    /// Vertex 0 (m).
+    pub v0: Vec3A,
+    /// v1 − v0.
+    pub e1: Vec3A,
+    /// v2 − v0.
+    pub e2: Vec3A,
+}
+
+impl TriGeom {
+    /// Distance along the ray to the hit, ∞ for a miss or outside [tmin, tmax].
+    #[inline(always)]
+    pub fn intersect(&self, ray: &Ray) -> f32 {
+        let p = ray.direction.cross(self.e2);
+        let det = self.e1.dot(p);
+        if det == 0.0 {
+            return f32::INFINITY;
+        }
+        let inv = 1.0 / det;
+        let s = ray.origin - self.v0;
+        // a small tolerance on the barycentrics closes cracks along shared edges (a ray
+        // exactly on an edge may otherwise miss both triangles in floating point)
+        const EPS: f32 = 1e-6;
+        let u = s.dot(p) * inv;
+        if !(-EPS..=1.0 + EPS).contains(&u) {
+            return f32::INFINITY;
+        }
+        let q = s.cross(self.e1);
+        let v = ray.direction.dot(q) * inv;
+        if v < -EPS || u + v > 1.0 + EPS {
+            return f32::INFINITY;
+        }
+        let t = self.e2.dot(q) * inv;
+        if t >= ray.tmin && t <= ray.tmax {
+            t
+        } else {
+            f32::INFINITY
+        }
+    }
+
+    /// Barycentrics (b1, b2) of the point where the ray crosses the triangle's plane.
+    #[inline]
+    pub fn barycentrics(&self, o: Vec3A, d: Vec3A) -> Vec2 {
+        let p = d.cross(self.e2);
+        let inv = 1.0 / self.e1.dot(p);
+        let s = o - self.v0;
+        let q = s.cross(self.e1);
+        Vec2::new(s.dot(p) * inv, d.dot(q) * inv)
+    }
+}
+
+/// Shading attributes of one triangle.
+#[derive(Debug, Clone, Copy)]
+pub struct TriShading {
+    /// Unit geometric normal (right-handed from the CCW winding).
+    pub ng: Vec3,
+    /// Per-vertex unit normals (equal to `ng` when the mesh has none).
+    pub n: [Vec3; 3],
+    /// Per-vertex texture coordinates (zero when absent).
+    pub uv: [Vec2; 3],
+    /// Material index.
+    pub material: u32,
+    /// Index in the area-light list, or u32::MAX.
+    pub light: u32,
+    /// Area (m²).
+    pub area: f32,
+}
+
+/// A spectral reflectance that may vary over the surface.
+#[derive(Debug, Clone)]
+pub enum SpectralTexture {
+    /// The same spectrum everywhere.
+    Constant(TabulatedSpectrum),
+    /// An RGB image upsampled per texel (sigmoid-polynomial coefficients), nearest texel with
+    /// repeat/clamp wrapping, sampled at the hit's texture coordinates.
+    Image {
+        /// Width (texels).
+        width: u32,
+        /// Height (texels).
+        height: u32,
+        /// Per-texel coefficients (row 0 = top of the image, v = 0).
+        coeffs: Vec<SigmoidPoly>,
+        /// Repeat (true) or clamp along u and v.
+        repeat: [bool; 2],
+        /// Mean reflectance (for sampling weights).
+        mean: f32,
+    },
+}
+
+impl SpectralTexture {
+    /// Reflectance at the 4 wavelengths and texture coordinates `uv`.
+    #[inline]
+    pub fn eval(&self, uv: Vec2, wl: &[f32; N_WL]) -> [f32; N_WL] {
+        match self {
+            SpectralTexture::Constant(s) => s.eval4(wl),
+            SpectralTexture::Image {
+                width,
+                height,
+                coeffs,
+                repeat,
+                ..
+            } => {
+                let wrap = |x: f32, n: u32, rep: bool| -> usize {
+                    let t = if rep {
+                        x - x.floor()
+                    } else {
+                        x.clamp(0.0, 1.0)
+                    };
+                    ((t * n as f32) as usize).min(n as usize - 1)
+                };
+                let i = wrap(uv.x, *width, repeat[0]);
+                let j = wrap(uv.y, *height, repeat[1]);
+                let c = &coeffs[j * *width as usize + i];
+                [c.eval(wl[0]), c.eval(wl[1]), c.eval(wl[2]), c.eval(wl[3])]
+            }
+        }
+    }
+    /// Mean value over the visible range (Mitsuba's `mean()`, used for sampling weights).
+    pub fn mean(&self) -> f32 {
+        match self {
+            SpectralTexture::Constant(s) => s.mean_over(360.0, 830.0),
+            SpectralTexture::Image { mean, .. } => *mean,
+        }
+    }
+}
+
+/// A material: BSDF, its reflectance, and optional one-sided area emission.
+#[derive(Debug, Clone)]
+pub struct Material {
+    /// Name (glTF material name or index).
+    pub name: String,
+    /// Scattering.
+    pub bsdf: Bsdf,
+    /// Diffuse (or specular) reflectance.
+    pub reflectance: SpectralTexture,
+    /// Emitted spectral radiance (W m⁻² sr⁻¹ nm⁻¹) from the front (CCW) side.
+    pub emission: Option<TabulatedSpectrum>,
+}
+
+/// A point-like or directional light (KHR_lights_punctual).
+#[derive(Debug, Clone)]
+pub enum PunctualLight {
+    /// Point or spot light.
+    Point {
+        /// Position (m).
+        position_m: Vec3,
+        /// Spectral radiant intensity (W sr⁻¹ nm⁻¹) on the axis.
+        intensity: TabulatedSpectrum,
+        /// Spot axis (unit, the direction the light points) and cone cosines (inner, outer);
+        /// None for an isotropic point light.
+        spot: Option<(Vec3, f32, f32)>,
+    },
+    /// Distant light.
+    Directional {
+        /// Direction the light travels (unit).
+        direction: Vec3,
+        /// Spectral irradiance on a surface facing the light (W m⁻² nm⁻¹).
+        irradiance: TabulatedSpectrum,
+    },
+}
+
+impl PunctualLight {
+    /// glTF spot falloff: clamp((cos − cos_outer)/(cos_inner − cos_outer), 0, 1)².
+    #[inline]
+    pub fn spot_factor(&self, dir_from_light: Vec3) -> f32 {
+        match self {
+            PunctualLight::Point {
+                spot: Some((axis, ci, co)),
+                ..
+            } => {
+                let c = axis.dot(dir_from_light);
+                let t = ((c - co) / (ci - co).max(1e-4)).clamp(0.0, 1.0);
+                t * t
+            }
+            _ => 1.0,
+        }
+    }
+}
+
+/// A camera found in the scene.
+#[derive(Debug, Clone)]
+pub struct SceneCamera {
+    /// Node or camera name.
+    pub name: String,
+    /// Camera-to-world transform with the scale removed.
+    pub to_world: Mat4,
+    /// Vertical field of view (rad).
+    pub yfov_rad: f32,
+    /// glTF aspectRatio when given.
+    pub aspect_ratio: Option<f32>,
+    /// Near clip (m).
+    pub znear_m: f32,
+    /// Far clip (m).
+    pub zfar_m: Option<f32>,
+    /// `extras.thinlens` of the camera node or camera: (aperture radius, focus distance) (m).
+    pub thinlens: Option<(f32, f32)>,
+}
+
+impl SceneCamera {
+    /// The perspective projection for a film of `width × height` px.
+    pub fn perspective(&self, width_px: u32, height_px: u32) -> Perspective {
+        Perspective {
+            width_px,
+            height_px,
+            yfov_rad: self.yfov_rad,
+            znear_m: self.znear_m,
+            zfar_m: self.zfar_m.unwrap_or(f32::INFINITY),
+        }
+    }
+}
+
+/// Everything the integrator needs.
+pub struct Scene {
+    /// Triangles in BVH order.
+    pub tris: Vec<TriGeom>,
+    /// Shading attributes in BVH order.
+    pub shading: Vec<TriShading>,
+    /// The CWBVH over `tris` (primitive i of the BVH is `tris[i]`).
+    pub bvh: Option<CwBvh>,
+    /// Materials.
+    pub materials: Vec<Material>,
+    /// Triangle index (BVH order) of each area light.
+    pub area_lights: Vec<u32>,
+    /// Point, spot and directional lights.
+    pub punctual: Vec<PunctualLight>,
+    /// Light selection: area lights first, then punctual lights, by power.
+    pub light_distr: Option<Distribution1D>,
+    /// Cameras in document order.
+    pub cameras: Vec<SceneCamera>,
+    /// Bounding-sphere centre and radius of the geometry (for directional lights).
+    pub bounds_center: Vec3,
+    /// Bounding-sphere radius (m).
+    pub bounds_radius: f32,
+}
+
+/// A closest hit.
+#[derive(Debug, Clone, Copy)]
+pub struct Hit {
+    /// Distance along the (unit) ray (m).
+    pub t: f32,
+    /// Triangle (BVH order).
+    pub prim: u32,
+}
+
+/// A light sample seen from a shading point.
+#[derive(Debug, Clone, Copy)]
+pub struct LightSample {
+    /// Unit direction from the shading point to the light.
+    pub dir: Vec3,
+    /// Distance to the light point (∞ for a directional light).
+    pub dist: f32,
+    /// Emitted radiance (area), intensity/d² (point) or irradiance (directional) per wavelength,
+    /// already divided by the density of the sample (solid angle × selection).
+    pub weight: [f32; N_WL],
+    /// Density of the direction per steradian (for MIS; 0 for Dirac lights).
+    pub pdf: f32,
+    /// True for point and directional lights (no MIS).
+    pub delta: bool,
+}
+
+impl Scene {
+    /// Build the acceleration structure and the light distribution from world-space triangles.
+    pub fn build(
+        triangles: Vec<[Vec3; 3]>,
+        mut shading: Vec<TriShading>,
+        materials: Vec<Material>,
+        punctual: Vec<PunctualLight>,
+        cameras: Vec<SceneCamera>,
+    ) -> Scene {
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for t in &triangles {
+            for v in t {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+        }
+        let (bounds_center, bounds_radius) = if triangles.is_empty() {
+            (Vec3::ZERO, 1.0)
+        } else {
+            (0.5 * (lo + hi), (0.5 * (hi - lo).length()).max(1e-3))
+        };
+        let (tris, bvh) = if triangles.is_empty() {
+            (Vec::new(), None)
+        } else {
+            let obv: Vec<obvhs::triangle::Triangle> = triangles
+                .iter()
+                .map(|t| obvhs::triangle::Triangle {
+                    v0: t[0].into(),
+                    v1: t[1].into(),
+                    v2: t[2].into(),
+                })
+                .collect();
+            let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+                &obv,
+                obvhs::BvhBuildParams::medium_build(),
+                &mut std::time::Duration::default(),
+            );
+            // reorder so that BVH primitive i is triangle i (no indirection while tracing)
+            let order: Vec<usize> = bvh.primitive_indices.iter().map(|&i| i as usize).collect();
+            let tris = order
+                .iter()
+                .map(|&i| {
+                    let t = &triangles[i];
+                    TriGeom {
+                        v0: t[0].into(),
+                        e1: (t[1] - t[0]).into(),
+                        e2: (t[2] - t[0]).into(),
+                    }
+                })
+                .collect();
+            shading = order.iter().map(|&i| shading[i]).collect();
+            (tris, Some(bvh))
+        };
+        // area lights and the selection distribution (weight ∝ area × peak radiance × π)
+        let mut area_lights = Vec::new();
+        let mut weights = Vec::new();
+        for (i, s) in shading.iter_mut().enumerate() {
+            s.light = u32::MAX;
+            if let Some(e) = &materials[s.material as usize].emission {
+                let p = e.max_value() as f64 * s.area as f64 * std::f64::consts::PI;
+                if p > 0.0 && s.area > 0.0 {
+                    s.light = area_lights.len() as u32;
+                    area_lights.push(i as u32);
+                    weights.push(p);
+                }
+            }
+        }
+        for l in &punctual {
+            weights.push(match l {
+                PunctualLight::Point { intensity, .. } => {
+                    intensity.max_value() as f64 * 4.0 * std::f64::consts::PI
+                }
+                PunctualLight::Directional { irradiance, .. } => {
+                    irradiance.max_value() as f64
+                        * std::f64::consts::PI
+                        * (bounds_radius as f64).powi(2)
+                }
+            });
+        }
+        let light_distr = Distribution1D::new(&weights);
+        Scene {
+            tris,
+            shading,
+            bvh,
+            materials,
+            area_lights,
+            punctual,
+            light_distr,
+            cameras,
+            bounds_center,
+            bounds_radius,
+        }
+    }
+
+    /// Closest hit along the ray within [tmin, tmax].
+    #[inline]
+    pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
+        let bvh = self.bvh.as_ref()?;
+        let ray = Ray::new(o.into(), d.into(), tmin, tmax);
+        let mut hit = RayHit::none();
+        let tris = &self.tris;
+        if bvh.ray_traverse(ray, &mut hit, |r, id| tris[id].intersect(r)) {
+            Some(Hit {
+                t: hit.t,
+                prim: hit.primitive_id,
+            })
+        } else {
+            None
+        }
+    }
+
+    /// True when nothing blocks the segment (tmin, tmax) along the ray.
+    #[inline]
+    pub fn unoccluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        let Some(bvh) = self.bvh.as_ref() else {
+            return true;
+        };
+        let ray = Ray::new(o.into(), d.into(), tmin, tmax);
+        let tris = &self.tris;
+        bvh.ray_traverse_miss(ray, |r, id| tris[id].intersect(r))
+    }
+
+    /// Density (per steradian) of sampling the direction to point `p` on area-light triangle
+    /// `prim` from distance `dist` with cos θ at the light `cos_l` (for MIS on emitter hits).
+    #[inline]
+    pub fn area_light_pdf(&self, prim: u32, dist: f32, cos_l: f32) -> f32 {
+        let s = &self.shading[prim as usize];
+        let Some(d) = &self.light_distr else {
+            return 0.0;
+        };
+        if s.light == u32::MAX || cos_l <= 0.0 {
+            return 0.0;
+        }
+        d.pmf(s.light as usize) / s.area * dist * dist / cos_l
+    }
+
+    /// Sample a light as seen from `p` (next-event estimation). `u` picks the light, `u2` the
+    /// point on it. Returns None when the light faces away or has no power.
+    #[inline]
+    pub fn sample_light(&self, p: Vec3, u: f32, u2: Vec2, wl: &[f32; N_WL]) -> Option<LightSample> {
+        let distr = self.light_distr.as_ref()?;
+        let (li, pmf, _) = distr.sample(u);
+        if pmf <= 0.0 {
+            return None;
+        }
+        if li < self.area_lights.len() {
+            let prim = self.area_lights[li] as usize;
+            let g = &self.tris[prim];
+            let s = &self.shading[prim];
+            let b = square_to_triangle(u2);
+            let q: Vec3 = (g.v0 + g.e1 * b.x + g.e2 * b.y).into();
+            let to = q - p;
+            let d2 = to.length_squared();
+            if !(d2 > 0.0) {
+                return None;
+            }
+            let dist = d2.sqrt();
+            let dir = to / dist;
+            // one-sided emitter: the shading normal decides the front, as in Mitsuba
+            let ns = shading_normal(s, b);
+            if ns.dot(-dir) <= 0.0 {
+                return None;
+            }
+            let cos_l = s.ng.dot(-dir).abs();
+            if cos_l <= 1e-7 {
+                return None;
+            }
+            let pdf = pmf / s.area * d2 / cos_l;
+            let le = self.materials[s.material as usize]
+                .emission
+                .as_ref()?
+                .eval4(wl);
+            Some(LightSample {
+                dir,
+                dist,
+                weight: le.map(|v| v / pdf),
+                pdf,
+                delta: false,
+            })
+        } else {
+            match &self.punctual[li - self.area_lights.len()] {
+                l @ PunctualLight::Point {
+                    position_m,
+                    intensity,
+                    ..
+                } => {
+                    let to = *position_m - p;
+                    let d2 = to.length_squared();
+                    if !(d2 > 0.0) {
+                        return None;
+                    }
+                    let dist = d2.sqrt();
+                    let dir = to / dist;
+                    let k = l.spot_factor(-dir) / (d2 * pmf);
+                    if k <= 0.0 {
+                        return None;
+                    }
+                    Some(LightSample {
+                        dir,
+                        dist,
+                        weight: intensity.eval4(wl).map(|v| v * k),
+                        pdf: 0.0,
+                        delta: true,
+                    })
+                }
+                PunctualLight::Directional {
+                    direction,
+                    irradiance,
+                } => Some(LightSample {
+                    dir: -*direction,
+                    dist: f32::INFINITY,
+                    weight: irradiance.eval4(wl).map(|v| v / pmf),
+                    pdf: 0.0,
+                    delta: true,
+                }),
+            }
+        }
+    }
+}
+
+/// Interpolated unit shading normal at barycentrics b = (b1, b2).
+#[inline]
+pub fn shading_normal(s: &TriShading, b: Vec2) -> Vec3 {
+    let n = s.n[0] * (1.0 - b.x - b.y) + s.n[1] * b.x + s.n[2] * b.y;
+    let l = n.length();
+    if l > 0.0 && l.is_finite() {
+        n / l
+    } else {
+        s.ng
+    }
+}
