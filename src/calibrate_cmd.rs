@@ -209,13 +209,8 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
         ..CalibrationOptions::default()
     };
     let result = calibrate(sensor, &shots, &opts);
-    let chart = patch_spectral::patch_spectral(
-        &patch_shots,
-        sensor,
-        o,
-        &result,
-        &opts.spectral_grid,
-    );
+    let chart =
+        patch_spectral::patch_spectral(&patch_shots, sensor, o, &result, &opts.spectral_grid);
     let fitted = fitted_camera_json(
         &set.camera_path,
         &result,
@@ -388,36 +383,43 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
         }
         // chart (per-patch) spectral efficiencies with ±1σ bands, and the fit per observation
         if let Some(f) = chart.fit.get() {
-            let palette = [[200u8, 30, 30], [20, 140, 40], [30, 60, 200], [120, 60, 160]];
+            let palette = [
+                [200u8, 30, 30],
+                [20, 140, 40],
+                [30, 60, 200],
+                [120, 60, 160],
+            ];
             let colour = |name: &str, i: usize| match name {
                 "r" => palette[0],
                 "g" => palette[1],
                 "b" => palette[2],
                 _ => palette[(i + 3) % palette.len()],
             };
-            let series: Vec<plots::BandSeries> = f
-                .qe
-                .channels
-                .iter()
-                .enumerate()
-                .map(|(i, ch)| plots::BandSeries {
-                    name: format!("{} ±1σ", ch.name),
-                    colour: colour(&ch.name, i),
-                    points: f
-                        .qe
-                        .wavelength_nm
-                        .iter()
-                        .zip(ch.qe.iter().zip(&ch.std_error))
-                        .map(|(w, (v, e))| (*w, *v, (v - e).max(0.0), v + e))
-                        .collect(),
-                    dashed: false,
-                })
-                .collect();
+            let series: Vec<plots::BandSeries> =
+                f.qe.channels
+                    .iter()
+                    .enumerate()
+                    .map(|(i, ch)| plots::BandSeries {
+                        name: format!("{} ±1σ", ch.name),
+                        colour: colour(&ch.name, i),
+                        points: f
+                            .qe
+                            .wavelength_nm
+                            .iter()
+                            .zip(ch.qe.iter().zip(&ch.std_error))
+                            .map(|(w, (v, e))| (*w, *v, (v - e).max(0.0), v + e))
+                            .collect(),
+                        dashed: false,
+                    })
+                    .collect();
             plots::band_plot(
                 &put("chart_spectral_qe.png"),
                 "Channel spectral efficiency from chart patches (Appendix B)",
                 &series,
-                ("wavelength (nm)", "QE (electrons / photon of the given radiance)"),
+                (
+                    "wavelength (nm)",
+                    "QE (electrons / photon of the given radiance)",
+                ),
             )?;
             figures.push((
                 "chart_spectral_qe.png".into(),

@@ -178,10 +178,7 @@ pub fn llanos_flea3_bandpass(data_dir: &Path, out: &Path) -> Result<PathBuf, Cli
             .iter()
             .map(|r| {
                 // negative ratios are spectrometer noise around 0
-                let v: Vec<f64> = keep
-                    .iter()
-                    .map(|&i| sig6((t[i] * r[i]).max(0.0)))
-                    .collect();
+                let v: Vec<f64> = keep.iter().map(|&i| sig6((t[i] * r[i]).max(0.0))).collect();
                 json!({"wavelength_nm": wl_kept, "values": v})
             })
             .collect();
@@ -213,7 +210,8 @@ pub fn llanos_flea3_bandpass(data_dir: &Path, out: &Path) -> Result<PathBuf, Cli
     for n in list("colorchecker_bandpass")? {
         let p: Vec<&str> = n.split('_').collect();
         let (Some(nm), Some(ms)) = (
-            p.get(2).and_then(|s| s.trim_end_matches("nm").parse::<u32>().ok()),
+            p.get(2)
+                .and_then(|s| s.trim_end_matches("nm").parse::<u32>().ok()),
             p.get(3).and_then(|s| ms_of(s)),
         ) else {
             continue;
@@ -237,7 +235,10 @@ pub fn llanos_flea3_bandpass(data_dir: &Path, out: &Path) -> Result<PathBuf, Cli
         if p[0] != "d2" {
             continue;
         }
-        link(&data_dir.join("dark_frames").join(&n), &out.join("raw").join(&n))?;
+        link(
+            &data_dir.join("dark_frames").join(&n),
+            &out.join("raw").join(&n),
+        )?;
         darks.entry(ms).or_default().push(format!("raw/{n}"));
     }
     if chart.is_empty() {
@@ -254,8 +255,10 @@ pub fn llanos_flea3_bandpass(data_dir: &Path, out: &Path) -> Result<PathBuf, Cli
         })
         .collect();
     for ((nm, ms), frames) in chart {
-        shots.push(json!({"id": format!("cc-{nm}nm-{ms}ms"), "target": targets[&nm],
-                          "exposure_s": ms as f64 / 1000.0, "frames": frames}));
+        shots.push(
+            json!({"id": format!("cc-{nm}nm-{ms}ms"), "target": targets[&nm],
+                          "exposure_s": ms as f64 / 1000.0, "frames": frames}),
+        );
     }
     let write = |p: &Path, text: String| {
         write_atomically(p, |tmp| std::fs::write(tmp, &text)).map_err(|e| CliError::output(p, e))

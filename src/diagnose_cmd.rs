@@ -234,7 +234,8 @@ fn fitted_camera_json(
         if let Some(camsim_sensor::Nonlinearity::Quadratic { coefficient_per_v }) =
             fs.effects.nonlinearity
         {
-            s["nonlinearity"] = json!({"kind": "quadratic", "coefficient_per_v": coefficient_per_v});
+            s["nonlinearity"] =
+                json!({"kind": "quadratic", "coefficient_per_v": coefficient_per_v});
         }
     }
     if fs.effects.crosstalk != bs.effects.crosstalk {
@@ -246,7 +247,8 @@ fn fitted_camera_json(
         let old = cam["optics"]["exposure_scale"]["factor"]
             .as_f64()
             .unwrap_or(1.0);
-        cam["optics"]["exposure_scale"] = json!({"factor": old * f.exposure_factor / b.exposure_factor});
+        cam["optics"]["exposure_scale"] =
+            json!({"factor": old * f.exposure_factor / b.exposure_factor});
     }
     cam
 }
@@ -410,9 +412,8 @@ pub fn run_diagnose(
     let fitted = fitted_camera_json(&camera_json, camera_dir, &diag, names);
     // The fitted camera must be one `camsim simulate` reads.
     let fitted_path = out.join("fitted_camera.json");
-    let raw: CameraFile = serde_json::from_value(fitted.clone()).map_err(|e| {
-        CliError::Other(format!("internal: the fitted camera does not parse: {e}"))
-    })?;
+    let raw: CameraFile = serde_json::from_value(fitted.clone())
+        .map_err(|e| CliError::Other(format!("internal: the fitted camera does not parse: {e}")))?;
     camera_from_file(&fitted_path, raw)?;
     let report = report_json(&diag, &data, &skipped);
     with_staging(out, |st| {
@@ -504,12 +505,7 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
             })
             .collect()
     };
-    let rounds: Vec<Value> = d
-        .selection
-        .rounds
-        .iter()
-        .map(|r| json!(table(r)))
-        .collect();
+    let rounds: Vec<Value> = d.selection.rounds.iter().map(|r| json!(table(r))).collect();
     let sc = |l: &camsim_diagnose::mismatch::Located| -> Vec<Value> {
         l.shot_channels
             .iter()

@@ -428,3 +428,229 @@ pub fn write_frame_with(
     }
     write_atomically(path, |tmp| std::fs::write(tmp, &bytes)).map_err(|e| CliError::output(path, e))
 }
+
+/// How [`write_dng`] lays out a DNG.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DngLayout {
+    /// CFA tile from the active area's top-left, one string per row (letters r g b c m y w).
+    pub cfa: Vec<String>,
+    /// Black level repeat cell (rows, cols) and its values (row-major, DN).
+    pub black_repeat: (usize, usize),
+    /// Black levels of the cell.
+    pub black_level_dn: Vec<f64>,
+    /// Optional BlackLevelDeltaH (per active-area column) and DeltaV (per row).
+    pub black_delta_h: Vec<f64>,
+    /// BlackLevelDeltaV.
+    pub black_delta_v: Vec<f64>,
+    /// WhiteLevel (DN).
+    pub white_level: u32,
+    /// Masked border (top, left, bottom, right pixels) stored around the frame, filled with
+    /// the black level; the frame becomes the ActiveArea.
+    pub border: [usize; 4],
+    /// Raw image in a SubIFD of IFD 0 (with a small preview in IFD 0), as cameras and the
+    /// Adobe converter write it; else the raw image is IFD 0 itself.
+    pub raw_in_subifd: bool,
+    /// Bits per stored sample: 8 or 16.
+    pub bits_per_sample: u16,
+}
+
+impl DngLayout {
+    /// A plain layout for a camera: its CFA and black level, WhiteLevel 2^bits − 1, 16-bit
+    /// samples, raw image in a SubIFD.
+    pub fn for_sensor(s: &camsim_sensor::SensorModel) -> Self {
+        let cfa = s
+            .cfa
+            .tile
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .map(|&k| {
+                        s.channel_names[k]
+                            .chars()
+                            .next()
+                            .unwrap_or('g')
+                            .to_ascii_lowercase()
+                    })
+                    .collect()
+            })
+            .collect();
+        DngLayout {
+            cfa,
+            black_repeat: (1, 1),
+            black_level_dn: vec![s.black_level_dn],
+            black_delta_h: Vec::new(),
+            black_delta_v: Vec::new(),
+            white_level: s.max_dn() as u32,
+            border: [0; 4],
+            raw_in_subifd: true,
+            bits_per_sample: 16,
+        }
+    }
+}
+
+/// Write a mosaic as an uncompressed DNG (what [`crate::raw_input::dng::read_dng`] reads),
+/// atomically, with the `tiff` crate: DNGVersion 1.4, CFARepeatPatternDim/CFAPattern,
+/// BlackLevelRepeatDim/BlackLevel (RATIONAL: fractional pedestals survive), optional
+/// BlackLevelDeltaH/V, WhiteLevel and ActiveArea.
+pub fn write_dng(path: &Path, frame: &RawFrame, layout: &DngLayout) -> Result<(), CliError> {
+    use crate::raw_input::dng::tags as t;
+    use tiff::encoder::{Rational, TiffEncoder};
+    use tiff::tags::Tag;
+    let bad = |m: String| CliError::output(path, m);
+    let codes: Vec<u8> = layout
+        .cfa
+        .iter()
+        .flat_map(|r| r.chars())
+        .map(|c| {
+            "rgbcmyw"
+                .find(c.to_ascii_lowercase())
+                .map(|i| i as u8)
+                .ok_or_else(|| {
+                    bad(format!(
+                        "CFA letter '{c}' has no DNG colour code (r g b c m y w)"
+                    ))
+                })
+        })
+        .collect::<Result<_, _>>()?;
+    let (pr, pc) = (
+        layout.cfa.len(),
+        layout.cfa.first().map_or(0, |r| r.chars().count()),
+    );
+    if pr == 0 || pc == 0 || codes.len() != pr * pc {
+        return Err(bad("the CFA tile must be a non-empty rectangle".into()));
+    }
+    let (br, bc) = layout.black_repeat;
+    if br * bc != layout.black_level_dn.len() || br == 0 {
+        return Err(bad("black level cell size does not match its values".into()));
+    }
+    if layout.bits_per_sample != 8 && layout.bits_per_sample != 16 {
+        return Err(bad("bits_per_sample must be 8 or 16".into()));
+    }
+    let [bt, bl, bb, brr] = layout.border;
+    let (rows, cols) = (frame.rows + bt + bb, frame.cols + bl + brr);
+    let black_at = |r: usize, c: usize| -> f64 {
+        layout.black_level_dn[(r % br) * bc + c % bc]
+            + layout.black_delta_v.get(r).copied().unwrap_or(0.0)
+            + layout.black_delta_h.get(c).copied().unwrap_or(0.0)
+    };
+    let mut stored = vec![0u16; rows * cols];
+    for r in 0..rows {
+        for c in 0..cols {
+            let inside = r >= bt && r < bt + frame.rows && c >= bl && c < bl + frame.cols;
+            stored[r * cols + c] = if inside {
+                frame.dn[(r - bt) * frame.cols + c - bl]
+            } else {
+                // masked pixels read the black level of the nearest active pixel's cell
+                let (ar, ac) = (
+                    r.saturating_sub(bt).min(frame.rows - 1),
+                    c.saturating_sub(bl).min(frame.cols - 1),
+                );
+                black_at(ar, ac).round().max(0.0) as u16
+            };
+        }
+    }
+    let rational = |v: f64| -> Rational {
+        // 1/1000 DN resolution
+        Rational {
+            n: (v.max(0.0) * 1000.0).round() as u32,
+            d: 1000,
+        }
+    };
+    let srational = |v: f64| tiff::encoder::SRational {
+        n: (v * 1000.0).round() as i32,
+        d: 1000,
+    };
+    let write = |tmp: &Path| -> Result<(), tiff::TiffError> {
+        let f = std::io::BufWriter::new(File::create(tmp)?);
+        // the tiff encoder writes the platform's byte order (the reader handles both)
+        let mut enc = TiffEncoder::new(f)?;
+        let tag = Tag::from_u16_exhaustive;
+        let raw_tags =
+            |dir: &mut tiff::encoder::DirectoryEncoder<'_, _, _>| -> Result<(), tiff::TiffError> {
+                let off = if layout.bits_per_sample == 8 {
+                    let b: Vec<u8> = stored.iter().map(|&v| v.min(255) as u8).collect();
+                    dir.write_data(&b[..])?
+                } else {
+                    dir.write_data(&stored[..])?
+                };
+                dir.write_tag(tag(t::NEW_SUBFILE_TYPE), 0u32)?;
+                dir.write_tag(Tag::ImageWidth, cols as u32)?;
+                dir.write_tag(Tag::ImageLength, rows as u32)?;
+                dir.write_tag(Tag::BitsPerSample, layout.bits_per_sample)?;
+                dir.write_tag(Tag::Compression, 1u16)?;
+                dir.write_tag(Tag::PhotometricInterpretation, t::PHOTOMETRIC_CFA)?;
+                dir.write_tag(Tag::StripOffsets, off as u32)?;
+                dir.write_tag(Tag::SamplesPerPixel, 1u16)?;
+                dir.write_tag(Tag::RowsPerStrip, rows as u32)?;
+                dir.write_tag(
+                    Tag::StripByteCounts,
+                    (rows * cols * layout.bits_per_sample as usize / 8) as u32,
+                )?;
+                dir.write_tag(Tag::PlanarConfiguration, 1u16)?;
+                dir.write_tag(tag(t::CFA_REPEAT_PATTERN_DIM), &[pr as u16, pc as u16][..])?;
+                dir.write_tag(tag(t::CFA_PATTERN), &codes[..])?;
+                dir.write_tag(tag(t::CFA_LAYOUT), 1u16)?;
+                dir.write_tag(tag(t::BLACK_LEVEL_REPEAT_DIM), &[br as u16, bc as u16][..])?;
+                let levels: Vec<Rational> =
+                    layout.black_level_dn.iter().map(|&v| rational(v)).collect();
+                dir.write_tag(tag(t::BLACK_LEVEL), &levels[..])?;
+                if !layout.black_delta_h.is_empty() {
+                    let v: Vec<_> = layout.black_delta_h.iter().map(|&x| srational(x)).collect();
+                    dir.write_tag(tag(t::BLACK_LEVEL_DELTA_H), &v[..])?;
+                }
+                if !layout.black_delta_v.is_empty() {
+                    let v: Vec<_> = layout.black_delta_v.iter().map(|&x| srational(x)).collect();
+                    dir.write_tag(tag(t::BLACK_LEVEL_DELTA_V), &v[..])?;
+                }
+                dir.write_tag(tag(t::WHITE_LEVEL), layout.white_level)?;
+                if layout.border != [0; 4] {
+                    let aa = [
+                        bt as u32,
+                        bl as u32,
+                        (bt + frame.rows) as u32,
+                        (bl + frame.cols) as u32,
+                    ];
+                    dir.write_tag(tag(t::ACTIVE_AREA), &aa[..])?;
+                }
+                Ok(())
+            };
+        let dng_tags =
+            |dir: &mut tiff::encoder::DirectoryEncoder<'_, _, _>| -> Result<(), tiff::TiffError> {
+                dir.write_tag(tag(t::DNG_VERSION), &[1u8, 4, 0, 0][..])?;
+                dir.write_tag(tag(t::UNIQUE_CAMERA_MODEL), "camsim")?;
+                Ok(())
+            };
+        if layout.raw_in_subifd {
+            let mut sub = enc.extra_directory()?;
+            raw_tags(&mut sub)?;
+            let sub_off = sub.finish_with_offsets()?;
+            // IFD 0: an 8 × 8 grey preview (NewSubFileType 1) pointing at the raw SubIFD
+            let mut ifd0 = enc.image_directory()?;
+            let preview = [128u8; 64];
+            let off = ifd0.write_data(&preview[..])?;
+            ifd0.write_tag(tag(t::NEW_SUBFILE_TYPE), 1u32)?;
+            ifd0.write_tag(Tag::ImageWidth, 8u32)?;
+            ifd0.write_tag(Tag::ImageLength, 8u32)?;
+            ifd0.write_tag(Tag::BitsPerSample, 8u16)?;
+            ifd0.write_tag(Tag::Compression, 1u16)?;
+            ifd0.write_tag(Tag::PhotometricInterpretation, 1u16)?;
+            ifd0.write_tag(Tag::StripOffsets, off as u32)?;
+            ifd0.write_tag(Tag::SamplesPerPixel, 1u16)?;
+            ifd0.write_tag(Tag::RowsPerStrip, 8u32)?;
+            ifd0.write_tag(Tag::StripByteCounts, 64u32)?;
+            ifd0.write_tag(Tag::SubIfd, &[sub_off.offset][..])?;
+            dng_tags(&mut ifd0)?;
+            ifd0.finish()?;
+        } else {
+            let mut ifd0 = enc.image_directory()?;
+            raw_tags(&mut ifd0)?;
+            dng_tags(&mut ifd0)?;
+            ifd0.finish()?;
+        }
+        Ok(())
+    };
+    write_atomically(path, |tmp| {
+        write(tmp).map_err(|e| std::io::Error::other(e.to_string()))
+    })
+    .map_err(|e| CliError::output(path, e))
+}

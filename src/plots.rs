@@ -306,7 +306,10 @@ pub fn band_plot(
     series: &[BandSeries],
     axis_labels: (&str, &str),
 ) -> Result<(), CliError> {
-    let (x0, x1) = range(series.iter().flat_map(|s| s.points.iter().map(|p| p.0)), 0.0);
+    let (x0, x1) = range(
+        series.iter().flat_map(|s| s.points.iter().map(|p| p.0)),
+        0.0,
+    );
     let (y0, y1) = range(
         series
             .iter()
@@ -350,7 +353,10 @@ pub fn band_plot(
                             let t0 = k as f64 / 4.0;
                             let t1 = (k + 1) as f64 / 4.0;
                             let p = |t: f64| {
-                                (w[0].0 + t * (w[1].0 - w[0].0), w[0].1 + t * (w[1].1 - w[0].1))
+                                (
+                                    w[0].0 + t * (w[1].0 - w[0].0),
+                                    w[0].1 + t * (w[1].1 - w[0].1),
+                                )
                             };
                             segs.push(PathElement::new([p(t0), p(t1)], style));
                         }

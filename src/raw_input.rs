@@ -1,5 +1,8 @@
 //! Reading recorded frames: the spec's 16-bit PNG mosaics, plus 8/16-bit greyscale TIFF
-//! (real cameras' exports) — each as a [`RawFrame`] of DN as stored.
+//! (real cameras' exports), uncompressed DNG ([`dng`]) and headerless raw — each as a
+//! [`RawFrame`] of DN as stored.
+pub mod dng;
+
 use crate::error::CliError;
 use crate::frames::read_png16;
 use camsim_core::RawFrame;
@@ -80,7 +83,8 @@ pub fn read_frame_with(path: &Path, raw_format: Option<&RawFormat>) -> Result<Ra
     read_frame(path)
 }
 
-/// Read one recorded frame (PNG: 16-bit greyscale; TIFF: 8- or 16-bit greyscale).
+/// Read one recorded frame (PNG: 16-bit greyscale; TIFF: 8- or 16-bit greyscale; DNG: the
+/// active area of the CFA image, see [`dng::read_dng`]).
 pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
     let ext = path
         .extension()
@@ -89,6 +93,7 @@ pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
         .to_ascii_lowercase();
     match ext.as_str() {
         "png" => read_png16(path),
+        "dng" => dng::read_dng(path).map(|d| d.frame),
         "tif" | "tiff" => {
             let img = image::ImageReader::open(path)
                 .map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?
@@ -119,7 +124,7 @@ pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
         }
         other => Err(CliError::input(
             path,
-            format!("unsupported frame format \".{other}\" (expected .png, .tif, or .raw/.bin with raw_format)"),
+            format!("unsupported frame format \".{other}\" (expected .png, .tif, .dng, or .raw/.bin with raw_format)"),
         )),
     }
 }

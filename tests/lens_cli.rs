@@ -671,3 +671,77 @@ fn lens_cli_draw_writes_svg() {
     assert_eq!(text.matches("<polyline").count(), 14);
     assert!(!text.contains("NaN") && !text.contains("inf"));
 }
+
+/// `lens psf --method huygens`: the EXR holds the library's Huygens PSF of the refocused lens
+/// (same grid, same pupil sampling) and the summary its Strehl ratio; FFT-only / Huygens-only
+/// options are rejected with one error line.
+#[test]
+fn lens_cli_huygens_psf_is_the_library_psf() {
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("h.exr");
+    let (code, out, err) = run(&[
+        "lens",
+        "psf",
+        dgauss().to_str().unwrap(),
+        "--field-fraction",
+        "0.5",
+        "--wavelength-nm",
+        "550",
+        "--method",
+        "huygens",
+        "--samples",
+        "33",
+        "--sample-um",
+        "1.5",
+        "--pupil-samples",
+        "48",
+        "--defocus-mm",
+        "-0.19",
+        "--out",
+        exr.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "stderr: {err}");
+    let summary: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(summary["method"], "huygens");
+    assert_eq!(summary["samples"], 33);
+    let (rows, cols, chans, _) = camsim_core::exr_io::read_channels(&exr).unwrap();
+    assert_eq!((rows, cols), (33, 33));
+    let lens = camsim_lens::LensPrescription::from_json_file(
+        dgauss(),
+        &camsim_lens::GlassCatalog::bundled(),
+    )
+    .unwrap();
+    let l = lens.focused(lens.primary_nm).unwrap();
+    let d = l.surfaces.last().unwrap().thickness_mm;
+    let l = l.with_image_distance(d - 0.19);
+    let win = camsim_lens::huygens::HuygensWindow {
+        n: 33,
+        sample_mm: 1.5e-3,
+        offset_mm: [0.0, 0.0],
+    };
+    let h = l
+        .huygens_psf(10.0, 550.0, 48, &win, camsim_lens::Clipping::None)
+        .unwrap();
+    for (a, b) in chans[0].1.iter().zip(&h.psf.values) {
+        assert!((*a as f64 - b).abs() < 1e-6 * b.max(1e-3), "{a} vs {b}");
+    }
+    assert!((num(&summary["strehl_ratio"]) - h.strehl_ratio).abs() < 1e-12);
+    let (code, _, err) = run(&[
+        "lens",
+        "psf",
+        dgauss().to_str().unwrap(),
+        "--field-fraction",
+        "0",
+        "--wavelength-nm",
+        "550",
+        "--samples",
+        "33",
+        "--out",
+        exr.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("--method huygens") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+}

@@ -121,29 +121,108 @@ fn flea3_bandpass_explore() {
     let c = camsim::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
     eprintln!("total {:?}", t0.elapsed());
     let ch = &c["chart_channel_qe"];
-    eprintln!("status {} notes {} pedestal {} median icpt {}", ch["fit"]["status"], ch["notes"], ch["pedestal_dn"], ch["median_intercept_dn"]);
-    std::fs::write("/tmp/h4_cal.json", serde_json::to_string_pretty(&c).unwrap()).unwrap();
-    if let Some(r) = ch["fit"]["reason"].as_str() { eprintln!("reason {r}"); }
+    eprintln!(
+        "status {} notes {} pedestal {} median icpt {}",
+        ch["fit"]["status"], ch["notes"], ch["pedestal_dn"], ch["median_intercept_dn"]
+    );
+    std::fs::write(
+        "/tmp/h4_cal.json",
+        serde_json::to_string_pretty(&c).unwrap(),
+    )
+    .unwrap();
+    if let Some(r) = ch["fit"]["reason"].as_str() {
+        eprintln!("reason {r}");
+    }
     let q = &ch["fit"]["qe"];
     eprintln!("wl {}", q["wavelength_nm"]);
     for c in q["channels"].as_array().unwrap() {
-        eprintln!("{} alpha {} cv {}", c["name"], c["alpha"], c["cv_chi2_per_shot"]);
-        let v: Vec<String> = c["qe"].as_array().unwrap().iter().zip(c["std_error"].as_array().unwrap()).map(|(a, b)| format!("{:.3e}±{:.1e}", a.as_f64().unwrap(), b.as_f64().unwrap())).collect();
+        eprintln!(
+            "{} alpha {} cv {}",
+            c["name"], c["alpha"], c["cv_chi2_per_shot"]
+        );
+        let v: Vec<String> = c["qe"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(c["std_error"].as_array().unwrap())
+            .map(|(a, b)| format!("{:.3e}±{:.1e}", a.as_f64().unwrap(), b.as_f64().unwrap()))
+            .collect();
         eprintln!("  {}", v.join(" "));
     }
-    eprintln!("iterations {} gains {}", ch["gain_iterations"], ch["patch_illumination"].as_array().map(|a| a.iter().map(|g| format!("{:.3}±{:.3}", g["factor"].as_f64().unwrap(), g["sigma"].as_f64().unwrap())).collect::<Vec<_>>().join(" ")).unwrap_or_default());
+    eprintln!(
+        "iterations {} gains {}",
+        ch["gain_iterations"],
+        ch["patch_illumination"]
+            .as_array()
+            .map(|a| a
+                .iter()
+                .map(|g| format!(
+                    "{:.3}±{:.3}",
+                    g["factor"].as_f64().unwrap(),
+                    g["sigma"].as_f64().unwrap()
+                ))
+                .collect::<Vec<_>>()
+                .join(" "))
+            .unwrap_or_default()
+    );
     // per series chi2 and z
     let obs = ch["fit"]["observations"].as_array().unwrap();
     let mut by: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
     for o in obs {
-        let z = (o["signal"].as_f64().unwrap() - o["predicted"].as_f64().unwrap()) / o["sigma"].as_f64().unwrap();
-        by.entry(format!("{} {}", o["group"], o["channel"])).or_default().push(z);
+        let z = (o["signal"].as_f64().unwrap() - o["predicted"].as_f64().unwrap())
+            / o["sigma"].as_f64().unwrap();
+        by.entry(format!("{} {}", o["group"], o["channel"]))
+            .or_default()
+            .push(z);
     }
-    for (k, z) in &by { let chi = z.iter().map(|x| x*x).sum::<f64>()/z.len() as f64; let rel: Vec<f64> = obs.iter().filter(|o| format!("{} {}", o["group"], o["channel"]) == *k).map(|o| o["signal"].as_f64().unwrap()/o["predicted"].as_f64().unwrap()).collect(); let mut r2=rel.clone(); r2.sort_by(f64::total_cmp); eprintln!("   ratio median {:.3} min {:.3} max {:.3}", r2[r2.len()/2], r2[0], r2[r2.len()-1]); eprintln!("{k}: n {} chi2/n {chi:.2} zs {:?}", z.len(), z.iter().map(|v| (v*10.0).round()/10.0).collect::<Vec<_>>()); }
-    for l in ch["lines"].as_array().unwrap().iter().filter(|l| l["patch"] == 19 || l["patch"] == 1) {
-        eprintln!("{} p{} {} slope {:.4}±{:.4} icpt {:.3}±{:.3} n {} chi2 {} ri {:.3}", l["series"], l["patch"], l["channel"], l["slope_dn_per_s"].as_f64().unwrap_or(f64::NAN), l["slope_sigma_dn_per_s"].as_f64().unwrap_or(f64::NAN), l["intercept_dn"].as_f64().unwrap_or(f64::NAN), l["intercept_sigma_dn"].as_f64().unwrap_or(f64::NAN), l["n_points"], l["chi2_per_dof"], l["relative_illumination"].as_f64().unwrap());
+    for (k, z) in &by {
+        let chi = z.iter().map(|x| x * x).sum::<f64>() / z.len() as f64;
+        let rel: Vec<f64> = obs
+            .iter()
+            .filter(|o| format!("{} {}", o["group"], o["channel"]) == *k)
+            .map(|o| o["signal"].as_f64().unwrap() / o["predicted"].as_f64().unwrap())
+            .collect();
+        let mut r2 = rel.clone();
+        r2.sort_by(f64::total_cmp);
+        eprintln!(
+            "   ratio median {:.3} min {:.3} max {:.3}",
+            r2[r2.len() / 2],
+            r2[0],
+            r2[r2.len() - 1]
+        );
+        eprintln!(
+            "{k}: n {} chi2/n {chi:.2} zs {:?}",
+            z.len(),
+            z.iter()
+                .map(|v| (v * 10.0).round() / 10.0)
+                .collect::<Vec<_>>()
+        );
+    }
+    for l in ch["lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|l| l["patch"] == 19 || l["patch"] == 1)
+    {
+        eprintln!(
+            "{} p{} {} slope {:.4}±{:.4} icpt {:.3}±{:.3} n {} chi2 {} ri {:.3}",
+            l["series"],
+            l["patch"],
+            l["channel"],
+            l["slope_dn_per_s"].as_f64().unwrap_or(f64::NAN),
+            l["slope_sigma_dn_per_s"].as_f64().unwrap_or(f64::NAN),
+            l["intercept_dn"].as_f64().unwrap_or(f64::NAN),
+            l["intercept_sigma_dn"].as_f64().unwrap_or(f64::NAN),
+            l["n_points"],
+            l["chi2_per_dof"],
+            l["relative_illumination"].as_f64().unwrap()
+        );
     }
     std::fs::copy(out.join("chart_spectral_qe.png"), "/tmp/h4_chart_qe.png").ok();
     std::fs::copy(out.join("chart_fit.png"), "/tmp/h4_chart_fit.png").ok();
-    std::fs::write("/tmp/h4_cal.json", serde_json::to_string_pretty(&c).unwrap()).unwrap();
+    std::fs::write(
+        "/tmp/h4_cal.json",
+        serde_json::to_string_pretty(&c).unwrap(),
+    )
+    .unwrap();
 }

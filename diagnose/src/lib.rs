@@ -38,11 +38,11 @@ use stack::{ChannelMap, Stack};
 pub use camsim_core::RawFrame;
 pub use prnu::PrnuChannel;
 pub use ptc::PtcPoint;
-pub use spectral::{ChannelQe, SpectralQe};
 pub use spectral::{
     fit_spectral_efficiency, regularisation_weights, ObservationFit, SpectralFit,
     SpectralObservation,
 };
+pub use spectral::{ChannelQe, SpectralQe};
 
 /// What a calibration shot looked at.
 #[derive(Debug, Clone, PartialEq)]

@@ -112,7 +112,9 @@ pub struct SpectralFit {
 /// The grid of relative regularisation weights searched by cross-validation,
 /// 10⁻⁸ … 10² in half decades ([`ChannelQe::alpha`] is one of them).
 pub fn regularisation_weights() -> Vec<f64> {
-    (0..=20).map(|k| 10f64.powf(-8.0 + 0.5 * k as f64)).collect()
+    (0..=20)
+        .map(|k| 10f64.powf(-8.0 + 0.5 * k as f64))
+        .collect()
 }
 
 /// Second-difference operator on `n` grid values.

@@ -18,6 +18,8 @@
 //! * surfaces with the same medium on both sides (e.g. a stop in air) do not refract.
 //!
 //! Lost rays are marked, not removed; the arithmetic of a dead lane is discarded.
+// The per-lane loops index several parallel arrays on purpose (they vectorise).
+#![allow(clippy::needless_range_loop)]
 use crate::prescription::LensPrescription;
 use crate::trace::{intersect, Clipping, FieldAim, Ray, TracedRay};
 use rayon::prelude::*;

@@ -397,13 +397,14 @@ impl FieldModel {
             Focus::Prescription => lens.object_distance_mm,
             Focus::At(d) => d,
         };
-        for d in std::iter::once(&focus_distance_mm).chain(&opts.object_distances_mm) {
-            if let Some(d) = d {
-                if !(d.is_finite() && *d > 0.0) {
-                    return Err(bad(format!(
-                        "object distance {d} mm must be > 0 (None = infinity)"
-                    )));
-                }
+        for d in std::iter::once(&focus_distance_mm)
+            .chain(&opts.object_distances_mm)
+            .flatten()
+        {
+            if !(d.is_finite() && *d > 0.0) {
+                return Err(bad(format!(
+                    "object distance {d} mm must be > 0 (None = infinity)"
+                )));
             }
         }
         let focused = lens.focus_at(focus_distance_mm)?;

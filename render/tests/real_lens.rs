@@ -490,6 +490,8 @@ fn distant_point_source_matches_the_field_model_psf() {
         },
     )
     .unwrap();
+    // the object-at-infinity table (the only one requested)
+    let fm = fm.at_distance(None);
     let delta = 1e-4;
     let pitch_mm = pitch_um * 1e-3;
     let mut centroids = Vec::new();
@@ -515,7 +517,7 @@ fn distant_point_source_matches_the_field_model_psf() {
         );
         // image ellipse of the disc: tangential δ·h/sin θ, radial δ·dh/dθ (cells)
         let dh = {
-            let e = 0.05;
+            let e: f64 = 0.05;
             let hp = lens.distortion(th + e).unwrap().real_height_mm;
             let hm = if th > e {
                 lens.distortion(th - e).unwrap().real_height_mm

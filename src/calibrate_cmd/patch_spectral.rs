@@ -237,14 +237,7 @@ fn relative_illumination(optics: &OpticsModel, s: &SensorModel, r: usize, c: usi
         RelativeIllumination::Cos4 => relative_illumination_cos4(x.hypot(y), optics.focal_length_m),
         _ => {
             let diag = p * ((s.rows * s.rows + s.cols * s.cols) as f64).sqrt();
-            relative_illumination_isetcam(
-                x,
-                y,
-                optics.focal_length_m,
-                optics.f_number,
-                0.0,
-                diag,
-            )
+            relative_illumination_isetcam(x, y, optics.focal_length_m, optics.f_number, 0.0, diag)
         }
     }
 }
@@ -424,7 +417,9 @@ pub fn patch_spectral(
                 let px: Vec<usize> = region
                     .iter()
                     .copied()
-                    .filter(|&i| sensor.cfa.channel_at(i / cols, i % cols) == c && !hot.contains(&i))
+                    .filter(|&i| {
+                        sensor.cfa.channel_at(i / cols, i % cols) == c && !hot.contains(&i)
+                    })
                     .collect();
                 if px.len() < 2 {
                     continue;
@@ -437,7 +432,8 @@ pub fn patch_spectral(
                 let mut points = Vec::new();
                 let mut fit_pts = vec![(0.0, pedestal, ped_sigma)];
                 for s in &members {
-                    let (mut sum, mut sum2, mut n, mut zeros, mut mx) = (0.0, 0.0, 0usize, 0usize, 0u16);
+                    let (mut sum, mut sum2, mut n, mut zeros, mut mx) =
+                        (0.0, 0.0, 0usize, 0usize, 0u16);
                     for f in &s.frames {
                         for &i in &px {
                             let v = f.dn[i];
@@ -615,30 +611,30 @@ pub fn patch_spectral(
                 f.qe.channels
                     .iter()
                     .find(|q| q.name == sensor.channel_names[c])
-                    .and_then(|q| {
-                        Spectrum::sampled(f.qe.wavelength_nm.clone(), q.qe.clone()).ok()
-                    })
+                    .and_then(|q| Spectrum::sampled(f.qe.wavelength_nm.clone(), q.qe.clone()).ok())
             })
             .collect();
         let units: Vec<Option<f64>> = obs
             .iter()
             .map(|o| {
-                curves[o.channel].as_ref().map(|q| {
-                    o.scale * Spectrum::integrate_product(q, &o.radiance).unwrap_or(0.0)
-                })
+                curves[o.channel]
+                    .as_ref()
+                    .map(|q| o.scale * Spectrum::integrate_product(q, &o.radiance).unwrap_or(0.0))
             })
             .collect();
         // observations whose predicted signal comes mostly from the floor part
         let new_leak: Vec<bool> = obs
             .iter()
             .enumerate()
-            .map(|(i, o)| match (&curves[o.channel], &floor_parts[i], units[i]) {
-                (Some(q), Some(fl), Some(u)) if u > 0.0 => {
-                    o.scale * Spectrum::integrate_product(q, fl).unwrap_or(0.0)
-                        > MAX_FLOOR_SHARE * u
-                }
-                _ => false,
-            })
+            .map(
+                |(i, o)| match (&curves[o.channel], &floor_parts[i], units[i]) {
+                    (Some(q), Some(fl), Some(u)) if u > 0.0 => {
+                        o.scale * Spectrum::integrate_product(q, fl).unwrap_or(0.0)
+                            > MAX_FLOOR_SHARE * u
+                    }
+                    _ => false,
+                },
+            )
             .collect();
         let units: Vec<Option<f64>> = units
             .into_iter()
@@ -669,8 +665,13 @@ pub fn patch_spectral(
         // ε: the relative scatter beyond the measurement noise, from
         // Σ r²/(σ² + ε² s²) = N − (illumination factors fitted)   (0 when χ² ≤ that already)
         let n_used = units.iter().filter(|u| u.is_some()).count();
-        let target =
-            (n_used as f64 - if estimate_gains { n_patches as f64 } else { 0.0 }).max(1.0);
+        let target = (n_used as f64
+            - if estimate_gains {
+                n_patches as f64
+            } else {
+                0.0
+            })
+        .max(1.0);
         let chi2 = |e: f64| -> f64 {
             obs.iter()
                 .enumerate()
@@ -769,7 +770,9 @@ mod tests {
     #[test]
     fn weighted_line_matches_closed_form_and_series_names() {
         // exact line, equal weights: y = 2 + 3x
-        let pts: Vec<(f64, f64, f64)> = (0..5).map(|i| (i as f64, 2.0 + 3.0 * i as f64, 0.5)).collect();
+        let pts: Vec<(f64, f64, f64)> = (0..5)
+            .map(|i| (i as f64, 2.0 + 3.0 * i as f64, 0.5))
+            .collect();
         let (a, b, sa, sb, chi2) = weighted_line(&pts);
         assert!((a - 2.0).abs() < 1e-12 && (b - 3.0).abs() < 1e-12 && chi2 < 1e-20);
         // σ_b = σ/√Σ(x − x̄)² = 0.5/√10, σ_a = σ·√(Σx²/(nΣ(x − x̄)²)) = 0.5·√(30/50)
@@ -796,7 +799,11 @@ mod tests {
         };
         // 20×20 sensor, 10×10 cells, patch 5×5 centred, core 4×4 → pixels 3..7 of each cell
         let r = patch_regions(&shot, 20, 20);
-        assert!(r.iter().all(|p| p.len() == 16), "{:?}", r.iter().map(|p| p.len()).collect::<Vec<_>>());
+        assert!(
+            r.iter().all(|p| p.len() == 16),
+            "{:?}",
+            r.iter().map(|p| p.len()).collect::<Vec<_>>()
+        );
         assert!(r[0].contains(&(3 * 20 + 3)) && !r[0].contains(&(2 * 20 + 3)));
         assert!(r[3].contains(&(16 * 20 + 16)) && !r[3].contains(&(17 * 20 + 16)));
         // a 12×12 labelled square eroded by 3 leaves 6×6

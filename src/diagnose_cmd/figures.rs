@@ -170,32 +170,41 @@ pub fn write_figures(dir: &Path, d: &Diagnosis, data: &DataSet) -> Result<Vec<Fi
     let col_score = |s: usize| -> f64 {
         let p = &d.before.profiles[s];
         let se = p.column_se_dn.max(1e-12);
-        p.column_resid_dn.iter().map(|x| (x / se).powi(2)).sum::<f64>() / p.column_resid_dn.len().max(1) as f64
+        p.column_resid_dn
+            .iter()
+            .map(|x| (x / se).powi(2))
+            .sum::<f64>()
+            / p.column_resid_dn.len().max(1) as f64
     };
     if let Some(s) = (0..data.shots.len()).max_by(|&a, &b| col_score(a).total_cmp(&col_score(b))) {
         for (what, get) in [("columns", true), ("rows", false)] {
-            let series: Vec<(String, Vec<(f64, f64)>)> = [("believed model", &d.before), ("fitted model", &d.after)]
-                .iter()
-                .map(|(n, l)| {
-                    let p = &l.profiles[s];
-                    let (v, se) = if get {
-                        (&p.column_resid_dn, p.column_se_dn)
-                    } else {
-                        (&p.row_resid_dn, p.row_se_dn)
-                    };
-                    (
-                        n.to_string(),
-                        v.iter()
-                            .enumerate()
-                            .map(|(i, x)| (i as f64, x / se.max(1e-12)))
-                            .collect(),
-                    )
-                })
-                .collect();
+            let series: Vec<(String, Vec<(f64, f64)>)> =
+                [("believed model", &d.before), ("fitted model", &d.after)]
+                    .iter()
+                    .map(|(n, l)| {
+                        let p = &l.profiles[s];
+                        let (v, se) = if get {
+                            (&p.column_resid_dn, p.column_se_dn)
+                        } else {
+                            (&p.row_resid_dn, p.row_se_dn)
+                        };
+                        (
+                            n.to_string(),
+                            v.iter()
+                                .enumerate()
+                                .map(|(i, x)| (i as f64, x / se.max(1e-12)))
+                                .collect(),
+                        )
+                    })
+                    .collect();
             let file = format!("{what}.png");
             plots::line_plot(
                 &dir.join(&file),
-                &format!("Mean residual per {} (shot {})", &what[..what.len() - 1], data.shots[s].id),
+                &format!(
+                    "Mean residual per {} (shot {})",
+                    &what[..what.len() - 1],
+                    data.shots[s].id
+                ),
                 &series,
                 (if get { "column" } else { "row" }, "mean residual ÷ its σ"),
             )?;
@@ -213,9 +222,30 @@ pub fn write_figures(dir: &Path, d: &Diagnosis, data: &DataSet) -> Result<Vec<Fi
             &dir.join(&file),
             &format!("Edge MTF, shot {}", data.shots[mb.shot].id),
             &[
-                ("recording".into(), mb.freq.iter().copied().zip(mb.data.iter().copied()).collect()),
-                ("believed model".into(), mb.freq.iter().copied().zip(mb.model.iter().copied()).collect()),
-                ("fitted model".into(), ma.freq.iter().copied().zip(ma.model.iter().copied()).collect()),
+                (
+                    "recording".into(),
+                    mb.freq
+                        .iter()
+                        .copied()
+                        .zip(mb.data.iter().copied())
+                        .collect(),
+                ),
+                (
+                    "believed model".into(),
+                    mb.freq
+                        .iter()
+                        .copied()
+                        .zip(mb.model.iter().copied())
+                        .collect(),
+                ),
+                (
+                    "fitted model".into(),
+                    ma.freq
+                        .iter()
+                        .copied()
+                        .zip(ma.model.iter().copied())
+                        .collect(),
+                ),
             ],
             ("spatial frequency (cycles/pixel)", "MTF"),
         )?;
@@ -230,7 +260,12 @@ pub fn write_figures(dir: &Path, d: &Diagnosis, data: &DataSet) -> Result<Vec<Fi
         sorted(
             (0..data.shots.len())
                 .map(|s| {
-                    let xs: Vec<f64> = l.shot_channels.iter().filter(|x| x.shot == s).map(|x| x.mean_z).collect();
+                    let xs: Vec<f64> = l
+                        .shot_channels
+                        .iter()
+                        .filter(|x| x.shot == s)
+                        .map(|x| x.mean_z)
+                        .collect();
                     (
                         data.shots[s].exposure_s,
                         xs.iter().sum::<f64>() / xs.len().max(1) as f64,
@@ -266,7 +301,8 @@ pub fn write_figures(dir: &Path, d: &Diagnosis, data: &DataSet) -> Result<Vec<Fi
                         .iter()
                         .filter(|x| x.channel == c && data.shots[x.shot].target.is_light())
                         .filter_map(|x| {
-                            let model_signal = x.model_mean_dn - (x.data_mean_dn - x.data_signal_dn);
+                            let model_signal =
+                                x.model_mean_dn - (x.data_mean_dn - x.data_signal_dn);
                             (model_signal.abs() > 1e-9)
                                 .then(|| (x.shot as f64, x.data_signal_dn / model_signal - 1.0))
                         })

@@ -55,7 +55,8 @@ impl Evidence {
                     .zip(&r)
                     .filter(|(s, _)| s.target.is_light())
                     .map(|(s, r)| {
-                        r.iter().fold(0f64, |m, &x| m.max(x as f64)) * s.exposure_s
+                        r.iter().fold(0f64, |m, &x| m.max(x as f64))
+                            * s.exposure_s
                             * believed.exposure_factor
                     })
                     .fold(0.0, f64::max)
@@ -64,14 +65,18 @@ impl Evidence {
         Evidence {
             max_photo_e,
             well_e: believed.sensor.well_capacity_e,
-            light: d.shots.iter().any(|s| s.target.is_light() && s.exposure_s > 0.0),
+            light: d
+                .shots
+                .iter()
+                .any(|s| s.target.is_light() && s.exposure_s > 0.0),
             structured_light: d
                 .shots
                 .iter()
                 .any(|s| s.target.is_structured() && s.exposure_s > 0.0),
-            uniform_light: d.shots.iter().any(|s| {
-                s.target == super::data::TargetClass::Uniform && s.exposure_s > 0.0
-            }),
+            uniform_light: d
+                .shots
+                .iter()
+                .any(|s| s.target == super::data::TargetClass::Uniform && s.exposure_s > 0.0),
             exposed: d.shots.iter().any(|s| s.exposure_s > 0.0),
             channels: d.channels(),
             column_rows: ctx.column_term(RowSel::Fit),
@@ -269,7 +274,11 @@ fn difference(a: &Rates, b: &Rates) -> Rates {
             out.push(out[j].clone());
             continue;
         }
-        let v: Vec<f32> = a[s].par_iter().zip(b[s].par_iter()).map(|(x, y)| x - y).collect();
+        let v: Vec<f32> = a[s]
+            .par_iter()
+            .zip(b[s].par_iter())
+            .map(|(x, y)| x - y)
+            .collect();
         out.push(Arc::new(v));
     }
     out
@@ -447,7 +456,13 @@ pub(crate) fn fit_effect(
     let f0 = eval_base(state);
     let sc = scales(ctx, state)?;
     let s0 = &state.sensor;
-    let out = |st: ModelState, f: f64, k: usize| Ok(FitOutcome::Fitted { state: st, neg_ll: f, k });
+    let out = |st: ModelState, f: f64, k: usize| {
+        Ok(FitOutcome::Fitted {
+            state: st,
+            neg_ll: f,
+            k,
+        })
+    };
     let sq = |x: f64| x * x;
     match effect {
         Effect::ExposureScale => {
@@ -511,7 +526,9 @@ pub(crate) fn fit_effect(
         }
         Effect::ReadNoise => {
             let r0 = s0.read_noise_v;
-            let hi = (4.0 * r0).max(2.0 * sc.var_max.sqrt() / sc.k).max(2.0 * sc.rms_dark / sc.k);
+            let hi = (4.0 * r0)
+                .max(2.0 * sc.var_max.sqrt() / sc.k)
+                .max(2.0 * sc.rms_dark / sc.k);
             let (st, f) = fit_1d(
                 &eval_base,
                 state,
@@ -674,16 +691,10 @@ pub(crate) fn fit_effect(
             let p_um = s0.pixel_pitch_m * 1e6;
             let d0 = state.rates.lateral_color_um.unwrap_or(0.0);
             let w = (2.0 * d0.abs()).max(4.0 * p_um);
-            let (st, f) = fit_surrogate_1d(
-                ctx,
-                state,
-                f0,
-                d0,
-                0.5 * p_um,
-                d0 - w,
-                d0 + w,
-                &|st, x| st.rates.lateral_color_um = Some(x),
-            )?;
+            let (st, f) =
+                fit_surrogate_1d(ctx, state, f0, d0, 0.5 * p_um, d0 - w, d0 + w, &|st, x| {
+                    st.rates.lateral_color_um = Some(x)
+                })?;
             out(st, f, 1)
         }
         Effect::Distortion => {
@@ -726,20 +737,12 @@ pub(crate) fn fit_effect(
                     .qe_shift_nm
                     .as_ref()
                     .map_or(0.0, |v| v.get(c).copied().unwrap_or(0.0));
-                let (s2, f2) = fit_surrogate_1d(
-                    ctx,
-                    &st,
-                    f,
-                    cur,
-                    4.0,
-                    cur - 40.0,
-                    cur + 40.0,
-                    &|s, x| {
+                let (s2, f2) =
+                    fit_surrogate_1d(ctx, &st, f, cur, 4.0, cur - 40.0, cur + 40.0, &|s, x| {
                         let mut v = s.rates.qe_shift_nm.clone().unwrap_or(vec![0.0; nch]);
                         v[c] = x;
                         s.rates.qe_shift_nm = Some(v);
-                    },
-                )?;
+                    })?;
                 st = s2;
                 f = f2;
             }
@@ -879,23 +882,17 @@ fn fit_falloff(ctx: &Ctx, state: &ModelState) -> Result<FitOutcome, String> {
     let cur = state.rates.falloff.clone().unwrap_or_default();
     let mut best: Option<(f64, Vec<f64>, f64, ModelState, usize)> = None;
     for order in 1..=3usize {
-        let th0: Vec<f64> = (0..order).map(|k| cur.get(k).copied().unwrap_or(0.0)).collect();
-        let (th, f, st) = gauss_newton(
-            ctx,
-            state,
-            &b0,
-            &basis[..order],
-            &th0,
-            None,
-            &|s, th| {
-                let mut c = th.to_vec();
-                c.resize(3, 0.0);
-                while c.len() > 1 && c.last() == Some(&0.0) {
-                    c.pop();
-                }
-                s.rates.falloff = Some(c);
-            },
-        );
+        let th0: Vec<f64> = (0..order)
+            .map(|k| cur.get(k).copied().unwrap_or(0.0))
+            .collect();
+        let (th, f, st) = gauss_newton(ctx, state, &b0, &basis[..order], &th0, None, &|s, th| {
+            let mut c = th.to_vec();
+            c.resize(3, 0.0);
+            while c.len() > 1 && c.last() == Some(&0.0) {
+                c.pop();
+            }
+            s.rates.falloff = Some(c);
+        });
         let crit = 2.0 * f + order as f64 * n_obs.ln();
         if best.as_ref().is_none_or(|b| crit < b.0) {
             best = Some((crit, th, f, st, order));
@@ -974,9 +971,11 @@ pub fn magnitude(effect: Effect, st: &ModelState, believed: &ModelState) -> f64 
         Effect::HotPixels => s.effects.hot_pixels.map_or(0.0, |h| h.fraction),
         Effect::Nonlinearity => camsim_sensor::nonlinearity_magnitude(s, s.analog_gain),
         Effect::FullWell => s.well_capacity_e,
-        Effect::RelativeIllumination => {
-            -st.rates.falloff.as_ref().map_or(0.0, |c| c.iter().sum::<f64>())
-        }
+        Effect::RelativeIllumination => -st
+            .rates
+            .falloff
+            .as_ref()
+            .map_or(0.0, |c| c.iter().sum::<f64>()),
         Effect::VeilingGlare => st.rates.glare_fraction.unwrap_or(0.0),
         Effect::Defocus => st.rates.defocus_sigma_um.unwrap_or(0.0),
         Effect::Crosstalk => s.effects.crosstalk.map_or(0.0, |c| c.total()),

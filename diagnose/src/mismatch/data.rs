@@ -190,7 +190,11 @@ impl ShotAccumulator {
         analog_gain: f64,
     ) -> ShotData {
         let f = self.frames.max(1) as f64;
-        let mean_dn: Vec<f32> = self.sum.par_iter().map(|&s| (s as f64 / f) as f32).collect();
+        let mean_dn: Vec<f32> = self
+            .sum
+            .par_iter()
+            .map(|&s| (s as f64 / f) as f32)
+            .collect();
         let var_dn: Vec<f32> = if self.frames >= 2 {
             self.sum
                 .par_iter()

@@ -178,7 +178,10 @@ impl<'a> Ctx<'a> {
     /// Rates of the forward model for `spec` (cached; the cache holds up to ~512 MB).
     pub fn base_rates(&self, spec: &RateSpec) -> Result<Arc<Rates>, String> {
         let key = spec.key();
-        let next = || self.stamp.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let next = || {
+            self.stamp
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+        };
         if let Some(r) = self.cache.lock().expect("cache").get_mut(&key) {
             r.0 = next();
             return Ok(r.1.clone());
@@ -439,8 +442,9 @@ impl<'a> Ctx<'a> {
                         let li = match &hot {
                             None => l0,
                             Some(h) => {
-                                let (lh, hp) =
-                                    self.hot_ll(i, &preds, &es, &consts, &cs, sig_d, sig_p, sig_c, use_cols, h);
+                                let (lh, hp) = self.hot_ll(
+                                    i, &preds, &es, &consts, &cs, sig_d, sig_p, sig_c, use_cols, h,
+                                );
                                 let a = (1.0 - h.fraction).ln() + l0;
                                 let b = h.fraction.ln() + lh;
                                 let tot = log_add_exp(a, b);
@@ -465,16 +469,20 @@ impl<'a> Ctx<'a> {
                                 // Pearson χ² of the rail count (1 dof); a term whose minority
                                 // outcome is expected in under half a frame and not seen
                                 // carries no information and is left out (χ² ≈ 0, not 1).
-                                let p_rail = (p.p_lo + p.p_hi).clamp(1e-12, 1.0 - 1e-12);
+                                let rs = rail_stats(p, f, nlo, nhi);
                                 let n_rail = nlo + nhi;
                                 st.censored += 1.0;
-                                let q = p_rail.min(1.0 - p_rail);
-                                let minority = if p_rail > 0.5 { f - n_rail } else { n_rail };
-                                if f * q < 0.5 && minority == 0.0 {
+                                let q = rs.mean.min(f - rs.mean);
+                                let minority = if rs.mean > 0.5 * f {
+                                    f - n_rail
+                                } else {
+                                    n_rail
+                                };
+                                if q < 0.5 && minority == 0.0 {
                                     continue;
                                 }
-                                let x = n_rail - f * p_rail;
-                                st.chi2 += x * x / (f * p_rail * (1.0 - p_rail));
+                                let x = n_rail - rs.mean;
+                                st.chi2 += x * x / rs.var.max(1e-12);
                                 st.dof += 1.0;
                                 continue;
                             }
@@ -484,9 +492,6 @@ impl<'a> Ctx<'a> {
                                 + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
                                 + sig_p * sig_p * p.w * p.w;
                             st.chi2 += rr * rr / vm;
-                            if std::env::var_os("CAMSIM_DEBUG").is_some() && rr * rr / vm > 8.0 && sidx == 7 {
-                                eprintln!("DEBUG s{sidx} i{i} m{m} mu{} vt{} vx{} u{} w{} e{}", p.mean, p.var_t, p.var_x, p.u, p.w, es[sidx]);
-                            }
                             st.dof += 1.0;
                             st.n += 1.0;
                             st.sum_resid += rr;
@@ -551,7 +556,7 @@ impl<'a> Ctx<'a> {
             let f = consts[sidx].frames;
             let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
             if sh.censored[i] {
-                ll += rail_ll(p, f, nlo, nhi);
+                ll += rail_stats(p, f, nlo, nhi).ll;
                 continue;
             }
             let mut r = sh.mean_dn[i] as f64 - p.mean;
@@ -658,24 +663,64 @@ pub(crate) fn temporal_ll(v: f64, var: f64, f: f64) -> f64 {
     -0.5 * (f - 1.0) * (v / var + var.ln())
 }
 
-/// Multinomial log-probability of the rail counts.
-#[inline]
-pub(crate) fn rail_ll(p: &Pred, f: f64, nlo: f64, nhi: f64) -> f64 {
-    let plo = p.p_lo.clamp(1e-300, 1.0);
-    let phi = p.p_hi.clamp(1e-300, 1.0);
-    let pmid = (1.0 - p.p_lo - p.p_hi).clamp(1e-300, 1.0);
+/// The rail counts of a censored pixel-shot under the model: log-likelihood and the mean and
+/// variance of the number of frames at a rail.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RailStat {
+    pub ll: f64,
+    pub mean: f64,
+    pub var: f64,
+}
+
+/// The frames of a pixel share its fixed pattern, so its rail counts are a mixture over the
+/// pixel's fixed offset z ~ N(0, s_f²) of multinomials with per-frame probabilities
+/// p_lo(z) = Φ((0.5 − y − z)/s_t), p_hi(z) = 1 − Φ((M − 0.5 − y − z)/s_t) (24-point
+/// Gauss–Hermite quadrature over z).
+pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
+    use super::num::{gauss_hermite_24, norm_cdf};
     let nmid = f - nlo - nhi;
-    let mut l = 0.0;
-    if nlo > 0.0 {
-        l += nlo * plo.ln();
+    let one = [(0.0, 1.0)];
+    let nodes: &[(f64, f64)] = if p.s_f > 1e-9 * p.s_t.max(1e-300) {
+        gauss_hermite_24()
+    } else {
+        &one
+    };
+    let st = p.s_t.max(1e-9);
+    let mut lmax = f64::NEG_INFINITY;
+    let mut terms = [(0.0f64, 0.0f64, 0.0f64); 24];
+    let (mut m1, mut m2, mut vin) = (0.0, 0.0, 0.0);
+    for (k, &(z, w)) in nodes.iter().enumerate() {
+        let y = p.y + p.s_f * z;
+        let plo = norm_cdf((0.5 - y) / st);
+        let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / st);
+        let pm = (1.0 - plo - phi).max(0.0);
+        let mut l = 0.0;
+        if nlo > 0.0 {
+            l += nlo * plo.max(1e-300).ln();
+        }
+        if nhi > 0.0 {
+            l += nhi * phi.max(1e-300).ln();
+        }
+        if nmid > 0.0 {
+            l += nmid * pm.max(1e-300).ln();
+        }
+        let l = l + w.ln();
+        lmax = lmax.max(l);
+        terms[k] = (l, 0.0, 0.0);
+        let pr = (plo + phi).min(1.0);
+        m1 += w * pr;
+        m2 += w * pr * pr;
+        vin += w * pr * (1.0 - pr);
     }
-    if nhi > 0.0 {
-        l += nhi * phi.ln();
+    let sum: f64 = terms[..nodes.len()]
+        .iter()
+        .map(|t| (t.0 - lmax).exp())
+        .sum();
+    RailStat {
+        ll: lmax + sum.ln(),
+        mean: f * m1,
+        var: f * vin + f * f * (m2 - m1 * m1).max(0.0),
     }
-    if nmid > 0.0 {
-        l += nmid * pmid.ln();
-    }
-    l
 }
 
 /// Pixels that stand out from their same-channel neighbours in the same column (±2, ±4

@@ -105,7 +105,8 @@ impl Ctx<'_> {
         let sh = &d.shots[s];
         let c = ShotConst::new(&state.sensor, sh.exposure_s, sh.analog_gain, sh.frames);
         let sn = &state.sensor;
-        let sig_u2 = sn.dsnu_sigma_v.powi(2) + sn.column_fpn.map_or(0.0, |c| c.offset_sigma_v.powi(2));
+        let sig_u2 =
+            sn.dsnu_sigma_v.powi(2) + sn.column_fpn.map_or(0.0, |c| c.offset_sigma_v.powi(2));
         let sig_p2 = (sn.prnu_sigma_percent / 100.0).powi(2);
         let rate = &rates[s];
         let (model_mean, z): (Vec<f32>, Vec<f32>) = (0..d.pixels())
@@ -303,7 +304,8 @@ impl Ctx<'_> {
                 .map(|b| {
                     let lo = e[b.saturating_sub(1)];
                     let hi = e[(b + 1).min(nb - 1)];
-                    let w = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * (b as f64 + 0.5) / nb as f64).cos();
+                    let w = 0.5
+                        - 0.5 * (2.0 * std::f64::consts::PI * (b as f64 + 0.5) / nb as f64).cos();
                     0.5 * (hi - lo) * w
                 })
                 .collect();

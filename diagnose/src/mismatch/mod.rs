@@ -138,7 +138,9 @@ pub fn diagnose(
                 .shot_channels
                 .iter()
                 .filter(|x| x.shot == s)
-                .fold((0.0, 0.0), |a, x| (a.0 + x.chi2_per_dof * x.dof, a.1 + x.dof));
+                .fold((0.0, 0.0), |a, x| {
+                    (a.0 + x.chi2_per_dof * x.dof, a.1 + x.dof)
+                });
             (c / d.max(1.0), s)
         })
         .collect();
@@ -211,7 +213,11 @@ fn report_finding(
     } else if shots.len() == d.shots.len() && d.shots.len() > 2 {
         "every shot".to_string()
     } else {
-        let names: Vec<&str> = shots.iter().take(6).map(|&s| d.shots[s].id.as_str()).collect();
+        let names: Vec<&str> = shots
+            .iter()
+            .take(6)
+            .map(|&s| d.shots[s].id.as_str())
+            .collect();
         let more = if shots.len() > 6 {
             format!(" and {} more", shots.len() - 6)
         } else {

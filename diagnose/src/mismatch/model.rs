@@ -94,12 +94,16 @@ pub(crate) struct Pred {
     pub u: f64,
     /// DN per unit relative gain error (PRNU P).
     pub w: f64,
-    /// Probability that a frame is 0 DN.
-    pub p_lo: f64,
-    /// Probability that a frame is at the ADC maximum.
-    pub p_hi: f64,
     /// DN per extra dark electron (hot pixels).
     pub dn_per_e: f64,
+    /// Mean DN before the ADC clip.
+    pub y: f64,
+    /// Temporal standard deviation before the clip (DN).
+    pub s_t: f64,
+    /// Fixed-pattern standard deviation before the clip (DN).
+    pub s_f: f64,
+    /// Upper clip (DN).
+    pub hi: f64,
 }
 
 /// Below this many standard deviations from a clip, the clip is treated as censoring.
@@ -151,7 +155,9 @@ impl ShotConst {
     fn nonlinear(&self, v: f64) -> (f64, f64) {
         match self.nl {
             None => (v, 1.0),
-            Some(Nonlinearity::Quadratic { coefficient_per_v: a }) => {
+            Some(Nonlinearity::Quadratic {
+                coefficient_per_v: a,
+            }) => {
                 if a <= 0.0 {
                     (v, 1.0)
                 } else if v < 0.5 / a {
@@ -194,10 +200,10 @@ impl ShotConst {
         let (n_mean, n_var_t, n_var_f, rho_w) = if adc_first {
             (lam, var_n, var_p, 1.0)
         } else if var_ne > 0.0 && self.well - lam < CENSOR_SIGMAS * var_ne.sqrt() {
-                let c = censored(lam, var_ne.sqrt(), f64::NEG_INFINITY, self.well);
-                let unsat = 1.0 - c.p_hi;
-                let t = var_n * unsat;
-                (c.mean, t, (c.var - t).max(0.0), unsat)
+            let c = censored(lam, var_ne.sqrt(), f64::NEG_INFINITY, self.well);
+            let unsat = 1.0 - c.p_hi;
+            let t = var_n * unsat;
+            (c.mean, t, (c.var - t).max(0.0), unsat)
         } else if lam >= self.well {
             (self.well, 0.0, 0.0, 0.0)
         } else {
@@ -211,7 +217,8 @@ impl ShotConst {
         let var_f = dn_per_e * dn_per_e * n_var_f + self.k * self.k * self.fix_v2;
         // linear loadings and what the well bent out of the PRNU pattern
         let w_lin = rho_w * dn_per_e * e;
-        let x_well = (dn_per_e * dn_per_e * n_var_f - w_lin * w_lin * self.prnu * self.prnu).max(0.0);
+        let x_well =
+            (dn_per_e * dn_per_e * n_var_f - w_lin * w_lin * self.prnu * self.prnu).max(0.0);
         let s_tot = (var_t + var_f).sqrt();
         if y < CENSOR_SIGMAS * s_tot || self.hi_dn - y < CENSOR_SIGMAS * s_tot {
             // Steps 6–7: the ADC rails, censoring the marginal (temporal + fixed) distribution.
@@ -227,10 +234,11 @@ impl ShotConst {
                 var_x: (c.var - vt - lin).max(0.0),
                 u,
                 w,
-                // DN = 0 when the pre-rounding value is below 0.5; the maximum from M − 0.5.
-                p_lo: super::num::norm_cdf((0.5 - y) / s_tot),
-                p_hi: 1.0 - super::num::norm_cdf((self.hi_dn - 0.5 - y) / s_tot),
                 dn_per_e: rho * dn_per_e,
+                y,
+                s_t: var_t.sqrt(),
+                s_f: var_f.sqrt(),
+                hi: self.hi_dn,
             }
         } else {
             Pred {
@@ -239,9 +247,11 @@ impl ShotConst {
                 var_x: x_well,
                 u: self.k,
                 w: w_lin,
-                p_lo: 0.0,
-                p_hi: 0.0,
                 dn_per_e,
+                y,
+                s_t: var_t.sqrt(),
+                s_f: var_f.sqrt(),
+                hi: self.hi_dn,
             }
         }
     }
@@ -312,7 +322,7 @@ mod tests {
         let var = (k * 1e-4).powi(2) * (1000.0 + d) + k * k * 1e-6 + 1.0 / 12.0;
         assert!((p.var_t - var).abs() < 1e-9 * var);
         assert!((p.w - k * 1e-4 * 1000.0).abs() < 1e-9);
-        assert_eq!((p.p_lo, p.p_hi), (0.0, 0.0));
+        assert_eq!(p.var_x, 0.0);
     }
 
     #[test]
@@ -322,7 +332,8 @@ mod tests {
         let p = c.predict(1e6, 0.0);
         // well: 10000 e⁻ · 1e-4 V · 4095 DN/V + 64 = 4159 > 4095: ADC clip
         assert!((p.mean - 4095.0).abs() < 1e-6, "{}", p.mean);
-        assert!(p.p_hi > 0.999);
+        let r = crate::mismatch::like::rail_stats(&p, 2.0, 0.0, 2.0);
+        assert!(r.mean > 1.999 && r.ll > -1e-6, "{r:?}");
         assert!(p.u < 1e-6);
     }
 }

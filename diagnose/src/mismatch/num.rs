@@ -55,10 +55,22 @@ pub fn censored(m: f64, s: f64, lo: f64, hi: f64) -> Censored {
     let mean = lo_t + hi_t + m * mid + s * (fa - fb);
     // E[X²; lo<X<hi] = (m²+s²)ΔΦ + s φa (m+lo) − s φb (m+hi)
     let m2_mid = (m * m + s * s) * mid
-        + if a.is_finite() { s * fa * (m + lo) } else { 0.0 }
-        - if b.is_finite() { s * fb * (m + hi) } else { 0.0 };
+        + if a.is_finite() {
+            s * fa * (m + lo)
+        } else {
+            0.0
+        }
+        - if b.is_finite() {
+            s * fb * (m + hi)
+        } else {
+            0.0
+        };
     let lo2 = if a.is_finite() { lo * lo * pa } else { 0.0 };
-    let hi2 = if b.is_finite() { hi * hi * (1.0 - pb) } else { 0.0 };
+    let hi2 = if b.is_finite() {
+        hi * hi * (1.0 - pb)
+    } else {
+        0.0
+    };
     let var = (lo2 + hi2 + m2_mid - mean * mean).max(0.0);
     Censored {
         mean,
@@ -283,6 +295,30 @@ fn brent(
     (x, fx)
 }
 
+/// Nodes and weights of the n-point Gauss–Hermite rule for expectations over N(0, 1)
+/// (Golub & Welsch, Math. Comp. 23, 1969: eigen-decomposition of the Jacobi matrix of the
+/// probabilists' Hermite polynomials).
+pub fn gauss_hermite(n: usize) -> Vec<(f64, f64)> {
+    let mut j = nalgebra::DMatrix::<f64>::zeros(n, n);
+    for k in 1..n {
+        let b = (k as f64).sqrt();
+        j[(k, k - 1)] = b;
+        j[(k - 1, k)] = b;
+    }
+    let e = nalgebra::SymmetricEigen::new(j);
+    let mut out: Vec<(f64, f64)> = (0..n)
+        .map(|i| (e.eigenvalues[i], e.eigenvectors[(0, i)].powi(2)))
+        .collect();
+    out.sort_by(|a, b| a.0.total_cmp(&b.0));
+    out
+}
+
+/// The 24-point rule of [`gauss_hermite`], computed once.
+pub fn gauss_hermite_24() -> &'static [(f64, f64)] {
+    static GH: std::sync::OnceLock<Vec<(f64, f64)>> = std::sync::OnceLock::new();
+    GH.get_or_init(|| gauss_hermite(24))
+}
+
 /// Upper tail of the χ² distribution with `k` degrees of freedom.
 pub fn chi2_sf(x: f64, k: f64) -> f64 {
     use statrs::distribution::{ChiSquared, ContinuousCDF};
@@ -382,6 +418,20 @@ mod tests {
         let q_ref = (rv.transpose() * ci * rv)[(0, 0)];
         let ld_ref = c.determinant().ln();
         assert!((q - q_ref).abs() < 1e-10 && (ld - ld_ref).abs() < 1e-10);
+    }
+
+    #[test]
+    fn gauss_hermite_integrates_normal_moments() {
+        let gh = gauss_hermite(24);
+        let m = |k: i32| gh.iter().map(|(x, w)| w * x.powi(k)).sum::<f64>();
+        assert!((m(0) - 1.0).abs() < 1e-12);
+        assert!(m(1).abs() < 1e-12);
+        assert!((m(2) - 1.0).abs() < 1e-10);
+        assert!((m(4) - 3.0).abs() < 1e-9);
+        assert!((m(6) - 15.0).abs() < 1e-8);
+        // E[Φ(a + b Z)] = Φ(a / √(1 + b²))
+        let e: f64 = gh.iter().map(|(x, w)| w * norm_cdf(0.3 + 0.8 * x)).sum();
+        assert!((e - norm_cdf(0.3 / (1.0f64 + 0.64).sqrt())).abs() < 1e-6);
     }
 
     #[test]

@@ -212,8 +212,7 @@ pub(crate) fn select(
         if dbic > -opts.bic_threshold {
             break;
         }
-        let alternatives: Vec<(Effect, f64)> =
-            fits.iter().skip(1).map(|x| (x.0, x.3)).collect();
+        let alternatives: Vec<(Effect, f64)> = fits.iter().skip(1).map(|x| (x.0, x.3)).collect();
         // An effect left undecided earlier and still needed now: both were present.
         let partners: Vec<(Effect, f64, ModelState)> = fits
             .iter()

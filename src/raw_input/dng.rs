@@ -1,0 +1,526 @@
+//! DNG mosaics (Adobe Digital Negative 1.x, a TIFF): the raw CFA image of IFD 0 or of one of
+//! its SubIFDs, read with the `tiff` crate (MIT) — no LGPL/AGPL dependency.
+//!
+//! Supported: uncompressed (`Compression` = 1) CFA images (`PhotometricInterpretation` =
+//! 32803), 8- or 16-bit samples, strips or tiles, either byte order. The frame returned is the
+//! `ActiveArea` (DN as stored: the black level is *not* subtracted); `CFARepeatPatternDim` /
+//! `CFAPattern`, `BlackLevelRepeatDim` / `BlackLevel` / `BlackLevelDeltaH` / `BlackLevelDeltaV`
+//! and `WhiteLevel` are reported in [`DngInfo`], with their patterns' origin at the active
+//! area's top-left corner (DNG spec). Compressed DNG (lossless JPEG, deflate, …) is not
+//! supported: convert with Adobe DNG Converter's "uncompressed" option.
+use crate::error::CliError;
+use camsim_core::RawFrame;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::Path;
+use tiff::decoder::{ifd::Value, Decoder};
+use tiff::tags::{ByteOrder, IfdPointer, Tag};
+
+/// DNG / TIFF-EP tag numbers used here.
+pub mod tags {
+    /// NewSubFileType (0 = main image, 1 = reduced resolution preview).
+    pub const NEW_SUBFILE_TYPE: u16 = 254;
+    /// CFARepeatPatternDim (rows, cols).
+    pub const CFA_REPEAT_PATTERN_DIM: u16 = 33421;
+    /// CFAPattern (colour codes, row-major).
+    pub const CFA_PATTERN: u16 = 33422;
+    /// DNGVersion.
+    pub const DNG_VERSION: u16 = 50706;
+    /// UniqueCameraModel.
+    pub const UNIQUE_CAMERA_MODEL: u16 = 50708;
+    /// CFAPlaneColor.
+    pub const CFA_PLANE_COLOR: u16 = 50710;
+    /// CFALayout (1 = rectangular).
+    pub const CFA_LAYOUT: u16 = 50711;
+    /// BlackLevelRepeatDim (rows, cols).
+    pub const BLACK_LEVEL_REPEAT_DIM: u16 = 50713;
+    /// BlackLevel.
+    pub const BLACK_LEVEL: u16 = 50714;
+    /// BlackLevelDeltaH (per column of the active area).
+    pub const BLACK_LEVEL_DELTA_H: u16 = 50715;
+    /// BlackLevelDeltaV (per row of the active area).
+    pub const BLACK_LEVEL_DELTA_V: u16 = 50716;
+    /// WhiteLevel.
+    pub const WHITE_LEVEL: u16 = 50717;
+    /// ActiveArea (top, left, bottom, right).
+    pub const ACTIVE_AREA: u16 = 50829;
+    /// PhotometricInterpretation value of a CFA image.
+    pub const PHOTOMETRIC_CFA: u16 = 32803;
+    /// PhotometricInterpretation value of a demosaicked "linear raw" image.
+    pub const PHOTOMETRIC_LINEAR_RAW: u16 = 34892;
+}
+
+/// What a DNG says about its mosaic.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DngInfo {
+    /// Which directory held the raw image ("IFD0" or "IFD0 SubIFD[k]").
+    pub ifd: String,
+    /// Stored image rows × columns (before the active-area crop).
+    pub stored_rows: usize,
+    /// Stored columns.
+    pub stored_cols: usize,
+    /// ActiveArea (top, left, bottom, right); the whole image when absent.
+    pub active_area: [usize; 4],
+    /// Bits per stored sample.
+    pub bits_per_sample: u16,
+    /// CFA tile from the active area's top-left, one string per row, camsim letters
+    /// (r, g, b, c, m, y, w for DNG codes 0–6).
+    pub cfa: Vec<String>,
+    /// Black level repeat cell (rows, cols).
+    pub black_repeat: (usize, usize),
+    /// Black level per cell position, row-major (DN).
+    pub black_level_dn: Vec<f64>,
+    /// BlackLevelDeltaH per active-area column (empty when absent).
+    pub black_delta_h: Vec<f64>,
+    /// BlackLevelDeltaV per active-area row (empty when absent).
+    pub black_delta_v: Vec<f64>,
+    /// WhiteLevel (DN); 2^bits − 1 when absent.
+    pub white_level: u32,
+}
+
+impl DngInfo {
+    /// Black level (DN) at active-area pixel (row, col): the repeat cell plus the deltas.
+    pub fn black_level_at(&self, row: usize, col: usize) -> f64 {
+        let (br, bc) = self.black_repeat;
+        self.black_level_dn[(row % br) * bc + col % bc]
+            + self.black_delta_v.get(row).copied().unwrap_or(0.0)
+            + self.black_delta_h.get(col).copied().unwrap_or(0.0)
+    }
+    /// Mean black level over the active area (DN).
+    pub fn mean_black_level_dn(&self) -> f64 {
+        let cell = self.black_level_dn.iter().sum::<f64>() / self.black_level_dn.len() as f64;
+        let mean = |v: &[f64]| {
+            if v.is_empty() {
+                0.0
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
+        cell + mean(&self.black_delta_h) + mean(&self.black_delta_v)
+    }
+}
+
+/// A DNG's active-area mosaic and its metadata.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DngFrame {
+    /// The active area, DN as stored; `adc_bits` = the bits needed for the WhiteLevel.
+    pub frame: RawFrame,
+    /// Metadata.
+    pub info: DngInfo,
+}
+
+/// camsim letter of a DNG CFA colour code.
+pub fn cfa_letter(code: u8) -> Option<char> {
+    ['r', 'g', 'b', 'c', 'm', 'y', 'w']
+        .get(code as usize)
+        .copied()
+}
+
+fn numbers(v: Value) -> Option<Vec<f64>> {
+    #[allow(deprecated)]
+    match v {
+        Value::List(l) => l
+            .into_iter()
+            .map(|x| numbers(x).and_then(|n| (n.len() == 1).then(|| n[0])))
+            .collect(),
+        Value::Byte(x) => Some(vec![x as f64]),
+        Value::Short(x) => Some(vec![x as f64]),
+        Value::Unsigned(x) => Some(vec![x as f64]),
+        Value::UnsignedBig(x) => Some(vec![x as f64]),
+        Value::SignedByte(x) => Some(vec![x as f64]),
+        Value::SignedShort(x) => Some(vec![x as f64]),
+        Value::Signed(x) => Some(vec![x as f64]),
+        Value::SignedBig(x) => Some(vec![x as f64]),
+        Value::Float(x) => Some(vec![x as f64]),
+        Value::Double(x) => Some(vec![x]),
+        Value::Rational(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
+        Value::SRational(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
+        Value::RationalBig(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
+        Value::SRationalBig(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
+        _ => None,
+    }
+}
+
+fn tag_name(t: u16) -> &'static str {
+    use tags::*;
+    match t {
+        254 => "NewSubFileType",
+        256 => "ImageWidth",
+        257 => "ImageLength",
+        258 => "BitsPerSample",
+        259 => "Compression",
+        262 => "PhotometricInterpretation",
+        273 => "StripOffsets",
+        277 => "SamplesPerPixel",
+        278 => "RowsPerStrip",
+        279 => "StripByteCounts",
+        322 => "TileWidth",
+        323 => "TileLength",
+        324 => "TileOffsets",
+        325 => "TileByteCounts",
+        330 => "SubIFDs",
+        CFA_REPEAT_PATTERN_DIM => "CFARepeatPatternDim",
+        CFA_PATTERN => "CFAPattern",
+        CFA_LAYOUT => "CFALayout",
+        CFA_PLANE_COLOR => "CFAPlaneColor",
+        BLACK_LEVEL_REPEAT_DIM => "BlackLevelRepeatDim",
+        BLACK_LEVEL => "BlackLevel",
+        BLACK_LEVEL_DELTA_H => "BlackLevelDeltaH",
+        BLACK_LEVEL_DELTA_V => "BlackLevelDeltaV",
+        WHITE_LEVEL => "WhiteLevel",
+        ACTIVE_AREA => "ActiveArea",
+        _ => "tag",
+    }
+}
+
+/// Tags of one directory, read into numbers.
+struct Dir {
+    name: String,
+    values: std::collections::BTreeMap<u16, Vec<f64>>,
+}
+
+impl Dir {
+    fn get(&self, t: u16) -> Option<&Vec<f64>> {
+        self.values.get(&t)
+    }
+    fn one(&self, t: u16) -> Option<f64> {
+        self.get(t).and_then(|v| v.first().copied())
+    }
+}
+
+fn read_dir<R: Read + Seek>(
+    dec: &mut Decoder<R>,
+    ptr: IfdPointer,
+    name: String,
+) -> Result<Dir, String> {
+    let d = dec
+        .read_directory(ptr)
+        .map_err(|e| format!("{name}: unreadable directory: {e}"))?;
+    let mut values = std::collections::BTreeMap::new();
+    for r in dec.read_directory_tags(&d).tag_iter() {
+        let (tag, v) = r.map_err(|e| format!("{name}: unreadable tag: {e}"))?;
+        if let Some(n) = numbers(v) {
+            values.insert(tag.to_u16(), n);
+        }
+    }
+    Ok(Dir { name, values })
+}
+
+/// Read the raw CFA image of a DNG (see the module documentation for what is supported).
+/// Errors name the file, the directory and the tag.
+pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
+    let err = |m: String| CliError::input(path, m);
+    let file = std::fs::File::open(path).map_err(|e| err(format!("cannot open frame: {e}")))?;
+    let mut dec = Decoder::new(std::io::BufReader::new(file))
+        .map_err(|e| err(format!("not a readable DNG/TIFF: {e}")))?;
+    let order = dec.byte_order();
+    let ifd0 = dec
+        .ifd_pointer()
+        .ok_or_else(|| err("not a readable DNG/TIFF: no IFD0".into()))?;
+    let d0 = read_dir(&mut dec, ifd0, "IFD0".into()).map_err(&err)?;
+    if d0.get(tags::DNG_VERSION).is_none() {
+        return Err(err("IFD0 has no DNGVersion tag (50706): not a DNG".into()));
+    }
+    let mut dirs = vec![d0];
+    let subs: Vec<IfdPointer> = match dec.find_tag(Tag::SubIfd) {
+        Ok(Some(v)) => v
+            .into_ifd_vec()
+            .or_else(|_| numbers_to_ptrs(dirs[0].get(330).cloned().unwrap_or_default()))
+            .map_err(|e| err(format!("IFD0: SubIFDs (330) unreadable: {e}")))?,
+        _ => Vec::new(),
+    };
+    for (k, p) in subs.into_iter().enumerate() {
+        dirs.push(read_dir(&mut dec, p, format!("IFD0 SubIFD[{k}]")).map_err(&err)?);
+    }
+    // the full-resolution CFA image: NewSubFileType 0 (absent = 0), Photometric 32803
+    let is_main = |d: &Dir| d.one(tags::NEW_SUBFILE_TYPE).unwrap_or(0.0) == 0.0;
+    let Some(d) = dirs
+        .iter()
+        .find(|d| is_main(d) && d.one(262) == Some(tags::PHOTOMETRIC_CFA as f64))
+    else {
+        let linear = dirs
+            .iter()
+            .any(|d| d.one(262) == Some(tags::PHOTOMETRIC_LINEAR_RAW as f64));
+        return Err(err(if linear {
+            "the DNG holds a demosaicked LinearRaw image (PhotometricInterpretation 34892), not a CFA mosaic: not supported".into()
+        } else {
+            format!(
+                "no full-resolution CFA image (NewSubFileType 0, PhotometricInterpretation 32803) in {}",
+                dirs.iter().map(|d| d.name.as_str()).collect::<Vec<_>>().join(", ")
+            )
+        }));
+    };
+    let need = |t: u16| -> Result<&Vec<f64>, CliError> {
+        d.get(t)
+            .ok_or_else(|| err(format!("{}: {} ({t}) is missing", d.name, tag_name(t))))
+    };
+    let bad = |t: u16, what: String| err(format!("{}: {} ({t}) {what}", d.name, tag_name(t)));
+    let compression = d.one(259).unwrap_or(1.0);
+    if compression != 1.0 {
+        return Err(bad(
+            259,
+            format!(
+                "= {compression}{}: compressed DNG not supported (only Compression = 1, uncompressed; re-save with Adobe DNG Converter's uncompressed option)",
+                match compression as u32 {
+                    7 => " (lossless JPEG)",
+                    8 => " (deflate)",
+                    34892 => " (lossy JPEG)",
+                    52546 => " (JPEG XL)",
+                    _ => "",
+                }
+            ),
+        ));
+    }
+    let cols = need(256)?[0] as usize;
+    let rows = need(257)?[0] as usize;
+    let spp = d.one(277).unwrap_or(1.0);
+    if spp != 1.0 {
+        return Err(bad(
+            277,
+            format!("= {spp}; a CFA image has 1 sample per pixel"),
+        ));
+    }
+    let bits = d.get(258).and_then(|v| v.first().copied()).unwrap_or(1.0) as u16;
+    if bits != 8 && bits != 16 {
+        return Err(bad(
+            258,
+            format!("= {bits}: only 8- and 16-bit samples are supported"),
+        ));
+    }
+    if let Some(l) = d.one(tags::CFA_LAYOUT) {
+        if l != 1.0 {
+            return Err(bad(
+                tags::CFA_LAYOUT,
+                format!("= {l}: only rectangular CFAs (1) are supported"),
+            ));
+        }
+    }
+    // CFA
+    let dim = need(tags::CFA_REPEAT_PATTERN_DIM)?;
+    if dim.len() != 2 || dim[0] < 1.0 || dim[1] < 1.0 {
+        return Err(bad(
+            tags::CFA_REPEAT_PATTERN_DIM,
+            format!("= {dim:?}: expected two positive numbers (rows, cols)"),
+        ));
+    }
+    let (pr, pc) = (dim[0] as usize, dim[1] as usize);
+    let pat = need(tags::CFA_PATTERN)?;
+    if pat.len() != pr * pc {
+        return Err(bad(
+            tags::CFA_PATTERN,
+            format!(
+                "has {} entries but CFARepeatPatternDim is {pr}×{pc}",
+                pat.len()
+            ),
+        ));
+    }
+    // CFAPattern holds TIFF-EP colour codes; CFAPlaneColor only orders LinearRaw planes.
+    let mut cfa = Vec::with_capacity(pr);
+    for r in 0..pr {
+        let mut row = String::new();
+        for c in 0..pc {
+            let code = pat[r * pc + c] as u8;
+            row.push(cfa_letter(code).ok_or_else(|| {
+                bad(
+                    tags::CFA_PATTERN,
+                    format!("has colour code {code} (known: 0–6 = R, G, B, C, M, Y, W)"),
+                )
+            })?);
+        }
+        cfa.push(row);
+    }
+    // ActiveArea
+    let aa = match d.get(tags::ACTIVE_AREA) {
+        None => [0, 0, rows, cols],
+        Some(v) if v.len() == 4 => [v[0] as usize, v[1] as usize, v[2] as usize, v[3] as usize],
+        Some(v) => {
+            return Err(bad(
+                tags::ACTIVE_AREA,
+                format!(
+                    "has {} values; expected 4 (top, left, bottom, right)",
+                    v.len()
+                ),
+            ))
+        }
+    };
+    if !(aa[0] < aa[2] && aa[1] < aa[3] && aa[2] <= rows && aa[3] <= cols) {
+        return Err(bad(
+            tags::ACTIVE_AREA,
+            format!("= {aa:?} does not lie inside the {rows}×{cols} image"),
+        ));
+    }
+    let (ar, ac) = (aa[2] - aa[0], aa[3] - aa[1]);
+    // black and white levels
+    let (br, bc) = match d.get(tags::BLACK_LEVEL_REPEAT_DIM) {
+        None => (1, 1),
+        Some(v) if v.len() == 2 && v[0] >= 1.0 && v[1] >= 1.0 => (v[0] as usize, v[1] as usize),
+        Some(v) => {
+            return Err(bad(
+                tags::BLACK_LEVEL_REPEAT_DIM,
+                format!("= {v:?}: expected two positive numbers"),
+            ))
+        }
+    };
+    let black = match d.get(tags::BLACK_LEVEL) {
+        None => vec![0.0; br * bc],
+        Some(v) if v.len() == br * bc => v.clone(),
+        Some(v) if v.len() == 1 => vec![v[0]; br * bc],
+        Some(v) => {
+            return Err(bad(
+                tags::BLACK_LEVEL,
+                format!(
+                    "has {} values but BlackLevelRepeatDim is {br}×{bc}",
+                    v.len()
+                ),
+            ))
+        }
+    };
+    let delta = |t: u16, n: usize| -> Result<Vec<f64>, CliError> {
+        match d.get(t) {
+            None => Ok(Vec::new()),
+            Some(v) if v.len() == n => Ok(v.clone()),
+            Some(v) => Err(bad(
+                t,
+                format!("has {} values; the active area needs {n}", v.len()),
+            )),
+        }
+    };
+    let black_delta_h = delta(tags::BLACK_LEVEL_DELTA_H, ac)?;
+    let black_delta_v = delta(tags::BLACK_LEVEL_DELTA_V, ar)?;
+    let max_code = ((1u64 << bits) - 1) as f64;
+    let white = d.one(tags::WHITE_LEVEL).unwrap_or(max_code);
+    if !(white >= 1.0 && white <= max_code) {
+        return Err(bad(
+            tags::WHITE_LEVEL,
+            format!("= {white} is outside 1–{max_code} for {bits}-bit samples"),
+        ));
+    }
+    // sample data: strips or tiles, uncompressed
+    let bps = (bits / 8) as usize;
+    let mut stored = vec![0u16; rows * cols];
+    let mut file = std::fs::File::open(path).map_err(|e| err(format!("cannot open frame: {e}")))?;
+    let file_len = file
+        .metadata()
+        .map(|m| m.len())
+        .map_err(|e| err(format!("cannot read: {e}")))?;
+    let mut read_at = |off: f64, n: usize, t: u16| -> Result<Vec<u8>, CliError> {
+        let off = off as u64;
+        if off.checked_add(n as u64).is_none_or(|end| end > file_len) {
+            return Err(bad(
+                t,
+                format!(
+                    "points to bytes {off}..{} beyond the file's {file_len}",
+                    off + n as u64
+                ),
+            ));
+        }
+        let mut buf = vec![0u8; n];
+        file.seek(SeekFrom::Start(off))
+            .and_then(|_| file.read_exact(&mut buf))
+            .map_err(|e| err(format!("{}: reading image data: {e}", d.name)))?;
+        Ok(buf)
+    };
+    let sample = |b: &[u8], i: usize| -> u16 {
+        if bps == 1 {
+            b[i] as u16
+        } else if order == ByteOrder::LittleEndian {
+            u16::from_le_bytes([b[2 * i], b[2 * i + 1]])
+        } else {
+            u16::from_be_bytes([b[2 * i], b[2 * i + 1]])
+        }
+    };
+    if let Some(offsets) = d.get(324) {
+        let tw = need(322)?[0] as usize;
+        let tl = need(323)?[0] as usize;
+        if tw == 0 || tl == 0 {
+            return Err(bad(322, "TileWidth/TileLength must be positive".into()));
+        }
+        let across = cols.div_ceil(tw);
+        let down = rows.div_ceil(tl);
+        if offsets.len() != across * down {
+            return Err(bad(
+                324,
+                format!(
+                    "has {} tiles; a {rows}×{cols} image in {tl}×{tw} tiles needs {}",
+                    offsets.len(),
+                    across * down
+                ),
+            ));
+        }
+        for (k, &off) in offsets.iter().enumerate() {
+            let b = read_at(off, tw * tl * bps, 324)?;
+            let (ty, tx) = (k / across * tl, k % across * tw);
+            for y in 0..tl.min(rows - ty) {
+                for x in 0..tw.min(cols - tx) {
+                    stored[(ty + y) * cols + tx + x] = sample(&b, y * tw + x);
+                }
+            }
+        }
+    } else {
+        let offsets = need(273)?.clone();
+        let counts = need(279)?.clone();
+        let rps = d
+            .one(278)
+            .map(|v| v as usize)
+            .unwrap_or(rows)
+            .clamp(1, rows);
+        let n_strips = rows.div_ceil(rps);
+        if offsets.len() != n_strips || counts.len() != n_strips {
+            return Err(bad(
+                273,
+                format!(
+                    "has {} offsets and {} byte counts; {rows} rows at RowsPerStrip {rps} need {n_strips}",
+                    offsets.len(),
+                    counts.len()
+                ),
+            ));
+        }
+        for (k, &off) in offsets.iter().enumerate() {
+            let r0 = k * rps;
+            let nr = rps.min(rows - r0);
+            let need_bytes = nr * cols * bps;
+            if (counts[k] as usize) < need_bytes {
+                return Err(bad(
+                    279,
+                    format!(
+                        "strip {k} has {} bytes but {nr} rows × {cols} × {bps} need {need_bytes}",
+                        counts[k]
+                    ),
+                ));
+            }
+            let b = read_at(off, need_bytes, 273)?;
+            for i in 0..nr * cols {
+                stored[r0 * cols + i] = sample(&b, i);
+            }
+        }
+    }
+    let mut dn = Vec::with_capacity(ar * ac);
+    for r in aa[0]..aa[2] {
+        dn.extend_from_slice(&stored[r * cols + aa[1]..r * cols + aa[3]]);
+    }
+    let adc_bits = (64 - (white as u64).leading_zeros()).max(1);
+    Ok(DngFrame {
+        frame: RawFrame {
+            rows: ar,
+            cols: ac,
+            adc_bits,
+            dn,
+        },
+        info: DngInfo {
+            ifd: d.name.clone(),
+            stored_rows: rows,
+            stored_cols: cols,
+            active_area: aa,
+            bits_per_sample: bits,
+            cfa,
+            black_repeat: (br, bc),
+            black_level_dn: black,
+            black_delta_h,
+            black_delta_v,
+            white_level: white as u32,
+        },
+    })
+}
+
+fn numbers_to_ptrs(v: Vec<f64>) -> Result<Vec<IfdPointer>, tiff::TiffError> {
+    Ok(v.into_iter().map(|x| IfdPointer(x as u64)).collect())
+}
