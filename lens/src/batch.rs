@@ -139,64 +139,62 @@ impl RayBatch {
     /// The batch of `aim`'s rays through the normalised pupil points `pupil` (the same rays
     /// as [`FieldAim::ray`]; built in parallel).
     pub fn from_pupil(aim: &FieldAim, pupil: &[[f64; 2]]) -> Self {
+        let mut b = RayBatch::with_capacity(pupil.len());
+        b.fill_from_pupil(aim, pupil);
+        b
+    }
+
+    /// Refill this batch with `aim`'s rays through `pupil` (as [`RayBatch::from_pupil`]),
+    /// reusing its buffers: a streaming caller that keeps one batch per thread allocates
+    /// nothing per block. Large batches are filled in parallel.
+    pub fn fill_from_pupil(&mut self, aim: &FieldAim, pupil: &[[f64; 2]]) {
         let n = pupil.len();
-        let mut b = RayBatch {
-            x: vec![0.0; n],
-            y: vec![0.0; n],
-            z: vec![0.0; n],
-            l: vec![0.0; n],
-            m: vec![0.0; n],
-            n: vec![0.0; n],
-            opl: vec![0.0; n],
-            alive: vec![true; n],
-            stop_x: vec![f64::NAN; n],
-            stop_y: vec![f64::NAN; n],
-            stop_z: vec![f64::NAN; n],
-        };
+        for v in [
+            &mut self.x,
+            &mut self.y,
+            &mut self.z,
+            &mut self.l,
+            &mut self.m,
+            &mut self.n,
+            &mut self.opl,
+        ] {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+        for v in [&mut self.stop_x, &mut self.stop_y, &mut self.stop_z] {
+            v.clear();
+            v.resize(n, f64::NAN);
+        }
+        self.alive.clear();
+        self.alive.resize(n, true);
         const BLOCK: usize = 4096;
-        let r = aim.entrance_pupil_radius_mm;
-        let th = aim.field_deg.to_radians();
-        let (st, ct) = th.sin_cos();
-        let zs = aim.start_z_mm();
-        let ze = aim.entrance_pupil_z_mm;
-        b.x.par_chunks_mut(BLOCK)
-            .zip(b.y.par_chunks_mut(BLOCK))
-            .zip(b.z.par_chunks_mut(BLOCK))
-            .zip(b.l.par_chunks_mut(BLOCK))
-            .zip(b.m.par_chunks_mut(BLOCK))
-            .zip(b.n.par_chunks_mut(BLOCK))
-            .zip(b.opl.par_chunks_mut(BLOCK))
+        let gen = GenParams::new(aim);
+        if n <= BLOCK {
+            gen.fill(
+                aim,
+                pupil,
+                &mut self.x,
+                &mut self.y,
+                &mut self.z,
+                &mut self.l,
+                &mut self.m,
+                &mut self.n,
+                &mut self.opl,
+            );
+            return;
+        }
+        self.x
+            .par_chunks_mut(BLOCK)
+            .zip(self.y.par_chunks_mut(BLOCK))
+            .zip(self.z.par_chunks_mut(BLOCK))
+            .zip(self.l.par_chunks_mut(BLOCK))
+            .zip(self.m.par_chunks_mut(BLOCK))
+            .zip(self.n.par_chunks_mut(BLOCK))
+            .zip(self.opl.par_chunks_mut(BLOCK))
             .zip(pupil.par_chunks(BLOCK))
             .for_each(|(((((((x, y), z), l), m), nn), opl), pp)| {
-                for (i, p) in pp.iter().enumerate() {
-                    match aim.object_distance_mm {
-                        None => {
-                            // Collimated: the direction is the field's; the start point lies
-                            // on the plane z = start_z (as `FieldAim::ray`).
-                            let (ex, ey) = (p[0] * r, aim.aim_y_mm + p[1] * r);
-                            let s = (ze - zs) / ct;
-                            x[i] = ex;
-                            y[i] = ey - s * st;
-                            z[i] = ze - s * ct;
-                            l[i] = 0.0;
-                            m[i] = st;
-                            nn[i] = ct;
-                            opl[i] = ey * st + (ze - zs) * ct - s;
-                        }
-                        Some(_) => {
-                            let ray = aim.ray(p[0], p[1]);
-                            x[i] = ray.origin_mm[0];
-                            y[i] = ray.origin_mm[1];
-                            z[i] = ray.origin_mm[2];
-                            l[i] = ray.direction[0];
-                            m[i] = ray.direction[1];
-                            nn[i] = ray.direction[2];
-                            opl[i] = ray.opl_mm;
-                        }
-                    }
-                }
+                gen.fill(aim, pp, x, y, z, l, m, nn, opl);
             });
-        b
     }
 
     /// Ray `i` as a [`TracedRay`] (`None` if lost).
@@ -212,6 +210,72 @@ impl RayBatch {
     /// Rays that reached the image.
     pub fn count_alive(&self) -> usize {
         self.alive.iter().filter(|a| **a).count()
+    }
+}
+
+/// Per-field constants of ray generation from normalised pupil points.
+struct GenParams {
+    r: f64,
+    st: f64,
+    ct: f64,
+    zs: f64,
+    ze: f64,
+}
+
+impl GenParams {
+    fn new(aim: &FieldAim) -> Self {
+        let (st, ct) = aim.field_deg.to_radians().sin_cos();
+        GenParams {
+            r: aim.entrance_pupil_radius_mm,
+            st,
+            ct,
+            zs: aim.start_z_mm(),
+            ze: aim.entrance_pupil_z_mm,
+        }
+    }
+
+    /// Rays through the pupil points `pp` into the given slices (all of `pp`'s length).
+    #[allow(clippy::too_many_arguments)]
+    fn fill(
+        &self,
+        aim: &FieldAim,
+        pp: &[[f64; 2]],
+        x: &mut [f64],
+        y: &mut [f64],
+        z: &mut [f64],
+        l: &mut [f64],
+        m: &mut [f64],
+        nn: &mut [f64],
+        opl: &mut [f64],
+    ) {
+        let GenParams { r, st, ct, zs, ze } = *self;
+        for (i, p) in pp.iter().enumerate() {
+            match aim.object_distance_mm {
+                None => {
+                    // Collimated: the direction is the field's; the start point lies on the
+                    // plane z = start_z (as `FieldAim::ray`).
+                    let (ex, ey) = (p[0] * r, aim.aim_y_mm + p[1] * r);
+                    let s = (ze - zs) / ct;
+                    x[i] = ex;
+                    y[i] = ey - s * st;
+                    z[i] = ze - s * ct;
+                    l[i] = 0.0;
+                    m[i] = st;
+                    nn[i] = ct;
+                    opl[i] = ey * st + (ze - zs) * ct - s;
+                }
+                Some(_) => {
+                    let ray = aim.ray(p[0], p[1]);
+                    x[i] = ray.origin_mm[0];
+                    y[i] = ray.origin_mm[1];
+                    z[i] = ray.origin_mm[2];
+                    l[i] = ray.direction[0];
+                    m[i] = ray.direction[1];
+                    nn[i] = ray.direction[2];
+                    opl[i] = ray.opl_mm;
+                }
+            }
+        }
     }
 }
 
@@ -297,6 +361,24 @@ impl<'a> TraceSystem<'a> {
             stop_y,
             stop_z,
         } = batch;
+        if x.len() <= BLOCK {
+            // One block: trace it on this thread (no task overhead for streaming callers).
+            let mut c = Chunk {
+                x,
+                y,
+                z,
+                l,
+                m,
+                n,
+                opl,
+                alive,
+                sx: stop_x,
+                sy: stop_y,
+                sz: stop_z,
+            };
+            self.trace_block(&mut c, clip);
+            return;
+        }
         x.par_chunks_mut(BLOCK)
             .zip(y.par_chunks_mut(BLOCK))
             .zip(z.par_chunks_mut(BLOCK))
@@ -333,6 +415,19 @@ impl<'a> TraceSystem<'a> {
         let mut b = RayBatch::from_pupil(aim, pupil);
         self.trace(&mut b, clipping);
         b
+    }
+
+    /// As [`TraceSystem::trace_pupil`], into a reused batch (no allocation once its buffers
+    /// have grown to the block size).
+    pub fn trace_pupil_into(
+        &self,
+        aim: &FieldAim,
+        pupil: &[[f64; 2]],
+        clipping: Clipping,
+        batch: &mut RayBatch,
+    ) {
+        batch.fill_from_pupil(aim, pupil);
+        self.trace(batch, clipping);
     }
 
     fn trace_block(&self, c: &mut Chunk<'_>, clip: bool) {

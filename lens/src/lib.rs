@@ -79,6 +79,7 @@ pub mod prescription;
 pub mod readers;
 pub mod trace;
 
+pub use batch::{RayBatch, TraceSystem};
 pub use error::LensError;
 pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
 pub use glass::{Glass, GlassCatalog};

@@ -101,3 +101,40 @@ fn batch_trace_does_not_depend_on_the_thread_count() {
     assert!(a.count_alive() < pupil.len(), "some rays are vignetted");
     assert!(a.count_alive() > 1000);
 }
+
+#[test]
+fn streaming_into_a_reused_batch_equals_one_batch() {
+    // 10 000 rays overfilling the pupil (vignetted: ~46 % pass; parallel fill and trace) against blocks of varying size streamed through
+    // one reused batch (serial path, buffers shrinking and growing): identical rays.
+    let l = bundled("double_gauss_50mm_f2.json");
+    let w = l.primary_nm;
+    let fo = l.first_order(w).unwrap();
+    let max = l.fields_deg.iter().cloned().fold(0.0, f64::max);
+    let aim = l.aim_field(0.7 * max, w, &fo).unwrap();
+    let sys = l.trace_system(w);
+    let n = 10_000;
+    let pupil: Vec<[f64; 2]> = (0..n)
+        .map(|i| {
+            let r = 1.1 * ((i as f64 + 0.5) / n as f64).sqrt();
+            let a = i as f64 * 2.399_963_229_728_653;
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect();
+    let whole = sys.trace_pupil(&aim, &pupil, Clipping::SemiDiameters);
+    let alive = whole.count_alive();
+    assert!(alive > n / 4 && alive < n, "alive {alive} of {n}");
+    let mut b = RayBatch::with_capacity(0);
+    let mut start = 0;
+    for size in [2048usize, 17, 5000, 1, 2048].iter().cycle() {
+        if start >= n {
+            break;
+        }
+        let end = (start + size).min(n);
+        sys.trace_pupil_into(&aim, &pupil[start..end], Clipping::SemiDiameters, &mut b);
+        assert_eq!(b.len(), end - start);
+        for i in 0..b.len() {
+            assert_eq!(b.get(i), whole.get(start + i), "ray {}", start + i);
+        }
+        start = end;
+    }
+}
