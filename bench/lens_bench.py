@@ -6,7 +6,7 @@ Run by bench/lens.sh (which builds the camsim example and provides the Optiland 
 1. Real-ray trace rate on the 50 mm f/2 double Gauss (lenses/double_gauss_50mm_f2.json = the
    optics_ref dgauss50.json), field 0.7 of 20 degrees, 587.56 nm, rays generated from normalised
    pupil points filling the disc and traced to the image plane, no clipping:
-   camsim: lens/examples/lens_bench.rs (batch tracer, rayon, 8192-ray blocks; also the scalar
+   camsim: lens/examples/lens_bench.rs (batch tracer, rayon, 2048-ray blocks streamed into a reused batch per worker; also the scalar
    tracer); Optiland: Optic.ray_tracer.trace_generic(record=False) on NumPy arrays (the same
    call as shared/tools/optics_ref/bench.py).
 2. Field model of 16 fields x 31 wavelengths (400-700 nm) with 128^2-pupil FFT wave PSFs:
@@ -143,9 +143,9 @@ measured (wall clock, under this load).
 Trace case: rays of the 0.7 field (14°) at 587.56 nm through normalised pupil points filling
 the disc (golden-angle spiral, {c['rays']} points for camsim, {o['rays']} for Optiland), generated
 and traced to the paraxial image plane without clipping; all rays reach it
-({c['rays_alive']} of {c['rays']}). camsim: `TraceSystem::trace_pupil`
+({c['rays_alive']} of {c['rays']}). camsim: `TraceSystem::trace_pupil_into`
 (lens/src/batch.rs: structure of arrays, 32-ray vectors, AVX-512/AVX2 selected at run time,
-rayon over 8192-ray blocks). Optiland: `ray_tracer.trace_generic(..., record=False)` on NumPy
+rayon over 2048-ray blocks, each generated into and traced in a reused per-worker batch: no allocation per block). Optiland: `ray_tracer.trace_generic(..., record=False)` on NumPy
 arrays, the call used by shared/tools/optics_ref/bench.py, with paraxial ray aiming (the
 fast mode; its iterative aiming, which refines each ray's pupil position, is shown on the
 second row). camsim's aim is one chief-ray solve per field, then a fixed grid per ray, which is

@@ -2,7 +2,7 @@
 //!
 //! `cargo run --release -p camsim-lens --example lens_bench -- LENS.json [RAYS] [REPEATS]`
 //! prints one JSON object: the rays/s of the batch tracer (rays generated from normalised
-//! pupil points of the 0.7 field at the primary wavelength in blocks of 8192, traced to the
+//! pupil points of the 0.7 field at the primary wavelength in blocks of 2048 (one reused batch per worker), traced to the
 //! image plane, no clipping; wall and process CPU time), of the scalar tracer, and the wall
 //! time of a 16-field × 31-wavelength field model with 128² pupil wave PSFs. Run by
 //! bench/lens.sh.
