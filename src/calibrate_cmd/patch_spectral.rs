@@ -37,6 +37,9 @@ pub const FLOOR_FRACTION: f64 = 0.01;
 pub const MAX_FLOOR_SHARE: f64 = 0.5;
 /// Patch illumination factors need this many exposure series (filters).
 pub const MIN_SERIES_FOR_GAINS: usize = 3;
+/// After this many alternations an observation once left out as floor-dominated stays out
+/// (the set can otherwise cycle between two states).
+pub const LEAK_FREEZE_ITERATIONS: usize = 10;
 /// Alternation stops when no factor changes by more than this.
 pub const GAIN_TOLERANCE: f64 = 1e-4;
 /// At most this many alternations.
@@ -623,6 +626,9 @@ pub fn patch_spectral(
             })
             .collect();
         // observations whose predicted signal comes mostly from the floor part
+        // After LEAK_FREEZE_ITERATIONS the set only grows (union with the last one), so it
+        // cannot cycle and the alternation converges.
+        let grow_only = iterations > LEAK_FREEZE_ITERATIONS;
         let new_leak: Vec<bool> = obs
             .iter()
             .enumerate()
@@ -635,6 +641,8 @@ pub fn patch_spectral(
                     _ => false,
                 },
             )
+            .zip(&leak)
+            .map(|(l, &was)| l || (grow_only && was))
             .collect();
         let units: Vec<Option<f64>> = units
             .into_iter()
