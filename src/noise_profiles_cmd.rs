@@ -59,7 +59,9 @@ pub fn run_noise_profiles(
         }
         let imp: Vec<ProfileImplication> = cam.iter().map(|p| implication(p)).collect();
         let series = |f: &dyn Fn(&ProfileImplication, usize) -> Option<f64>| {
-            (0..3)
+            // B, R, G: line_plot's palette is blue, red, green
+            [2usize, 0, 1]
+                .into_iter()
                 .map(|k| {
                     (
                         ["R", "G", "B"][k].to_string(),

@@ -37,8 +37,8 @@ pub const FLOOR_FRACTION: f64 = 0.01;
 pub const MAX_FLOOR_SHARE: f64 = 0.5;
 /// Patch illumination factors need this many exposure series (filters).
 pub const MIN_SERIES_FOR_GAINS: usize = 3;
-/// After this many alternations an observation once left out as floor-dominated stays out
-/// (the set can otherwise cycle between two states).
+/// After this many alternations the set of floor-dominated observations may only shrink (it
+/// can otherwise cycle between two states).
 pub const LEAK_FREEZE_ITERATIONS: usize = 10;
 /// Alternation stops when no factor changes by more than this.
 pub const GAIN_TOLERANCE: f64 = 1e-4;
@@ -626,9 +626,10 @@ pub fn patch_spectral(
             })
             .collect();
         // observations whose predicted signal comes mostly from the floor part
-        // After LEAK_FREEZE_ITERATIONS the set only grows (union with the last one), so it
-        // cannot cycle and the alternation converges.
-        let grow_only = iterations > LEAK_FREEZE_ITERATIONS;
+        // After LEAK_FREEZE_ITERATIONS the set can only shrink (intersection with the last
+        // one: an observation is left out only while every later fit agrees), so it cannot
+        // cycle and the alternation of illumination factors and model error converges.
+        let frozen = iterations > LEAK_FREEZE_ITERATIONS;
         let new_leak: Vec<bool> = obs
             .iter()
             .enumerate()
@@ -642,7 +643,7 @@ pub fn patch_spectral(
                 },
             )
             .zip(&leak)
-            .map(|(l, &was)| l || (grow_only && was))
+            .map(|(l, &was)| if frozen { l && was } else { l })
             .collect();
         let units: Vec<Option<f64>> = units
             .into_iter()
