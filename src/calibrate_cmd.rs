@@ -395,30 +395,39 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
                 "b" => palette[2],
                 _ => palette[(i + 3) % palette.len()],
             };
-            let series: Vec<plots::BandSeries> =
+            // plotted relative to the highest efficiency (readable axis whatever the radiance
+            // units); calibration.json keeps the absolute values
+            let top =
                 f.qe.channels
                     .iter()
-                    .enumerate()
-                    .map(|(i, ch)| plots::BandSeries {
-                        name: format!("{} ±1σ", ch.name),
-                        colour: colour(&ch.name, i),
-                        points: f
-                            .qe
-                            .wavelength_nm
-                            .iter()
-                            .zip(ch.qe.iter().zip(&ch.std_error))
-                            .map(|(w, (v, e))| (*w, *v, (v - e).max(0.0), v + e))
-                            .collect(),
-                        dashed: false,
-                    })
-                    .collect();
+                    .flat_map(|c| c.qe.iter().copied())
+                    .fold(0.0f64, f64::max);
+            let top = if top > 0.0 { top } else { 1.0 };
+            let series: Vec<plots::BandSeries> = f
+                .qe
+                .channels
+                .iter()
+                .enumerate()
+                .map(|(i, ch)| plots::BandSeries {
+                    name: format!("{} ±1σ", ch.name),
+                    colour: colour(&ch.name, i),
+                    points: f
+                        .qe
+                        .wavelength_nm
+                        .iter()
+                        .zip(ch.qe.iter().zip(&ch.std_error))
+                        .map(|(w, (v, e))| (*w, v / top, ((v - e) / top).max(0.0), (v + e) / top))
+                        .collect(),
+                    dashed: false,
+                })
+                .collect();
             plots::band_plot(
                 &put("chart_spectral_qe.png"),
                 "Channel spectral efficiency from chart patches (Appendix B)",
                 &series,
                 (
                     "wavelength (nm)",
-                    "QE (electrons / photon of the given radiance)",
+                    &format!("efficiency / {top:.3e} e⁻ per photon"),
                 ),
             )?;
             figures.push((

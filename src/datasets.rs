@@ -164,16 +164,7 @@ pub fn llanos_flea3_bandpass(data_dir: &Path, out: &Path) -> Result<PathBuf, Cli
     }
     let mut targets: BTreeMap<u32, Value> = BTreeMap::new();
     for (nm, name) in FLEA3_FILTER_COLUMNS {
-        let t0 = column(name)?;
-        let peak = keep.iter().map(|&i| t0[i]).fold(0.0f64, f64::max);
-        let floor: Option<f64> = std::env::var("H4_FLOOR").ok().and_then(|v| v.parse().ok());
-        let t: Vec<f64> = t0
-            .iter()
-            .map(|&v| match floor {
-                Some(fl) if v < 0.01 * peak => fl,
-                _ => v,
-            })
-            .collect();
+        let t = column(name)?;
         let patches: Vec<Value> = patch_cols
             .iter()
             .map(|r| {

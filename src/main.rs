@@ -110,6 +110,19 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         effects: Vec<String>,
     },
+    /// Read darktable noise profiles (var = a·mean + b) through the shot-plus-read model:
+    /// implied electrons at full scale and read noise, impossible (b < 0) fits flagged;
+    /// writes DIR/noise_profiles.json and figures (docs/diagnose_real.md).
+    NoiseProfiles {
+        /// darktable noiseprofiles.json
+        file: PathBuf,
+        /// One camera's per-ISO analysis (model, or "maker model").
+        #[arg(long)]
+        camera: Option<String>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Generated capture sets with concealed effects and their truth (`demo diagnose`).
     Demo {
         #[command(subcommand)]
@@ -278,6 +291,16 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 "camsim: chi2/dof {:.3} -> {:.3}, {findings} finding(s); wrote {} (open report.html)",
                 report["fit_before"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
                 report["fit_after"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
+                out.display()
+            );
+            Ok(())
+        }
+        Command::NoiseProfiles { file, camera, out } => {
+            let s = camsim::noise_profiles_cmd::run_noise_profiles(&file, camera.as_deref(), &out)?;
+            eprintln!(
+                "camsim: {} profiles, {} with b < 0; wrote {}",
+                s["census"]["profiles"],
+                s["census"]["negative_b_profiles"],
                 out.display()
             );
             Ok(())

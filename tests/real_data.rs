@@ -110,119 +110,204 @@ fn flea3_dark_series_dark_growth_and_hot_pixels() {
     assert!(html.contains("342×408") && html.contains("not estimable"));
 }
 
+/// Appendix B on a real camera: the Flea3 photographing a ColorChecker through seven 10 nm
+/// bandpass filters (400–700 nm), seven exposures each; `camsim calibrate` recovers the three
+/// channels' spectral efficiencies (relative units: the projector's spectrum is not in the
+/// data). Bounds (docs/real_data_flea3.md, "Bandpass"):
+/// * efficiencies ≥ 0 (non-negative least squares) with finite errors;
+/// * peaks ordered B < G < R and inside the dye bands of a Sony Bayer CCD (B 420–480 nm,
+///   G 500–570 nm, R 570–630 nm): the filters sample every 50 nm, so a peak is located to
+///   about ±25 nm around the 450 / 530 / 600 nm of such dyes;
+/// * model error ε (relative scatter beyond photon and quantisation noise, fitted so that
+///   χ²/dof = 1) below 20 %: the spectrometer spot vs the camera's patch area, residual
+///   illumination and lateral colour; more would mean the linear model fails;
+/// * leave-one-filter-out prediction: held-out relative rms error √(cv χ²)·ε below 100 %
+///   (a held-out 10 nm band is only constrained by neighbours 50 nm away);
+/// * per filter and channel (≥ 10 patches), the median of measured/predicted patch signal
+///   within ±2.5 ε of 1: the illumination factors are shared by all filters, so a wrong
+///   efficiency at one wavelength shows as a per-filter offset, and one larger than 2.5× the
+///   fit's own scatter would mean one curve cannot serve all filters (the 550 nm green series
+///   sits at +21 %, ≈ 1.6 ε: the peak is flattened, docs/real_data_flea3.md);
+/// * the alternation of illumination factors and model error converges.
 #[test]
-fn flea3_bandpass_explore() {
+fn flea3_bandpass_recovers_channel_efficiencies() {
     let d = tempfile::tempdir().unwrap();
     let caps = camsim::datasets::llanos_flea3_bandpass(&flea3_dir(), d.path()).unwrap();
-    let t0 = std::time::Instant::now();
     let set = camsim::config::load_captures(&caps, None).unwrap();
-    eprintln!("load {:?}", t0.elapsed());
     let out = d.path().join("cal");
     let c = camsim::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
-    eprintln!("total {:?}", t0.elapsed());
     let ch = &c["chart_channel_qe"];
-    eprintln!(
-        "status {} notes {} pedestal {} median icpt {}",
-        ch["fit"]["status"], ch["notes"], ch["pedestal_dn"], ch["median_intercept_dn"]
+    assert_eq!(ch["fit"]["status"], "estimated", "{}", ch["fit"]);
+    let notes = ch["notes"].to_string();
+    println!("notes: {notes}");
+    assert!(!notes.contains("not converged"), "{notes}");
+    let eps = ch["model_error_fraction"].as_f64().unwrap();
+    println!(
+        "model error ε = {eps:.3}, {} alternations, pedestal {} DN",
+        ch["gain_iterations"], ch["pedestal_dn"]
     );
-    std::fs::write(
-        "/tmp/h4_cal.json",
-        serde_json::to_string_pretty(&c).unwrap(),
-    )
-    .unwrap();
-    if let Some(r) = ch["fit"]["reason"].as_str() {
-        eprintln!("reason {r}");
-    }
+    assert!((0.0..0.2).contains(&eps), "model error {eps}");
     let q = &ch["fit"]["qe"];
-    eprintln!("wl {}", q["wavelength_nm"]);
-    for c in q["channels"].as_array().unwrap() {
-        eprintln!(
-            "{} alpha {} cv {}",
-            c["name"], c["alpha"], c["cv_chi2_per_shot"]
-        );
-        let v: Vec<String> = c["qe"]
-            .as_array()
+    let f = |v: &serde_json::Value| -> Vec<f64> {
+        v.as_array()
             .unwrap()
             .iter()
-            .zip(c["std_error"].as_array().unwrap())
-            .map(|(a, b)| format!("{:.3e}±{:.1e}", a.as_f64().unwrap(), b.as_f64().unwrap()))
-            .collect();
-        eprintln!("  {}", v.join(" "));
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let wl = f(&q["wavelength_nm"]);
+    let mut peak = std::collections::BTreeMap::new();
+    for chan in q["channels"].as_array().unwrap() {
+        let name = chan["name"].as_str().unwrap().to_string();
+        let (v, s) = (f(&chan["qe"]), f(&chan["std_error"]));
+        assert!(v.iter().all(|&x| x >= 0.0), "{name}: negative efficiency");
+        assert!(s.iter().all(|x| x.is_finite() && *x >= 0.0), "{name}");
+        let k = (0..v.len()).max_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap();
+        let cv = chan["cv_chi2_per_shot"].as_f64().unwrap();
+        println!(
+            "{name}: peak {} nm, cv χ²/obs {cv:.1} → held-out rms {:.0} %",
+            wl[k],
+            100.0 * cv.sqrt() * eps
+        );
+        assert!(cv.sqrt() * eps < 1.0, "{name}: cv χ² {cv}");
+        peak.insert(name, wl[k]);
     }
-    eprintln!(
-        "iterations {} gains {}",
-        ch["gain_iterations"],
-        ch["patch_illumination"]
-            .as_array()
-            .map(|a| a
-                .iter()
-                .map(|g| format!(
-                    "{:.3}±{:.3}",
-                    g["factor"].as_f64().unwrap(),
-                    g["sigma"].as_f64().unwrap()
-                ))
-                .collect::<Vec<_>>()
-                .join(" "))
-            .unwrap_or_default()
-    );
-    // per series chi2 and z
+    let (b, g, r) = (peak["b"], peak["g"], peak["r"]);
+    assert!(b < g && g < r, "peaks b {b} g {g} r {r}");
+    assert!((420.0..=480.0).contains(&b), "blue peak {b}");
+    assert!((500.0..=570.0).contains(&g), "green peak {g}");
+    assert!((570.0..=630.0).contains(&r), "red peak {r}");
+    // measured vs predicted patch signals, per filter series and channel
     let obs = ch["fit"]["observations"].as_array().unwrap();
     let mut by: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
     for o in obs {
-        let z = (o["signal"].as_f64().unwrap() - o["predicted"].as_f64().unwrap())
-            / o["sigma"].as_f64().unwrap();
         by.entry(format!("{} {}", o["group"], o["channel"]))
             .or_default()
-            .push(z);
+            .push(o["signal"].as_f64().unwrap() / o["predicted"].as_f64().unwrap());
     }
-    for (k, z) in &by {
-        let chi = z.iter().map(|x| x * x).sum::<f64>() / z.len() as f64;
-        let rel: Vec<f64> = obs
-            .iter()
-            .filter(|o| format!("{} {}", o["group"], o["channel"]) == *k)
-            .map(|o| o["signal"].as_f64().unwrap() / o["predicted"].as_f64().unwrap())
-            .collect();
-        let mut r2 = rel.clone();
-        r2.sort_by(f64::total_cmp);
-        eprintln!(
-            "   ratio median {:.3} min {:.3} max {:.3}",
-            r2[r2.len() / 2],
-            r2[0],
-            r2[r2.len() - 1]
+    for (k, mut ratios) in by {
+        ratios.sort_by(f64::total_cmp);
+        let med = ratios[ratios.len() / 2];
+        println!(
+            "{k}: {} patches, median measured/predicted {med:.3}",
+            ratios.len()
         );
-        eprintln!(
-            "{k}: n {} chi2/n {chi:.2} zs {:?}",
-            z.len(),
-            z.iter()
-                .map(|v| (v * 10.0).round() / 10.0)
-                .collect::<Vec<_>>()
-        );
+        if ratios.len() >= 10 {
+            assert!((med - 1.0).abs() <= 2.5 * eps, "{k}: median ratio {med}");
+        }
     }
-    for l in ch["lines"]
-        .as_array()
+    // the fit's figures exist and are drawn; copied for the docs on request
+    for fig in ["chart_spectral_qe.png", "chart_fit.png"] {
+        let chk = camsim::plots::check_figure(&out.join(fig)).unwrap();
+        assert!(chk.non_white_per_mille > 20, "{fig}: {chk:?}");
+    }
+    if let Ok(dir) = std::env::var("CAMSIM_DOC_FIGURES") {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
+        std::fs::copy(
+            out.join("chart_spectral_qe.png"),
+            dir.join("flea3_bandpass_qe.png"),
+        )
+        .unwrap();
+        std::fs::copy(
+            out.join("chart_fit.png"),
+            dir.join("flea3_bandpass_fit.png"),
+        )
+        .unwrap();
+    }
+}
+
+/// `camsim diagnose` on the Flea3 dark series (session 1; session 2 is rejected by size):
+/// what the missing-physics search finds on real 8-bit darks (docs/diagnose_real.md).
+/// Ignored in CI: ~8 min on 2 cores. Run with
+/// `cargo test --release --test tests real_data::flea3_dark_series_through_diagnose -- --ignored --nocapture`.
+#[test]
+#[ignore = "slow (~8 min): diagnose's effect search on 14 real frames"]
+fn flea3_dark_series_through_diagnose() {
+    let d = tempfile::tempdir().unwrap();
+    let caps = flea3_dark_set(d.path());
+    // session 1 only: session 2 was cropped to 342 rows (diagnose needs every frame to fit)
+    let mut c: Value = serde_json::from_str(&std::fs::read_to_string(&caps).unwrap()).unwrap();
+    c["shots"]
+        .as_array_mut()
         .unwrap()
-        .iter()
-        .filter(|l| l["patch"] == 19 || l["patch"] == 1)
-    {
-        eprintln!(
-            "{} p{} {} slope {:.4}±{:.4} icpt {:.3}±{:.3} n {} chi2 {} ri {:.3}",
-            l["series"],
-            l["patch"],
-            l["channel"],
-            l["slope_dn_per_s"].as_f64().unwrap_or(f64::NAN),
-            l["slope_sigma_dn_per_s"].as_f64().unwrap_or(f64::NAN),
-            l["intercept_dn"].as_f64().unwrap_or(f64::NAN),
-            l["intercept_sigma_dn"].as_f64().unwrap_or(f64::NAN),
-            l["n_points"],
-            l["chi2_per_dof"],
-            l["relative_illumination"].as_f64().unwrap()
-        );
+        .retain(|s| s["id"].as_str().unwrap().starts_with("d1"));
+    std::fs::write(&caps, c.to_string()).unwrap();
+    let set = camsim::config::load_captures(&caps, None).unwrap();
+    let out = d.path().join("diag");
+    let opts = camsim::diagnose_cmd::DiagnoseCmdOptions {
+        bic_threshold: 10.0,
+        effects: Vec::new(),
+        progress: false,
+    };
+    let r = camsim::diagnose_cmd::run_diagnose(&set, &out, &opts).unwrap();
+    println!(
+        "flea3 diagnose: {}",
+        serde_json::to_string_pretty(&json!({
+            "fit_before": r["fit_before"], "fit_after": r["fit_after"],
+            "findings": r["findings"], "notes": r["notes"]}))
+        .unwrap()
+    );
+    assert!(out.join("report.json").is_file() && out.join("report.html").is_file());
+}
+
+/// `camsim noise-profiles` on darktable's file: census, one camera's per-ISO table and the
+/// figures; an unknown camera is one error naming it.
+#[test]
+fn noise_profiles_cli_on_the_darktable_file() {
+    let d = tempfile::tempdir().unwrap();
+    let file = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/real/noise/darktable_noiseprofiles.json");
+    let out = d.path().join("np");
+    let st = crate::util::camsim()
+        .args(["noise-profiles"])
+        .arg(&file)
+        .args(["--camera", "Sony ILCE-7M3", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let s: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("noise_profiles.json")).unwrap())
+            .unwrap();
+    assert_eq!(s["census"]["profiles"], 7045);
+    assert_eq!(s["census"]["negative_b_profiles"], 1142);
+    let profiles = s["profiles"].as_array().unwrap();
+    assert_eq!(profiles.len(), 37);
+    // ISO 640 green: a = 6.34616e-6 (file) → 157 576 e⁻ at full scale, read √b/a = 16.48 e⁻
+    let p640 = profiles.iter().find(|p| p["iso"] == 640.0).unwrap();
+    let g = &p640["channels"][1];
+    assert!((g["full_scale_e"].as_f64().unwrap() - 1.0 / 6.34616001285596e-06).abs() < 1e-6);
+    let read = g["read_noise_e"].as_f64().unwrap();
+    assert!((read - 1.09318376980497e-08f64.sqrt() / 6.34616001285596e-06).abs() < 1e-9);
+    let p128k = profiles.iter().find(|p| p["iso"] == 128000.0).unwrap();
+    assert!(p128k["channels"][1]["why"]
+        .as_str()
+        .unwrap()
+        .contains("black-level clipping"));
+    for fig in [
+        "noise_negative_b_by_iso.png",
+        "noise_camera_full_scale.png",
+        "noise_camera_read_noise.png",
+    ] {
+        let chk = camsim::plots::check_figure(&out.join(fig)).unwrap();
+        assert!(chk.non_white_per_mille > 10, "{fig}: {chk:?}");
     }
-    std::fs::copy(out.join("chart_spectral_qe.png"), "/tmp/h4_chart_qe.png").ok();
-    std::fs::copy(out.join("chart_fit.png"), "/tmp/h4_chart_fit.png").ok();
-    std::fs::write(
-        "/tmp/h4_cal.json",
-        serde_json::to_string_pretty(&c).unwrap(),
-    )
-    .unwrap();
+    let st = crate::util::camsim()
+        .args(["noise-profiles"])
+        .arg(&file)
+        .args(["--camera", "Nonexistent Z9000", "--out"])
+        .arg(d.path().join("np2"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(
+        !st.status.success()
+            && err.contains("Nonexistent Z9000")
+            && err.contains("darktable_noiseprofiles.json"),
+        "{err}"
+    );
 }

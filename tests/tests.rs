@@ -5,6 +5,7 @@ mod effects;
 mod lens_blur;
 mod lens_cli;
 mod oracles;
+mod raw_formats;
 mod real_data;
 mod render;
 mod run;

@@ -25,6 +25,7 @@
 mod dark;
 pub mod fit;
 pub mod mismatch;
+pub mod noise_profiles;
 mod prnu;
 mod ptc;
 mod spectral;

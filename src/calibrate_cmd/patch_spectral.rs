@@ -37,6 +37,9 @@ pub const FLOOR_FRACTION: f64 = 0.01;
 pub const MAX_FLOOR_SHARE: f64 = 0.5;
 /// Patch illumination factors need this many exposure series (filters).
 pub const MIN_SERIES_FOR_GAINS: usize = 3;
+/// After this many alternations the set of floor-dominated observations may only shrink (it
+/// can otherwise cycle between two states).
+pub const LEAK_FREEZE_ITERATIONS: usize = 10;
 /// Alternation stops when no factor changes by more than this.
 pub const GAIN_TOLERANCE: f64 = 1e-4;
 /// At most this many alternations.
@@ -623,6 +626,10 @@ pub fn patch_spectral(
             })
             .collect();
         // observations whose predicted signal comes mostly from the floor part
+        // After LEAK_FREEZE_ITERATIONS the set can only shrink (intersection with the last
+        // one: an observation is left out only while every later fit agrees), so it cannot
+        // cycle and the alternation of illumination factors and model error converges.
+        let frozen = iterations > LEAK_FREEZE_ITERATIONS;
         let new_leak: Vec<bool> = obs
             .iter()
             .enumerate()
@@ -635,6 +642,8 @@ pub fn patch_spectral(
                     _ => false,
                 },
             )
+            .zip(&leak)
+            .map(|(l, &was)| if frozen { l && was } else { l })
             .collect();
         let units: Vec<Option<f64>> = units
             .into_iter()

@@ -1,5 +1,7 @@
 //! DNG mosaics (Adobe Digital Negative 1.x, a TIFF): the raw CFA image of IFD 0 or of one of
-//! its SubIFDs, read with the `tiff` crate (MIT) — no LGPL/AGPL dependency.
+//! its SubIFDs, read with a minimal TIFF 6.0 directory parser (classic TIFF, either byte
+//! order; the `tiff` crate's decoder refuses the CFA PhotometricInterpretation 32803) — no
+//! LGPL/AGPL dependency.
 //!
 //! Supported: uncompressed (`Compression` = 1) CFA images (`PhotometricInterpretation` =
 //! 32803), 8- or 16-bit samples, strips or tiles, either byte order. The frame returned is the
@@ -10,10 +12,7 @@
 //! supported: convert with Adobe DNG Converter's "uncompressed" option.
 use crate::error::CliError;
 use camsim_core::RawFrame;
-use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
-use tiff::decoder::{ifd::Value, Decoder};
-use tiff::tags::{ByteOrder, IfdPointer, Tag};
 
 /// DNG / TIFF-EP tag numbers used here.
 pub mod tags {
@@ -115,31 +114,6 @@ pub fn cfa_letter(code: u8) -> Option<char> {
         .copied()
 }
 
-fn numbers(v: Value) -> Option<Vec<f64>> {
-    #[allow(deprecated)]
-    match v {
-        Value::List(l) => l
-            .into_iter()
-            .map(|x| numbers(x).and_then(|n| (n.len() == 1).then(|| n[0])))
-            .collect(),
-        Value::Byte(x) => Some(vec![x as f64]),
-        Value::Short(x) => Some(vec![x as f64]),
-        Value::Unsigned(x) => Some(vec![x as f64]),
-        Value::UnsignedBig(x) => Some(vec![x as f64]),
-        Value::SignedByte(x) => Some(vec![x as f64]),
-        Value::SignedShort(x) => Some(vec![x as f64]),
-        Value::Signed(x) => Some(vec![x as f64]),
-        Value::SignedBig(x) => Some(vec![x as f64]),
-        Value::Float(x) => Some(vec![x as f64]),
-        Value::Double(x) => Some(vec![x]),
-        Value::Rational(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
-        Value::SRational(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
-        Value::RationalBig(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
-        Value::SRationalBig(n, d) if d != 0 => Some(vec![n as f64 / d as f64]),
-        _ => None,
-    }
-}
-
 fn tag_name(t: u16) -> &'static str {
     use tags::*;
     match t {
@@ -187,49 +161,168 @@ impl Dir {
     }
 }
 
-fn read_dir<R: Read + Seek>(
-    dec: &mut Decoder<R>,
-    ptr: IfdPointer,
-    name: String,
-) -> Result<Dir, String> {
-    let d = dec
-        .read_directory(ptr)
-        .map_err(|e| format!("{name}: unreadable directory: {e}"))?;
-    let mut values = std::collections::BTreeMap::new();
-    for r in dec.read_directory_tags(&d).tag_iter() {
-        let (tag, v) = r.map_err(|e| format!("{name}: unreadable tag: {e}"))?;
-        if let Some(n) = numbers(v) {
-            values.insert(tag.to_u16(), n);
-        }
+/// A classic TIFF in memory (TIFF 6.0 §2: header, IFDs of 12-byte entries).
+struct Tiff<'a> {
+    bytes: &'a [u8],
+    little: bool,
+}
+
+impl Tiff<'_> {
+    fn u16_at(&self, off: usize) -> Option<u16> {
+        let b = self.bytes.get(off..off + 2)?;
+        Some(if self.little {
+            u16::from_le_bytes([b[0], b[1]])
+        } else {
+            u16::from_be_bytes([b[0], b[1]])
+        })
     }
-    Ok(Dir { name, values })
+    fn u32_at(&self, off: usize) -> Option<u32> {
+        let b = self.bytes.get(off..off + 4)?;
+        let a = [b[0], b[1], b[2], b[3]];
+        Some(if self.little {
+            u32::from_le_bytes(a)
+        } else {
+            u32::from_be_bytes(a)
+        })
+    }
+    fn u64_at(&self, off: usize) -> Option<u64> {
+        let b = self.bytes.get(off..off + 8)?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Some(if self.little {
+            u64::from_le_bytes(a)
+        } else {
+            u64::from_be_bytes(a)
+        })
+    }
+    /// One value of TIFF type `ty` at `off` as a number (None for ASCII/unknown types).
+    fn value(&self, ty: u16, off: usize) -> Option<f64> {
+        Some(match ty {
+            1 | 7 => *self.bytes.get(off)? as f64,
+            6 => *self.bytes.get(off)? as i8 as f64,
+            3 => self.u16_at(off)? as f64,
+            8 => self.u16_at(off)? as i16 as f64,
+            4 | 13 => self.u32_at(off)? as f64,
+            9 => self.u32_at(off)? as i32 as f64,
+            5 => {
+                let d = self.u32_at(off + 4)?;
+                if d == 0 {
+                    return None;
+                }
+                self.u32_at(off)? as f64 / d as f64
+            }
+            10 => {
+                let d = self.u32_at(off + 4)? as i32;
+                if d == 0 {
+                    return None;
+                }
+                self.u32_at(off)? as i32 as f64 / d as f64
+            }
+            11 => f32::from_bits(self.u32_at(off)?) as f64,
+            12 => f64::from_bits(self.u64_at(off)?),
+            _ => return None,
+        })
+    }
+    /// The numeric tags of the directory at `off`.
+    fn dir(&self, off: usize, name: String) -> Result<Dir, String> {
+        let n = self.u16_at(off).ok_or_else(|| {
+            format!(
+                "{name}: directory offset {off} is beyond the file's {} bytes",
+                self.bytes.len()
+            )
+        })? as usize;
+        if off + 2 + 12 * n + 4 > self.bytes.len() {
+            return Err(format!(
+                "{name}: directory of {n} entries at byte {off} runs past the end of the file ({} bytes): truncated?",
+                self.bytes.len()
+            ));
+        }
+        let mut values = std::collections::BTreeMap::new();
+        for k in 0..n {
+            let e = off + 2 + 12 * k;
+            let (tag, ty) = (self.u16_at(e).unwrap_or(0), self.u16_at(e + 2).unwrap_or(0));
+            let count = self.u32_at(e + 4).unwrap_or(0) as usize;
+            let size = match ty {
+                1 | 2 | 6 | 7 => 1,
+                3 | 8 => 2,
+                4 | 9 | 11 | 13 => 4,
+                5 | 10 | 12 => 8,
+                _ => continue, // unknown types may be skipped (TIFF 6.0 §2)
+            };
+            if ty == 2 {
+                continue;
+            }
+            let total = count
+                .checked_mul(size)
+                .filter(|&t| t <= self.bytes.len())
+                .ok_or_else(|| {
+                    format!(
+                        "{name}: {} ({tag}) has {count} values, more than the file holds",
+                        tag_name(tag)
+                    )
+                })?;
+            let at = if total <= 4 {
+                e + 8
+            } else {
+                self.u32_at(e + 8).unwrap_or(0) as usize
+            };
+            if at + total > self.bytes.len() {
+                return Err(format!(
+                    "{name}: {} ({tag}) points to bytes {at}..{} beyond the file's {}",
+                    tag_name(tag),
+                    at + total,
+                    self.bytes.len()
+                ));
+            }
+            let v: Option<Vec<f64>> = (0..count).map(|i| self.value(ty, at + i * size)).collect();
+            if let Some(v) = v {
+                values.insert(tag, v);
+            }
+        }
+        Ok(Dir { name, values })
+    }
 }
 
 /// Read the raw CFA image of a DNG (see the module documentation for what is supported).
 /// Errors name the file, the directory and the tag.
 pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
     let err = |m: String| CliError::input(path, m);
-    let file = std::fs::File::open(path).map_err(|e| err(format!("cannot open frame: {e}")))?;
-    let mut dec = Decoder::new(std::io::BufReader::new(file))
-        .map_err(|e| err(format!("not a readable DNG/TIFF: {e}")))?;
-    let order = dec.byte_order();
-    let ifd0 = dec
-        .ifd_pointer()
-        .ok_or_else(|| err("not a readable DNG/TIFF: no IFD0".into()))?;
-    let d0 = read_dir(&mut dec, ifd0, "IFD0".into()).map_err(&err)?;
+    let bytes = std::fs::read(path).map_err(|e| err(format!("cannot open frame: {e}")))?;
+    let little = match bytes.get(0..4) {
+        Some([b'I', b'I', 42, 0]) => true,
+        Some([b'M', b'M', 0, 42]) => false,
+        Some([b'I', b'I', 43, 0]) | Some([b'M', b'M', 0, 43]) => {
+            return Err(err(
+                "not a readable DNG/TIFF: BigTIFF is not supported (DNG is classic TIFF)".into(),
+            ))
+        }
+        _ => {
+            return Err(err(
+                "not a readable DNG/TIFF: no TIFF header (\"II*\\0\" or \"MM\\0*\")".into(),
+            ))
+        }
+    };
+    let tiff = Tiff {
+        bytes: &bytes,
+        little,
+    };
+    let ifd0 = tiff.u32_at(4).unwrap_or(0) as usize;
+    let d0 = tiff
+        .dir(ifd0, "IFD0".into())
+        .map_err(|m| err(format!("not a readable DNG/TIFF: {m}")))?;
     if d0.get(tags::DNG_VERSION).is_none() {
         return Err(err("IFD0 has no DNGVersion tag (50706): not a DNG".into()));
     }
+    let subs: Vec<usize> = d0
+        .get(330)
+        .map(|v| v.iter().map(|&x| x as usize).collect())
+        .unwrap_or_default();
     let mut dirs = vec![d0];
-    let subs: Vec<IfdPointer> = match dec.find_tag(Tag::SubIfd) {
-        Ok(Some(v)) => v
-            .into_ifd_vec()
-            .or_else(|_| numbers_to_ptrs(dirs[0].get(330).cloned().unwrap_or_default()))
-            .map_err(|e| err(format!("IFD0: SubIFDs (330) unreadable: {e}")))?,
-        _ => Vec::new(),
-    };
     for (k, p) in subs.into_iter().enumerate() {
-        dirs.push(read_dir(&mut dec, p, format!("IFD0 SubIFD[{k}]")).map_err(&err)?);
+        dirs.push(
+            tiff.dir(p, format!("IFD0 SubIFD[{k}]"))
+                .map_err(|m| err(format!("not a readable DNG/TIFF: {m}")))?,
+        );
     }
     // the full-resolution CFA image: NewSubFileType 0 (absent = 0), Photometric 32803
     let is_main = |d: &Dir| d.one(tags::NEW_SUBFILE_TYPE).unwrap_or(0.0) == 0.0;
@@ -397,32 +490,24 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
     // sample data: strips or tiles, uncompressed
     let bps = (bits / 8) as usize;
     let mut stored = vec![0u16; rows * cols];
-    let mut file = std::fs::File::open(path).map_err(|e| err(format!("cannot open frame: {e}")))?;
-    let file_len = file
-        .metadata()
-        .map(|m| m.len())
-        .map_err(|e| err(format!("cannot read: {e}")))?;
-    let mut read_at = |off: f64, n: usize, t: u16| -> Result<Vec<u8>, CliError> {
+    let file_len = bytes.len() as u64;
+    let read_at = |off: f64, n: usize, t: u16| -> Result<&[u8], CliError> {
         let off = off as u64;
-        if off.checked_add(n as u64).is_none_or(|end| end > file_len) {
-            return Err(bad(
+        match off.checked_add(n as u64) {
+            Some(end) if end <= file_len => Ok(&bytes[off as usize..end as usize]),
+            _ => Err(bad(
                 t,
                 format!(
                     "points to bytes {off}..{} beyond the file's {file_len}",
                     off + n as u64
                 ),
-            ));
+            )),
         }
-        let mut buf = vec![0u8; n];
-        file.seek(SeekFrom::Start(off))
-            .and_then(|_| file.read_exact(&mut buf))
-            .map_err(|e| err(format!("{}: reading image data: {e}", d.name)))?;
-        Ok(buf)
     };
     let sample = |b: &[u8], i: usize| -> u16 {
         if bps == 1 {
             b[i] as u16
-        } else if order == ByteOrder::LittleEndian {
+        } else if little {
             u16::from_le_bytes([b[2 * i], b[2 * i + 1]])
         } else {
             u16::from_be_bytes([b[2 * i], b[2 * i + 1]])
@@ -519,8 +604,4 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
             white_level: white as u32,
         },
     })
-}
-
-fn numbers_to_ptrs(v: Vec<f64>) -> Result<Vec<IfdPointer>, tiff::TiffError> {
-    Ok(v.into_iter().map(|x| IfdPointer(x as u64)).collect())
 }
