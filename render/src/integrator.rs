@@ -65,6 +65,8 @@ pub struct RenderOutput {
     /// One row-major plane per band.
     pub band_planes: Vec<Vec<f32>>,
     /// Variance of each pixel's estimate (sample variance / spp), per band, when asked for.
+    /// The wavelengths are stratified over a pixel's samples, so this i.i.d. estimate is an
+    /// upper bound (conservative) for the true variance of the pixel mean.
     pub variance_planes: Option<Vec<Vec<f32>>>,
     /// Planar depth along the viewing axis of the ray through the pixel centre (m); +∞ where
     /// it escapes (OpenEXR `Z`).
@@ -88,6 +90,9 @@ impl RenderOutput {
     }
 }
 
+/// The largest f32 below 1.
+const ONE_MINUS_EPS: f32 = 1.0 - f32::EPSILON / 2.0;
+
 #[inline(always)]
 fn next_f32(rng: &mut CamRng) -> f32 {
     (rng.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
@@ -97,6 +102,15 @@ fn next_f32(rng: &mut CamRng) -> f32 {
 fn next_vec2(rng: &mut CamRng) -> Vec2 {
     let a = next_f32(rng);
     Vec2::new(a, next_f32(rng))
+}
+
+/// Fisher–Yates shuffle of `p` in place (a uniformly random permutation).
+#[inline]
+fn shuffle(p: &mut [u32], rng: &mut CamRng) {
+    for i in (1..p.len()).rev() {
+        let j = ((rng.next_u32() as u64 * (i as u64 + 1)) >> 32) as usize;
+        p.swap(i, j);
+    }
 }
 
 /// Power heuristic (β = 2).
@@ -298,6 +312,7 @@ pub fn render(
     // per sample, each of the 4 slots adds L·count/4 to its band: the band-averaged radiance
     // estimator (1/Δ)∫_band L with λ uniform on [LO, HI] (density 1/(HI−LO) = 1/(count·Δ)).
     let slot_scale = nb as f32 / N_WL as f32;
+    let inv_spp = 1.0 / spp as f32;
     let done = AtomicUsize::new(0);
     let t0 = std::time::Instant::now();
     // row-parallel; each row is [pixel][band] means followed by variances
@@ -312,13 +327,35 @@ pub fn render(
             };
             let mut sum = vec![0f64; nb];
             let mut sum2 = vec![0f64; nb];
+            let mut perm_x: Vec<u32> = (0..spp).collect();
+            let mut perm_y: Vec<u32> = (0..spp).collect();
             for x in 0..w {
                 let pix = (y * w + x) as u64;
                 let mut rng = stream(s.seed, &[pix]);
-                for _ in 0..spp {
-                    let film = Vec2::new(x as f32, y as f32) + next_vec2(&mut rng);
+                // Stratification over the pixel's spp samples (Latin hypercube / N-rooks,
+                // Shirley 1991): film x and y of sample k lie in strata perm_x[k], perm_y[k]
+                // of two random permutations, jittered within them. Wavelengths: the 4·spp
+                // slot wavelengths of the pixel fill 4·spp equal strata of the range, one
+                // each — sample k's hero sits in stratum k of [0, 1/4), jittered, rotated by
+                // a random quarter r_k (its other slots are the other quarters, Wilkie et al.
+                // 2014), so every band receives the same share of wavelengths and pixels that
+                // see an emitter lose the count noise of independent wavelengths. Averaged
+                // over permutations, jitter and k, every sample is uniform over pixel ×
+                // spectrum (unbiased, also for hero-only paths); all other dimensions are
+                // drawn independently of k.
+                shuffle(&mut perm_x, &mut rng);
+                shuffle(&mut perm_y, &mut rng);
+                for k in 0..spp {
+                    let j = next_vec2(&mut rng);
+                    let film = Vec2::new(
+                        x as f32 + ((perm_x[k as usize] as f32 + j.x) * inv_spp).min(ONE_MINUS_EPS),
+                        y as f32 + ((perm_y[k as usize] as f32 + j.y) * inv_spp).min(ONE_MINUS_EPS),
+                    );
                     let lens = next_vec2(&mut rng);
-                    let wl = s.bands.sample_wavelengths(next_f32(&mut rng));
+                    let quarter = (rng.next_u32() >> 30) as f32 * 0.25;
+                    let u_wl = ((k as f32 + next_f32(&mut rng)) * inv_spp * 0.25 + quarter)
+                        .min(ONE_MINUS_EPS);
+                    let wl = s.bands.sample_wavelengths(u_wl);
                     let Some(cr) = camera.generate_ray(film, lens, &wl) else {
                         continue;
                     };
