@@ -171,7 +171,7 @@ impl Bvh4 {
         };
         let root = if triangles.len() <= 4 {
             let all: Vec<u32> = (0..triangles.len() as u32).collect();
-            b.from_prims(&all).0
+            b.child_over(&all).0
         } else {
             let obv: Vec<obvhs::triangle::Triangle> = triangles
                 .iter()
@@ -210,7 +210,7 @@ impl Bvh4 {
                 packs: Vec::new(),
                 order: Vec::with_capacity(triangles.len()),
             };
-            let packs: Vec<ChildBox> = order.chunks(4).map(|c| fb.from_prims(c)).collect();
+            let packs: Vec<ChildBox> = order.chunks(4).map(|c| fb.child_over(c)).collect();
             // one box per pack, 4 per group node, tested before the triangles
             for g in packs.chunks(4) {
                 let idx = fb.push_node();
@@ -425,7 +425,7 @@ impl Builder<'_> {
         if count[i] <= 4 || bvh.nodes[i].prim_count > 0 {
             let mut prims = Vec::new();
             self.prims_under(bvh, i, &mut prims);
-            return self.from_prims(&prims);
+            return self.child_over(&prims);
         }
         // open the largest inner child (> 4 triangles) until there are 4 children
         let f = bvh.nodes[i].first_index as usize;
@@ -494,7 +494,7 @@ impl Builder<'_> {
 
     /// A child over an arbitrary list of input triangles: one pack when ≤ 4, else a node over
     /// ≤ 4 groups (in list order; only reached for leaves the binary builder left large).
-    fn from_prims(&mut self, prims: &[u32]) -> ChildBox {
+    fn child_over(&mut self, prims: &[u32]) -> ChildBox {
         if prims.len() <= 4 {
             let mut p = Pack4 {
                 v0: [Vec4::ZERO; 3],
@@ -529,7 +529,7 @@ impl Builder<'_> {
         }
         let idx = self.push_node();
         let per = prims.len().div_ceil(4);
-        let children: Vec<ChildBox> = prims.chunks(per).map(|c| self.from_prims(c)).collect();
+        let children: Vec<ChildBox> = prims.chunks(per).map(|c| self.child_over(c)).collect();
         self.fill_node(idx, &children)
     }
 }
