@@ -65,6 +65,8 @@ pub struct RenderOutput {
     /// One row-major plane per band.
     pub band_planes: Vec<Vec<f32>>,
     /// Variance of each pixel's estimate (sample variance / spp), per band, when asked for.
+    /// The wavelengths are stratified over a pixel's samples, so this i.i.d. estimate is an
+    /// upper bound (conservative) for the true variance of the pixel mean.
     pub variance_planes: Option<Vec<Vec<f32>>>,
     /// Planar depth along the viewing axis of the ray through the pixel centre (m); +∞ where
     /// it escapes (OpenEXR `Z`).
@@ -88,6 +90,9 @@ impl RenderOutput {
     }
 }
 
+/// The largest f32 below 1.
+const ONE_MINUS_EPS: f32 = 1.0 - f32::EPSILON / 2.0;
+
 #[inline(always)]
 fn next_f32(rng: &mut CamRng) -> f32 {
     (rng.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
@@ -97,6 +102,15 @@ fn next_f32(rng: &mut CamRng) -> f32 {
 fn next_vec2(rng: &mut CamRng) -> Vec2 {
     let a = next_f32(rng);
     Vec2::new(a, next_f32(rng))
+}
+
+/// Fisher–Yates shuffle of `p` in place (a uniformly random permutation).
+#[inline]
+fn shuffle(p: &mut [u32], rng: &mut CamRng) {
+    for i in (1..p.len()).rev() {
+        let j = ((rng.next_u32() as u64 * (i as u64 + 1)) >> 32) as usize;
+        p.swap(i, j);
+    }
 }
 
 /// Power heuristic (β = 2).
@@ -153,6 +167,7 @@ fn to_world(r: &CameraRay, m: &Mat4, near: f32, far: f32) -> Option<WorldRay> {
 /// Trace one path carrying 4 wavelengths; returns the radiance per wavelength slot times
 /// `beta0` (the camera weight, with the hero-only factor already applied).
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn trace_path(
     scene: &Scene,
     ray: WorldRay,
@@ -176,9 +191,8 @@ fn trace_path(
             break;
         };
         let prim = hit.prim as usize;
-        let tri = &scene.tris[prim];
         let sh = &scene.shading[prim];
-        let b = tri.barycentrics(o.into(), d.into());
+        let b = hit.bary;
         let p = o + d * hit.t;
         let ns = shading_normal(sh, b);
         let wi_w = -d;
@@ -275,6 +289,147 @@ fn trace_path(
     l
 }
 
+/// Everything one film row needs.
+struct RowCtx<'a> {
+    scene: &'a Scene,
+    camera: &'a dyn Camera,
+    camera_to_world: Mat4,
+    s: &'a RenderSettings,
+    w: usize,
+    nb: usize,
+    max_depth: u32,
+    near: f32,
+    far: f32,
+    spp: u32,
+    slot_scale: f32,
+    inv_spp: f32,
+}
+
+/// Render film row `y`: per pixel [band] means, then variances (when asked for).
+#[inline(always)]
+fn render_row(c: &RowCtx, y: usize) -> (Vec<f32>, Vec<f32>) {
+    let RowCtx {
+        scene,
+        camera,
+        camera_to_world,
+        s,
+        w,
+        nb,
+        max_depth,
+        near,
+        far,
+        spp,
+        slot_scale,
+        inv_spp,
+    } = *c;
+    let mut mean = vec![0f32; w * nb];
+    let mut var = if s.variance {
+        vec![0f32; w * nb]
+    } else {
+        Vec::new()
+    };
+    let mut sum = vec![0f64; nb];
+    let mut sum2 = vec![0f64; nb];
+    let mut perm_x: Vec<u32> = (0..spp).collect();
+    let mut perm_y: Vec<u32> = (0..spp).collect();
+    for x in 0..w {
+        let pix = (y * w + x) as u64;
+        let mut rng = stream(s.seed, &[pix]);
+        // Stratification over the pixel's spp samples (Latin hypercube / N-rooks,
+        // Shirley 1991): film x and y of sample k lie in strata perm_x[k], perm_y[k]
+        // of two random permutations, jittered within them. Wavelengths: the 4·spp
+        // slot wavelengths of the pixel fill 4·spp equal strata of the range, one
+        // each — sample k's hero sits in stratum k of [0, 1/4), jittered, rotated by
+        // a random quarter r_k (its other slots are the other quarters, Wilkie et al.
+        // 2014), so every band receives the same share of wavelengths and pixels that
+        // see an emitter lose the count noise of independent wavelengths. Averaged
+        // over permutations, jitter and k, every sample is uniform over pixel ×
+        // spectrum (unbiased, also for hero-only paths); all other dimensions are
+        // drawn independently of k.
+        shuffle(&mut perm_x, &mut rng);
+        shuffle(&mut perm_y, &mut rng);
+        for k in 0..spp {
+            let j = next_vec2(&mut rng);
+            let film = Vec2::new(
+                x as f32 + ((perm_x[k as usize] as f32 + j.x) * inv_spp).min(ONE_MINUS_EPS),
+                y as f32 + ((perm_y[k as usize] as f32 + j.y) * inv_spp).min(ONE_MINUS_EPS),
+            );
+            let lens = next_vec2(&mut rng);
+            let quarter = (rng.next_u32() >> 30) as f32 * 0.25;
+            let u_wl =
+                ((k as f32 + next_f32(&mut rng)) * inv_spp * 0.25 + quarter).min(ONE_MINUS_EPS);
+            let wl = s.bands.sample_wavelengths(u_wl);
+            let Some(cr) = camera.generate_ray(film, lens, &wl) else {
+                continue;
+            };
+            let mut beta0 = cr.weight;
+            if cr.wavelength_dependent {
+                beta0[0] *= N_WL as f32;
+                for v in beta0.iter_mut().skip(1) {
+                    *v = 0.0;
+                }
+            }
+            if beta0.iter().all(|v| *v == 0.0) {
+                continue;
+            }
+            let Some(ray) = to_world(&cr, &camera_to_world, near, far) else {
+                continue;
+            };
+            let l = trace_path(
+                scene,
+                ray,
+                &wl,
+                beta0,
+                cr.wavelength_dependent,
+                max_depth,
+                s.rr_depth,
+                &mut rng,
+            );
+            // bands of the 4 slots (merge slots that share a band)
+            let mut bi = [usize::MAX; N_WL];
+            let mut bv = [0f64; N_WL];
+            let mut n = 0;
+            for i in 0..N_WL {
+                let v = (l[i] * slot_scale) as f64;
+                if !v.is_finite() {
+                    continue;
+                }
+                let b = s.bands.index(wl[i]);
+                match bi[..n].iter().position(|&q| q == b) {
+                    Some(k) => bv[k] += v,
+                    None => {
+                        bi[n] = b;
+                        bv[n] = v;
+                        n += 1;
+                    }
+                }
+            }
+            for k in 0..n {
+                sum[bi[k]] += bv[k];
+                sum2[bi[k]] += bv[k] * bv[k];
+            }
+        }
+        let inv = 1.0 / spp as f64;
+        for b in 0..nb {
+            let m = sum[b] * inv;
+            mean[x * nb + b] = m as f32;
+            if s.variance {
+                // variance of the mean: (E[v²] − E[v]²)/(n − 1)
+                let v2 = sum2[b] * inv;
+                let sv = if spp > 1 {
+                    ((v2 - m * m) * spp as f64 / (spp as f64 - 1.0)).max(0.0) * inv
+                } else {
+                    0.0
+                };
+                var[x * nb + b] = sv as f32;
+            }
+            sum[b] = 0.0;
+            sum2[b] = 0.0;
+        }
+    }
+    (mean, var)
+}
+
 /// Render `scene` through `camera` placed by `camera_to_world`. `progress` is called with the
 /// number of finished rows.
 pub fn render(
@@ -298,100 +453,33 @@ pub fn render(
     // per sample, each of the 4 slots adds L·count/4 to its band: the band-averaged radiance
     // estimator (1/Δ)∫_band L with λ uniform on [LO, HI] (density 1/(HI−LO) = 1/(count·Δ)).
     let slot_scale = nb as f32 / N_WL as f32;
+    let inv_spp = 1.0 / spp as f32;
     let done = AtomicUsize::new(0);
     let t0 = std::time::Instant::now();
     // row-parallel; each row is [pixel][band] means followed by variances
+    let ctx = RowCtx {
+        scene,
+        camera,
+        camera_to_world,
+        s,
+        w,
+        nb,
+        max_depth,
+        near,
+        far,
+        spp,
+        slot_scale,
+        inv_spp,
+    };
     let rows: Vec<(Vec<f32>, Vec<f32>)> = (0..h)
         .into_par_iter()
         .map(|y| {
-            let mut mean = vec![0f32; w * nb];
-            let mut var = if s.variance {
-                vec![0f32; w * nb]
-            } else {
-                Vec::new()
-            };
-            let mut sum = vec![0f64; nb];
-            let mut sum2 = vec![0f64; nb];
-            for x in 0..w {
-                let pix = (y * w + x) as u64;
-                let mut rng = stream(s.seed, &[pix]);
-                for _ in 0..spp {
-                    let film = Vec2::new(x as f32, y as f32) + next_vec2(&mut rng);
-                    let lens = next_vec2(&mut rng);
-                    let wl = s.bands.sample_wavelengths(next_f32(&mut rng));
-                    let Some(cr) = camera.generate_ray(film, lens, &wl) else {
-                        continue;
-                    };
-                    let mut beta0 = cr.weight;
-                    if cr.wavelength_dependent {
-                        beta0[0] *= N_WL as f32;
-                        for v in beta0.iter_mut().skip(1) {
-                            *v = 0.0;
-                        }
-                    }
-                    if beta0.iter().all(|v| *v == 0.0) {
-                        continue;
-                    }
-                    let Some(ray) = to_world(&cr, &camera_to_world, near, far) else {
-                        continue;
-                    };
-                    let l = trace_path(
-                        scene,
-                        ray,
-                        &wl,
-                        beta0,
-                        cr.wavelength_dependent,
-                        max_depth,
-                        s.rr_depth,
-                        &mut rng,
-                    );
-                    // bands of the 4 slots (merge slots that share a band)
-                    let mut bi = [usize::MAX; N_WL];
-                    let mut bv = [0f64; N_WL];
-                    let mut n = 0;
-                    for i in 0..N_WL {
-                        let v = (l[i] * slot_scale) as f64;
-                        if !v.is_finite() {
-                            continue;
-                        }
-                        let b = s.bands.index(wl[i]);
-                        match bi[..n].iter().position(|&q| q == b) {
-                            Some(k) => bv[k] += v,
-                            None => {
-                                bi[n] = b;
-                                bv[n] = v;
-                                n += 1;
-                            }
-                        }
-                    }
-                    for k in 0..n {
-                        sum[bi[k]] += bv[k];
-                        sum2[bi[k]] += bv[k] * bv[k];
-                    }
-                }
-                let inv = 1.0 / spp as f64;
-                for b in 0..nb {
-                    let m = sum[b] * inv;
-                    mean[x * nb + b] = m as f32;
-                    if s.variance {
-                        // variance of the mean: (E[v²] − E[v]²)/(n − 1)
-                        let v2 = sum2[b] * inv;
-                        let sv = if spp > 1 {
-                            ((v2 - m * m) * spp as f64 / (spp as f64 - 1.0)).max(0.0) * inv
-                        } else {
-                            0.0
-                        };
-                        var[x * nb + b] = sv as f32;
-                    }
-                    sum[b] = 0.0;
-                    sum2[b] = 0.0;
-                }
-            }
+            let row = render_row(&ctx, y);
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
             if let Some(p) = progress {
                 p(k);
             }
-            (mean, var)
+            row
         })
         .collect();
     let render_s = t0.elapsed().as_secs_f64();

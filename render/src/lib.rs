@@ -17,6 +17,7 @@
 #![deny(missing_docs)]
 
 pub mod bsdf;
+pub mod bvh4;
 pub mod camera;
 pub mod depth_path;
 pub mod error;

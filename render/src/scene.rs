@@ -1,13 +1,13 @@
-//! The render scene: world-space triangles in a CWBVH (obvhs: Ylitie et al., "Efficient
-//! Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs", HPG 2017), their shading
+//! The render scene: world-space triangles in a 4-wide BVH ([`crate::bvh4`], topology from
+//! obvhs's PLOC builder), their shading
 //! attributes, materials, emitters and cameras.
 use crate::bsdf::Bsdf;
+use crate::bvh4::Bvh4;
 use crate::camera::Perspective;
 use crate::sampling::{square_to_triangle, Distribution1D};
 use crate::spectral::{SigmoidPoly, TabulatedSpectrum, N_WL};
 use glam::{Mat4, Vec2, Vec3, Vec3A};
-use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray, RayHit};
+use obvhs::ray::Ray;
 
 /// Intersection data of one triangle (Möller & Trumbore 1997): vertex 0 and two edges.
 #[derive(Debug, Clone, Copy)]
@@ -228,8 +228,8 @@ pub struct Scene {
     pub tris: Vec<TriGeom>,
     /// Shading attributes in BVH order.
     pub shading: Vec<TriShading>,
-    /// The CWBVH over `tris` (primitive i of the BVH is `tris[i]`).
-    pub bvh: Option<CwBvh>,
+    /// The 4-wide BVH over `tris` (primitive i of the BVH is `tris[i]`).
+    pub bvh: Option<Bvh4>,
     /// Materials.
     pub materials: Vec<Material>,
     /// Triangle index (BVH order) of each area light.
@@ -253,6 +253,8 @@ pub struct Hit {
     pub t: f32,
     /// Triangle (BVH order).
     pub prim: u32,
+    /// Barycentrics (b1, b2) of the hit point.
+    pub bary: Vec2,
 }
 
 /// A light sample seen from a shading point.
@@ -295,21 +297,9 @@ impl Scene {
         let (tris, bvh) = if triangles.is_empty() {
             (Vec::new(), None)
         } else {
-            let obv: Vec<obvhs::triangle::Triangle> = triangles
-                .iter()
-                .map(|t| obvhs::triangle::Triangle {
-                    v0: t[0].into(),
-                    v1: t[1].into(),
-                    v2: t[2].into(),
-                })
-                .collect();
-            let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-                &obv,
-                obvhs::BvhBuildParams::medium_build(),
-                &mut std::time::Duration::default(),
-            );
+            let bvh = Bvh4::build(&triangles);
             // reorder so that BVH primitive i is triangle i (no indirection while tracing)
-            let order: Vec<usize> = bvh.primitive_indices.iter().map(|&i| i as usize).collect();
+            let order: Vec<usize> = bvh.order.iter().map(|&i| i as usize).collect();
             let tris = order
                 .iter()
                 .map(|&i| {
@@ -368,29 +358,21 @@ impl Scene {
     /// Closest hit along the ray within [tmin, tmax].
     #[inline]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
-        let bvh = self.bvh.as_ref()?;
-        let ray = Ray::new(o.into(), d.into(), tmin, tmax);
-        let mut hit = RayHit::none();
-        let tris = &self.tris;
-        if bvh.ray_traverse(ray, &mut hit, |r, id| tris[id].intersect(r)) {
-            Some(Hit {
-                t: hit.t,
-                prim: hit.primitive_id,
-            })
-        } else {
-            None
-        }
+        let h = self.bvh.as_ref()?.intersect(o, d, tmin, tmax)?;
+        Some(Hit {
+            t: h.t,
+            prim: h.prim,
+            bary: h.bary,
+        })
     }
 
     /// True when nothing blocks the segment (tmin, tmax) along the ray.
     #[inline]
     pub fn unoccluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
-        let Some(bvh) = self.bvh.as_ref() else {
-            return true;
-        };
-        let ray = Ray::new(o.into(), d.into(), tmin, tmax);
-        let tris = &self.tris;
-        bvh.ray_traverse_miss(ray, |r, id| tris[id].intersect(r))
+        match self.bvh.as_ref() {
+            Some(bvh) => bvh.unoccluded(o, d, tmin, tmax),
+            None => true,
+        }
     }
 
     /// Density (per steradian) of sampling the direction to point `p` on area-light triangle
