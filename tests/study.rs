@@ -744,3 +744,59 @@ fn dof_study_ci_depth_path_agrees_with_the_real_lens() {
         "4 plots and 3 × 3 point images, got {n_fig}"
     );
 }
+
+/// Bad render points are one-line errors naming the spec and the key: a negative f-number,
+/// an unknown render task, an unknown key of the scene, a threshold out of range.
+#[test]
+fn bad_render_points_are_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let ci: Value = serde_json::from_str(
+        &std::fs::read_to_string(repo().join("examples/study_dof/spec_ci.json")).unwrap(),
+    )
+    .unwrap();
+    let lens: Value = serde_json::from_str(
+        &std::fs::read_to_string(repo().join("lenses/double_gauss_50mm_f2.json")).unwrap(),
+    )
+    .unwrap();
+    let mut base = ci["point"].clone();
+    base["lens"] = lens;
+    let with = |path: &[&str], v: Value| {
+        let mut p = base.clone();
+        let mut t = &mut p;
+        for k in &path[..path.len() - 1] {
+            t = &mut t[*k];
+        }
+        t[path[path.len() - 1]] = v;
+        json!({"point": p})
+    };
+    let cases: Vec<(Value, Vec<&str>)> = vec![
+        (with(&["f_number"], json!(-2.0)), vec!["f_number", "-2"]),
+        (with(&["task"], json!("bokeh")), vec!["task", "bokeh"]),
+        (
+            with(&["scene", "dof_tiles", "colour"], json!(1)),
+            vec!["unknown field `colour`"],
+        ),
+        (
+            with(&["metrics", "mtf50_threshold_cy_per_px"], json!(0.7)),
+            vec!["mtf50_threshold_cy_per_px", "0.7"],
+        ),
+    ];
+    for (i, (spec, want)) in cases.iter().enumerate() {
+        let p = dir.path().join(format!("bad{i}.json"));
+        std::fs::write(&p, spec.to_string()).unwrap();
+        let o = camsim()
+            .arg("study")
+            .arg(&p)
+            .arg("--out")
+            .arg(dir.path().join(format!("out{i}")))
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "case {i} accepted");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "case {i}: {err}");
+        assert!(err.contains(&format!("bad{i}.json")), "case {i}: {err}");
+        for w in want {
+            assert!(err.contains(w), "case {i}: `{w}` not in {err}");
+        }
+    }
+}
