@@ -17,8 +17,14 @@
 //!   edges of the layers in front of it (hole filling by normalised convolution), so a
 //!   blurred foreground edge blends with the background instead of with black. Edges are
 //!   replicated outside the image.
-//! * Any PSF per depth can be supplied ([`defocus_layered`] takes a kernel function), e.g. a
-//!   lens's on-axis geometric PSF at each depth.
+//! * Any PSF per depth can be supplied ([`defocus_layered`] takes a kernel function). Each
+//!   slab is blurred with the PSF of its pixels' mean 1/z, which is exact for planes.
+//! * Real lens ([`LensDefocus`]): the lens's on-axis geometric PSF at each slab's object
+//!   distance, taken from the `camsim-lens` field model tabulated over object distance and
+//!   binned on the pixel grid. It is compared with the real-lens camera in
+//!   `render/tests/depth_path.rs` and in docs/study_dof.md: edge rise per depth within
+//!   0.3 px + 12 %, DoF within 4 %, pixel error ≤ 3.5 % inside tiles and 5–31 % at
+//!   occlusion boundaries.
 //!
 //! Known limits (measured in docs/render_validation.md): a pinhole image has no radiance for
 //! surfaces hidden behind foreground edges, which a finite aperture partly sees, and blurred
