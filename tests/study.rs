@@ -674,3 +674,129 @@ fn lens_point_is_independent_of_threads_and_process() {
         std::fs::read(b.join("edge.png")).unwrap()
     );
 }
+
+/// Study 2 at CI size (examples/study_dof/spec_ci.json: 16 depths, 128 px, 32 spp): the
+/// depth of field (vergence width 1/near − 1/far where MTF50 ≥ 0.15 cy/px) grows linearly in
+/// the f-number (f/2 → f/4 → f/8: ratios 2 ± 0.3), agrees with the thin-lens expectation of
+/// the entrance-pupil disc within 15 % (the lens's aberrations and the slanted-edge noise),
+/// and the depth path's DoF agrees with the real-lens render's within 10 % (measured ≈ 4 %;
+/// the rest is Monte Carlo noise of the 32-spp edges). The report's figures are non-trivial.
+#[test]
+fn dof_study_ci_depth_path_agrees_with_the_real_lens() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("dof");
+    let t0 = std::time::Instant::now();
+    study(&repo().join("examples/study_dof/spec_ci.json"), &out, &[]);
+    eprintln!("dof CI study: {:?}", t0.elapsed());
+    let r = rows(&out);
+    assert_eq!(r.len(), 3);
+    let n: Vec<f64> = r.iter().map(|x| num(x, "f_number")).collect();
+    assert_eq!(n, vec![2.0, 4.0, 8.0]);
+    let wl: Vec<f64> = r.iter().map(|x| num(x, "dof_lens_per_m")).collect();
+    let wd: Vec<f64> = r.iter().map(|x| num(x, "dof_depth_path_per_m")).collect();
+    let wt: Vec<f64> = r.iter().map(|x| num(x, "dof_thin_lens_per_m")).collect();
+    eprintln!("DoF widths (1/m): real lens {wl:?}, depth path {wd:?}, thin lens {wt:?}");
+    for w in [&wl, &wd] {
+        for k in 0..2 {
+            let ratio = w[k + 1] / w[k];
+            assert!(
+                (ratio - 2.0).abs() < 0.3,
+                "DoF width ratio f/{} → f/{}: {ratio:.3} (expected ≈ 2, linear in N)",
+                n[k],
+                n[k + 1]
+            );
+        }
+    }
+    for k in 0..3 {
+        assert!(
+            (wl[k] / wt[k] - 1.0).abs() < 0.15,
+            "f/{}: real-lens DoF {:.4} vs thin-lens {:.4} 1/m",
+            n[k],
+            wl[k],
+            wt[k]
+        );
+        let agree = num(&r[k], "dof_agreement_pct");
+        assert!(
+            agree.abs() < 10.0,
+            "f/{}: depth path vs real lens DoF differ by {agree:.1} %",
+            n[k]
+        );
+        // the near and far limits bracket the 2 m focus
+        assert!(num(&r[k], "dof_near_lens_m") < 2.0 && num(&r[k], "dof_far_lens_m") > 1.8);
+    }
+    // far limit grows and near limit shrinks as the lens is stopped down
+    assert!(num(&r[2], "dof_far_lens_m") > num(&r[0], "dof_far_lens_m"));
+    assert!(num(&r[2], "dof_near_lens_m") < num(&r[0], "dof_near_lens_m"));
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let mut n_fig = 0;
+    for part in html.split("src=\"").skip(1) {
+        let src = &part[..part.find('"').unwrap()];
+        let f = camsim::plots::check_figure(&out.join(src)).unwrap();
+        assert!(f.width >= 16 && f.height >= 16, "{src}");
+        assert!(
+            f.distinct_colours >= 3 && f.non_white_per_mille >= 20,
+            "{src}: {f:?}"
+        );
+        n_fig += 1;
+    }
+    assert!(
+        n_fig >= 4 + 9,
+        "4 plots and 3 × 3 point images, got {n_fig}"
+    );
+}
+
+/// Bad render points are one-line errors naming the spec and the key: a negative f-number,
+/// an unknown render task, an unknown key of the scene, a threshold out of range.
+#[test]
+fn bad_render_points_are_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let ci: Value = serde_json::from_str(
+        &std::fs::read_to_string(repo().join("examples/study_dof/spec_ci.json")).unwrap(),
+    )
+    .unwrap();
+    let lens: Value = serde_json::from_str(
+        &std::fs::read_to_string(repo().join("lenses/double_gauss_50mm_f2.json")).unwrap(),
+    )
+    .unwrap();
+    let mut base = ci["point"].clone();
+    base["lens"] = lens;
+    let with = |path: &[&str], v: Value| {
+        let mut p = base.clone();
+        let mut t = &mut p;
+        for k in &path[..path.len() - 1] {
+            t = &mut t[*k];
+        }
+        t[path[path.len() - 1]] = v;
+        json!({"point": p})
+    };
+    let cases: Vec<(Value, Vec<&str>)> = vec![
+        (with(&["f_number"], json!(-2.0)), vec!["f_number", "-2"]),
+        (with(&["task"], json!("bokeh")), vec!["task", "bokeh"]),
+        (
+            with(&["scene", "dof_tiles", "colour"], json!(1)),
+            vec!["unknown field `colour`"],
+        ),
+        (
+            with(&["metrics", "mtf50_threshold_cy_per_px"], json!(0.7)),
+            vec!["mtf50_threshold_cy_per_px", "0.7"],
+        ),
+    ];
+    for (i, (spec, want)) in cases.iter().enumerate() {
+        let p = dir.path().join(format!("bad{i}.json"));
+        std::fs::write(&p, spec.to_string()).unwrap();
+        let o = camsim()
+            .arg("study")
+            .arg(&p)
+            .arg("--out")
+            .arg(dir.path().join(format!("out{i}")))
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "case {i} accepted");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "case {i}: {err}");
+        assert!(err.contains(&format!("bad{i}.json")), "case {i}: {err}");
+        for w in want {
+            assert!(err.contains(w), "case {i}: `{w}` not in {err}");
+        }
+    }
+}

@@ -20,6 +20,7 @@ pub mod bsdf;
 pub mod bvh4;
 pub mod camera;
 pub mod depth_path;
+pub mod dof_scene;
 pub mod error;
 pub mod gltf_load;
 pub mod gltf_write;

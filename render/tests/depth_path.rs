@@ -326,3 +326,262 @@ fn depth_path_on_the_thin_lens_scene() {
         );
     }
 }
+
+/// 10–90 % edge rise (px, along the edge normal) of the slanted edge in cell `k`, from the
+/// pixels of the central `frac` of the cell: signed distance of each pixel centre to the known
+/// edge line, ESF binned at ¼ px, plateaus = mean of the pixels farther than `plateau_px`
+/// from the edge.
+fn edge_rise_px(
+    img: &[f32],
+    w: usize,
+    cell: camsim_render::dof_scene::CellPx,
+    angle_deg: f64,
+    frac: f64,
+    plateau_px: f64,
+) -> Option<f64> {
+    let (xc, yc) = (0.5 * (cell.x0 + cell.x1), 0.5 * (cell.y0 + cell.y1));
+    let half = 0.5 * frac * (cell.x1 - cell.x0);
+    let (t, ca) = (angle_deg.to_radians().tan(), angle_deg.to_radians().cos());
+    let mut pts = Vec::new();
+    for j in (yc - half).ceil() as usize..(yc + half).floor() as usize {
+        for i in (xc - half).ceil() as usize..(xc + half).floor() as usize {
+            let (x, y) = (i as f64 + 0.5, j as f64 + 0.5);
+            // image y grows downwards; the edge's top leans right: x = xc − (y − yc)·tan a
+            let d = ((x - xc) + (y - yc) * t) * ca;
+            pts.push((d, img[j * w + i] as f64));
+        }
+    }
+    let mean = |f: &dyn Fn(f64) -> bool| {
+        let v: Vec<f64> = pts.iter().filter(|p| f(p.0)).map(|p| p.1).collect();
+        (v.len() > 3).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let lo = mean(&|d| d < -plateau_px)?;
+    let hi = mean(&|d| d > plateau_px)?;
+    let nb = (2.0 * half * 4.0) as usize;
+    let mut bins = vec![(0.0, 0usize); 2 * nb + 1];
+    for (d, v) in &pts {
+        let b = ((d * 4.0).round() as isize + nb as isize).clamp(0, 2 * nb as isize) as usize;
+        bins[b].0 += (v - lo) / (hi - lo);
+        bins[b].1 += 1;
+    }
+    let esf: Vec<(f64, f64)> = bins
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| b.1 > 0)
+        .map(|(k, b)| ((k as f64 - nb as f64) / 4.0, b.0 / b.1 as f64))
+        .collect();
+    // smooth by a 5-bin running mean, then the first crossings of 0.1 and 0.9
+    let sm: Vec<(f64, f64)> = (0..esf.len())
+        .map(|k| {
+            let a = k.saturating_sub(2);
+            let b = (k + 3).min(esf.len());
+            (
+                esf[k].0,
+                esf[a..b].iter().map(|p| p.1).sum::<f64>() / (b - a) as f64,
+            )
+        })
+        .collect();
+    let cross = |level: f64| {
+        sm.windows(2).find_map(|p| {
+            ((p[0].1 - level) * (p[1].1 - level) <= 0.0 && p[0].1 != p[1].1)
+                .then(|| p[0].0 + (level - p[0].1) / (p[1].1 - p[0].1) * (p[1].0 - p[0].0))
+        })
+    };
+    Some(cross(0.9)? - cross(0.1)?)
+}
+
+/// The depth path with the lens's own PSFs (field model, per object distance) against the
+/// real-lens render of the depth-of-field tiles (a double Gauss 50 mm at f/4, focus 2 m):
+/// per depth, the 10–90 % edge rise of both images agrees (|Δ| ≤ 0.25 px + 10 %) wherever
+/// the defocus disc fits inside the measured region, and the pixel error is reported inside
+/// the tiles and at the occlusion boundaries between tiles (where the pinhole image lacks
+/// the radiance a finite aperture sees).
+#[test]
+fn lens_depth_path_matches_the_real_lens_render() {
+    use camsim_render::dof_scene::{render_dof, shipped, DofRenderOptions};
+    let lens = camsim_lens::LensPrescription::from_json_file(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json"),
+        &camsim_lens::GlassCatalog::bundled(),
+    )
+    .unwrap();
+    let tiles = shipped();
+    let o = DofRenderOptions {
+        width_px: 128,
+        spp_lens: 64,
+        spp_pinhole: 16,
+        seed: 11,
+        band_nm: (500.0, 600.0),
+        f_number: 4.0,
+        focus_distance_m: 2.0,
+        layers: 32,
+        real_lens: true,
+    };
+    let r = render_dof(&tiles, &lens, &o).unwrap();
+    eprintln!("times {:?}, pitch {:.4} mm", r.times_s, r.pixel_pitch_mm);
+    let real = r.real_lens.as_ref().unwrap();
+    let (w, h) = (r.width, r.height);
+    // gain: irradiance / radiance, from the in-focus tile nearest 2 m (mean over its cell)
+    let cell_mean = |img: &[f32], k: usize| {
+        let c = tiles.cell_px(k, w as u32, h as u32);
+        let (mut s, mut n) = (0.0, 0.0);
+        for j in c.y0 as usize + 2..c.y1 as usize - 2 {
+            for i in c.x0 as usize + 2..c.x1 as usize - 2 {
+                s += img[j * w + i] as f64;
+                n += 1.0;
+            }
+        }
+        s / n
+    };
+    let kf = (0..tiles.depths_m.len())
+        .min_by(|a, b| {
+            (1.0 / tiles.depths_m[*a] - 0.5)
+                .abs()
+                .partial_cmp(&(1.0 / tiles.depths_m[*b] - 0.5).abs())
+                .unwrap()
+        })
+        .unwrap();
+    let gain = cell_mean(real, kf) / cell_mean(&r.depth_path, kf);
+    if let Ok(dir) = std::env::var("CAMSIM_DEPTH_PATH_DUMP") {
+        for (name, img) in [("real", real), ("dp", &r.depth_path), ("pin", &r.pinhole)] {
+            let g = img.iter().cloned().fold(0f32, f32::max) as f64;
+            let px: Vec<u8> = img
+                .iter()
+                .map(|v| ((*v as f64 / g) * 255.0).clamp(0.0, 255.0) as u8)
+                .collect();
+            image::GrayImage::from_raw(w as u32, h as u32, px)
+                .unwrap()
+                .save(Path::new(&dir).join(format!("{name}.png")))
+                .unwrap();
+        }
+    }
+    let cell_w = w as f64 / tiles.cols as f64;
+    let var = r.real_lens_variance.as_ref().unwrap();
+    let mut checked = 0;
+    let mut rel = Vec::new();
+    let mut worst_inside = 0f64;
+    for (k, z) in tiles.depths_m.iter().enumerate() {
+        let cell = tiles.cell_px(k, w as u32, h as u32);
+        let c_px = r.entrance_pupil_radius_m * (1.0 / z - 0.5).abs() * h as f64
+            / (2.0 * (0.5 * tiles.yfov_deg.to_radians()).tan());
+        let frac = 0.75;
+        let fits = c_px + 1.0 < 0.5 * frac * cell_w - 2.0;
+        let er = edge_rise_px(real, w, cell, tiles.edge_angle_deg, frac, c_px + 1.0);
+        let ed = edge_rise_px(
+            &r.depth_path,
+            w,
+            cell,
+            tiles.edge_angle_deg,
+            frac,
+            c_px + 1.0,
+        );
+        // RMS error (of the in-focus mean level) inside the tile and in the border band
+        let (mut e_in, mut n_in, mut e_b, mut n_b) = (0f64, 0f64, 0f64, 0f64);
+        for j in cell.y0 as usize..cell.y1 as usize {
+            for i in cell.x0 as usize..cell.x1 as usize {
+                let (x, y) = (i as f64 + 0.5, j as f64 + 0.5);
+                let m = (x - cell.x0)
+                    .min(cell.x1 - x)
+                    .min(y - cell.y0)
+                    .min(cell.y1 - y);
+                // squared difference minus the real-lens estimate's variance (Monte Carlo
+                // noise removed; the pinhole image is noise-free away from edges)
+                let d = (real[j * w + i] as f64 - gain * r.depth_path[j * w + i] as f64).powi(2)
+                    - var[j * w + i] as f64;
+                if m > c_px + 1.5 {
+                    e_in += d;
+                    n_in += 1.0;
+                } else {
+                    e_b += d;
+                    n_b += 1.0;
+                }
+            }
+        }
+        let level = cell_mean(real, kf);
+        let rms_in = (e_in.max(0.0) / n_in.max(1.0)).sqrt() / level;
+        let rms_b = (e_b.max(0.0) / n_b.max(1.0)).sqrt() / level;
+        eprintln!(
+            "z {z:.2} m: CoC {c_px:.2} px, 10-90 rise real {er:.3?} px, depth path {ed:.3?} px; RMS error (noise removed, of the mean level) inside the tile {rms_in:.4}, at tile borders {rms_b:.4}"
+        );
+        worst_inside = worst_inside.max(rms_in);
+        if fits {
+            let (er, ed) = (er.unwrap(), ed.unwrap());
+            rel.push(ed / er - 1.0);
+            assert!(
+                (er - ed).abs() <= 0.3 + 0.12 * er,
+                "z {z} m: edge rise real lens {er:.3} px vs depth path {ed:.3} px"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 12, "only {checked} tiles compared");
+    let bias = rel.iter().sum::<f64>() / rel.len() as f64;
+    eprintln!("mean relative edge-rise difference (depth path / real lens − 1): {bias:+.4}; worst RMS inside tiles {worst_inside:.4}");
+    assert!(
+        bias.abs() < 0.05,
+        "systematic edge-rise difference {bias:+.4}"
+    );
+    assert!(
+        worst_inside < 0.05,
+        "RMS error inside a tile {worst_inside:.4}"
+    );
+}
+
+/// Paraxially, the lens's defocus PSF is the thin-lens disc with the entrance-pupil radius as
+/// aperture radius: c(z) = R_ep·|1/z − 1/D|·F_px (F_px = focal length in pixels of the
+/// equivalent pinhole). The field-model PSFs of a slow lens (double Gauss at f/8, small
+/// aberrations) have the disc's RMS radius c/√2 (plus the pixel bin's 1/√6 px) within 5 %.
+#[test]
+fn lens_defocus_psf_is_the_entrance_pupil_disc() {
+    use camsim_render::depth_path::{LensDefocus, LensDefocusOptions};
+    let lens = camsim_lens::LensPrescription::from_json_file(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json"),
+        &camsim_lens::GlassCatalog::bundled(),
+    )
+    .unwrap();
+    let pitch_mm = 0.01;
+    let focus_m = 2.0;
+    let invs = [0.0, 0.2, 0.8, 1.0, 1.5];
+    let d = LensDefocus::new(
+        &lens,
+        &LensDefocusOptions {
+            f_number: Some(8.0),
+            focus_distance_m: Some(focus_m),
+            pixel_pitch_mm: pitch_mm,
+            wavelengths_nm: vec![550.0],
+            pupil_n: 256,
+        },
+        &invs,
+    )
+    .unwrap();
+    // F_px from the paraxial chief ray of the focused lens
+    let mut l8 = lens.clone();
+    l8.aperture = camsim_lens::prescription::Aperture::FNumber(8.0);
+    let z_ep = l8.first_order(l8.primary_nm).unwrap().entrance_pupil_z_mm;
+    let focused = l8.focus_at(Some(focus_m * 1e3 - z_ep)).unwrap();
+    let f_px = focused
+        .paraxial_chief_height_mm(1.0, l8.primary_nm)
+        .unwrap()
+        .abs()
+        / 1f64.to_radians().tan()
+        / pitch_mm;
+    for (v, k) in d.table() {
+        let c = d.entrance_pupil_radius_m * (v - 1.0 / focus_m).abs() * f_px;
+        let n = 2 * k.radius + 1;
+        let (mut m2, mut s) = (0.0, 0.0);
+        for j in 0..n {
+            for i in 0..n {
+                let (x, y) = (i as f64 - k.radius as f64, j as f64 - k.radius as f64);
+                m2 += k.values[j * n + i] as f64 * (x * x + y * y);
+                s += k.values[j * n + i] as f64;
+            }
+        }
+        let rms = (m2 / s).sqrt();
+        // disc RMS radius c/√2, a uniform pixel bin adds 2·(1/12) px²
+        let expect = (c * c / 2.0 + 1.0 / 6.0).sqrt();
+        eprintln!("1/z {v}: CoC {c:.3} px, PSF RMS radius {rms:.3} px, disc {expect:.3} px");
+        assert!(
+            (rms - expect).abs() < 0.05 * expect + 0.1,
+            "1/z {v} m⁻¹: PSF RMS radius {rms:.3} px vs entrance-pupil disc {expect:.3} px"
+        );
+    }
+}

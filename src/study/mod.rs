@@ -10,6 +10,7 @@
 //!   `result.json` written last and atomically: a point is finished exactly when its
 //!   result.json exists, so an interrupted study resumes where it stopped;
 //! * [`capture`]: the sensor-level evaluator (MTF50, SNR, vSNR, ΔE2000, dynamic range);
+//! * [`render`]: the renderer-based evaluator (depth of field: real-lens camera vs depth path);
 //! * [`table`] and [`report`]: CSV + JSON tables in spec order, HTML report with plots and
 //!   image strips;
 //! * [`ray`]: the Ray engine: the same points, each run by `camsim study-point` on a Ray
@@ -21,6 +22,7 @@ pub mod capture;
 pub mod hash;
 pub mod point;
 pub mod ray;
+pub mod render;
 pub mod report;
 pub mod spec;
 pub mod table;

@@ -9,6 +9,7 @@
 //! and reports do not change.
 use super::capture;
 use super::hash::canonical_json;
+use super::render;
 use crate::error::CliError;
 use camsim_core::exr_io::write_atomically;
 use serde_json::{json, Value};
@@ -19,6 +20,9 @@ use std::path::{Path, PathBuf};
 pub enum PointKind {
     /// Sensor-level capture of test targets through the camera (MTF50, SNR, vSNR, ΔE, DR).
     Capture,
+    /// glTF scenes through the render crate's cameras (depth of field: real lens vs depth
+    /// path), measured on the rendered images ([`super::render`]).
+    Render,
 }
 
 impl PointKind {
@@ -26,8 +30,9 @@ impl PointKind {
     pub fn of(doc: &Value) -> Result<Self, String> {
         match doc.get("kind").and_then(Value::as_str) {
             Some("capture") => Ok(PointKind::Capture),
+            Some("render") => Ok(PointKind::Render),
             Some(other) => Err(format!(
-                "kind: unknown point kind \"{other}\" (expected \"capture\")"
+                "kind: unknown point kind \"{other}\" (expected \"capture\" or \"render\")"
             )),
             None => Err("kind: required (a string)".into()),
         }
@@ -62,6 +67,7 @@ impl PointOutput {
 pub fn validate(doc: &Value) -> Result<(), String> {
     match PointKind::of(doc)? {
         PointKind::Capture => capture::validate(doc),
+        PointKind::Render => render::validate(doc),
     }
 }
 
@@ -127,6 +133,8 @@ pub fn evaluate_into(doc: &Value, hash: &str, dir: &Path) -> Result<Value, CliEr
     let seed = seed_of(doc, hash);
     let out = match kind {
         PointKind::Capture => capture::evaluate(doc, seed, dir)
+            .map_err(|e| CliError::input(&point_path, e.one_line()))?,
+        PointKind::Render => render::evaluate(doc, seed, dir)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
     };
     let metrics: serde_json::Map<String, Value> = out

@@ -1,0 +1,425 @@
+//! The `"render"` point kind: glTF scenes through the render crate's cameras, measured on
+//! the rendered images.
+//!
+//! `"task": "depth_of_field"` (study 2, docs/study_dof.md): the slanted-edge tiles of
+//! [`camsim_render::dof_scene`] (one depth per tile) through a real lens at one f-number and
+//! focus, rendered (a) with the real-lens camera (sensor irradiance, exit-pupil sampling) and
+//! (b) with the depth path (pinhole radiance + depth → the lens's field-model PSF per depth).
+//! Per tile and image the ISO 12233 MTF50 (cy/px); the depth of field is the range of
+//! distances around focus where MTF50 ≥ a threshold, its ends interpolated linearly in
+//! 1/MTF50 against vergence 1/z (a defocus blur's width is proportional to |1/z − 1/D|).
+//!
+//! ```json
+//! {"kind": "render", "task": "depth_of_field",
+//!  "scene": {"dof_tiles": {"depths_m": [...], "cols": 4, "yfov_deg": 2.5, "edge_angle_deg": 5}},
+//!  "lens": {...prescription...}, "f_number": 4, "focus_distance_m": 2,
+//!  "render": {"width_px": 128, "spp": 64, "pinhole_spp": 16, "band_nm": [500, 600], "layers": 32},
+//!  "metrics": {"mtf50_threshold_cy_per_px": 0.15, "roi_fraction": 0.75}}
+//! ```
+use super::point::PointOutput;
+use crate::error::CliError;
+use camsim_core::stats::Rect;
+use camsim_lens::{GlassCatalog, LensPrescription};
+use camsim_metrics::slanted_edge_mtf;
+use camsim_render::dof_scene::{render_dof, DofRenderOptions, DofTiles};
+use serde::Deserialize;
+use serde_json::{json, Value};
+use std::path::Path;
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TilesDoc {
+    depths_m: Vec<f64>,
+    #[serde(default = "default_cols")]
+    cols: usize,
+    #[serde(default = "default_yfov")]
+    yfov_deg: f64,
+    #[serde(default = "default_angle")]
+    edge_angle_deg: f64,
+}
+fn default_cols() -> usize {
+    4
+}
+fn default_yfov() -> f64 {
+    2.5
+}
+fn default_angle() -> f64 {
+    5.0
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneDoc {
+    dof_tiles: TilesDoc,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RenderDoc {
+    #[serde(default = "default_width")]
+    width_px: u32,
+    #[serde(default = "default_spp")]
+    spp: u32,
+    #[serde(default = "default_pin_spp")]
+    pinhole_spp: u32,
+    #[serde(default = "default_band")]
+    band_nm: [f64; 2],
+    #[serde(default = "default_layers")]
+    layers: usize,
+}
+fn default_width() -> u32 {
+    128
+}
+fn default_spp() -> u32 {
+    64
+}
+fn default_pin_spp() -> u32 {
+    16
+}
+fn default_band() -> [f64; 2] {
+    [500.0, 600.0]
+}
+fn default_layers() -> usize {
+    32
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MetricsDoc {
+    #[serde(default = "default_thr")]
+    mtf50_threshold_cy_per_px: f64,
+    #[serde(default = "default_roi")]
+    roi_fraction: f64,
+}
+fn default_thr() -> f64 {
+    0.15
+}
+fn default_roi() -> f64 {
+    0.75
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DofDoc {
+    #[allow(dead_code)]
+    kind: String,
+    #[allow(dead_code)]
+    task: String,
+    scene: SceneDoc,
+    lens: Value,
+    f_number: f64,
+    focus_distance_m: f64,
+    #[serde(default)]
+    render: Option<RenderDoc>,
+    #[serde(default)]
+    metrics: Option<MetricsDoc>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    seed: Option<u64>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    camsim_version: Option<String>,
+}
+
+fn parse_dof(doc: &Value) -> Result<DofDoc, String> {
+    let d: DofDoc =
+        serde_json::from_value(doc.clone()).map_err(|e| format!("render point: {e}"))?;
+    let t = tiles_of(&d);
+    t.validate().map_err(|m| format!("scene.dof_tiles: {m}"))?;
+    if !(d.f_number.is_finite() && d.f_number > 0.0) {
+        return Err(format!("f_number: must be > 0, got {}", d.f_number));
+    }
+    if !(d.focus_distance_m.is_finite() && d.focus_distance_m > 0.0) {
+        return Err(format!(
+            "focus_distance_m: must be > 0, got {}",
+            d.focus_distance_m
+        ));
+    }
+    let r = render_of(&d);
+    if r.width_px < 16 || r.width_px > 4096 || r.spp == 0 || r.pinhole_spp == 0 {
+        return Err(format!(
+            "render: width_px must be 16–4096 and spp, pinhole_spp ≥ 1 (got {}, {}, {})",
+            r.width_px, r.spp, r.pinhole_spp
+        ));
+    }
+    if !(r.band_nm[0] > 0.0 && r.band_nm[1] > r.band_nm[0]) {
+        return Err(format!(
+            "render.band_nm: need 0 < lo < hi, got {:?}",
+            r.band_nm
+        ));
+    }
+    if r.layers == 0 || r.layers > 256 {
+        return Err(format!("render.layers: must be 1–256, got {}", r.layers));
+    }
+    let m = metrics_of(&d);
+    if !(m.mtf50_threshold_cy_per_px > 0.0 && m.mtf50_threshold_cy_per_px < 0.5) {
+        return Err(format!(
+            "metrics.mtf50_threshold_cy_per_px: must be in (0, 0.5), got {}",
+            m.mtf50_threshold_cy_per_px
+        ));
+    }
+    if !(m.roi_fraction > 0.2 && m.roi_fraction <= 1.0) {
+        return Err(format!(
+            "metrics.roi_fraction: must be in (0.2, 1], got {}",
+            m.roi_fraction
+        ));
+    }
+    lens_of(&d.lens)?;
+    Ok(d)
+}
+
+fn tiles_of(d: &DofDoc) -> DofTiles {
+    let t = &d.scene.dof_tiles;
+    DofTiles {
+        depths_m: t.depths_m.clone(),
+        cols: t.cols,
+        yfov_deg: t.yfov_deg,
+        edge_angle_deg: t.edge_angle_deg,
+    }
+}
+fn render_of(d: &DofDoc) -> RenderDoc {
+    d.render.clone().unwrap_or(RenderDoc {
+        width_px: default_width(),
+        spp: default_spp(),
+        pinhole_spp: default_pin_spp(),
+        band_nm: default_band(),
+        layers: default_layers(),
+    })
+}
+fn metrics_of(d: &DofDoc) -> MetricsDoc {
+    d.metrics.clone().unwrap_or(MetricsDoc {
+        mtf50_threshold_cy_per_px: default_thr(),
+        roi_fraction: default_roi(),
+    })
+}
+
+fn lens_of(v: &Value) -> Result<LensPrescription, String> {
+    let text = serde_json::to_string(v).expect("json");
+    LensPrescription::from_json_str(&text, &GlassCatalog::bundled())
+        .map_err(|e| format!("lens: {e}"))
+}
+
+/// The render tasks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Task {
+    DepthOfField,
+}
+
+fn task_of(doc: &Value) -> Result<Task, String> {
+    match doc.get("task").and_then(Value::as_str) {
+        Some("depth_of_field") => Ok(Task::DepthOfField),
+        Some(o) => Err(format!(
+            "task: unknown render task \"{o}\" (expected \"depth_of_field\")"
+        )),
+        None => Err("task: required (\"depth_of_field\")".into()),
+    }
+}
+
+/// Check a render point document (cheap: nothing rendered).
+pub fn validate(doc: &Value) -> Result<(), String> {
+    match task_of(doc)? {
+        Task::DepthOfField => parse_dof(doc).map(|_| ()),
+    }
+}
+
+/// Evaluate a render point into `dir`.
+pub fn evaluate(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
+    match task_of(doc).map_err(CliError::Other)? {
+        Task::DepthOfField => evaluate_dof(doc, seed, dir),
+    }
+}
+
+/// A depth-of-field estimate from MTF50 against depth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DofRange {
+    /// Near limit (m).
+    pub near_m: f64,
+    /// Far limit (m; ∞ when the far vergence reaches 0).
+    pub far_m: f64,
+    /// Width in vergence (1/m): 1/near − 1/far.
+    pub width_per_m: f64,
+    /// Whether a limit hit the end of the measured depths (then the range is a lower bound).
+    pub censored: bool,
+}
+
+/// The depth of field from MTF50 samples (vergence 1/z in 1/m, MTF50 in cy/px; `None` = not
+/// measurable (no edge found in the noise of a strongly blurred tile) → skipped): the contiguous
+/// vergence interval around the sharpest sample where MTF50 ≥ `threshold`, its ends
+/// interpolated linearly in 1/MTF50 (∝ blur width, linear in |Δ(1/z)| for defocus).
+pub fn dof_range(samples: &[(f64, Option<f64>)], threshold: f64) -> Option<DofRange> {
+    let mut s: Vec<(f64, f64)> = samples
+        .iter()
+        .filter_map(|(v, m)| m.map(|m| (*v, m.max(1e-6))))
+        .collect();
+    s.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
+    let best = (0..s.len()).max_by(|a, b| s[*a].1.partial_cmp(&s[*b].1).unwrap())?;
+    if s[best].1 < threshold {
+        return None;
+    }
+    let cross = |a: (f64, f64), b: (f64, f64)| {
+        let (ia, ib, it) = (1.0 / a.1, 1.0 / b.1, 1.0 / threshold);
+        a.0 + (it - ia) / (ib - ia) * (b.0 - a.0)
+    };
+    let mut censored = false;
+    // towards larger vergence (nearer)
+    let mut k = best;
+    while k + 1 < s.len() && s[k + 1].1 >= threshold {
+        k += 1;
+    }
+    let v_near = if k + 1 < s.len() {
+        cross(s[k], s[k + 1])
+    } else {
+        censored = true;
+        s[k].0
+    };
+    let mut k = best;
+    while k > 0 && s[k - 1].1 >= threshold {
+        k -= 1;
+    }
+    let v_far = if k > 0 {
+        cross(s[k], s[k - 1])
+    } else {
+        censored = true;
+        s[k].0
+    };
+    let v_far = v_far.max(0.0);
+    Some(DofRange {
+        near_m: 1.0 / v_near,
+        far_m: if v_far > 0.0 {
+            1.0 / v_far
+        } else {
+            f64::INFINITY
+        },
+        width_per_m: v_near - v_far,
+        censored,
+    })
+}
+
+fn grey_png(path: &Path, img: &[f32], w: usize, h: usize) -> Result<(), CliError> {
+    let max = img.iter().cloned().fold(0f32, f32::max).max(1e-30);
+    let rgb: Vec<u8> = img
+        .iter()
+        .flat_map(|v| {
+            // display gamma 1/2.2
+            let g = ((v / max).clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8;
+            [g, g, g]
+        })
+        .collect();
+    crate::plots::rgb8_png(path, &rgb, h, w)
+}
+
+fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
+    let d = parse_dof(doc).map_err(CliError::Other)?;
+    let tiles = tiles_of(&d);
+    let r = render_of(&d);
+    let m = metrics_of(&d);
+    let lens = lens_of(&d.lens).map_err(CliError::Other)?;
+    let out_r = render_dof(
+        &tiles,
+        &lens,
+        &DofRenderOptions {
+            width_px: r.width_px,
+            spp_lens: r.spp,
+            spp_pinhole: r.pinhole_spp,
+            seed,
+            band_nm: (r.band_nm[0], r.band_nm[1]),
+            f_number: d.f_number,
+            focus_distance_m: d.focus_distance_m,
+            layers: r.layers,
+            real_lens: true,
+        },
+    )
+    .map_err(|e| CliError::Other(format!("render: {e}")))?;
+    let (w, h) = (out_r.width, out_r.height);
+    let real = out_r.real_lens.as_ref().expect("rendered");
+    grey_png(&dir.join("real_lens.png"), real, w, h)?;
+    grey_png(&dir.join("depth_path.png"), &out_r.depth_path, w, h)?;
+    let mtf = |img: &[f32], k: usize| -> Option<f64> {
+        let c = tiles.cell_px(k, w as u32, h as u32);
+        let half = 0.5 * m.roi_fraction * (c.x1 - c.x0);
+        let (xc, yc) = (0.5 * (c.x0 + c.x1), 0.5 * (c.y0 + c.y1));
+        let roi = Rect {
+            row0: (yc - half).ceil() as usize,
+            row1: (yc + half).floor() as usize,
+            col0: (xc - half).ceil() as usize,
+            col1: (xc + half).floor() as usize,
+        };
+        let e = slanted_edge_mtf(img, h, w, roi).ok()?;
+        e.mtf50_cycles_per_pixel
+    };
+    let mut per = Vec::new();
+    for (k, z) in tiles.depths_m.iter().enumerate() {
+        per.push((1.0 / z, mtf(real, k), mtf(&out_r.depth_path, k)));
+    }
+    let thr = m.mtf50_threshold_cy_per_px;
+    let lens_s: Vec<(f64, Option<f64>)> = per.iter().map(|p| (p.0, p.1)).collect();
+    let dp_s: Vec<(f64, Option<f64>)> = per.iter().map(|p| (p.0, p.2)).collect();
+    let dl = dof_range(&lens_s, thr);
+    let dd = dof_range(&dp_s, thr);
+    let mut out = PointOutput::default();
+    out.put("pixel_pitch_um", out_r.pixel_pitch_mm * 1e3);
+    out.put(
+        "mtf50_focus_lens_cy_per_px",
+        lens_s.iter().filter_map(|p| p.1).fold(0.0, f64::max),
+    );
+    out.put(
+        "mtf50_focus_depth_path_cy_per_px",
+        dp_s.iter().filter_map(|p| p.1).fold(0.0, f64::max),
+    );
+    out.put_opt("dof_near_lens_m", dl.map(|x| x.near_m));
+    out.put_opt("dof_far_lens_m", dl.map(|x| x.far_m));
+    out.put_opt("dof_near_depth_path_m", dd.map(|x| x.near_m));
+    out.put_opt("dof_far_depth_path_m", dd.map(|x| x.far_m));
+    out.put_opt("dof_lens_per_m", dl.map(|x| x.width_per_m));
+    out.put_opt("dof_depth_path_per_m", dd.map(|x| x.width_per_m));
+    out.put_opt(
+        "dof_agreement_pct",
+        dl.zip(dd)
+            .map(|(a, b)| 100.0 * (b.width_per_m / a.width_per_m - 1.0)),
+    );
+    // thin-lens expectation with the entrance pupil as aperture: the defocus disc radius
+    // c = R_ep |Δv| F_px reaches the threshold's disc radius 0.3526/thr (disc MTF = 0.5 at
+    // 2π f c ≈ 2.215), so Δv_half = 0.3526 / (thr · R_ep · F_px)
+    let f_px = h as f64 / (2.0 * (0.5 * tiles.yfov_deg.to_radians()).tan());
+    out.put(
+        "dof_thin_lens_per_m",
+        2.0 * 0.3526 / (thr * out_r.entrance_pupil_radius_m * f_px),
+    );
+    // per-depth MTF50 figure
+    let curve = |s: &[(f64, Option<f64>)]| -> Vec<(f64, f64)> {
+        let mut v: Vec<(f64, f64)> = s.iter().filter_map(|p| Some((1.0 / p.0, p.1?))).collect();
+        v.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
+        v
+    };
+    let zs: Vec<f64> = tiles.depths_m.clone();
+    let (zmin, zmax) = zs
+        .iter()
+        .fold((f64::INFINITY, 0f64), |(a, b), z| (a.min(*z), b.max(*z)));
+    crate::plots::line_plot(
+        &dir.join("mtf50_vs_depth.png"),
+        &format!("MTF50 vs depth, f/{}", d.f_number),
+        &[
+            ("real lens".to_string(), curve(&lens_s)),
+            ("depth path".to_string(), curve(&dp_s)),
+            (format!("threshold {thr}"), vec![(zmin, thr), (zmax, thr)]),
+        ],
+        ("object distance (m)", "MTF50 (cy/px)"),
+    )?;
+    out.images = vec![
+        ("real_lens.png".into(), "real-lens render".into()),
+        (
+            "depth_path.png".into(),
+            "depth path (pinhole + lens PSFs)".into(),
+        ),
+        ("mtf50_vs_depth.png".into(), "MTF50 per depth".into()),
+    ];
+    out.detail = json!({
+        "depths_m": zs,
+        "mtf50_lens_cy_per_px": per.iter().map(|p| p.1).collect::<Vec<_>>(),
+        "mtf50_depth_path_cy_per_px": per.iter().map(|p| p.2).collect::<Vec<_>>(),
+        "dof_lens_censored": dl.map(|x| x.censored),
+        "dof_depth_path_censored": dd.map(|x| x.censored),
+        "render_times_s": out_r.times_s,
+    });
+    Ok(out)
+}
