@@ -1,6 +1,7 @@
 //! camsim's integration tests: one test binary (ripgrep style), one module per concern.
 mod calibrate;
 mod cli;
+mod diagnose;
 mod effects;
 mod lens_blur;
 mod lens_cli;
