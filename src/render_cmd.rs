@@ -103,12 +103,13 @@ pub fn run_render(a: &RenderArgs, progress: bool) -> Result<Value, CliError> {
     if a.out.extension().and_then(|e| e.to_str()) != Some("exr") {
         return Err(CliError::output(&a.out, "the output must be an .exr file"));
     }
-    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        if !dir.is_dir() {
-            return Err(CliError::output(&a.out, "the folder does not exist"));
-        }
-    }
     let prepared = prepare(&job).map_err(|e| render_err(&a.scene, e))?;
+    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        // Like the folder outputs of the other commands, missing parent folders are created.
+        std::fs::create_dir_all(dir).map_err(|e| {
+            CliError::output(&a.out, format!("cannot create the output folder: {e}"))
+        })?;
+    }
     let (w, h) = prepared.camera.film_size_px();
     let bar = crate::progress::bar(
         progress,
