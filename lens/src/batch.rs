@@ -478,12 +478,16 @@ impl<'a> TraceSystem<'a> {
         let fma = madd::<FMA>;
         // Each step is a separate loop over all lanes: the LANES/8 independent vectors of a
         // step overlap in the pipeline (a fused loop per surface is latency-bound).
+        // Per-surface temporaries live across the loop: initialised once per vector of rays,
+        // not once per surface (every element is written before it is read below).
+        let mut t = [0.0f64; LANES];
+        let (mut qx, mut qy, mut qz) = ([0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+        let (mut nx, mut ny, mut nz) = ([0.0f64; LANES], [0.0f64; LANES], [1.0f64; LANES]);
         for (j, s) in self.surfs.iter().enumerate() {
             if s.shape == Shape::Asphere {
                 self.asphere_lanes(v, j, clip);
                 continue;
             }
-            let mut t = [0.0f64; LANES];
             if s.shape == Shape::Plane {
                 for i in 0..LANES {
                     let pz = v.z[i] - s.z_mm;
@@ -505,7 +509,6 @@ impl<'a> TraceSystem<'a> {
                     t[i] = cc / den;
                 }
             }
-            let (mut qx, mut qy, mut qz) = ([0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
             for i in 0..LANES {
                 qx[i] = fma(t[i], v.l[i], v.x[i]);
                 qy[i] = fma(t[i], v.m[i], v.y[i]);
@@ -545,8 +548,11 @@ impl<'a> TraceSystem<'a> {
             }
             // Unit normal oriented towards +z: (−c x, −c y, 1 − (1+k) c z), unit on a sphere,
             // normalised for a conic; (0, 0, 1) on a plane.
-            let (mut nx, mut ny, mut nz) = ([0.0f64; LANES], [0.0f64; LANES], [1.0f64; LANES]);
-            if s.shape != Shape::Plane {
+            if s.shape == Shape::Plane {
+                nx = [0.0; LANES];
+                ny = [0.0; LANES];
+                nz = [1.0; LANES];
+            } else {
                 let ck = s.c * s.k1;
                 for i in 0..LANES {
                     nx[i] = -s.c * qx[i];
