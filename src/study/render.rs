@@ -203,15 +203,17 @@ fn lens_of(v: &Value) -> Result<LensPrescription, String> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Task {
     DepthOfField,
+    LightField,
 }
 
 fn task_of(doc: &Value) -> Result<Task, String> {
     match doc.get("task").and_then(Value::as_str) {
         Some("depth_of_field") => Ok(Task::DepthOfField),
+        Some("light_field") => Ok(Task::LightField),
         Some(o) => Err(format!(
-            "task: unknown render task \"{o}\" (expected \"depth_of_field\")"
+            "task: unknown render task \"{o}\" (expected \"depth_of_field\" or \"light_field\")"
         )),
-        None => Err("task: required (\"depth_of_field\")".into()),
+        None => Err("task: required (\"depth_of_field\" or \"light_field\")".into()),
     }
 }
 
@@ -219,6 +221,7 @@ fn task_of(doc: &Value) -> Result<Task, String> {
 pub fn validate(doc: &Value) -> Result<(), String> {
     match task_of(doc)? {
         Task::DepthOfField => parse_dof(doc).map(|_| ()),
+        Task::LightField => lightfield::parse(doc).map(|_| ()),
     }
 }
 
@@ -226,6 +229,7 @@ pub fn validate(doc: &Value) -> Result<(), String> {
 pub fn evaluate(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
     match task_of(doc).map_err(CliError::Other)? {
         Task::DepthOfField => evaluate_dof(doc, seed, dir),
+        Task::LightField => lightfield::evaluate(doc, seed, dir),
     }
 }
 
@@ -295,7 +299,7 @@ pub fn dof_range(samples: &[(f64, Option<f64>)], threshold: f64) -> Option<DofRa
     })
 }
 
-fn grey_png(path: &Path, img: &[f32], w: usize, h: usize) -> Result<(), CliError> {
+pub(super) fn grey_png(path: &Path, img: &[f32], w: usize, h: usize) -> Result<(), CliError> {
     let max = img.iter().cloned().fold(0f32, f32::max).max(1e-30);
     let rgb: Vec<u8> = img
         .iter()
@@ -422,4 +426,365 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
         "render_times_s": out_r.times_s,
     });
     Ok(out)
+}
+
+/// `"task": "light_field"` (study 3, docs/study_lightfield.md): tiles at several depths
+/// (the slanted-edge scene of [`camsim_render::dof_scene`]) through a plenoptic camera (thin
+/// main lens + microlens array, [`camsim_render::camera::lightfield`]); the sub-aperture
+/// views, shift-and-add refocusing at every tile depth, and the same scene through the same
+/// main lens without the MLA (thin-lens camera at the raw sensor's pixel pitch and field).
+/// MTF50 of every tile in every refocused image (cy per view pixel = per microlens) and of
+/// the in-focus tile in the full-resolution image (cy/px); the resolution loss factor is
+/// MTF50_full / (MTF50_refocused / n) with n pixels per microlens (the refocused image has
+/// one pixel per microlens).
+///
+/// ```json
+/// {"kind": "render", "task": "light_field",
+///  "scene": {"depths_m": [1, 2, 8], "edge_angle_deg": 5},
+///  "main_lens": {"focal_length_mm": 50, "f_number": 4}, "focus_distance_m": 2,
+///  "mla": {"microlens_pitch_um": 100, "microlens_focal_length_um": 410,
+///          "pixels_per_microlens": 7, "microlenses_per_tile": 32},
+///  "render": {"spp": 16, "band_nm": [500, 600]},
+///  "metrics": {"roi_fraction": 0.75}}
+/// ```
+mod lightfield {
+    use super::{grey_png, PointOutput};
+    use crate::error::CliError;
+    use camsim_core::stats::Rect;
+    use camsim_metrics::slanted_edge_mtf;
+    use camsim_render::camera::lightfield::{refocus, LightFieldCamera, MainLens};
+    use camsim_render::camera::ThinLens;
+    use camsim_render::dof_scene::DofTiles;
+    use camsim_render::{render, Bands, RenderSettings};
+    use serde::Deserialize;
+    use serde_json::{json, Value};
+    use std::path::Path;
+
+    #[derive(Debug, Clone, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct SceneDoc {
+        depths_m: Vec<f64>,
+        #[serde(default = "super::default_angle")]
+        edge_angle_deg: f64,
+    }
+    #[derive(Debug, Clone, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct MainDoc {
+        focal_length_mm: f64,
+        f_number: f64,
+    }
+    #[derive(Debug, Clone, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct MlaDoc {
+        microlens_pitch_um: f64,
+        microlens_focal_length_um: f64,
+        pixels_per_microlens: u32,
+        microlenses_per_tile: u32,
+    }
+    #[derive(Debug, Clone, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct RenderDoc {
+        #[serde(default = "default_spp")]
+        spp: u32,
+        #[serde(default = "super::default_band")]
+        band_nm: [f64; 2],
+    }
+    fn default_spp() -> u32 {
+        16
+    }
+    #[derive(Debug, Clone, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct MetricsDoc {
+        #[serde(default = "super::default_roi")]
+        roi_fraction: f64,
+    }
+    #[derive(Debug, Clone, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub(super) struct LfDoc {
+        #[allow(dead_code)]
+        kind: String,
+        #[allow(dead_code)]
+        task: String,
+        scene: SceneDoc,
+        main_lens: MainDoc,
+        focus_distance_m: f64,
+        mla: MlaDoc,
+        #[serde(default)]
+        render: Option<RenderDoc>,
+        #[serde(default)]
+        metrics: Option<MetricsDoc>,
+        #[serde(default)]
+        #[allow(dead_code)]
+        seed: Option<u64>,
+        #[serde(default)]
+        #[allow(dead_code)]
+        camsim_version: Option<String>,
+    }
+
+    struct Setup {
+        cam: LightFieldCamera,
+        tiles: DofTiles,
+        width_px: u32,
+        height_px: u32,
+    }
+
+    fn setup(d: &LfDoc) -> Result<Setup, String> {
+        let m = &d.mla;
+        if m.pixels_per_microlens == 0 || m.pixels_per_microlens > 32 {
+            return Err(format!(
+                "mla.pixels_per_microlens: must be 1–32, got {}",
+                m.pixels_per_microlens
+            ));
+        }
+        if m.microlenses_per_tile < 16 || m.microlenses_per_tile > 256 {
+            return Err(format!(
+                "mla.microlenses_per_tile: must be 16–256 (the slanted edge needs ≥ 16), got {}",
+                m.microlenses_per_tile
+            ));
+        }
+        let cols = d.scene.depths_m.len().max(1);
+        let (n, t) = (m.pixels_per_microlens, m.microlenses_per_tile);
+        let (w, h) = (n * t * cols as u32, n * t);
+        let cam = LightFieldCamera::new(
+            MainLens::Thin {
+                focal_length_mm: d.main_lens.focal_length_mm,
+                f_number: d.main_lens.f_number,
+            },
+            d.focus_distance_m,
+            m.microlens_pitch_um,
+            m.microlens_focal_length_um,
+            None,
+            n,
+            w,
+            h,
+        )
+        .map_err(|e| e.to_string())?;
+        // field of the MLA seen through the main-lens centre: tan(θ/2) = (H/n)·p_μ / (2b)
+        let i = cam.info();
+        let yfov_deg = 2.0 * ((t as f64 * i.microlens_pitch_mm) / (2.0 * i.mla_distance_mm)).atan();
+        let tiles = DofTiles {
+            depths_m: d.scene.depths_m.clone(),
+            cols,
+            yfov_deg: yfov_deg.to_degrees(),
+            edge_angle_deg: d.scene.edge_angle_deg,
+        };
+        tiles.validate().map_err(|e| format!("scene: {e}"))?;
+        Ok(Setup {
+            cam,
+            tiles,
+            width_px: w,
+            height_px: h,
+        })
+    }
+
+    pub(super) fn parse(doc: &Value) -> Result<LfDoc, String> {
+        let d: LfDoc =
+            serde_json::from_value(doc.clone()).map_err(|e| format!("render point: {e}"))?;
+        if d.scene.depths_m.is_empty() || d.scene.depths_m.len() > 8 {
+            return Err(format!(
+                "scene.depths_m: need 1–8 depths, got {}",
+                d.scene.depths_m.len()
+            ));
+        }
+        let r = render_of(&d);
+        if r.spp == 0 || r.spp > 4096 {
+            return Err(format!("render.spp: must be 1–4096, got {}", r.spp));
+        }
+        if !(r.band_nm[0] > 0.0 && r.band_nm[1] > r.band_nm[0]) {
+            return Err(format!(
+                "render.band_nm: need 0 < lo < hi, got {:?}",
+                r.band_nm
+            ));
+        }
+        let roi = metrics_of(&d).roi_fraction;
+        if !(roi > 0.2 && roi <= 1.0) {
+            return Err(format!(
+                "metrics.roi_fraction: must be in (0.2, 1], got {roi}"
+            ));
+        }
+        setup(&d)?;
+        Ok(d)
+    }
+
+    fn render_of(d: &LfDoc) -> RenderDoc {
+        d.render.clone().unwrap_or(RenderDoc {
+            spp: default_spp(),
+            band_nm: super::default_band(),
+        })
+    }
+    fn metrics_of(d: &LfDoc) -> MetricsDoc {
+        d.metrics.clone().unwrap_or(MetricsDoc {
+            roi_fraction: super::default_roi(),
+        })
+    }
+
+    /// ISO 12233 MTF50 (cy/px) of tile `k` in a `w × h` image; `None` when no edge is found.
+    fn tile_mtf50(
+        tiles: &DofTiles,
+        img: &[f32],
+        w: usize,
+        h: usize,
+        k: usize,
+        roi_f: f64,
+    ) -> Option<f64> {
+        let c = tiles.cell_px(k, w as u32, h as u32);
+        let half = 0.5 * roi_f * (c.x1 - c.x0);
+        let (xc, yc) = (0.5 * (c.x0 + c.x1), 0.5 * (c.y0 + c.y1));
+        let roi = Rect {
+            row0: (yc - half).ceil() as usize,
+            row1: (yc + half).floor() as usize,
+            col0: (xc - half).ceil() as usize,
+            col1: (xc + half).floor() as usize,
+        };
+        slanted_edge_mtf(img, h, w, roi)
+            .ok()?
+            .mtf50_cycles_per_pixel
+    }
+
+    pub(super) fn evaluate(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
+        let d = parse(doc).map_err(CliError::Other)?;
+        let s = setup(&d).map_err(CliError::Other)?;
+        let r = render_of(&d);
+        let roi_f = metrics_of(&d).roi_fraction;
+        let tmp = dir.join(".scene_tmp");
+        std::fs::create_dir_all(&tmp)
+            .map_err(|e| CliError::Other(format!("{}: {e}", tmp.display())))?;
+        let path = tmp.join("tiles.gltf");
+        s.tiles
+            .builder()
+            .write(&path)
+            .map_err(|e| CliError::Other(format!("{}: {e}", path.display())))?;
+        let scene = camsim_render::gltf_load::load_gltf(&path);
+        let _ = std::fs::remove_dir_all(&tmp);
+        let scene = scene.map_err(|e| CliError::Other(format!("scene: {e}")))?;
+        let sc = camsim_render::gltf_load::pick_camera(&scene, None).map_err(CliError::Other)?;
+        let bands = Bands::new(r.band_nm[0], r.band_nm[1], r.band_nm[1] - r.band_nm[0])
+            .map_err(|e| CliError::Other(format!("render.band_nm: {e}")))?;
+        let settings = |seed: u64| RenderSettings {
+            spp: r.spp,
+            seed,
+            bands: bands.clone(),
+            variance: false,
+            depth_spp: 0,
+            ..Default::default()
+        };
+        let (w, h) = (s.width_px, s.height_px);
+        let t0 = std::time::Instant::now();
+        let raw = render(&scene, &s.cam, sc.to_world, &settings(seed), None).band_planes[0].clone();
+        let t1 = std::time::Instant::now();
+        // the same main lens without the MLA: thin lens of aperture radius F/2N focused at D,
+        // sensor pixels of the raw light-field sensor's pitch over the same field
+        let full_cam = ThinLens {
+            perspective: sc.perspective(w, h),
+            aperture_radius_m: (d.main_lens.focal_length_mm / (2.0 * d.main_lens.f_number) * 1e-3)
+                as f32,
+            focus_distance_m: d.focus_distance_m as f32,
+        };
+        let full = render(
+            &scene,
+            &full_cam,
+            sc.to_world,
+            &settings(seed ^ 0x5bd1_e995),
+            None,
+        )
+        .band_planes[0]
+            .clone();
+        let t2 = std::time::Instant::now();
+        let n = d.mla.pixels_per_microlens as usize;
+        let (wu, hu) = (w as usize, h as usize);
+        let (vw, vh) = (wu / n, hu / n);
+        let views = s.cam.sub_aperture_views(&raw);
+        // grid of the n × n sub-aperture views (view (u, v) at column u, row v)
+        let mut grid = vec![0f32; wu * hu];
+        for (k, v) in views.iter().enumerate() {
+            let (u, vv) = (k % n, k / n);
+            for j in 0..vh {
+                let row = (vv * vh + j) * wu + u * vw;
+                grid[row..row + vw].copy_from_slice(&v[j * vw..(j + 1) * vw]);
+            }
+        }
+        grey_png(&dir.join("sub_aperture_views.png"), &grid, wu, hu)?;
+        grey_png(&dir.join("full_resolution.png"), &full, wu, hu)?;
+        let depths = s.tiles.depths_m.clone();
+        let nt = depths.len();
+        let mut out = PointOutput::default();
+        let mut matrix = Vec::new();
+        let mut images = vec![(
+            "sub_aperture_views.png".to_string(),
+            format!("{n} × {n} sub-aperture views"),
+        )];
+        let mut series = Vec::new();
+        for (a, &za) in depths.iter().enumerate() {
+            let shift = s.cam.disparity_per_view(za);
+            let img = refocus(&views, n, vw, vh, shift);
+            let name = format!("refocus_{a}.png");
+            grey_png(&dir.join(&name), &img, vw, vh)?;
+            images.push((name, format!("refocused at {za} m")));
+            let row: Vec<Option<f64>> = (0..nt)
+                .map(|k| tile_mtf50(&s.tiles, &img, vw, vh, k, roi_f))
+                .collect();
+            out.put_opt(&format!("mtf50_refocus{a}_own_tile_cy_per_view_px"), row[a]);
+            series.push((
+                format!("refocused at {za} m"),
+                depths
+                    .iter()
+                    .zip(&row)
+                    .filter_map(|(z, m)| Some((*z, (*m)?)))
+                    .collect::<Vec<_>>(),
+            ));
+            matrix.push(row);
+        }
+        images.push((
+            "full_resolution.png".into(),
+            "same main lens, no MLA".into(),
+        ));
+        // the in-focus tile (nearest the focus distance)
+        let kf = (0..nt)
+            .min_by(|a, b| {
+                let e = |k: usize| (1.0 / depths[k] - 1.0 / d.focus_distance_m).abs();
+                e(*a).partial_cmp(&e(*b)).unwrap()
+            })
+            .unwrap_or(0);
+        let full_mtf = tile_mtf50(&s.tiles, &full, wu, hu, kf, roi_f);
+        let lf_mtf = matrix[kf][kf];
+        out.put("pixels_per_microlens", n as f64);
+        out.put(
+            "disparity_max_px_per_view",
+            depths
+                .iter()
+                .map(|z| s.cam.disparity_per_view(*z).abs())
+                .fold(0.0, f64::max),
+        );
+        out.put_opt("mtf50_full_res_focus_cy_per_px", full_mtf);
+        // refocused MTF50 in cycles per raw-sensor pixel (one view pixel = n sensor pixels)
+        out.put_opt(
+            "mtf50_lf_focus_cy_per_sensor_px",
+            lf_mtf.map(|m| m / n as f64),
+        );
+        out.put_opt(
+            "resolution_loss_factor",
+            full_mtf.zip(lf_mtf).map(|(f, l)| f / (l / n as f64)),
+        );
+        crate::plots::line_plot(
+            &dir.join("mtf50_per_tile.png"),
+            "MTF50 of each tile in each refocused image",
+            &series,
+            ("tile depth (m)", "MTF50 (cy per microlens)"),
+        )?;
+        images.push((
+            "mtf50_per_tile.png".into(),
+            "MTF50 per tile and refocus depth".into(),
+        ));
+        out.images = images;
+        out.detail = json!({
+            "depths_m": depths,
+            "in_focus_tile": kf,
+            "mtf50_refocus_cy_per_view_px": matrix,
+            "disparity_px_per_view": depths.iter().map(|z| s.cam.disparity_per_view(*z)).collect::<Vec<_>>(),
+            "raw_px": [w, h],
+            "views_px": [vw, vh],
+            "render_times_s": [(t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64()],
+        });
+        Ok(out)
+    }
 }
