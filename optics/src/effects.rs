@@ -812,12 +812,7 @@ pub(crate) mod warp_tests {
     use super::*;
     use camsim_core::{SpectralBasis, Spectrum};
 
-    /// A Gaussian spot of σ = 3 samples at (x0, y0) samples from the image centre (smooth
-    /// enough that resampling it does not bias its centroid).
-    fn spot(rows: usize, cols: usize, x0: f64, y0: f64) -> SpectralImage {
-        spot_s(rows, cols, x0, y0, 3.0)
-    }
-
+    /// A Gaussian spot of σ = `sig` samples at (x0, y0) samples from the image centre.
     pub(crate) fn spot_s(rows: usize, cols: usize, x0: f64, y0: f64, sig: f64) -> SpectralImage {
         let (yc, xc) = ((rows as f64 - 1.0) / 2.0, (cols as f64 - 1.0) / 2.0);
         let plane = (0..rows * cols)
@@ -833,22 +828,6 @@ pub(crate) mod warp_tests {
             vec![plane],
         )
         .unwrap()
-    }
-
-    pub(crate) fn centroid(img: &SpectralImage, x0: f64, y0: f64, win: f64) -> (f64, f64) {
-        let (rows, cols) = (img.rows, img.cols);
-        let (yc, xc) = ((rows as f64 - 1.0) / 2.0, (cols as f64 - 1.0) / 2.0);
-        let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for i in 0..rows * cols {
-            let (y, x) = ((i / cols) as f64 - yc, (i % cols) as f64 - xc);
-            if (x - x0).abs() <= win && (y - y0).abs() <= win {
-                let v = img.planes[0][i] as f64;
-                s += v;
-                sx += v * x;
-                sy += v * y;
-            }
-        }
-        (sx / s, sy / s)
     }
 
     #[test]
