@@ -158,7 +158,8 @@ impl RayBatch {
             &mut self.n,
             &mut self.opl,
         ] {
-            v.clear();
+            // Every element is overwritten by the generation below.
+            v.truncate(n);
             v.resize(n, 0.0);
         }
         for v in [&mut self.stop_x, &mut self.stop_y, &mut self.stop_z] {
@@ -249,32 +250,34 @@ impl GenParams {
         opl: &mut [f64],
     ) {
         let GenParams { r, st, ct, zs, ze } = *self;
-        for (i, p) in pp.iter().enumerate() {
-            match aim.object_distance_mm {
-                None => {
-                    // Collimated: the direction is the field's; the start point lies on the
-                    // plane z = start_z (as `FieldAim::ray`).
-                    let (ex, ey) = (p[0] * r, aim.aim_y_mm + p[1] * r);
-                    let s = (ze - zs) / ct;
-                    x[i] = ex;
-                    y[i] = ey - s * st;
-                    z[i] = ze - s * ct;
-                    l[i] = 0.0;
-                    m[i] = st;
-                    nn[i] = ct;
-                    opl[i] = ey * st + (ze - zs) * ct - s;
-                }
-                Some(_) => {
-                    let ray = aim.ray(p[0], p[1]);
-                    x[i] = ray.origin_mm[0];
-                    y[i] = ray.origin_mm[1];
-                    z[i] = ray.origin_mm[2];
-                    l[i] = ray.direction[0];
-                    m[i] = ray.direction[1];
-                    nn[i] = ray.direction[2];
-                    opl[i] = ray.opl_mm;
-                }
+        if aim.object_distance_mm.is_some() {
+            for (i, p) in pp.iter().enumerate() {
+                let ray = aim.ray(p[0], p[1]);
+                x[i] = ray.origin_mm[0];
+                y[i] = ray.origin_mm[1];
+                z[i] = ray.origin_mm[2];
+                l[i] = ray.direction[0];
+                m[i] = ray.direction[1];
+                nn[i] = ray.direction[2];
+                opl[i] = ray.opl_mm;
             }
+            return;
+        }
+        // Collimated: the direction is the field's; the start point lies on the plane
+        // z = start_z (as `FieldAim::ray`). Branch-free, so it vectorises.
+        let s = (ze - zs) / ct;
+        let n = pp.len();
+        let (x, y, z) = (&mut x[..n], &mut y[..n], &mut z[..n]);
+        let (l, m, nn, opl) = (&mut l[..n], &mut m[..n], &mut nn[..n], &mut opl[..n]);
+        for (i, p) in pp.iter().enumerate() {
+            let (ex, ey) = (p[0] * r, aim.aim_y_mm + p[1] * r);
+            x[i] = ex;
+            y[i] = ey - s * st;
+            z[i] = ze - s * ct;
+            l[i] = 0.0;
+            m[i] = st;
+            nn[i] = ct;
+            opl[i] = ey * st + (ze - zs) * ct - s;
         }
     }
 }
@@ -475,106 +478,31 @@ impl<'a> TraceSystem<'a> {
 
     #[inline(always)]
     fn trace_lanes<const FMA: bool>(&self, v: &mut Lanes, clip: bool) {
-        let fma = madd::<FMA>;
-        // Each step is a separate loop over all lanes: the LANES/8 independent vectors of a
-        // step overlap in the pipeline (a fused loop per surface is latency-bound).
-        // Per-surface temporaries live across the loop: initialised once per vector of rays,
-        // not once per surface (every element is written before it is read below).
-        let mut t = [0.0f64; LANES];
-        let (mut qx, mut qy, mut qz) = ([0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
-        let (mut nx, mut ny, mut nz) = ([0.0f64; LANES], [0.0f64; LANES], [1.0f64; LANES]);
+        // One fused loop per surface, specialised at compile time for the surface's shape,
+        // refraction and clipping (a sphere carries no conic terms, a stop in air no Snell
+        // step); the loop over LANES lanes is unrolled into LANES/8 (AVX-512) independent
+        // vectors that overlap in the pipeline.
         for (j, s) in self.surfs.iter().enumerate() {
-            if s.shape == Shape::Asphere {
-                self.asphere_lanes(v, j, clip);
-                continue;
+            match (s.shape, s.refracts, clip) {
+                (Shape::Asphere, _, _) => self.asphere_lanes(v, j, clip),
+                (Shape::Plane, false, false) => surf_lanes::<FMA, 0, false, false>(s, v, j),
+                (Shape::Plane, false, true) => surf_lanes::<FMA, 0, false, true>(s, v, j),
+                (Shape::Plane, true, false) => surf_lanes::<FMA, 0, true, false>(s, v, j),
+                (Shape::Plane, true, true) => surf_lanes::<FMA, 0, true, true>(s, v, j),
+                (Shape::Sphere, false, false) => surf_lanes::<FMA, 1, false, false>(s, v, j),
+                (Shape::Sphere, false, true) => surf_lanes::<FMA, 1, false, true>(s, v, j),
+                (Shape::Sphere, true, false) => surf_lanes::<FMA, 1, true, false>(s, v, j),
+                (Shape::Sphere, true, true) => surf_lanes::<FMA, 1, true, true>(s, v, j),
+                (Shape::Conic, false, false) => surf_lanes::<FMA, 2, false, false>(s, v, j),
+                (Shape::Conic, false, true) => surf_lanes::<FMA, 2, false, true>(s, v, j),
+                (Shape::Conic, true, false) => surf_lanes::<FMA, 2, true, false>(s, v, j),
+                (Shape::Conic, true, true) => surf_lanes::<FMA, 2, true, true>(s, v, j),
             }
-            if s.shape == Shape::Plane {
-                for i in 0..LANES {
-                    let pz = v.z[i] - s.z_mm;
-                    v.alive[i] &= mask(v.n[i] != 0.0);
-                    t[i] = -pz / v.n[i];
-                }
-            } else {
-                for i in 0..LANES {
-                    let px = v.x[i];
-                    let py = v.y[i];
-                    let pz = v.z[i] - s.z_mm;
-                    let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
-                    let a = s.c * fma(dx, dx, fma(dy, dy, s.k1 * dz * dz));
-                    let b = fma(s.c, fma(px, dx, fma(py, dy, s.k1 * pz * dz)), -dz);
-                    let cc = fma(s.c, fma(px, px, fma(py, py, s.k1 * pz * pz)), -2.0 * pz);
-                    let disc = fma(b, b, -(a * cc));
-                    let den = -b + pos(disc).sqrt();
-                    v.alive[i] &= mask(disc >= 0.0) & mask(den != 0.0);
-                    t[i] = cc / den;
-                }
-            }
-            for i in 0..LANES {
-                qx[i] = fma(t[i], v.l[i], v.x[i]);
-                qy[i] = fma(t[i], v.m[i], v.y[i]);
-                qz[i] = fma(t[i], v.n[i], v.z[i] - s.z_mm);
-            }
-            if s.shape != Shape::Plane {
-                // Stay inside the conic's domain 1 − (1+k)c²r² ≥ 0 (as the scalar trace).
-                let kc2 = s.k1 * s.c * s.c;
-                for i in 0..LANES {
-                    let r2 = qx[i] * qx[i] + qy[i] * qy[i];
-                    v.alive[i] &= mask(1.0 - kc2 * r2 >= 0.0);
-                }
-            }
-            if clip {
-                let back_ok = j == 0;
-                let lim = s.sd2 * (1.0 + 1e-12);
-                for i in 0..LANES {
-                    let r2 = qx[i] * qx[i] + qy[i] * qy[i];
-                    v.alive[i] &= mask(back_ok | (t[i] >= -1e-9)) & mask(r2 <= lim);
-                }
-            }
-            for i in 0..LANES {
-                v.opl[i] += s.n1 * t[i];
-                v.x[i] = qx[i];
-                v.y[i] = qy[i];
-                v.z[i] = qz[i] + s.z_mm;
-            }
-            if j == self.stop_index {
-                v.sx = qx;
-                v.sy = qy;
-                for i in 0..LANES {
-                    v.sz[i] = qz[i] + s.z_mm;
-                }
-            }
-            if !s.refracts {
-                continue;
-            }
-            // Unit normal oriented towards +z: (−c x, −c y, 1 − (1+k) c z), unit on a sphere,
-            // normalised for a conic; (0, 0, 1) on a plane.
-            if s.shape == Shape::Plane {
-                nx = [0.0; LANES];
-                ny = [0.0; LANES];
-                nz = [1.0; LANES];
-            } else {
-                let ck = s.c * s.k1;
-                for i in 0..LANES {
-                    nx[i] = -s.c * qx[i];
-                    ny[i] = -s.c * qy[i];
-                    nz[i] = 1.0 - ck * qz[i];
-                }
-                if s.shape == Shape::Conic {
-                    for i in 0..LANES {
-                        let inv = 1.0 / (nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]).sqrt();
-                        nx[i] *= inv;
-                        ny[i] *= inv;
-                        nz[i] *= inv;
-                    }
-                }
-            }
-            for i in 0..LANES {
-                let (l, m, n, good) =
-                    refract_lane::<FMA>(s.mu, v.l[i], v.m[i], v.n[i], nx[i], ny[i], nz[i]);
-                v.alive[i] &= good;
-                v.l[i] = l;
-                v.m[i] = m;
-                v.n[i] = n;
+            if j == self.stop_index && s.shape != Shape::Asphere {
+                // Every lane's position on the stop (dead lanes' values are discarded).
+                v.sx = v.x;
+                v.sy = v.y;
+                v.sz = v.z;
             }
         }
         // Image plane.
@@ -644,6 +572,75 @@ impl<'a> TraceSystem<'a> {
                 }
             }
         }
+    }
+}
+
+/// One plane (`SHAPE` 0), sphere (1) or conic (2) surface for every lane of `v` (surface `j`):
+/// intersection, domain / clipping tests, transfer and (when `REFR`) refraction, in one loop.
+#[inline(always)]
+fn surf_lanes<const FMA: bool, const SHAPE: u8, const REFR: bool, const CLIP: bool>(
+    s: &Surf,
+    v: &mut Lanes,
+    j: usize,
+) {
+    let fma = madd::<FMA>;
+    let back_ok = j == 0;
+    let lim = s.sd2 * (1.0 + 1e-12);
+    let kc2 = s.k1 * s.c * s.c;
+    let ck = s.c * s.k1;
+    for i in 0..LANES {
+        let px = v.x[i];
+        let py = v.y[i];
+        let pz = v.z[i] - s.z_mm;
+        let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
+        let (t, mut ok) = if SHAPE == 0 {
+            (-pz / dz, mask(dz != 0.0))
+        } else {
+            // c(x² + y² + (1+k)z²) − 2z = 0 along p + t d: t = C/(−B + √(B² − A C))
+            // (Spencer & Murty 1962); a sphere has k1 = 1.
+            let k1 = if SHAPE == 1 { 1.0 } else { s.k1 };
+            let a = s.c * fma(dx, dx, fma(dy, dy, k1 * dz * dz));
+            let b = fma(s.c, fma(px, dx, fma(py, dy, k1 * pz * dz)), -dz);
+            let cc = fma(s.c, fma(px, px, fma(py, py, k1 * pz * pz)), -2.0 * pz);
+            let disc = fma(b, b, -(a * cc));
+            let den = -b + pos(disc).sqrt();
+            (cc / den, mask(disc >= 0.0) & mask(den != 0.0))
+        };
+        let qx = fma(t, dx, px);
+        let qy = fma(t, dy, py);
+        let qz = fma(t, dz, pz);
+        if SHAPE != 0 {
+            // Stay inside the conic's domain 1 − (1+k)c²r² ≥ 0 (as the scalar trace).
+            let r2 = qx * qx + qy * qy;
+            ok &= mask(1.0 - kc2 * r2 >= 0.0);
+        }
+        if CLIP {
+            let r2 = qx * qx + qy * qy;
+            ok &= mask(back_ok | (t >= -1e-9)) & mask(r2 <= lim);
+        }
+        v.opl[i] += s.n1 * t;
+        v.x[i] = qx;
+        v.y[i] = qy;
+        v.z[i] = qz + s.z_mm;
+        if REFR {
+            // Unit normal oriented towards +z: (−c x, −c y, 1 − (1+k) c z), unit on a
+            // sphere, normalised for a conic; (0, 0, 1) on a plane.
+            let (nx, ny, nz) = match SHAPE {
+                0 => (0.0, 0.0, 1.0),
+                1 => (-s.c * qx, -s.c * qy, 1.0 - s.c * qz),
+                _ => {
+                    let (nx, ny, nz) = (-s.c * qx, -s.c * qy, 1.0 - ck * qz);
+                    let inv = 1.0 / (nx * nx + ny * ny + nz * nz).sqrt();
+                    (nx * inv, ny * inv, nz * inv)
+                }
+            };
+            let (l, m, n, good) = refract_lane::<FMA>(s.mu, dx, dy, dz, nx, ny, nz);
+            ok &= good;
+            v.l[i] = l;
+            v.m[i] = m;
+            v.n[i] = n;
+        }
+        v.alive[i] &= ok;
     }
 }
 
