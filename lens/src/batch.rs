@@ -588,6 +588,10 @@ fn surf_lanes<const FMA: bool, const SHAPE: u8, const REFR: bool, const CLIP: bo
     let lim = s.sd2 * (1.0 + 1e-12);
     let kc2 = s.k1 * s.c * s.c;
     let ck = s.c * s.k1;
+    // Two loops (intersection + transfer, then refraction): each has one long dependency
+    // chain through the divider, and a loop this short is unrolled into independent
+    // vectors; a single fused loop was latency-bound.
+    let mut qz_lanes = [0.0f64; LANES];
     for i in 0..LANES {
         let px = v.x[i];
         let py = v.y[i];
@@ -622,7 +626,16 @@ fn surf_lanes<const FMA: bool, const SHAPE: u8, const REFR: bool, const CLIP: bo
         v.x[i] = qx;
         v.y[i] = qy;
         v.z[i] = qz + s.z_mm;
-        if REFR {
+        qz_lanes[i] = qz;
+        v.alive[i] &= ok;
+    }
+    if !REFR {
+        return;
+    }
+    for i in 0..LANES {
+        let (qx, qy, qz) = (v.x[i], v.y[i], qz_lanes[i]);
+        let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
+        {
             // Unit normal oriented towards +z: (−c x, −c y, 1 − (1+k) c z), unit on a
             // sphere, normalised for a conic; (0, 0, 1) on a plane.
             let (nx, ny, nz) = match SHAPE {
@@ -635,12 +648,11 @@ fn surf_lanes<const FMA: bool, const SHAPE: u8, const REFR: bool, const CLIP: bo
                 }
             };
             let (l, m, n, good) = refract_lane::<FMA>(s.mu, dx, dy, dz, nx, ny, nz);
-            ok &= good;
+            v.alive[i] &= good;
             v.l[i] = l;
             v.m[i] = m;
             v.n[i] = n;
         }
-        v.alive[i] &= ok;
     }
 }
 
