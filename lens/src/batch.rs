@@ -221,6 +221,7 @@ struct GenParams {
     ct: f64,
     zs: f64,
     ze: f64,
+    ay: f64,
 }
 
 impl GenParams {
@@ -232,6 +233,7 @@ impl GenParams {
             ct,
             zs: aim.start_z_mm(),
             ze: aim.entrance_pupil_z_mm,
+            ay: aim.aim_y_mm,
         }
     }
 
@@ -249,7 +251,9 @@ impl GenParams {
         nn: &mut [f64],
         opl: &mut [f64],
     ) {
-        let GenParams { r, st, ct, zs, ze } = *self;
+        let GenParams {
+            r, st, ct, zs, ze, ..
+        } = *self;
         if aim.object_distance_mm.is_some() {
             for (i, p) in pp.iter().enumerate() {
                 let ray = aim.ray(p[0], p[1]);
@@ -281,6 +285,9 @@ impl GenParams {
         }
     }
 }
+
+/// Rays to generate from pupil points instead of loading them (collimated fields only).
+type Src<'p> = Option<(&'p GenParams, &'p [[f64; 2]])>;
 
 /// Mutable views of one chunk of a batch.
 struct Chunk<'b> {
@@ -379,7 +386,7 @@ impl<'a> TraceSystem<'a> {
                 sy: stop_y,
                 sz: stop_z,
             };
-            self.trace_block(&mut c, clip);
+            self.trace_block(&mut c, clip, None);
             return;
         }
         x.par_chunks_mut(BLOCK)
@@ -408,7 +415,7 @@ impl<'a> TraceSystem<'a> {
                         sy,
                         sz,
                     };
-                    self.trace_block(&mut c, clip);
+                    self.trace_block(&mut c, clip, None);
                 },
             );
     }
@@ -429,47 +436,96 @@ impl<'a> TraceSystem<'a> {
         clipping: Clipping,
         batch: &mut RayBatch,
     ) {
-        batch.fill_from_pupil(aim, pupil);
-        self.trace(batch, clipping);
+        const BLOCK: usize = 64 * LANES;
+        let n = pupil.len();
+        if aim.object_distance_mm.is_some() || n > BLOCK {
+            batch.fill_from_pupil(aim, pupil);
+            self.trace(batch, clipping);
+            return;
+        }
+        // Collimated block: rays are generated straight into the lane vectors and traced
+        // while in registers / L1 (the same rays as `fill_from_pupil`; every element of the
+        // batch is written by the store).
+        let RayBatch {
+            x,
+            y,
+            z,
+            l,
+            m,
+            n: nn,
+            opl,
+            alive,
+            stop_x,
+            stop_y,
+            stop_z,
+        } = batch;
+        for v in [x, y, z, l, m, nn, opl, stop_x, stop_y, stop_z] {
+            v.truncate(n);
+            v.resize(n, 0.0);
+        }
+        alive.truncate(n);
+        alive.resize(n, false);
+        let gen = GenParams::new(aim);
+        let mut c = Chunk {
+            x: &mut batch.x,
+            y: &mut batch.y,
+            z: &mut batch.z,
+            l: &mut batch.l,
+            m: &mut batch.m,
+            n: &mut batch.n,
+            opl: &mut batch.opl,
+            alive: &mut batch.alive,
+            sx: &mut batch.stop_x,
+            sy: &mut batch.stop_y,
+            sz: &mut batch.stop_z,
+        };
+        self.trace_block(
+            &mut c,
+            clipping == Clipping::SemiDiameters,
+            Some((&gen, pupil)),
+        );
     }
 
-    fn trace_block(&self, c: &mut Chunk<'_>, clip: bool) {
+    fn trace_block(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
         #[cfg(target_arch = "x86_64")]
         {
             let fma = std::arch::is_x86_feature_detected!("fma");
             if fma && std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the CPU supports AVX-512F and FMA (checked above).
-                unsafe { self.trace_block_avx512(c, clip) };
+                unsafe { self.trace_block_avx512(c, clip, src) };
                 return;
             }
             if fma && std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU supports AVX2 and FMA (checked above).
-                unsafe { self.trace_block_avx2(c, clip) };
+                unsafe { self.trace_block_avx2(c, clip, src) };
                 return;
             }
         }
-        self.trace_block_generic::<false>(c, clip);
+        self.trace_block_generic::<false>(c, clip, src);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,fma")]
-    unsafe fn trace_block_avx512(&self, c: &mut Chunk<'_>, clip: bool) {
-        self.trace_block_generic::<true>(c, clip);
+    unsafe fn trace_block_avx512(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
+        self.trace_block_generic::<true>(c, clip, src);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn trace_block_avx2(&self, c: &mut Chunk<'_>, clip: bool) {
-        self.trace_block_generic::<true>(c, clip);
+    unsafe fn trace_block_avx2(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
+        self.trace_block_generic::<true>(c, clip, src);
     }
 
     #[inline(always)]
-    fn trace_block_generic<const FMA: bool>(&self, c: &mut Chunk<'_>, clip: bool) {
+    fn trace_block_generic<const FMA: bool>(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
         let len = c.x.len();
         let mut i = 0;
         while i < len {
             let k = (len - i).min(LANES);
-            let mut v = Lanes::load(c, i, k);
+            let mut v = match src {
+                Some((g, pp)) => Lanes::generate(g, &pp[i..i + k]),
+                None => Lanes::load(c, i, k),
+            };
             self.trace_lanes::<FMA>(&mut v, clip);
             v.store(c, i, k);
             i += k;
@@ -748,6 +804,45 @@ fn st(dst: &mut [f64], i: usize, k: usize, a: &[f64; LANES]) {
 }
 
 impl Lanes {
+    /// The collimated rays of `g` through the pupil points `pp` (≤ LANES; as
+    /// `GenParams::fill`); unused lanes trace a harmless axial ray and are discarded.
+    #[inline(always)]
+    fn generate(g: &GenParams, pp: &[[f64; 2]]) -> Self {
+        let GenParams {
+            r,
+            st,
+            ct,
+            zs,
+            ze,
+            ay,
+        } = *g;
+        let s = (ze - zs) / ct;
+        let mut v = Lanes {
+            x: [0.0; LANES],
+            y: [0.0; LANES],
+            z: [0.0; LANES],
+            l: [0.0; LANES],
+            m: [0.0; LANES],
+            n: [1.0; LANES],
+            opl: [0.0; LANES],
+            alive: [0; LANES],
+            sx: [f64::NAN; LANES],
+            sy: [f64::NAN; LANES],
+            sz: [f64::NAN; LANES],
+        };
+        for (i, p) in pp.iter().enumerate().take(LANES) {
+            let (ex, ey) = (p[0] * r, ay + p[1] * r);
+            v.x[i] = ex;
+            v.y[i] = ey - s * st;
+            v.z[i] = ze - s * ct;
+            v.m[i] = st;
+            v.n[i] = ct;
+            v.opl[i] = ey * st + (ze - zs) * ct - s;
+            v.alive[i] = u64::MAX;
+        }
+        v
+    }
+
     /// Unused lanes of a partial vector trace a harmless axial ray and are discarded.
     #[inline(always)]
     fn load(c: &Chunk<'_>, i: usize, k: usize) -> Self {
