@@ -145,7 +145,11 @@ the disc (golden-angle spiral, {c['rays']} points for camsim, {o['rays']} for Op
 and traced to the paraxial image plane without clipping; all rays reach it
 ({c['rays_alive']} of {c['rays']}). camsim: `TraceSystem::trace_pupil_into`
 (lens/src/batch.rs: structure of arrays, 32-ray vectors, AVX-512/AVX2 selected at run time,
-rayon over 2048-ray blocks, each generated into and traced in a reused per-worker batch: no allocation per block). Optiland: `ray_tracer.trace_generic(..., record=False)` on NumPy
+rayon over 2048-ray blocks, each written to a reused per-worker batch: no allocation per block;
+collimated rays are generated straight into the 32-ray vectors, and each surface is two loops
+specialised for its shape (plane / sphere / conic), refraction and clipping: intersection and
+transfer, then refraction). Single-thread CPU time per ray, min of 5 × 2e6 rays
+(`RAYON_NUM_THREADS=1 LENS_BENCH_TRACE_ONLY=1`): 44.4 ns before this kernel, 31.8 ns after. Optiland: `ray_tracer.trace_generic(..., record=False)` on NumPy
 arrays, the call used by shared/tools/optics_ref/bench.py, with paraxial ray aiming (the
 fast mode; its iterative aiming, which refines each ray's pupil position, is shown on the
 second row). camsim's aim is one chief-ray solve per field, then a fixed grid per ray, which is

@@ -23,6 +23,25 @@ fn cpu_s() -> f64 {
     (ticks(11) + ticks(12)) / 100.0
 }
 
+/// CPU time of all threads of this process (s) from /proc/self/task/*/schedstat (ns
+/// resolution; Linux; falls back to [`cpu_s`]).
+fn cpu_ns_s() -> f64 {
+    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+        return cpu_s();
+    };
+    let mut ns = 0u64;
+    for e in dir.flatten() {
+        if let Ok(t) = std::fs::read_to_string(e.path().join("schedstat")) {
+            ns += t
+                .split_whitespace()
+                .next()
+                .and_then(|x| x.parse::<u64>().ok())
+                .unwrap_or(0);
+        }
+    }
+    ns as f64 * 1e-9
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let path = args
@@ -54,7 +73,7 @@ fn main() {
     let mut cpu = Vec::new();
     for _ in 0..repeats {
         let t0 = Instant::now();
-        let c0 = cpu_s();
+        let c0 = cpu_ns_s();
         // Streamed in blocks of 2048 rays into one reused batch per worker: generate from
         // the pupil points, trace, count (no allocation per block).
         use rayon::prelude::*;
@@ -69,10 +88,19 @@ fn main() {
             )
             .sum();
         times.push(t0.elapsed().as_secs_f64());
-        cpu.push(cpu_s() - c0);
+        cpu.push(cpu_ns_s() - c0);
     }
     let batch_cpu_s = cpu.iter().cloned().fold(f64::INFINITY, f64::min);
     let batch_s = median(times);
+    if std::env::var_os("LENS_BENCH_TRACE_ONLY").is_some() {
+        // A/B runs of the batch tracer alone: min CPU time per ray over the repeats.
+        println!(
+            "{{\"threads\": {}, \"rays\": {n_rays}, \"rays_alive\": {alive}, \"batch_trace_s\": {batch_s}, \"batch_trace_cpu_s\": {batch_cpu_s}, \"cpu_ns_per_ray\": {}}}",
+            rayon::current_num_threads(),
+            batch_cpu_s * 1e9 / n_rays as f64
+        );
+        return;
+    }
     // Scalar tracer on a tenth of the rays (ray generation included as well).
     let ns = (n_rays / 10).max(1);
     let mut times = Vec::new();

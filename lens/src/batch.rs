@@ -158,7 +158,8 @@ impl RayBatch {
             &mut self.n,
             &mut self.opl,
         ] {
-            v.clear();
+            // Every element is overwritten by the generation below.
+            v.truncate(n);
             v.resize(n, 0.0);
         }
         for v in [&mut self.stop_x, &mut self.stop_y, &mut self.stop_z] {
@@ -220,6 +221,7 @@ struct GenParams {
     ct: f64,
     zs: f64,
     ze: f64,
+    ay: f64,
 }
 
 impl GenParams {
@@ -231,6 +233,7 @@ impl GenParams {
             ct,
             zs: aim.start_z_mm(),
             ze: aim.entrance_pupil_z_mm,
+            ay: aim.aim_y_mm,
         }
     }
 
@@ -248,36 +251,43 @@ impl GenParams {
         nn: &mut [f64],
         opl: &mut [f64],
     ) {
-        let GenParams { r, st, ct, zs, ze } = *self;
-        for (i, p) in pp.iter().enumerate() {
-            match aim.object_distance_mm {
-                None => {
-                    // Collimated: the direction is the field's; the start point lies on the
-                    // plane z = start_z (as `FieldAim::ray`).
-                    let (ex, ey) = (p[0] * r, aim.aim_y_mm + p[1] * r);
-                    let s = (ze - zs) / ct;
-                    x[i] = ex;
-                    y[i] = ey - s * st;
-                    z[i] = ze - s * ct;
-                    l[i] = 0.0;
-                    m[i] = st;
-                    nn[i] = ct;
-                    opl[i] = ey * st + (ze - zs) * ct - s;
-                }
-                Some(_) => {
-                    let ray = aim.ray(p[0], p[1]);
-                    x[i] = ray.origin_mm[0];
-                    y[i] = ray.origin_mm[1];
-                    z[i] = ray.origin_mm[2];
-                    l[i] = ray.direction[0];
-                    m[i] = ray.direction[1];
-                    nn[i] = ray.direction[2];
-                    opl[i] = ray.opl_mm;
-                }
+        let GenParams {
+            r, st, ct, zs, ze, ..
+        } = *self;
+        if aim.object_distance_mm.is_some() {
+            for (i, p) in pp.iter().enumerate() {
+                let ray = aim.ray(p[0], p[1]);
+                x[i] = ray.origin_mm[0];
+                y[i] = ray.origin_mm[1];
+                z[i] = ray.origin_mm[2];
+                l[i] = ray.direction[0];
+                m[i] = ray.direction[1];
+                nn[i] = ray.direction[2];
+                opl[i] = ray.opl_mm;
             }
+            return;
+        }
+        // Collimated: the direction is the field's; the start point lies on the plane
+        // z = start_z (as `FieldAim::ray`). Branch-free, so it vectorises.
+        let s = (ze - zs) / ct;
+        let n = pp.len();
+        let (x, y, z) = (&mut x[..n], &mut y[..n], &mut z[..n]);
+        let (l, m, nn, opl) = (&mut l[..n], &mut m[..n], &mut nn[..n], &mut opl[..n]);
+        for (i, p) in pp.iter().enumerate() {
+            let (ex, ey) = (p[0] * r, aim.aim_y_mm + p[1] * r);
+            x[i] = ex;
+            y[i] = ey - s * st;
+            z[i] = ze - s * ct;
+            l[i] = 0.0;
+            m[i] = st;
+            nn[i] = ct;
+            opl[i] = ey * st + (ze - zs) * ct - s;
         }
     }
 }
+
+/// Rays to generate from pupil points instead of loading them (collimated fields only).
+type Src<'p> = Option<(&'p GenParams, &'p [[f64; 2]])>;
 
 /// Mutable views of one chunk of a batch.
 struct Chunk<'b> {
@@ -376,7 +386,7 @@ impl<'a> TraceSystem<'a> {
                 sy: stop_y,
                 sz: stop_z,
             };
-            self.trace_block(&mut c, clip);
+            self.trace_block(&mut c, clip, None);
             return;
         }
         x.par_chunks_mut(BLOCK)
@@ -405,7 +415,7 @@ impl<'a> TraceSystem<'a> {
                         sy,
                         sz,
                     };
-                    self.trace_block(&mut c, clip);
+                    self.trace_block(&mut c, clip, None);
                 },
             );
     }
@@ -426,47 +436,96 @@ impl<'a> TraceSystem<'a> {
         clipping: Clipping,
         batch: &mut RayBatch,
     ) {
-        batch.fill_from_pupil(aim, pupil);
-        self.trace(batch, clipping);
+        const BLOCK: usize = 64 * LANES;
+        let n = pupil.len();
+        if aim.object_distance_mm.is_some() || n > BLOCK {
+            batch.fill_from_pupil(aim, pupil);
+            self.trace(batch, clipping);
+            return;
+        }
+        // Collimated block: rays are generated straight into the lane vectors and traced
+        // while in registers / L1 (the same rays as `fill_from_pupil`; every element of the
+        // batch is written by the store).
+        let RayBatch {
+            x,
+            y,
+            z,
+            l,
+            m,
+            n: nn,
+            opl,
+            alive,
+            stop_x,
+            stop_y,
+            stop_z,
+        } = batch;
+        for v in [x, y, z, l, m, nn, opl, stop_x, stop_y, stop_z] {
+            v.truncate(n);
+            v.resize(n, 0.0);
+        }
+        alive.truncate(n);
+        alive.resize(n, false);
+        let gen = GenParams::new(aim);
+        let mut c = Chunk {
+            x: &mut batch.x,
+            y: &mut batch.y,
+            z: &mut batch.z,
+            l: &mut batch.l,
+            m: &mut batch.m,
+            n: &mut batch.n,
+            opl: &mut batch.opl,
+            alive: &mut batch.alive,
+            sx: &mut batch.stop_x,
+            sy: &mut batch.stop_y,
+            sz: &mut batch.stop_z,
+        };
+        self.trace_block(
+            &mut c,
+            clipping == Clipping::SemiDiameters,
+            Some((&gen, pupil)),
+        );
     }
 
-    fn trace_block(&self, c: &mut Chunk<'_>, clip: bool) {
+    fn trace_block(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
         #[cfg(target_arch = "x86_64")]
         {
             let fma = std::arch::is_x86_feature_detected!("fma");
             if fma && std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the CPU supports AVX-512F and FMA (checked above).
-                unsafe { self.trace_block_avx512(c, clip) };
+                unsafe { self.trace_block_avx512(c, clip, src) };
                 return;
             }
             if fma && std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU supports AVX2 and FMA (checked above).
-                unsafe { self.trace_block_avx2(c, clip) };
+                unsafe { self.trace_block_avx2(c, clip, src) };
                 return;
             }
         }
-        self.trace_block_generic::<false>(c, clip);
+        self.trace_block_generic::<false>(c, clip, src);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,fma")]
-    unsafe fn trace_block_avx512(&self, c: &mut Chunk<'_>, clip: bool) {
-        self.trace_block_generic::<true>(c, clip);
+    unsafe fn trace_block_avx512(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
+        self.trace_block_generic::<true>(c, clip, src);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn trace_block_avx2(&self, c: &mut Chunk<'_>, clip: bool) {
-        self.trace_block_generic::<true>(c, clip);
+    unsafe fn trace_block_avx2(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
+        self.trace_block_generic::<true>(c, clip, src);
     }
 
     #[inline(always)]
-    fn trace_block_generic<const FMA: bool>(&self, c: &mut Chunk<'_>, clip: bool) {
+    fn trace_block_generic<const FMA: bool>(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
         let len = c.x.len();
         let mut i = 0;
         while i < len {
             let k = (len - i).min(LANES);
-            let mut v = Lanes::load(c, i, k);
+            let mut v = match src {
+                Some((g, pp)) => Lanes::generate(g, &pp[i..i + k]),
+                None => Lanes::load(c, i, k),
+            };
             self.trace_lanes::<FMA>(&mut v, clip);
             v.store(c, i, k);
             i += k;
@@ -475,106 +534,31 @@ impl<'a> TraceSystem<'a> {
 
     #[inline(always)]
     fn trace_lanes<const FMA: bool>(&self, v: &mut Lanes, clip: bool) {
-        let fma = madd::<FMA>;
-        // Each step is a separate loop over all lanes: the LANES/8 independent vectors of a
-        // step overlap in the pipeline (a fused loop per surface is latency-bound).
-        // Per-surface temporaries live across the loop: initialised once per vector of rays,
-        // not once per surface (every element is written before it is read below).
-        let mut t = [0.0f64; LANES];
-        let (mut qx, mut qy, mut qz) = ([0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
-        let (mut nx, mut ny, mut nz) = ([0.0f64; LANES], [0.0f64; LANES], [1.0f64; LANES]);
+        // One fused loop per surface, specialised at compile time for the surface's shape,
+        // refraction and clipping (a sphere carries no conic terms, a stop in air no Snell
+        // step); the loop over LANES lanes is unrolled into LANES/8 (AVX-512) independent
+        // vectors that overlap in the pipeline.
         for (j, s) in self.surfs.iter().enumerate() {
-            if s.shape == Shape::Asphere {
-                self.asphere_lanes(v, j, clip);
-                continue;
+            match (s.shape, s.refracts, clip) {
+                (Shape::Asphere, _, _) => self.asphere_lanes(v, j, clip),
+                (Shape::Plane, false, false) => surf_lanes::<FMA, 0, false, false>(s, v, j),
+                (Shape::Plane, false, true) => surf_lanes::<FMA, 0, false, true>(s, v, j),
+                (Shape::Plane, true, false) => surf_lanes::<FMA, 0, true, false>(s, v, j),
+                (Shape::Plane, true, true) => surf_lanes::<FMA, 0, true, true>(s, v, j),
+                (Shape::Sphere, false, false) => surf_lanes::<FMA, 1, false, false>(s, v, j),
+                (Shape::Sphere, false, true) => surf_lanes::<FMA, 1, false, true>(s, v, j),
+                (Shape::Sphere, true, false) => surf_lanes::<FMA, 1, true, false>(s, v, j),
+                (Shape::Sphere, true, true) => surf_lanes::<FMA, 1, true, true>(s, v, j),
+                (Shape::Conic, false, false) => surf_lanes::<FMA, 2, false, false>(s, v, j),
+                (Shape::Conic, false, true) => surf_lanes::<FMA, 2, false, true>(s, v, j),
+                (Shape::Conic, true, false) => surf_lanes::<FMA, 2, true, false>(s, v, j),
+                (Shape::Conic, true, true) => surf_lanes::<FMA, 2, true, true>(s, v, j),
             }
-            if s.shape == Shape::Plane {
-                for i in 0..LANES {
-                    let pz = v.z[i] - s.z_mm;
-                    v.alive[i] &= mask(v.n[i] != 0.0);
-                    t[i] = -pz / v.n[i];
-                }
-            } else {
-                for i in 0..LANES {
-                    let px = v.x[i];
-                    let py = v.y[i];
-                    let pz = v.z[i] - s.z_mm;
-                    let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
-                    let a = s.c * fma(dx, dx, fma(dy, dy, s.k1 * dz * dz));
-                    let b = fma(s.c, fma(px, dx, fma(py, dy, s.k1 * pz * dz)), -dz);
-                    let cc = fma(s.c, fma(px, px, fma(py, py, s.k1 * pz * pz)), -2.0 * pz);
-                    let disc = fma(b, b, -(a * cc));
-                    let den = -b + pos(disc).sqrt();
-                    v.alive[i] &= mask(disc >= 0.0) & mask(den != 0.0);
-                    t[i] = cc / den;
-                }
-            }
-            for i in 0..LANES {
-                qx[i] = fma(t[i], v.l[i], v.x[i]);
-                qy[i] = fma(t[i], v.m[i], v.y[i]);
-                qz[i] = fma(t[i], v.n[i], v.z[i] - s.z_mm);
-            }
-            if s.shape != Shape::Plane {
-                // Stay inside the conic's domain 1 − (1+k)c²r² ≥ 0 (as the scalar trace).
-                let kc2 = s.k1 * s.c * s.c;
-                for i in 0..LANES {
-                    let r2 = qx[i] * qx[i] + qy[i] * qy[i];
-                    v.alive[i] &= mask(1.0 - kc2 * r2 >= 0.0);
-                }
-            }
-            if clip {
-                let back_ok = j == 0;
-                let lim = s.sd2 * (1.0 + 1e-12);
-                for i in 0..LANES {
-                    let r2 = qx[i] * qx[i] + qy[i] * qy[i];
-                    v.alive[i] &= mask(back_ok | (t[i] >= -1e-9)) & mask(r2 <= lim);
-                }
-            }
-            for i in 0..LANES {
-                v.opl[i] += s.n1 * t[i];
-                v.x[i] = qx[i];
-                v.y[i] = qy[i];
-                v.z[i] = qz[i] + s.z_mm;
-            }
-            if j == self.stop_index {
-                v.sx = qx;
-                v.sy = qy;
-                for i in 0..LANES {
-                    v.sz[i] = qz[i] + s.z_mm;
-                }
-            }
-            if !s.refracts {
-                continue;
-            }
-            // Unit normal oriented towards +z: (−c x, −c y, 1 − (1+k) c z), unit on a sphere,
-            // normalised for a conic; (0, 0, 1) on a plane.
-            if s.shape == Shape::Plane {
-                nx = [0.0; LANES];
-                ny = [0.0; LANES];
-                nz = [1.0; LANES];
-            } else {
-                let ck = s.c * s.k1;
-                for i in 0..LANES {
-                    nx[i] = -s.c * qx[i];
-                    ny[i] = -s.c * qy[i];
-                    nz[i] = 1.0 - ck * qz[i];
-                }
-                if s.shape == Shape::Conic {
-                    for i in 0..LANES {
-                        let inv = 1.0 / (nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]).sqrt();
-                        nx[i] *= inv;
-                        ny[i] *= inv;
-                        nz[i] *= inv;
-                    }
-                }
-            }
-            for i in 0..LANES {
-                let (l, m, n, good) =
-                    refract_lane::<FMA>(s.mu, v.l[i], v.m[i], v.n[i], nx[i], ny[i], nz[i]);
-                v.alive[i] &= good;
-                v.l[i] = l;
-                v.m[i] = m;
-                v.n[i] = n;
+            if j == self.stop_index && s.shape != Shape::Asphere {
+                // Every lane's position on the stop (dead lanes' values are discarded).
+                v.sx = v.x;
+                v.sy = v.y;
+                v.sz = v.z;
             }
         }
         // Image plane.
@@ -643,6 +627,87 @@ impl<'a> TraceSystem<'a> {
                     None => v.alive[i] = 0,
                 }
             }
+        }
+    }
+}
+
+/// One plane (`SHAPE` 0), sphere (1) or conic (2) surface for every lane of `v` (surface `j`):
+/// intersection, domain / clipping tests, transfer and (when `REFR`) refraction, in one loop.
+#[inline(always)]
+fn surf_lanes<const FMA: bool, const SHAPE: u8, const REFR: bool, const CLIP: bool>(
+    s: &Surf,
+    v: &mut Lanes,
+    j: usize,
+) {
+    let fma = madd::<FMA>;
+    let back_ok = j == 0;
+    let lim = s.sd2 * (1.0 + 1e-12);
+    let kc2 = s.k1 * s.c * s.c;
+    let ck = s.c * s.k1;
+    // Two loops (intersection + transfer, then refraction): each has one long dependency
+    // chain through the divider, and a loop this short is unrolled into independent
+    // vectors; a single fused loop was latency-bound.
+    let mut qz_lanes = [0.0f64; LANES];
+    for i in 0..LANES {
+        let px = v.x[i];
+        let py = v.y[i];
+        let pz = v.z[i] - s.z_mm;
+        let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
+        let (t, mut ok) = if SHAPE == 0 {
+            (-pz / dz, mask(dz != 0.0))
+        } else {
+            // c(x² + y² + (1+k)z²) − 2z = 0 along p + t d: t = C/(−B + √(B² − A C))
+            // (Spencer & Murty 1962); a sphere has k1 = 1.
+            let k1 = if SHAPE == 1 { 1.0 } else { s.k1 };
+            let a = s.c * fma(dx, dx, fma(dy, dy, k1 * dz * dz));
+            let b = fma(s.c, fma(px, dx, fma(py, dy, k1 * pz * dz)), -dz);
+            let cc = fma(s.c, fma(px, px, fma(py, py, k1 * pz * pz)), -2.0 * pz);
+            let disc = fma(b, b, -(a * cc));
+            let den = -b + pos(disc).sqrt();
+            (cc / den, mask(disc >= 0.0) & mask(den != 0.0))
+        };
+        let qx = fma(t, dx, px);
+        let qy = fma(t, dy, py);
+        let qz = fma(t, dz, pz);
+        if SHAPE != 0 {
+            // Stay inside the conic's domain 1 − (1+k)c²r² ≥ 0 (as the scalar trace).
+            let r2 = qx * qx + qy * qy;
+            ok &= mask(1.0 - kc2 * r2 >= 0.0);
+        }
+        if CLIP {
+            let r2 = qx * qx + qy * qy;
+            ok &= mask(back_ok | (t >= -1e-9)) & mask(r2 <= lim);
+        }
+        v.opl[i] += s.n1 * t;
+        v.x[i] = qx;
+        v.y[i] = qy;
+        v.z[i] = qz + s.z_mm;
+        qz_lanes[i] = qz;
+        v.alive[i] &= ok;
+    }
+    if !REFR {
+        return;
+    }
+    for i in 0..LANES {
+        let (qx, qy, qz) = (v.x[i], v.y[i], qz_lanes[i]);
+        let (dx, dy, dz) = (v.l[i], v.m[i], v.n[i]);
+        {
+            // Unit normal oriented towards +z: (−c x, −c y, 1 − (1+k) c z), unit on a
+            // sphere, normalised for a conic; (0, 0, 1) on a plane.
+            let (nx, ny, nz) = match SHAPE {
+                0 => (0.0, 0.0, 1.0),
+                1 => (-s.c * qx, -s.c * qy, 1.0 - s.c * qz),
+                _ => {
+                    let (nx, ny, nz) = (-s.c * qx, -s.c * qy, 1.0 - ck * qz);
+                    let inv = 1.0 / (nx * nx + ny * ny + nz * nz).sqrt();
+                    (nx * inv, ny * inv, nz * inv)
+                }
+            };
+            let (l, m, n, good) = refract_lane::<FMA>(s.mu, dx, dy, dz, nx, ny, nz);
+            v.alive[i] &= good;
+            v.l[i] = l;
+            v.m[i] = m;
+            v.n[i] = n;
         }
     }
 }
@@ -739,6 +804,45 @@ fn st(dst: &mut [f64], i: usize, k: usize, a: &[f64; LANES]) {
 }
 
 impl Lanes {
+    /// The collimated rays of `g` through the pupil points `pp` (≤ LANES; as
+    /// `GenParams::fill`); unused lanes trace a harmless axial ray and are discarded.
+    #[inline(always)]
+    fn generate(g: &GenParams, pp: &[[f64; 2]]) -> Self {
+        let GenParams {
+            r,
+            st,
+            ct,
+            zs,
+            ze,
+            ay,
+        } = *g;
+        let s = (ze - zs) / ct;
+        let mut v = Lanes {
+            x: [0.0; LANES],
+            y: [0.0; LANES],
+            z: [0.0; LANES],
+            l: [0.0; LANES],
+            m: [0.0; LANES],
+            n: [1.0; LANES],
+            opl: [0.0; LANES],
+            alive: [0; LANES],
+            sx: [f64::NAN; LANES],
+            sy: [f64::NAN; LANES],
+            sz: [f64::NAN; LANES],
+        };
+        for (i, p) in pp.iter().enumerate().take(LANES) {
+            let (ex, ey) = (p[0] * r, ay + p[1] * r);
+            v.x[i] = ex;
+            v.y[i] = ey - s * st;
+            v.z[i] = ze - s * ct;
+            v.m[i] = st;
+            v.n[i] = ct;
+            v.opl[i] = ey * st + (ze - zs) * ct - s;
+            v.alive[i] = u64::MAX;
+        }
+        v
+    }
+
     /// Unused lanes of a partial vector trace a harmless axial ray and are discarded.
     #[inline(always)]
     fn load(c: &Chunk<'_>, i: usize, k: usize) -> Self {
