@@ -42,7 +42,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub focus_distance: Option<f64>,
     /// Longest path in segments, Mitsuba's convention (1 = emitters only, 2 = direct light,
-    /// −1 = unlimited with Russian roulette from depth 5).
+    /// −1 = unlimited, with Russian roulette after the first bounce).
     #[arg(long, default_value_t = -1, allow_hyphen_values = true)]
     pub max_depth: i32,
     /// Also write the variance of each pixel estimate (channels variance.S0.<λ>nm).
@@ -90,7 +90,7 @@ pub fn job_from_args(a: &RenderArgs) -> Result<RenderJob, CliError> {
             seed: a.seed,
             bands,
             max_depth: a.max_depth,
-            rr_depth: 5,
+            rr_depth: RenderSettings::default().rr_depth,
             variance: a.variance,
             depth_spp: if a.mitsuba_channels { a.depth_spp } else { 0 },
         },
