@@ -9,7 +9,8 @@
 # (block 3σ, z_global). Writes docs/benchmarks/render.md.
 #
 # Usage: bench/render_mitsuba.sh            Env: CAMSIM_SHARED, SPP (64), WIDTH (256),
-#        BANDS (380:780:10), VARIANT, CARGO_TARGET_DIR
+#        BANDS (380:780:10), VARIANT, CARGO_TARGET_DIR, RR_DEPTH (camsim --rr-depth; default:
+#        camsim's default)
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -44,16 +45,17 @@ for s in 0 1; do
 done
 for s in 0 1; do
     "$CAMSIM" render "$SCENE" --width "$WIDTH" --spp "$SPP" --seed "$s" --bands "$BANDS" \
-        --mitsuba-channels --depth-spp 1 --out "$TMP/cs_s$s.exr" >"$TMP/cs_s$s.json"
+        --mitsuba-channels --depth-spp 1 ${RR_DEPTH:+--rr-depth "$RR_DEPTH"} --out "$TMP/cs_s$s.exr" \
+        >"$TMP/cs_s$s.json"
 done
 "$PY" "$HARNESS/compare.py" "$TMP/cs_s0.exr" "$TMP/mi_s0.exr" --test2 "$TMP/cs_s1.exr" --ref2 "$TMP/mi_s1.exr" \
     --channels 'band_*' --fail-frac 0.02 >"$TMP/compare.txt" || true
 
-"$PY" - "$TMP" "$OUT_MD" "$VARIANT" "$SPP" "$WIDTH" "$BANDS" <<'PY'
+"$PY" - "$TMP" "$OUT_MD" "$VARIANT" "$SPP" "$WIDTH" "$BANDS" "${RR_DEPTH:-default}" <<'PY'
 import json, os, platform, subprocess, sys, time
 import numpy as np
 import mitsuba as mi
-tmp, out_md, variant, spp, width, bands = sys.argv[1:7]
+tmp, out_md, variant, spp, width, bands, rr_depth = sys.argv[1:8]
 mi.set_variant("scalar_rgb")
 
 def read(p):
@@ -123,7 +125,7 @@ both renderers; Mitsuba ran one warm-up render first (Dr.Jit kernel compilation)
 | renderer | render s (seed 0 / 1) | camera paths / s (best) | per-pixel noise (rel., 10 nm bands): all pixels / without emitter pixels | paths / s at Mitsuba's noise: all / without emitter pixels |
 | --- | --- | --- | --- | --- |
 | Mitsuba 3 `{variant}` | {mi_t[0]:.2f} / {mi_t[1]:.2f} | {mi_best/1e6:.2f} M | {mi_noise:.3f} / {mi_noise_t:.3f} | {mi_best/1e6:.2f} M / {mi_best/1e6:.2f} M |
-| camsim `render` | {cs_t[0]:.2f} / {cs_t[1]:.2f} | {cs_best/1e6:.2f} M | {cs_noise:.3f} / {cs_noise_t:.3f} | {cs_equal/1e6:.2f} M / {cs_equal_t/1e6:.2f} M |
+| camsim `render` (`--rr-depth` {rr_depth}) | {cs_t[0]:.2f} / {cs_t[1]:.2f} | {cs_best/1e6:.2f} M | {cs_noise:.3f} / {cs_noise_t:.3f} | {cs_equal/1e6:.2f} M / {cs_equal_t/1e6:.2f} M |
 
 Speed ratio camsim / Mitsuba: {cs_best/mi_best:.2f}× in paths per second; at equal noise
 {cs_equal/mi_best:.2f}× (all pixels) and {cs_equal_t/mi_best:.2f}× (without the {emitter.mean()*100:.1f} % of pixels that see the

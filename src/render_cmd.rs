@@ -42,9 +42,13 @@ pub struct RenderArgs {
     #[arg(long)]
     pub focus_distance: Option<f64>,
     /// Longest path in segments, Mitsuba's convention (1 = emitters only, 2 = direct light,
-    /// −1 = unlimited with Russian roulette from depth 5).
+    /// −1 = unlimited, with Russian roulette from the second bounce).
     #[arg(long, default_value_t = -1, allow_hyphen_values = true)]
     pub max_depth: i32,
+    /// Depth (bounces) from which Russian roulette terminates paths (Mitsuba's `rr_depth`,
+    /// whose default is 5; camsim's default 2 is faster per path, slightly noisier).
+    #[arg(long, default_value_t = camsim_render::RenderSettings::default().rr_depth)]
+    pub rr_depth: u32,
     /// Also write the variance of each pixel estimate (channels variance.S0.<λ>nm).
     #[arg(long)]
     pub variance: bool,
@@ -90,7 +94,7 @@ pub fn job_from_args(a: &RenderArgs) -> Result<RenderJob, CliError> {
             seed: a.seed,
             bands,
             max_depth: a.max_depth,
-            rr_depth: 5,
+            rr_depth: a.rr_depth,
             variance: a.variance,
             depth_spp: if a.mitsuba_channels { a.depth_spp } else { 0 },
         },

@@ -763,7 +763,7 @@ fn render_scene(
             seed,
             bands,
             max_depth: rf.max_depth.unwrap_or(-1),
-            rr_depth: 5,
+            rr_depth: camsim_render::RenderSettings::default().rr_depth,
             variance: false,
             depth_spp: 0,
         },

@@ -1,6 +1,6 @@
 //! Development benchmark of the radiance pass: render a glTF (default: the shared Cornell box)
 //! and print camera paths per second. `cargo run --release -p camsim-render --example
-//! bench_render -- [SCENE.gltf] [spp] [width] [threads]`
+//! bench_render -- [SCENE.gltf] [spp] [width] [threads] [rr_depth]`
 use camsim_render::job::{prepare, CameraChoice, RenderJob};
 use camsim_render::{render, RenderSettings};
 use std::path::PathBuf;
@@ -18,6 +18,10 @@ fn main() {
     let spp: u32 = a.get(2).and_then(|s| s.parse().ok()).unwrap_or(64);
     let width: u32 = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(256);
     let threads: usize = a.get(4).and_then(|s| s.parse().ok()).unwrap_or(2);
+    let rr_depth: u32 = a
+        .get(5)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(RenderSettings::default().rr_depth);
     let job = RenderJob {
         scene,
         camera_name: None,
@@ -30,6 +34,7 @@ fn main() {
             spp,
             bands: camsim_render::Bands::parse("380:780:10").unwrap(),
             depth_spp: 0,
+            rr_depth,
             ..Default::default()
         },
     };

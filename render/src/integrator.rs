@@ -2,8 +2,10 @@
 //! sampling (Veach 1997, power heuristic β = 2), Russian roulette and hero-wavelength
 //! sampling (Wilkie et al. 2014), following the semantics of Mitsuba 3's `path` integrator:
 //! `max_depth` counts path segments (1 = emitters seen directly, 2 = direct lighting, −1 =
-//! unlimited), Russian roulette from depth `rr_depth` (default 5) with continuation
-//! probability min(max(throughput)·η², 0.95).
+//! unlimited), Russian roulette from depth `rr_depth` with continuation probability
+//! min(max(throughput)·η², 0.95) (Mitsuba's rule). camsim's default `rr_depth` is 2 (roulette
+//! from the second bounce; Mitsuba's default is 5): unbiased, it shortens the mean path and
+//! trades per-path variance for paths per second (docs/render.md, Performance).
 //!
 //! Every pixel has its own random stream derived from (seed, pixel index) (core::rng), and
 //! each pixel's samples are taken in order by one thread, so the image does not depend on
@@ -44,7 +46,7 @@ impl Default for RenderSettings {
             seed: 0,
             bands: Bands::new(380.0, 780.0, 10.0).expect("valid"),
             max_depth: -1,
-            rr_depth: 5,
+            rr_depth: 2,
             variance: false,
             depth_spp: 16,
         }
