@@ -33,7 +33,7 @@ impl Default for SelectOptions {
         SelectOptions {
             bic_threshold: 10.0,
             alike_margin: 10.0,
-            min_misfit_share: 0.25,
+            min_misfit_share: 0.0,
             min_drop_sigma: 3.0,
             max_rounds: 8,
             effects: Effect::ALL.to_vec(),
