@@ -125,7 +125,11 @@ fn misfit(ctx: &Ctx, st: &ModelState) -> Result<f64, String> {
     Ok((e.chi2 - e.dof).max(0.0))
 }
 
-/// Refits the effects in `model` one at a time (two sweeps), each from its current values.
+/// Most coordinate sweeps of the joint refit.
+const JOINT_SWEEPS: usize = 8;
+
+/// Refits the effects in `model` one at a time (sweeps until converged), each from its
+/// current values.
 fn joint_refit(
     ctx: &Ctx,
     ev: &Evidence,
@@ -136,7 +140,9 @@ fn joint_refit(
         return Ok(state);
     }
     let mut f = neg_ll(ctx, &state)?;
-    for _ in 0..2 {
+    // Correlated effects (a fall-off and glare both change the corners relative to the
+    // centre) need several coordinate sweeps; stop when a sweep gains < 0.5 in lnL.
+    for _ in 0..JOINT_SWEEPS {
         let f_start = f;
         for &e in model {
             if let FitOutcome::Fitted {
