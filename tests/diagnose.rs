@@ -250,6 +250,13 @@ fn full_well_under_scene() {
 }
 
 #[test]
+fn full_well_mimicking_prnu() {
+    // Flats reaching 80 % and 95 % of the believed scale with a 70 % well: the clipped
+    // pixels' lost noise and flattened means look like fixed pattern until the well is fitted.
+    single("full_well", 7000.0, Concealment::Mimicked, 0.0);
+}
+
+#[test]
 fn relative_illumination_with_flats() {
     // `none`: relative illumination concealed under scene content cannot be told from the
     // scene's own shading without a flat field; that case is the "cannot tell" test below.
