@@ -623,7 +623,9 @@ pub(crate) fn fit_effect(
                 &|st, x| st.sensor.well_capacity_e = x.exp(),
                 w0 - 1.6,
                 w0 + 1.1,
-                19,
+                // A hard well makes the likelihood sharply peaked (pixels switch between
+                // clipped, with no temporal noise, and not): ~2 % steps resolve the valley.
+                121,
                 1e-5,
             );
             out(st, f, 1)
@@ -864,30 +866,32 @@ fn fit_hot(
     }
 }
 
-/// Relative illumination: polynomial fall-off 1 + a1 h² (+ a2 h⁴ + a3 h⁶); the order is chosen
-/// by BIC among 1–3 coefficients.
+/// Relative illumination: polynomial fall-off 1 + a1 h² + … + a_K h^(2K); the order K is
+/// chosen by BIC among 1–`FALLOFF_MAX_ORDER` (a vignetted pupil falls off nearly linearly
+/// in h from the centre, which low even orders cannot follow).
 fn fit_falloff(ctx: &Ctx, state: &ModelState) -> Result<FitOutcome, String> {
     let spec_with = |c: Vec<f64>| RateSpec {
         falloff: Some(c),
         ..state.rates.clone()
     };
-    let b0 = ctx.base_rates(&spec_with(vec![0.0; 3]))?;
+    const FALLOFF_MAX_ORDER: usize = 6;
+    let b0 = ctx.base_rates(&spec_with(vec![0.0; FALLOFF_MAX_ORDER]))?;
     let mut basis: Vec<Rates> = Vec::new();
-    for k in 0..3 {
-        let mut c = vec![0.0; 3];
+    for k in 0..FALLOFF_MAX_ORDER {
+        let mut c = vec![0.0; FALLOFF_MAX_ORDER];
         c[k] = 1.0;
         basis.push(difference(&*ctx.base_rates(&spec_with(c))?, &b0));
     }
     let n_obs = ctx.data.pixels() as f64 * ctx.data.shots.len() as f64;
     let cur = state.rates.falloff.clone().unwrap_or_default();
     let mut best: Option<(f64, Vec<f64>, f64, ModelState, usize)> = None;
-    for order in 1..=3usize {
+    for order in 1..=FALLOFF_MAX_ORDER {
         let th0: Vec<f64> = (0..order)
             .map(|k| cur.get(k).copied().unwrap_or(0.0))
             .collect();
         let (th, f, st) = gauss_newton(ctx, state, &b0, &basis[..order], &th0, None, &|s, th| {
             let mut c = th.to_vec();
-            c.resize(3, 0.0);
+            c.resize(FALLOFF_MAX_ORDER, 0.0);
             while c.len() > 1 && c.last() == Some(&0.0) {
                 c.pop();
             }
@@ -898,7 +902,7 @@ fn fit_falloff(ctx: &Ctx, state: &ModelState) -> Result<FitOutcome, String> {
             best = Some((crit, th, f, st, order));
         }
     }
-    let (_, _, f, st, order) = best.expect("three orders tried");
+    let (_, _, f, st, order) = best.expect("every order tried");
     Ok(FitOutcome::Fitted {
         state: st,
         neg_ll: f,

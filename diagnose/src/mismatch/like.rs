@@ -466,9 +466,14 @@ impl<'a> Ctx<'a> {
                             let f = consts[sidx].frames;
                             let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
                             if sh.censored[i] {
-                                // Pearson χ² of the rail count (1 dof); a term whose minority
-                                // outcome is expected in under half a frame and not seen
-                                // carries no information and is left out (χ² ≈ 0, not 1).
+                                // Deviance (likelihood-ratio G², 1 dof) of the rail counts:
+                                // 2·(lnL of the saturated multinomial − lnL of the model), the
+                                // same likelihood the fit maximises. (Pearson's (n−m)²/var is
+                                // not: one rail frame where the model expects 10⁻⁴ adds 10⁴
+                                // to it but only ≈ 9 to −lnL, so a fit that improves lnL could
+                                // make χ² explode; issue 6, Flea3 8-bit darks.) A term whose
+                                // minority outcome is expected in under half a frame and not
+                                // seen carries no information and is left out.
                                 let rs = rail_stats(p, f, nlo, nhi);
                                 let n_rail = nlo + nhi;
                                 st.censored += 1.0;
@@ -481,8 +486,7 @@ impl<'a> Ctx<'a> {
                                 if q < 0.5 && minority == 0.0 {
                                     continue;
                                 }
-                                let x = n_rail - rs.mean;
-                                st.chi2 += x * x / rs.var.max(1e-12);
+                                st.chi2 += rail_deviance(&rs, f, nlo, nhi);
                                 st.dof += 1.0;
                                 continue;
                             }
@@ -663,13 +667,12 @@ pub(crate) fn temporal_ll(v: f64, var: f64, f: f64) -> f64 {
     -0.5 * (f - 1.0) * (v / var + var.ln())
 }
 
-/// The rail counts of a censored pixel-shot under the model: log-likelihood and the mean and
-/// variance of the number of frames at a rail.
+/// The rail counts of a censored pixel-shot under the model: log-likelihood and the mean
+/// number of frames at a rail.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct RailStat {
     pub ll: f64,
     pub mean: f64,
-    pub var: f64,
 }
 
 /// The frames of a pixel share its fixed pattern, so its rail counts are a mixture over the
@@ -688,7 +691,7 @@ pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
     let st = p.s_t.max(1e-9);
     let mut lmax = f64::NEG_INFINITY;
     let mut terms = [(0.0f64, 0.0f64, 0.0f64); 24];
-    let (mut m1, mut m2, mut vin) = (0.0, 0.0, 0.0);
+    let mut m1 = 0.0;
     for (k, &(z, w)) in nodes.iter().enumerate() {
         let y = p.y + p.s_f * z;
         let plo = norm_cdf((0.5 - y) / st);
@@ -709,8 +712,6 @@ pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
         terms[k] = (l, 0.0, 0.0);
         let pr = (plo + phi).min(1.0);
         m1 += w * pr;
-        m2 += w * pr * pr;
-        vin += w * pr * (1.0 - pr);
     }
     let sum: f64 = terms[..nodes.len()]
         .iter()
@@ -719,8 +720,20 @@ pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
     RailStat {
         ll: lmax + sum.ln(),
         mean: f * m1,
-        var: f * vin + f * f * (m2 - m1 * m1).max(0.0),
     }
+}
+
+/// Deviance of a pixel-shot's rail counts (frames at the low rail, at the high rail, between):
+/// G² = 2·(Σ_k n_k ln(n_k/F) − lnL_model) ≥ 0, since the model (a mixture of multinomials) is
+/// never more likely than the saturated multinomial with the observed frequencies.
+pub(crate) fn rail_deviance(rs: &RailStat, f: f64, nlo: f64, nhi: f64) -> f64 {
+    let nmid = f - nlo - nhi;
+    let sat: f64 = [nlo, nhi, nmid]
+        .iter()
+        .filter(|&&n| n > 0.0)
+        .map(|&n| n * (n / f).ln())
+        .sum();
+    (2.0 * (sat - rs.ll)).max(0.0)
 }
 
 /// Pixels that stand out from their same-channel neighbours in the same column (±2, ±4
@@ -885,5 +898,49 @@ impl Ctx<'_> {
             })
             .collect();
         blocks.into_iter().flatten().collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mismatch::num::norm_cdf;
+
+    /// Without fixed pattern the rail counts are multinomial: the deviance must equal the
+    /// closed-form binomial deviance 2[n ln(n/(Fp)) + (F−n) ln((F−n)/(F(1−p)))] with
+    /// p = Φ((0.5 − y)/σ), and stay of order ln(1/(Fp)) for a rare rail frame, where
+    /// Pearson's (n − Fp)²/(Fp(1−p)) explodes (the issue-6 χ² inconsistency).
+    #[test]
+    fn rail_deviance_is_binomial_deviance_and_bounded_for_rare_events() {
+        let f = 16.0;
+        for &(y, n) in &[(0.3, 5.0), (2.0, 1.0), (4.5, 1.0), (1.0, 16.0), (0.0, 0.0)] {
+            let p = Pred {
+                y,
+                s_t: 1.0,
+                s_f: 0.0,
+                hi: 255.0,
+                ..Default::default()
+            };
+            let rs = rail_stats(&p, f, n, 0.0);
+            let q = norm_cdf(0.5 - y);
+            let term = |k: f64, pr: f64| {
+                if k > 0.0 {
+                    k * (k / (f * pr)).ln()
+                } else {
+                    0.0
+                }
+            };
+            let want = 2.0 * (term(n, q) + term(f - n, 1.0 - q));
+            let got = rail_deviance(&rs, f, n, 0.0);
+            assert!(
+                (got - want).abs() < 1e-6 * want.max(1.0),
+                "y {y} n {n}: deviance {got} vs closed form {want}"
+            );
+            assert!(got >= 0.0);
+            if y == 4.5 {
+                let pearson = (n - f * q).powi(2) / (f * q * (1.0 - q));
+                assert!(pearson > 100.0 * got, "pearson {pearson} deviance {got}");
+            }
+        }
     }
 }

@@ -16,6 +16,13 @@ pub struct SelectOptions {
     pub bic_threshold: f64,
     /// Alike candidates whose ΔBIC lie within this margin cannot be told apart.
     pub alike_margin: f64,
+    /// Least share of the current model's lack of fit (|χ² − dof| on the fit rows) a
+    /// candidate must remove to be accepted (0: off).
+    pub min_misfit_share: f64,
+    /// Least reduction of the lack of fit |χ² − dof| a candidate must bring, in standard
+    /// deviations of the χ² of the fit rows (√(2·dof)): the effect must show in the
+    /// goodness of fit.
+    pub min_drop_sigma: f64,
     /// Most acceptance rounds.
     pub max_rounds: usize,
     /// Effects to consider (default all).
@@ -27,6 +34,8 @@ impl Default for SelectOptions {
         SelectOptions {
             bic_threshold: 10.0,
             alike_margin: 10.0,
+            min_misfit_share: 0.0,
+            min_drop_sigma: 3.0,
             max_rounds: 8,
             effects: Effect::ALL.to_vec(),
         }
@@ -111,7 +120,17 @@ fn neg_ll(ctx: &Ctx, st: &ModelState) -> Result<f64, String> {
     Ok(-ctx.evaluate(st, RowSel::Fit)?.logl)
 }
 
-/// Refits the effects in `model` one at a time (two sweeps), each from its current values.
+/// Lack of fit of a model: |χ² − dof| on the fit rows.
+fn misfit_abs(ctx: &Ctx, st: &ModelState) -> Result<f64, String> {
+    let e = ctx.evaluate(st, RowSel::Fit)?;
+    Ok((e.chi2 - e.dof).abs())
+}
+
+/// Most coordinate sweeps of the joint refit.
+const JOINT_SWEEPS: usize = 8;
+
+/// Refits the effects in `model` one at a time (sweeps until converged), each from its
+/// current values.
 fn joint_refit(
     ctx: &Ctx,
     ev: &Evidence,
@@ -122,7 +141,9 @@ fn joint_refit(
         return Ok(state);
     }
     let mut f = neg_ll(ctx, &state)?;
-    for _ in 0..2 {
+    // Correlated effects (a fall-off and glare both change the corners relative to the
+    // centre) need several coordinate sweeps; stop when a sweep gains < 0.5 in lnL.
+    for _ in 0..JOINT_SWEEPS {
         let f_start = f;
         for &e in model {
             if let FitOutcome::Fitted {
@@ -142,6 +163,90 @@ fn joint_refit(
     Ok(state)
 }
 
+/// `state` with the parameters of `e` put back to their believed values.
+fn without_effect(e: Effect, state: &ModelState, believed: &ModelState) -> ModelState {
+    let mut st = state.clone();
+    let (s, b) = (&mut st.sensor, &believed.sensor);
+    match e {
+        Effect::ExposureScale => st.exposure_factor = believed.exposure_factor,
+        Effect::ConversionGain => s.conversion_gain_v_per_e = b.conversion_gain_v_per_e,
+        Effect::BlackLevel => s.black_level_dn = b.black_level_dn,
+        Effect::DarkCurrent => s.dark_voltage_v_per_s = b.dark_voltage_v_per_s,
+        Effect::ReadNoise => s.read_noise_v = b.read_noise_v,
+        Effect::Dsnu => s.dsnu_sigma_v = b.dsnu_sigma_v,
+        Effect::Prnu => s.prnu_sigma_percent = b.prnu_sigma_percent,
+        Effect::ColumnFpn => s.column_fpn = b.column_fpn,
+        Effect::HotPixels => s.effects.hot_pixels = b.effects.hot_pixels,
+        Effect::Nonlinearity => s.effects.nonlinearity = b.effects.nonlinearity,
+        Effect::FullWell => s.well_capacity_e = b.well_capacity_e,
+        Effect::Crosstalk => s.effects.crosstalk = b.effects.crosstalk,
+        Effect::RelativeIllumination => st.rates.falloff = believed.rates.falloff.clone(),
+        Effect::VeilingGlare => st.rates.glare_fraction = believed.rates.glare_fraction,
+        Effect::Defocus => st.rates.defocus_sigma_um = believed.rates.defocus_sigma_um,
+        Effect::Distortion => st.rates.distortion = believed.rates.distortion,
+        Effect::LateralColor => st.rates.lateral_color_um = believed.rates.lateral_color_um,
+        Effect::IrLeakage => st.rates.ir_leakage = believed.rates.ir_leakage.clone(),
+        Effect::QeShift => st.rates.qe_shift_nm = believed.rates.qe_shift_nm.clone(),
+    }
+    st
+}
+
+/// Backward elimination (Efroymson's stepwise regression, applied to BIC): after the joint
+/// refit, an accepted effect whose removal (the others refitted without it) no longer worsens
+/// the criterion by more than the threshold is no longer supported by the data — it had
+/// absorbed part of an effect found later — and leaves the model. The weakest such effect
+/// goes first; repeat until every remaining effect is needed. Returns the dropped effects.
+#[allow(clippy::too_many_arguments)]
+fn backward_eliminate(
+    ctx: &Ctx,
+    ev: &Evidence,
+    believed: &ModelState,
+    model: &mut Vec<Effect>,
+    ks: &mut Vec<usize>,
+    state: &mut ModelState,
+    f_cur: &mut f64,
+    ln_n: f64,
+    threshold: f64,
+    keep: Effect,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Vec<Effect>, String> {
+    let mut dropped = Vec::new();
+    while model.len() >= 2 {
+        let mut weakest: Option<(usize, f64, ModelState, f64)> = None;
+        for (i, &e) in model.iter().enumerate() {
+            if e == keep {
+                continue;
+            }
+            progress(&format!("backward: without {}", e.id()));
+            let rest: Vec<Effect> = model.iter().copied().filter(|&x| x != e).collect();
+            let mut st = without_effect(e, state, believed);
+            if rest.len() == 1 {
+                if let FitOutcome::Fitted { state: s2, .. } = fit_effect(ctx, ev, rest[0], &st)? {
+                    if neg_ll(ctx, &s2)? < neg_ll(ctx, &st)? {
+                        st = s2;
+                    }
+                }
+            } else {
+                st = joint_refit(ctx, ev, &rest, st)?;
+            }
+            let f_without = neg_ll(ctx, &st)?;
+            // ΔBIC of putting e back into the model without it.
+            let dbic = ks[i] as f64 * ln_n - 2.0 * (f_without - *f_cur);
+            if dbic > -threshold && weakest.as_ref().is_none_or(|w| dbic > w.1) {
+                weakest = Some((i, dbic, st, f_without));
+            }
+        }
+        let Some((i, _, st, f)) = weakest else {
+            break;
+        };
+        dropped.push(model.remove(i));
+        ks.remove(i);
+        *state = st;
+        *f_cur = f;
+    }
+    Ok(dropped)
+}
+
 /// Runs the greedy selection from the believed model.
 pub(crate) fn select(
     ctx: &Ctx,
@@ -156,6 +261,8 @@ pub(crate) fn select(
     let ln_n = n_obs.ln();
     let mut f_cur = -first.logl;
     let mut model: Vec<Effect> = Vec::new();
+    let mut ks: Vec<usize> = Vec::new();
+    let mut dropped_ever: Vec<Effect> = Vec::new();
     let mut findings: Vec<Finding> = Vec::new();
     let mut undecided: Vec<Undecided> = Vec::new();
     let mut not_testable: Vec<(Effect, String)> = Vec::new();
@@ -164,7 +271,10 @@ pub(crate) fn select(
         let mut rows: Vec<CandidateRow> = Vec::new();
         let mut fits: Vec<(Effect, ModelState, usize, f64)> = Vec::new();
         for &e in &opts.effects {
-            if model.contains(&e) || not_testable.iter().any(|x| x.0 == e) {
+            if model.contains(&e)
+                || dropped_ever.contains(&e)
+                || not_testable.iter().any(|x| x.0 == e)
+            {
                 continue;
             }
             progress(&format!("round {}: {}", round + 1, e.id()));
@@ -212,6 +322,36 @@ pub(crate) fn select(
         if dbic > -opts.bic_threshold {
             break;
         }
+        // Misfit share: the fitted forms are approximations of the true shapes (a tanh
+        // nonlinearity, a two-circle vignetting, … seen through a quadratic, a polynomial), so
+        // once an effect is found a systematic residual of its form error remains, and with
+        // 10⁴–10⁵ data terms any extra free parameter projects onto it with ΔlnL far above
+        // the BIC penalty (which only guards against pure noise). A candidate that explains
+        // only a small share of the remaining lack of fit is such a projection, not a cause.
+        // Likewise a drop of 2ΔlnL within the noise of the fit's overall χ² (σ = √(2·dof)) is
+        // an effect the goodness of fit cannot see: the model already explains the recording.
+        // The improvement is the larger of the deviance drop 2ΔlnL and the χ² the candidate
+        // removes from the lack of fit, |χ² − dof| before minus after (a variance term that
+        // overshoots gets no credit for pushing χ² below dof). For a mean term the two agree;
+        // they differ for variance terms and censored data: 2ΔlnL undercounts random-effect
+        // terms (column offsets on the below-noise set: 2ΔlnL ≈ 900, χ² drop ≈ 6 300), the χ²
+        // drop undercounts light added to dark regions (glare after a fall-off: 2ΔlnL ≈ 1 690,
+        // χ² drop ≈ 580).
+        let lack_before = misfit_abs(ctx, &state)?;
+        let share_needed =
+            (opts.min_misfit_share * lack_before).max(opts.min_drop_sigma * (2.0 * n_obs).sqrt());
+        let dl_best = (dbic - k as f64 * ln_n) / -2.0;
+        let gain = (lack_before - misfit_abs(ctx, &best_state)?).max(2.0 * dl_best);
+        if gain < share_needed {
+            progress(&format!(
+                "round {}: {} brings χ² closer to dof by {:.1}, needs {:.1}: stop",
+                round + 1,
+                best.id(),
+                gain,
+                share_needed
+            ));
+            break;
+        }
         let alternatives: Vec<(Effect, f64)> = fits.iter().skip(1).map(|x| (x.0, x.3)).collect();
         // An effect left undecided earlier and still needed now: both were present.
         let partners: Vec<(Effect, f64, ModelState)> = fits
@@ -221,6 +361,9 @@ pub(crate) fn select(
                 alike(best, x.0).is_some()
                     && x.3 < -opts.bic_threshold
                     && x.3 - dbic < opts.alike_margin
+                    && misfit_abs(ctx, &x.1).is_ok_and(|m| {
+                        (lack_before - m).max(x.2 as f64 * ln_n - x.3) >= share_needed
+                    })
             })
             .map(|x| (x.0, x.3, x.1.clone()))
             .collect();
@@ -231,8 +374,27 @@ pub(crate) fn select(
         let dl = (dbic - k as f64 * ln_n) / -2.0;
         state = best_state;
         model.push(best);
+        ks.push(k);
         state = joint_refit(ctx, &ev, &model, state)?;
         f_cur = neg_ll(ctx, &state)?;
+        let dropped = backward_eliminate(
+            ctx,
+            &ev,
+            believed,
+            &mut model,
+            &mut ks,
+            &mut state,
+            &mut f_cur,
+            ln_n,
+            opts.bic_threshold,
+            best,
+            progress,
+        )?;
+        for e in &dropped {
+            findings.retain(|f| f.effect != *e);
+            undecided.retain(|u| u.effects[0] != *e);
+            dropped_ever.push(*e);
+        }
         let after = ctx.evaluate(&state, RowSel::All)?;
         if !partners.is_empty() || scene_content {
             let mut effects = vec![best];
