@@ -19,6 +19,14 @@ same packages (Optiland, rayoptics) through their public APIs. ref_lens.py is im
       unit disc), from optiland (object-height fields, EPD aperture; spots with paraxial aiming,
       which samples the paraxial entrance pupil like camsim on axis) and rayoptics (object-height
       fields, EPD; aim point shifts the grid off axis, as camsim).
+  optics_ref_extra.py asphere INPUT.json -o OUT.json [ref_lens.py arguments]
+      ref_lens.py itself (same analyses, same output schema) for a lens with conic / even-asphere
+      surfaces: INPUT's surfaces may carry "conic" and "aspheric_coeffs" ([A4, A6, ...], sag
+      z = c r^2 / (1 + sqrt(1 - (1+k) c^2 r^2)) + A4 r^4 + A6 r^6 + ..., the camsim/Zemax
+      EVENASPH convention), which ref_lens.py ignores. optiland's Optic is wrapped so that those
+      surfaces are built as optiland "even_asphere" surfaces (coefficients [0, A4, A6, ...]: its
+      list starts at r^2); optiland backend only (rayoptics is not patched). The output gains
+      an "aspheres" entry listing what was applied.
 """
 from __future__ import annotations
 
@@ -220,12 +228,68 @@ def finite(lens):
     return out
 
 
+# ----------------------------------------------------------------------------------------------
+# conic / even-asphere lenses through ref_lens.py (optiland only)
+# ----------------------------------------------------------------------------------------------
+def asphere(lens_json, out, extra_args):
+    """Run ref_lens.py's main on LENS_JSON with optiland surfaces made even aspheres."""
+    import optiland.optic as optic_mod
+    with open(lens_json) as f:
+        lens = json.load(f)
+    asph = {}
+    for i, s in enumerate(lens["surfaces"], start=1):  # optiland index 0 is the object
+        k = float(s.get("conic", 0.0))
+        a = [float(x) for x in s.get("aspheric_coeffs", [])]
+        if k != 0.0 or any(x != 0.0 for x in a):
+            asph[i] = (k, a)
+    if not asph:
+        raise SystemExit(f"{lens_json}: no surface has a conic or aspheric_coeffs")
+    base = optic_mod.Optic
+
+    class AsphericOptic(base):
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            add = self.surfaces.add
+
+            def add_asph(*a, index=None, **k):
+                if index in asph:
+                    conic, coeffs = asph[index]
+                    k.update(surface_type="even_asphere", conic=conic,
+                             coefficients=[0.0] + coeffs)
+                return add(*a, index=index, **k)
+            self.surfaces.add = add_asph
+
+    optic_mod.Optic = AsphericOptic
+    try:
+        argv = sys.argv
+        sys.argv = ["ref_lens.py", lens_json, "-o", out, "--backends", "optiland"] + extra_args
+        import contextlib
+        import io
+        with contextlib.redirect_stdout(io.StringIO()):
+            R.main()
+    finally:
+        sys.argv = argv
+        optic_mod.Optic = base
+    with open(out) as f:
+        doc = json.load(f)
+    doc["aspheres"] = {"runner": "tools/optics_ref_extra.py asphere",
+                       "surfaces": [{"surface": i, "conic": k, "aspheric_coeffs": a}
+                                    for i, (k, a) in sorted(asph.items())]}
+    with open(out, "w") as f:
+        f.write(json.dumps(doc, indent=1) + "\n")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["field_curvature", "finite"])
+    ap.add_argument("what", choices=["field_curvature", "finite", "asphere"])
     ap.add_argument("lens_json")
     ap.add_argument("-o", "--output", required=True)
-    a = ap.parse_args()
+    a, rest = ap.parse_known_args()
+    if a.what == "asphere":
+        asphere(a.lens_json, a.output, rest)
+        return
+    if rest:
+        ap.error(f"unrecognised arguments: {' '.join(rest)}")
     if a.what == "field_curvature":
         lens = R.load_lens(a.lens_json)
         res = field_curvature(lens)

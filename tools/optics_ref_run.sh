@@ -16,6 +16,10 @@
 # with "ref_lens_runs": {} runs only its extra tools (e.g. a finite-conjugate lens, which
 # ref_lens.py cannot express).
 #
+# An input with "ref_lens_runner": "asphere" (surfaces with "conic" / "aspheric_coeffs") runs its
+# ref_lens runs through tools/optics_ref_extra.py asphere: ref_lens.py with those surfaces built
+# as optiland even aspheres (optiland only).
+#
 # Usage: tools/optics_ref_run.sh [name ...]     (default: every *.json that is not *.ref.json)
 # Env:   PYTHON (interpreter used to create the venv, default python3)
 #        REF_LENS_ARGS (extra arguments appended to every ref_lens.py run, e.g. "--no-psf")
@@ -62,8 +66,9 @@ for f in "${inputs[@]}"; do
     runs="$("$VENV/bin/python" -c '
 import json, sys
 j = json.load(open(sys.argv[1]))
+kind = "asphere" if j.get("ref_lens_runner") == "asphere" else "ref_lens"
 for tag, args in j.get("ref_lens_runs", {"": ""}).items():
-    print("ref_lens|" + tag + "|" + args)
+    print(kind + "|" + tag + "|" + args)
 for tool, args in j.get("extra_runs", {}).items():
     print("extra|" + tool + "|" + args)
 ' "$f")"
@@ -75,6 +80,9 @@ for tool, args in j.get("extra_runs", {}).items():
         if [[ "$kind" == extra ]]; then
             cmd=("$VENV/bin/python" "$EXTRA" "$tag" "$f" -o "$out")
             common=""
+        elif [[ "$kind" == asphere ]]; then
+            cmd=("$VENV/bin/python" "$EXTRA" asphere "$f" -o "$out")
+            common="${REF_LENS_ARGS:-}"
         else
             cmd=("$VENV/bin/python" "$REF_LENS" "$f" -o "$out")
             common="${REF_LENS_ARGS:-}"

@@ -26,6 +26,9 @@
 //! * `zmx_us8427765_spherical`: US 8,427,765 ex. 1 *without its even asphere* (ref_lens.py has
 //!   no conic/asphere input; the test zeroes surface 4's conic and coefficients after reading
 //!   the `.zmx`), optiland only (rayoptics' opticalglass 1.1.1 has no Ohara L-TIM28);
+//! * `zmx_us8427765`: the same lens *with* its even asphere, read from the `.zmx` as is; the
+//!   reference is ref_lens.py run by `tools/optics_ref_extra.py asphere`, which builds that
+//!   surface as an optiland even asphere (optiland only, for the same glass reason);
 //! * `dat_pbrt_dgauss50`, `dat_pbrt_telephoto250`: pbrt `.dat` lenses (fallback, not `.zmx`),
 //!   optiland only (ref_lens.py hands a dispersionless glass to rayoptics as V_d = 0, which
 //!   opticalglass cannot build);
@@ -99,6 +102,14 @@ fn camsim_lens(name: &str) -> LensPrescription {
             }
             l
         }
+        "zmx_us8427765" => {
+            // The whole lens, its even asphere included (reference: optiland with that surface
+            // built as an even asphere, tools/optics_ref_extra.py asphere).
+            let l = from_zmx("rayoptics_US08427765-1.ZMX");
+            assert_eq!(l.surfaces[3].conic, 0.02);
+            assert_eq!(l.surfaces[3].aspheric_coeffs, vec![1.10721e-5, 1.837e-7]);
+            l
+        }
         "dat_pbrt_dgauss50" => from_dat("pbrt_dgauss.50mm.dat"),
         "dat_pbrt_telephoto250" => from_dat("pbrt_telephoto.250mm.dat"),
         "cooke_triplet_sasian" => LensPrescription::from_json_file(
@@ -161,9 +172,10 @@ impl Case {
     }
 }
 
-const CASES: [&str; 5] = [
+const CASES: [&str; 6] = [
     "zmx_us583336",
     "zmx_us8427765_spherical",
+    "zmx_us8427765",
     "dat_pbrt_dgauss50",
     "dat_pbrt_telephoto250",
     "cooke_triplet_sasian",
@@ -212,6 +224,13 @@ fn inputs_describe_the_lenses_camsim_reads() {
                 );
             }
             assert_eq!(a.semi_diameter_mm, b["semi_diameter_mm"].as_f64());
+            // Conic and even-asphere terms (absent in the input = spherical).
+            assert_eq!(a.conic, b["conic"].as_f64().unwrap_or(0.0), "{name} surface {i}");
+            let coeffs: Vec<f64> = b["aspheric_coeffs"]
+                .as_array()
+                .map(|v| v.iter().map(num).collect())
+                .unwrap_or_default();
+            assert_eq!(a.aspheric_coeffs, coeffs, "{name} surface {i}: aspheric terms");
             assert_eq!(
                 i == c.lens.stop_index,
                 b["stop"].as_bool().unwrap_or(false),
