@@ -237,8 +237,14 @@ fn trace_path(
                         f32::INFINITY
                     };
                     if smax > 0.0 && scene.unoccluded(so, ls.dir, 0.0, smax) {
+                        // one MIS weight when the BSDF density does not depend on λ
+                        let w0 = if ls.delta { 1.0 } else { mis(ls.pdf, pdf_b[0]) };
                         for i in 0..N_WL {
-                            let w = if ls.delta { 1.0 } else { mis(ls.pdf, pdf_b[i]) };
+                            let w = if ls.delta || pdf_b[i] == pdf_b[0] {
+                                w0
+                            } else {
+                                mis(ls.pdf, pdf_b[i])
+                            };
                             l[i] += beta[i] * f[i] * ls.weight[i] * w;
                         }
                     }

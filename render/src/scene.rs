@@ -425,10 +425,11 @@ impl Scene {
                 .emission
                 .as_ref()?
                 .eval4(wl);
+            let inv_pdf = 1.0 / pdf;
             Some(LightSample {
                 dir,
                 dist,
-                weight: le.map(|v| v / pdf),
+                weight: le.map(|v| v * inv_pdf),
                 pdf,
                 delta: false,
             })
@@ -476,6 +477,10 @@ impl Scene {
 /// Interpolated unit shading normal at barycentrics b = (b1, b2).
 #[inline]
 pub fn shading_normal(s: &TriShading, b: Vec2) -> Vec3 {
+    // equal (unit) vertex normals: the interpolation is that normal, no normalisation needed
+    if s.n[0] == s.n[1] && s.n[1] == s.n[2] {
+        return s.n[0];
+    }
     let n = s.n[0] * (1.0 - b.x - b.y) + s.n[1] * b.x + s.n[2] * b.y;
     let l = n.length();
     if l > 0.0 && l.is_finite() {
