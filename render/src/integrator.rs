@@ -12,12 +12,13 @@
 //! the number of threads.
 use crate::camera::{Camera, CameraRay, OutputQuantity};
 use crate::sampling::Frame;
-use crate::scene::{shading_normal, Scene};
-use crate::spectral::{Bands, N_WL};
+use crate::scene::{shading_normal, Scene, SpectralTexture};
+use crate::spectral::{Bands, TabulatedSpectrum, N_WL};
 use camsim_core::rng::{stream, CamRng};
 use glam::{Mat4, Vec2, Vec3};
 use rand::Rng;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Render settings.
@@ -166,6 +167,68 @@ fn to_world(r: &CameraRay, m: &Mat4, near: f32, far: f32) -> Option<WorldRay> {
     })
 }
 
+/// Materials whose spectral values a path memoises (the first ones of the scene).
+const MEMO: u32 = 16;
+
+/// Spectral values of the (first [`MEMO`]) materials at one path's 4 wavelengths, evaluated
+/// on first use: a path meets few materials, but each of them many times (every bounce and
+/// every light sample). Slots are written before they are read (the `*_ok` bits), so the
+/// arrays are not initialised.
+struct PathSpectra {
+    refl_ok: u32,
+    emit_ok: u32,
+    refl: [MaybeUninit<[f32; N_WL]>; MEMO as usize],
+    emit: [MaybeUninit<[f32; N_WL]>; MEMO as usize],
+}
+
+impl PathSpectra {
+    #[inline(always)]
+    fn new() -> Self {
+        PathSpectra {
+            refl_ok: 0,
+            emit_ok: 0,
+            refl: [MaybeUninit::uninit(); MEMO as usize],
+            emit: [MaybeUninit::uninit(); MEMO as usize],
+        }
+    }
+
+    /// Reflectance of material `m` at the hit (texture coordinate from `uv`).
+    #[inline(always)]
+    fn reflectance(
+        &mut self,
+        mat: &crate::scene::Material,
+        m: u32,
+        uv: impl FnOnce() -> Vec2,
+        wl: &[f32; N_WL],
+    ) -> [f32; N_WL] {
+        match &mat.reflectance {
+            SpectralTexture::Constant(s) if m < MEMO => {
+                if self.refl_ok & (1 << m) == 0 {
+                    self.refl[m as usize] = MaybeUninit::new(s.eval4(wl));
+                    self.refl_ok |= 1 << m;
+                }
+                // SAFETY: slot m was written (its bit is set)
+                unsafe { self.refl[m as usize].assume_init() }
+            }
+            t => t.eval(uv(), wl),
+        }
+    }
+
+    /// Emitted radiance `e` of material `m`.
+    #[inline(always)]
+    fn emission(&mut self, e: &TabulatedSpectrum, m: u32, wl: &[f32; N_WL]) -> [f32; N_WL] {
+        if m >= MEMO {
+            return e.eval4(wl);
+        }
+        if self.emit_ok & (1 << m) == 0 {
+            self.emit[m as usize] = MaybeUninit::new(e.eval4(wl));
+            self.emit_ok |= 1 << m;
+        }
+        // SAFETY: slot m was written (its bit is set)
+        unsafe { self.emit[m as usize].assume_init() }
+    }
+}
+
 /// Trace one path carrying 4 wavelengths; returns the radiance per wavelength slot times
 /// `beta0` (the camera weight, with the hero-only factor already applied).
 #[allow(clippy::too_many_arguments)]
@@ -188,6 +251,7 @@ fn trace_path(
     let mut prev_delta = true;
     let mut eta2 = 1.0f32;
     let mut depth = 0u32;
+    let mut spectra = PathSpectra::new();
     loop {
         let Some(hit) = scene.intersect(o, d, tmin, tmax) else {
             break;
@@ -202,7 +266,7 @@ fn trace_path(
         // emission (one-sided: front = shading normal side, as Mitsuba's area emitter)
         if let Some(e) = &mat.emission {
             if ns.dot(wi_w) > 0.0 {
-                let le = e.eval4(wl);
+                let le = spectra.emission(e, sh.material, wl);
                 let w = if prev_delta {
                     1.0
                 } else {
@@ -219,14 +283,20 @@ fn trace_path(
         }
         let frame = Frame::from_normal(ns);
         let wi = frame.to_local(wi_w);
-        let uv = sh.uv[0] * (1.0 - b.x - b.y) + sh.uv[1] * b.x + sh.uv[2] * b.y;
-        let refl = mat.reflectance.eval(uv, wl);
+        let refl = spectra.reflectance(
+            mat,
+            sh.material,
+            || sh.uv[0] * (1.0 - b.x - b.y) + sh.uv[1] * b.x + sh.uv[2] * b.y,
+            wl,
+        );
         let bsdf = &mat.bsdf;
         // next-event estimation
         let ul = next_f32(rng);
         let ul2 = next_vec2(rng);
         if !bsdf.is_delta() {
-            if let Some(ls) = scene.sample_light(p, ul, ul2, wl) {
+            if let Some(ls) =
+                scene.sample_light_with(p, ul, ul2, wl, |e, m| spectra.emission(e, m, wl))
+            {
                 let wo = frame.to_local(ls.dir);
                 let (f, pdf_b) = bsdf.eval_pdf(wi, wo, &refl, wl);
                 if f.iter().zip(&beta).any(|(x, b)| *x * *b > 0.0) {

@@ -13,14 +13,13 @@ pub fn square_to_disk_concentric(u: Vec2) -> Vec2 {
     }
     // φ = π/4·(y/x) on the wedges |x| > |y|, else π/2 − π/4·(x/y); the angle ψ = π/4·ratio
     // lies in [−π/4, π/4] where short Taylor series give cos and sin to f32 precision
-    if a.x.abs() > a.y.abs() {
-        let (c, s) = cos_sin_quarter(FRAC_PI_4 * (a.y / a.x));
-        Vec2::new(a.x * c, a.x * s)
-    } else {
-        // cos(π/2 − ψ) = sin ψ, sin(π/2 − ψ) = cos ψ
-        let (c, s) = cos_sin_quarter(FRAC_PI_4 * (a.x / a.y));
-        Vec2::new(a.y * s, a.y * c)
-    }
+    // (selects, no branch: the wedge is random)
+    let swap = a.x.abs() <= a.y.abs();
+    let (r, q) = if swap { (a.y, a.x) } else { (a.x, a.y) };
+    let (c, s) = cos_sin_quarter(FRAC_PI_4 * (q / r));
+    // cos(π/2 − ψ) = sin ψ, sin(π/2 − ψ) = cos ψ
+    let (c, s) = if swap { (s, c) } else { (c, s) };
+    Vec2::new(r * c, r * s)
 }
 
 /// (cos ψ, sin ψ) for |ψ| ≤ π/4 by Taylor series to ψ¹⁰ and ψ⁹ (truncation error below
@@ -30,7 +29,7 @@ fn cos_sin_quarter(x: f32) -> (f32, f32) {
     let x2 = x * x;
     let c = 1.0
         + x2 * (-1.0 / 2.0
-            + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 - x2 / 3628800.0))));
+            + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 - x2 * (1.0 / 3628800.0)))));
     let s = x
         * (1.0
             + x2 * (-1.0 / 6.0
