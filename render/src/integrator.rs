@@ -103,8 +103,10 @@ fn next_f32(rng: &mut CamRng) -> f32 {
 
 #[inline(always)]
 fn next_vec2(rng: &mut CamRng) -> Vec2 {
-    let a = next_f32(rng);
-    Vec2::new(a, next_f32(rng))
+    // two 24-bit uniforms from the high and low halves of one 64-bit output
+    let x = rng.next_u64();
+    const K: f32 = 1.0 / 16_777_216.0;
+    Vec2::new((x >> 40) as f32 * K, ((x >> 8) & 0xFF_FFFF) as f32 * K)
 }
 
 /// Fisher–Yates shuffle of `p` in place (a uniformly random permutation).
@@ -151,7 +153,8 @@ struct WorldRay {
 fn to_world(r: &CameraRay, m: &Mat4, near: f32, far: f32) -> Option<WorldRay> {
     let dz = -r.direction.z;
     let (tmin, tmax) = if dz > 1e-7 {
-        (near / dz, far / dz)
+        let inv = 1.0 / dz;
+        (near * inv, far * inv)
     } else {
         (0.0, f32::INFINITY)
     };
@@ -517,6 +520,8 @@ pub fn render(
     s: &RenderSettings,
     progress: Option<&(dyn Fn(usize) + Sync)>,
 ) -> RenderOutput {
+    let prepared = camera.prepared();
+    let camera: &dyn Camera = prepared.as_deref().unwrap_or(camera);
     let (w, h) = camera.film_size_px();
     let (w, h) = (w as usize, h as usize);
     let nb = s.bands.count;

@@ -29,7 +29,8 @@ fn cos_sin_quarter(x: f32) -> (f32, f32) {
     let x2 = x * x;
     let c = 1.0
         + x2 * (-1.0 / 2.0
-            + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 - x2 * (1.0 / 3628800.0)))));
+            + x2 * (1.0 / 24.0
+                + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 - x2 * (1.0 / 3628800.0)))));
     let s = x
         * (1.0
             + x2 * (-1.0 / 6.0
@@ -220,7 +221,10 @@ mod tests {
                     (a.y, 0.5 * PI - FRAC_PI_4 * (a.x / a.y))
                 };
                 let want = Vec2::new(r * phi.cos(), r * phi.sin());
-                assert!((square_to_disk_concentric(u) - want).length() < 1e-6, "{u:?}");
+                assert!(
+                    (square_to_disk_concentric(u) - want).length() < 1e-6,
+                    "{u:?}"
+                );
             }
         }
     }

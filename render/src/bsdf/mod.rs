@@ -406,7 +406,11 @@ impl Bsdf {
                 return None;
             }
             return Some(BsdfSample {
-                wo: if flip { Vec3::new(wo.x, wo.y, -wo.z) } else { wo },
+                wo: if flip {
+                    Vec3::new(wo.x, wo.y, -wo.z)
+                } else {
+                    wo
+                },
                 weight: *refl,
                 pdf: cosine_hemisphere_pdf(wo),
                 delta: false,
