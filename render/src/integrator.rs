@@ -466,7 +466,18 @@ fn render_row(c: &RowCtx, y: usize) -> (Vec<f32>, Vec<f32>) {
                 s.rr_depth,
                 &mut rng,
             );
-            // bands of the 4 slots (merge slots that share a band)
+            if !s.variance {
+                // the mean only: each slot adds to its band
+                for i in 0..N_WL {
+                    let v = (l[i] * slot_scale) as f64;
+                    if v.is_finite() {
+                        sum[s.bands.index(wl[i])] += v;
+                    }
+                }
+                continue;
+            }
+            // bands of the 4 slots (merge slots that share a band: the sample's value per band
+            // for the variance)
             let mut bi = [usize::MAX; N_WL];
             let mut bv = [0f64; N_WL];
             let mut n = 0;
