@@ -158,7 +158,15 @@ fn to_world(r: &CameraRay, m: &Mat4, near: f32, far: f32) -> Option<WorldRay> {
     } else {
         (0.0, f32::INFINITY)
     };
-    let d = m.transform_vector3(r.direction).normalize();
+    // the camera-to-world matrix is a rotation (scale removed), so the unit camera direction
+    // stays unit to rounding: normalise only when it is not
+    let d = m.transform_vector3(r.direction);
+    let l2 = d.length_squared();
+    let d = if (l2 - 1.0).abs() <= 1e-6 {
+        d
+    } else {
+        d / l2.sqrt()
+    };
     if !d.is_finite() {
         return None;
     }
