@@ -379,9 +379,9 @@ fn trace_path(
 }
 
 /// Everything one film row needs.
-struct RowCtx<'a> {
+struct RowCtx<'a, C: Camera + ?Sized> {
     scene: &'a Scene,
-    camera: &'a dyn Camera,
+    camera: &'a C,
     camera_to_world: Mat4,
     s: &'a RenderSettings,
     w: usize,
@@ -396,7 +396,7 @@ struct RowCtx<'a> {
 
 /// Render film row `y`: per pixel [band] means, then variances (when asked for).
 #[inline(always)]
-fn render_row(c: &RowCtx, y: usize) -> (Vec<f32>, Vec<f32>) {
+fn render_row<C: Camera + ?Sized>(c: &RowCtx<C>, y: usize) -> (Vec<f32>, Vec<f32>) {
     let RowCtx {
         scene,
         camera,
@@ -539,8 +539,12 @@ pub fn render(
     s: &RenderSettings,
     progress: Option<&(dyn Fn(usize) + Sync)>,
 ) -> RenderOutput {
+    // a pinhole or thin lens renders through its prepared, statically dispatched form
     let prepared = camera.prepared();
-    let camera: &dyn Camera = prepared.as_deref().unwrap_or(camera);
+    let camera: &dyn Camera = match &prepared {
+        Some(c) => c,
+        None => camera,
+    };
     let (w, h) = camera.film_size_px();
     let (w, h) = (w as usize, h as usize);
     let nb = s.bands.count;
@@ -573,10 +577,27 @@ pub fn render(
         slot_scale,
         inv_spp,
     };
+    let ctx_prepared = prepared.as_ref().map(|c| RowCtx {
+        scene,
+        camera: c,
+        camera_to_world,
+        s,
+        w,
+        nb,
+        max_depth,
+        near,
+        far,
+        spp,
+        slot_scale,
+        inv_spp,
+    });
     let rows: Vec<(Vec<f32>, Vec<f32>)> = (0..h)
         .into_par_iter()
         .map(|y| {
-            let row = render_row(&ctx, y);
+            let row = match &ctx_prepared {
+                Some(cp) => render_row(cp, y),
+                None => render_row(&ctx, y),
+            };
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
             if let Some(p) = progress {
                 p(k);

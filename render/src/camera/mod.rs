@@ -66,9 +66,10 @@ pub trait Camera: Send + Sync {
     fn far_clip_m(&self) -> f32 {
         f32::INFINITY
     }
-    /// An equivalent camera with its per-render constants precomputed, which the render loop
-    /// uses for its many rays; None (the default) to use this camera as it is.
-    fn prepared(&self) -> Option<Box<dyn Camera>> {
+    /// For a pinhole or thin lens: the equivalent camera with its per-render constants
+    /// precomputed, which the render loop uses (without dynamic dispatch) for its many rays;
+    /// None (the default) to use this camera as it is.
+    fn prepared(&self) -> Option<PreparedPerspective> {
         None
     }
 }
@@ -148,10 +149,10 @@ impl PlaneMap {
     }
 }
 
-/// A pinhole or thin lens with its [`PlaneMap`] ([`Camera::prepared`]); aperture radius 0
-/// is the pinhole.
+/// A pinhole or thin lens with its film-to-plane constants precomputed ([`Camera::prepared`]);
+/// aperture radius 0 is the pinhole.
 #[derive(Debug, Clone, Copy)]
-struct PreparedPerspective {
+pub struct PreparedPerspective {
     perspective: Perspective,
     map: PlaneMap,
     aperture_radius_m: f32,
@@ -214,13 +215,13 @@ impl Camera for Pinhole {
     fn film_size_px(&self) -> (u32, u32) {
         (self.perspective.width_px, self.perspective.height_px)
     }
-    fn prepared(&self) -> Option<Box<dyn Camera>> {
-        Some(Box::new(PreparedPerspective {
+    fn prepared(&self) -> Option<PreparedPerspective> {
+        Some(PreparedPerspective {
             perspective: self.perspective,
             map: PlaneMap::new(&self.perspective),
             aperture_radius_m: 0.0,
             focus_distance_m: 1.0,
-        }))
+        })
     }
     fn output_quantity(&self) -> OutputQuantity {
         OutputQuantity::Radiance
@@ -262,13 +263,13 @@ impl Camera for ThinLens {
     fn film_size_px(&self) -> (u32, u32) {
         (self.perspective.width_px, self.perspective.height_px)
     }
-    fn prepared(&self) -> Option<Box<dyn Camera>> {
-        Some(Box::new(PreparedPerspective {
+    fn prepared(&self) -> Option<PreparedPerspective> {
+        Some(PreparedPerspective {
             perspective: self.perspective,
             map: PlaneMap::new(&self.perspective),
             aperture_radius_m: self.aperture_radius_m,
             focus_distance_m: self.focus_distance_m,
-        }))
+        })
     }
     fn output_quantity(&self) -> OutputQuantity {
         OutputQuantity::Radiance
