@@ -489,5 +489,8 @@ fn variance_option_leaves_the_means_unchanged() {
             nonzero += (*x > 0.0) as usize;
         }
     }
-    assert!(nonzero > 1000, "only {nonzero} non-zero values: the test is not testing");
+    assert!(
+        nonzero > 1000,
+        "only {nonzero} non-zero values: the test is not testing"
+    );
 }
