@@ -102,6 +102,7 @@ mi_noise_t, cs_noise_t = noise("mi", emitter), noise("cs", emitter)
 mi_best, cs_best = max(mi_sps), max(cs_sps)
 # samples/s at equal noise: the noise variance per sample scales as noise², so a renderer
 # with noise ratio r needs r² as many samples for the same noise
+rr_text = "2 (camsim's default)" if rr_depth == "default" else rr_depth
 cs_equal = cs_best * (mi_noise / cs_noise) ** 2
 cs_equal_t = cs_best * (mi_noise_t / cs_noise_t) ** 2
 cmp = open(os.path.join(tmp, "compare.txt")).read().strip().splitlines()
@@ -116,8 +117,8 @@ load = os.getloadavg()
 md = f"""# Renderer benchmark: camsim vs Mitsuba 3 (written by bench/render_mitsuba.sh)
 
 Scene: the shared Cornell box (`shared/tools/mitsuba_ref/cornell.gltf`), {width}×{width} px,
-{spp} spp, bands {bands} nm, path tracing with unlimited depth (Russian roulette from depth 5),
-box pixel filter. Same run, same machine: {model}, {ncpu} logical CPUs, load average
+{spp} spp, bands {bands} nm, path tracing with unlimited depth (Russian roulette from depth 5
+in Mitsuba, from depth {rr_text} in camsim), box pixel filter. Same run, same machine: {model}, {ncpu} logical CPUs, load average
 {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min) at the end of the run
 ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Render times exclude scene loading for
 both renderers; Mitsuba ran one warm-up render first (Dr.Jit kernel compilation).

@@ -73,6 +73,10 @@ pub struct Bvh4 {
     flat: bool,
     /// Input index of each triangle in BVH order.
     pub order: Vec<u32>,
+    /// Few triangles on a CPU with AVX2 + FMA: the 8-wide packs that replace `nodes`/`packs`
+    /// (render/src/bvh8_flat.rs).
+    #[cfg(target_arch = "x86_64")]
+    flat8: Option<Box<crate::bvh8_flat::Flat8>>,
 }
 
 /// A ray prepared for traversal (splatted origin/direction, safe reciprocal direction).
@@ -163,6 +167,12 @@ impl Bvh4 {
     /// Build over world-space triangles (none degenerate in a way that matters: degenerate
     /// triangles are kept and simply never hit).
     pub fn build(triangles: &[[Vec3; 3]]) -> Bvh4 {
+        Self::build_with(triangles, true)
+    }
+
+    /// [`Bvh4::build`]; `simd8` allows the 8-wide AVX2 code for small scenes when the CPU has
+    /// it (false: the portable 4-wide code only, for tests).
+    pub fn build_with(triangles: &[[Vec3; 3]], simd8: bool) -> Bvh4 {
         let mut b = Builder {
             tris: triangles,
             nodes: Vec::new(),
@@ -200,6 +210,8 @@ impl Bvh4 {
             root,
             flat: false,
             order: b.order,
+            #[cfg(target_arch = "x86_64")]
+            flat8: None,
         };
         if triangles.len() <= FLAT_MAX_TRIS {
             // repack full packs of 4 in BVH order (spatially coherent groups)
@@ -220,13 +232,39 @@ impl Bvh4 {
             bvh.order = fb.order;
             bvh.nodes = fb.nodes;
             bvh.flat = true;
+            #[cfg(target_arch = "x86_64")]
+            if simd8 && crate::bvh8_flat::Flat8::supported() {
+                let tris: Vec<[Vec3; 3]> =
+                    bvh.order.iter().map(|&i| triangles[i as usize]).collect();
+                let prims: Vec<u32> = (0..tris.len() as u32).collect();
+                bvh.flat8 = Some(Box::new(crate::bvh8_flat::Flat8::build(&tris, &prims)));
+            }
         }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = simd8;
         bvh
+    }
+
+    /// True when the 8-wide AVX2 code casts the rays.
+    pub fn uses_simd8(&self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return self.flat8.is_some();
+        #[cfg(not(target_arch = "x86_64"))]
+        false
     }
 
     /// Closest hit along o + t·d with t ∈ [tmin, tmax].
     #[inline]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Bvh4Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(f) = &self.flat8 {
+            // SAFETY: flat8 is only built when the CPU has AVX2 and FMA
+            return unsafe { f.intersect(o, d, tmin, tmax) }.map(|(t, prim, bary)| Bvh4Hit {
+                t,
+                prim,
+                bary,
+            });
+        }
         let r = PreparedRay::new(o, d, tmin);
         let mut tmax = tmax;
         let mut best = Bvh4Hit {
@@ -337,6 +375,11 @@ impl Bvh4 {
     /// True when no triangle lies along o + t·d for t ∈ [tmin, tmax] (first hit ends it).
     #[inline]
     pub fn unoccluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(f) = &self.flat8 {
+            // SAFETY: flat8 is only built when the CPU has AVX2 and FMA
+            return unsafe { f.unoccluded(o, d, tmin, tmax) };
+        }
         let r = PreparedRay::new(o, d, tmin);
         if self.flat {
             for n in &self.nodes {
@@ -547,9 +590,9 @@ mod tests {
         (*s >> 40) as f32 / (1u64 << 24) as f32
     }
 
-    /// The BVH (flat packs up to 64 triangles, the 4-wide tree above) agrees with brute force
-    /// over every triangle with the scalar test: closest hit t, triangle barycentrics, and
-    /// occlusion.
+    /// The BVH (flat packs up to 64 triangles — 4-wide portable and 8-wide AVX2 when the CPU
+    /// has it —, the 4-wide tree above) agrees with brute force over every triangle with the
+    /// scalar test: closest hit t, triangle barycentrics, and occlusion.
     #[test]
     fn bvh4_matches_brute_force() {
         let mut s = 7u64;
@@ -561,64 +604,75 @@ mod tests {
                     [c + 1.5 * r(), c + 1.5 * r(), c + 1.5 * r()]
                 })
                 .collect();
-            let bvh = Bvh4::build(&tris);
-            let mut sorted = bvh.order.clone();
-            sorted.sort();
-            assert_eq!(sorted, (0..n as u32).collect::<Vec<_>>());
-            let geo: Vec<TriGeom> = bvh
-                .order
-                .iter()
-                .map(|&i| {
-                    let t = tris[i as usize];
-                    TriGeom {
-                        v0: t[0].into(),
-                        e1: (t[1] - t[0]).into(),
-                        e2: (t[2] - t[0]).into(),
-                    }
-                })
-                .collect();
-            let mut hits = 0;
-            for _ in 0..2000 {
-                let o = Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 8.0 - 4.0;
-                // aimed at the triangle cloud so that most rays hit something
-                let aim = Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 4.0 - 2.0;
-                let d = (aim - o).normalize();
-                let tmax = if lcg(&mut s) < 0.5 {
-                    f32::INFINITY
+            for simd8 in [false, true] {
+                let bvh = Bvh4::build_with(&tris, simd8);
+                if n <= FLAT_MAX_TRIS {
+                    #[cfg(target_arch = "x86_64")]
+                    assert_eq!(
+                        bvh.uses_simd8(),
+                        simd8 && crate::bvh8_flat::Flat8::supported()
+                    );
                 } else {
-                    3.0
-                };
-                let ray = Ray::new(o.into(), d.into(), 0.0, tmax);
-                let (mut bt, mut bp) = (f32::INFINITY, EMPTY);
-                for (i, g) in geo.iter().enumerate() {
-                    let t = g.intersect(&ray);
-                    if t < bt {
-                        bt = t;
-                        bp = i as u32;
-                    }
+                    assert!(!bvh.uses_simd8());
                 }
-                let h = bvh.intersect(o, d, 0.0, tmax);
-                match h {
-                    Some(h) => {
-                        hits += 1;
-                        assert!(bp != EMPTY, "n {n}: BVH hit where brute force missed");
-                        assert!(
-                            (h.t - bt).abs() <= 1e-5 * bt.max(1.0),
-                            "n {n}: t {} vs {bt}",
-                            h.t
-                        );
-                        let b = geo[h.prim as usize].barycentrics(o.into(), d.into());
-                        assert!((b - h.bary).length() < 1e-4);
+                let mut sorted = bvh.order.clone();
+                sorted.sort();
+                assert_eq!(sorted, (0..n as u32).collect::<Vec<_>>());
+                let geo: Vec<TriGeom> = bvh
+                    .order
+                    .iter()
+                    .map(|&i| {
+                        let t = tris[i as usize];
+                        TriGeom {
+                            v0: t[0].into(),
+                            e1: (t[1] - t[0]).into(),
+                            e2: (t[2] - t[0]).into(),
+                        }
+                    })
+                    .collect();
+                let mut hits = 0;
+                for _ in 0..2000 {
+                    let o = Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 8.0 - 4.0;
+                    // aimed at the triangle cloud so that most rays hit something
+                    let aim = Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 4.0 - 2.0;
+                    let d = (aim - o).normalize();
+                    let tmax = if lcg(&mut s) < 0.5 {
+                        f32::INFINITY
+                    } else {
+                        3.0
+                    };
+                    let ray = Ray::new(o.into(), d.into(), 0.0, tmax);
+                    let (mut bt, mut bp) = (f32::INFINITY, EMPTY);
+                    for (i, g) in geo.iter().enumerate() {
+                        let t = g.intersect(&ray);
+                        if t < bt {
+                            bt = t;
+                            bp = i as u32;
+                        }
                     }
-                    None => assert!(bp == EMPTY, "n {n}: BVH missed a hit at t = {bt}"),
+                    let h = bvh.intersect(o, d, 0.0, tmax);
+                    match h {
+                        Some(h) => {
+                            hits += 1;
+                            assert!(bp != EMPTY, "n {n}: BVH hit where brute force missed");
+                            assert!(
+                                (h.t - bt).abs() <= 1e-5 * bt.max(1.0),
+                                "n {n}: t {} vs {bt}",
+                                h.t
+                            );
+                            let b = geo[h.prim as usize].barycentrics(o.into(), d.into());
+                            assert!((b - h.bary).length() < 1e-4);
+                        }
+                        None => assert!(bp == EMPTY, "n {n}: BVH missed a hit at t = {bt}"),
+                    }
+                    assert_eq!(bvh.unoccluded(o, d, 0.0, tmax), bp == EMPTY);
                 }
-                assert_eq!(bvh.unoccluded(o, d, 0.0, tmax), bp == EMPTY);
-            }
-            if n >= 17 {
-                assert!(
-                    hits > 150,
-                    "n {n}: only {hits} hits: the test is not testing"
-                );
+                if n >= 17 {
+                    assert!(
+                        hits > 150,
+                        "n {n}: only {hits} hits: the test is not testing"
+                    );
+                }
             }
         }
     }

@@ -12,12 +12,13 @@
 //! the number of threads.
 use crate::camera::{Camera, CameraRay, OutputQuantity};
 use crate::sampling::Frame;
-use crate::scene::{shading_normal, Scene};
-use crate::spectral::{Bands, N_WL};
+use crate::scene::{shading_normal, Scene, SpectralTexture};
+use crate::spectral::{Bands, TabulatedSpectrum, N_WL};
 use camsim_core::rng::{stream, CamRng};
 use glam::{Mat4, Vec2, Vec3};
 use rand::Rng;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Render settings.
@@ -102,8 +103,10 @@ fn next_f32(rng: &mut CamRng) -> f32 {
 
 #[inline(always)]
 fn next_vec2(rng: &mut CamRng) -> Vec2 {
-    let a = next_f32(rng);
-    Vec2::new(a, next_f32(rng))
+    // two 24-bit uniforms from the high and low halves of one 64-bit output
+    let x = rng.next_u64();
+    const K: f32 = 1.0 / 16_777_216.0;
+    Vec2::new((x >> 40) as f32 * K, ((x >> 8) & 0xFF_FFFF) as f32 * K)
 }
 
 /// Fisher–Yates shuffle of `p` in place (a uniformly random permutation).
@@ -150,11 +153,20 @@ struct WorldRay {
 fn to_world(r: &CameraRay, m: &Mat4, near: f32, far: f32) -> Option<WorldRay> {
     let dz = -r.direction.z;
     let (tmin, tmax) = if dz > 1e-7 {
-        (near / dz, far / dz)
+        let inv = 1.0 / dz;
+        (near * inv, far * inv)
     } else {
         (0.0, f32::INFINITY)
     };
-    let d = m.transform_vector3(r.direction).normalize();
+    // the camera-to-world matrix is a rotation (scale removed), so the unit camera direction
+    // stays unit to rounding: normalise only when it is not
+    let d = m.transform_vector3(r.direction);
+    let l2 = d.length_squared();
+    let d = if (l2 - 1.0).abs() <= 1e-6 {
+        d
+    } else {
+        d / l2.sqrt()
+    };
     if !d.is_finite() {
         return None;
     }
@@ -164,6 +176,68 @@ fn to_world(r: &CameraRay, m: &Mat4, near: f32, far: f32) -> Option<WorldRay> {
         tmin,
         tmax,
     })
+}
+
+/// Materials whose spectral values a path memoises (the first ones of the scene).
+const MEMO: u32 = 16;
+
+/// Spectral values of the (first [`MEMO`]) materials at one path's 4 wavelengths, evaluated
+/// on first use: a path meets few materials, but each of them many times (every bounce and
+/// every light sample). Slots are written before they are read (the `*_ok` bits), so the
+/// arrays are not initialised.
+struct PathSpectra {
+    refl_ok: u32,
+    emit_ok: u32,
+    refl: [MaybeUninit<[f32; N_WL]>; MEMO as usize],
+    emit: [MaybeUninit<[f32; N_WL]>; MEMO as usize],
+}
+
+impl PathSpectra {
+    #[inline(always)]
+    fn new() -> Self {
+        PathSpectra {
+            refl_ok: 0,
+            emit_ok: 0,
+            refl: [MaybeUninit::uninit(); MEMO as usize],
+            emit: [MaybeUninit::uninit(); MEMO as usize],
+        }
+    }
+
+    /// Reflectance of material `m` at the hit (texture coordinate from `uv`).
+    #[inline(always)]
+    fn reflectance(
+        &mut self,
+        mat: &crate::scene::Material,
+        m: u32,
+        uv: impl FnOnce() -> Vec2,
+        wl: &[f32; N_WL],
+    ) -> [f32; N_WL] {
+        match &mat.reflectance {
+            SpectralTexture::Constant(s) if m < MEMO => {
+                if self.refl_ok & (1 << m) == 0 {
+                    self.refl[m as usize] = MaybeUninit::new(s.eval4(wl));
+                    self.refl_ok |= 1 << m;
+                }
+                // SAFETY: slot m was written (its bit is set)
+                unsafe { self.refl[m as usize].assume_init() }
+            }
+            t => t.eval(uv(), wl),
+        }
+    }
+
+    /// Emitted radiance `e` of material `m`.
+    #[inline(always)]
+    fn emission(&mut self, e: &TabulatedSpectrum, m: u32, wl: &[f32; N_WL]) -> [f32; N_WL] {
+        if m >= MEMO {
+            return e.eval4(wl);
+        }
+        if self.emit_ok & (1 << m) == 0 {
+            self.emit[m as usize] = MaybeUninit::new(e.eval4(wl));
+            self.emit_ok |= 1 << m;
+        }
+        // SAFETY: slot m was written (its bit is set)
+        unsafe { self.emit[m as usize].assume_init() }
+    }
 }
 
 /// Trace one path carrying 4 wavelengths; returns the radiance per wavelength slot times
@@ -188,6 +262,7 @@ fn trace_path(
     let mut prev_delta = true;
     let mut eta2 = 1.0f32;
     let mut depth = 0u32;
+    let mut spectra = PathSpectra::new();
     loop {
         let Some(hit) = scene.intersect(o, d, tmin, tmax) else {
             break;
@@ -202,7 +277,7 @@ fn trace_path(
         // emission (one-sided: front = shading normal side, as Mitsuba's area emitter)
         if let Some(e) = &mat.emission {
             if ns.dot(wi_w) > 0.0 {
-                let le = e.eval4(wl);
+                let le = spectra.emission(e, sh.material, wl);
                 let w = if prev_delta {
                     1.0
                 } else {
@@ -219,14 +294,20 @@ fn trace_path(
         }
         let frame = Frame::from_normal(ns);
         let wi = frame.to_local(wi_w);
-        let uv = sh.uv[0] * (1.0 - b.x - b.y) + sh.uv[1] * b.x + sh.uv[2] * b.y;
-        let refl = mat.reflectance.eval(uv, wl);
+        let refl = spectra.reflectance(
+            mat,
+            sh.material,
+            || sh.uv[0] * (1.0 - b.x - b.y) + sh.uv[1] * b.x + sh.uv[2] * b.y,
+            wl,
+        );
         let bsdf = &mat.bsdf;
         // next-event estimation
         let ul = next_f32(rng);
         let ul2 = next_vec2(rng);
         if !bsdf.is_delta() {
-            if let Some(ls) = scene.sample_light(p, ul, ul2, wl) {
+            if let Some(ls) =
+                scene.sample_light_with(p, ul, ul2, wl, |e, m| spectra.emission(e, m, wl))
+            {
                 let wo = frame.to_local(ls.dir);
                 let (f, pdf_b) = bsdf.eval_pdf(wi, wo, &refl, wl);
                 if f.iter().zip(&beta).any(|(x, b)| *x * *b > 0.0) {
@@ -237,8 +318,14 @@ fn trace_path(
                         f32::INFINITY
                     };
                     if smax > 0.0 && scene.unoccluded(so, ls.dir, 0.0, smax) {
+                        // one MIS weight when the BSDF density does not depend on λ
+                        let w0 = if ls.delta { 1.0 } else { mis(ls.pdf, pdf_b[0]) };
                         for i in 0..N_WL {
-                            let w = if ls.delta { 1.0 } else { mis(ls.pdf, pdf_b[i]) };
+                            let w = if ls.delta || pdf_b[i] == pdf_b[0] {
+                                w0
+                            } else {
+                                mis(ls.pdf, pdf_b[i])
+                            };
                             l[i] += beta[i] * f[i] * ls.weight[i] * w;
                         }
                     }
@@ -292,9 +379,9 @@ fn trace_path(
 }
 
 /// Everything one film row needs.
-struct RowCtx<'a> {
+struct RowCtx<'a, C: Camera + ?Sized> {
     scene: &'a Scene,
-    camera: &'a dyn Camera,
+    camera: &'a C,
     camera_to_world: Mat4,
     s: &'a RenderSettings,
     w: usize,
@@ -309,7 +396,7 @@ struct RowCtx<'a> {
 
 /// Render film row `y`: per pixel [band] means, then variances (when asked for).
 #[inline(always)]
-fn render_row(c: &RowCtx, y: usize) -> (Vec<f32>, Vec<f32>) {
+fn render_row<C: Camera + ?Sized>(c: &RowCtx<C>, y: usize) -> (Vec<f32>, Vec<f32>) {
     let RowCtx {
         scene,
         camera,
@@ -387,7 +474,18 @@ fn render_row(c: &RowCtx, y: usize) -> (Vec<f32>, Vec<f32>) {
                 s.rr_depth,
                 &mut rng,
             );
-            // bands of the 4 slots (merge slots that share a band)
+            if !s.variance {
+                // the mean only: each slot adds to its band
+                for i in 0..N_WL {
+                    let v = (l[i] * slot_scale) as f64;
+                    if v.is_finite() {
+                        sum[s.bands.index(wl[i])] += v;
+                    }
+                }
+                continue;
+            }
+            // bands of the 4 slots (merge slots that share a band: the sample's value per band
+            // for the variance)
             let mut bi = [usize::MAX; N_WL];
             let mut bv = [0f64; N_WL];
             let mut n = 0;
@@ -441,6 +539,12 @@ pub fn render(
     s: &RenderSettings,
     progress: Option<&(dyn Fn(usize) + Sync)>,
 ) -> RenderOutput {
+    // a pinhole or thin lens renders through its prepared, statically dispatched form
+    let prepared = camera.prepared();
+    let camera: &dyn Camera = match &prepared {
+        Some(c) => c,
+        None => camera,
+    };
     let (w, h) = camera.film_size_px();
     let (w, h) = (w as usize, h as usize);
     let nb = s.bands.count;
@@ -473,10 +577,27 @@ pub fn render(
         slot_scale,
         inv_spp,
     };
+    let ctx_prepared = prepared.as_ref().map(|c| RowCtx {
+        scene,
+        camera: c,
+        camera_to_world,
+        s,
+        w,
+        nb,
+        max_depth,
+        near,
+        far,
+        spp,
+        slot_scale,
+        inv_spp,
+    });
     let rows: Vec<(Vec<f32>, Vec<f32>)> = (0..h)
         .into_par_iter()
         .map(|y| {
-            let row = render_row(&ctx, y);
+            let row = match &ctx_prepared {
+                Some(cp) => render_row(cp, y),
+                None => render_row(&ctx, y),
+            };
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
             if let Some(p) = progress {
                 p(k);

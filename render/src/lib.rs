@@ -18,6 +18,7 @@
 
 pub mod bsdf;
 pub mod bvh4;
+mod bvh8_flat;
 pub mod camera;
 pub mod depth_path;
 pub mod dof_scene;

@@ -393,6 +393,21 @@ impl Scene {
     /// point on it. Returns None when the light faces away or has no power.
     #[inline]
     pub fn sample_light(&self, p: Vec3, u: f32, u2: Vec2, wl: &[f32; N_WL]) -> Option<LightSample> {
+        self.sample_light_with(p, u, u2, wl, |e, _| e.eval4(wl))
+    }
+
+    /// [`Scene::sample_light`] with the emitted radiance of an area light's material at the
+    /// sample's wavelengths given by `emission(spectrum, material index)` (the integrator
+    /// memoises it per path).
+    #[inline(always)]
+    pub fn sample_light_with(
+        &self,
+        p: Vec3,
+        u: f32,
+        u2: Vec2,
+        wl: &[f32; N_WL],
+        mut emission: impl FnMut(&TabulatedSpectrum, u32) -> [f32; N_WL],
+    ) -> Option<LightSample> {
         let distr = self.light_distr.as_ref()?;
         let (li, pmf, _) = distr.sample(u);
         if pmf <= 0.0 {
@@ -410,7 +425,7 @@ impl Scene {
                 return None;
             }
             let dist = d2.sqrt();
-            let dir = to / dist;
+            let dir = to * (1.0 / dist);
             // one-sided emitter: the shading normal decides the front, as in Mitsuba
             let ns = shading_normal(s, b);
             if ns.dot(-dir) <= 0.0 {
@@ -420,15 +435,21 @@ impl Scene {
             if cos_l <= 1e-7 {
                 return None;
             }
-            let pdf = pmf / s.area * d2 / cos_l;
-            let le = self.materials[s.material as usize]
-                .emission
-                .as_ref()?
-                .eval4(wl);
+            // solid-angle density pmf·d²/(area·cos θ_l) and its inverse from one division
+            let (a, c) = (pmf * d2, s.area * cos_l);
+            let r = 1.0 / (a * c);
+            let (pdf, inv_pdf) = (a * a * r, c * c * r);
+            if !(pdf > 0.0 && pdf.is_finite() && inv_pdf.is_finite()) {
+                return None;
+            }
+            let le = emission(
+                self.materials[s.material as usize].emission.as_ref()?,
+                s.material,
+            );
             Some(LightSample {
                 dir,
                 dist,
-                weight: le.map(|v| v / pdf),
+                weight: le.map(|v| v * inv_pdf),
                 pdf,
                 delta: false,
             })
@@ -476,6 +497,10 @@ impl Scene {
 /// Interpolated unit shading normal at barycentrics b = (b1, b2).
 #[inline]
 pub fn shading_normal(s: &TriShading, b: Vec2) -> Vec3 {
+    // equal (unit) vertex normals: the interpolation is that normal, no normalisation needed
+    if s.n[0] == s.n[1] && s.n[1] == s.n[2] {
+        return s.n[0];
+    }
     let n = s.n[0] * (1.0 - b.x - b.y) + s.n[1] * b.x + s.n[2] * b.y;
     let l = n.length();
     if l > 0.0 && l.is_finite() {

@@ -177,29 +177,27 @@ impl TabulatedSpectrum {
     }
 
     /// Value at `nm`.
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, nm: f32) -> f32 {
         if let Some(c) = self.constant {
             return c;
         }
         let x = nm - self.start_nm;
-        if x < 0.0 {
-            return 0.0;
+        let i = x as usize; // saturates: 0 for x < 0
+        if x >= 0.0 && i + 1 < self.values.len() {
+            let t = x - i as f32;
+            return self.values[i] * (1.0 - t) + self.values[i + 1] * t;
         }
-        let i = x as usize;
-        if i + 1 >= self.values.len() {
-            return if i + 1 == self.values.len() && x == i as f32 {
-                self.values[i]
-            } else {
-                0.0
-            };
+        // the last sample itself, else 0 outside the support
+        if x >= 0.0 && i + 1 == self.values.len() && x == i as f32 {
+            self.values[i]
+        } else {
+            0.0
         }
-        let t = x - i as f32;
-        self.values[i] * (1.0 - t) + self.values[i + 1] * t
     }
 
     /// Values at the 4 wavelengths of a sample.
-    #[inline]
+    #[inline(always)]
     pub fn eval4(&self, wl: &[f32; N_WL]) -> [f32; N_WL] {
         [
             self.eval(wl[0]),

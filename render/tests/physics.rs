@@ -460,3 +460,37 @@ fn glass_in_a_uniform_field_is_invisible() {
         }
     }
 }
+
+/// Asking for the variance does not change the image: the same seed gives the same band means
+/// (to f64 summation order) with and without variance planes.
+#[test]
+fn variance_option_leaves_the_means_unchanged() {
+    let scene = camsim_render::gltf_load::load_gltf(std::path::Path::new(&format!(
+        "{}/../scenes/showcase.gltf",
+        env!("CARGO_MANIFEST_DIR")
+    )))
+    .unwrap();
+    let c = &scene.cameras[0];
+    let cam = Pinhole {
+        perspective: c.perspective(16, 16),
+    };
+    let with = settings(8, "380:780:20");
+    let without = RenderSettings {
+        variance: false,
+        ..with.clone()
+    };
+    let a = render(&scene, &cam, c.to_world, &with, None);
+    let b = render(&scene, &cam, c.to_world, &without, None);
+    assert!(a.variance_planes.is_some() && b.variance_planes.is_none());
+    let mut nonzero = 0;
+    for (pa, pb) in a.band_planes.iter().zip(&b.band_planes) {
+        for (x, y) in pa.iter().zip(pb) {
+            assert!((x - y).abs() <= 1e-6 * x.abs().max(1e-30), "{x} vs {y}");
+            nonzero += (*x > 0.0) as usize;
+        }
+    }
+    assert!(
+        nonzero > 1000,
+        "only {nonzero} non-zero values: the test is not testing"
+    );
+}

@@ -258,7 +258,35 @@ impl Bsdf {
     /// f·|cos θo| per wavelength and the density of sampling `wo` per wavelength.
     /// `refl` is the material's reflectance at the hit (diffuse reflectance for diffuse and
     /// plastic, specular reflectance for conductors), `wl` the wavelengths (nm).
+    #[inline]
     pub fn eval_pdf(
+        &self,
+        wi: Vec3,
+        wo: Vec3,
+        refl: &[f32; N_WL],
+        wl: &[f32; N_WL],
+    ) -> ([f32; N_WL], [f32; N_WL]) {
+        if let Lobe::Diffuse = self.lobe {
+            // the common Lambertian case inline (as below: one-sided unless two_sided)
+            let zero = ([0.0; N_WL], [0.0; N_WL]);
+            let woz = if wi.z > 0.0 {
+                wo.z
+            } else if self.two_sided && wi.z < 0.0 {
+                -wo.z
+            } else {
+                return zero;
+            };
+            if woz <= 0.0 {
+                return zero;
+            }
+            let k = FRAC_1_PI * woz;
+            return (refl.map(|r| r * k), [k; N_WL]);
+        }
+        self.eval_pdf_general(wi, wo, refl, wl)
+    }
+
+    #[inline(never)]
+    fn eval_pdf_general(
         &self,
         wi: Vec3,
         wo: Vec3,
@@ -355,7 +383,46 @@ impl Bsdf {
 
     /// Sample `wo` given `wi`, with `u1` for the lobe choice and `u2` for the direction.
     /// The hero wavelength (slot 0) decides dispersive events.
+    #[inline]
     pub fn sample(
+        &self,
+        wi_in: Vec3,
+        u1: f32,
+        u2: Vec2,
+        refl: &[f32; N_WL],
+        wl: &[f32; N_WL],
+    ) -> Option<BsdfSample> {
+        if let Lobe::Diffuse = self.lobe {
+            // the common Lambertian case inline (as below)
+            let flip = if wi_in.z > 0.0 {
+                false
+            } else if self.two_sided && wi_in.z < 0.0 {
+                true
+            } else {
+                return None;
+            };
+            let wo = square_to_cosine_hemisphere(u2);
+            if wo.z <= 0.0 {
+                return None;
+            }
+            return Some(BsdfSample {
+                wo: if flip {
+                    Vec3::new(wo.x, wo.y, -wo.z)
+                } else {
+                    wo
+                },
+                weight: *refl,
+                pdf: cosine_hemisphere_pdf(wo),
+                delta: false,
+                eta: 1.0,
+                dispersive: false,
+            });
+        }
+        self.sample_general(wi_in, u1, u2, refl, wl)
+    }
+
+    #[inline(never)]
+    fn sample_general(
         &self,
         wi_in: Vec3,
         u1: f32,

@@ -66,6 +66,12 @@ pub trait Camera: Send + Sync {
     fn far_clip_m(&self) -> f32 {
         f32::INFINITY
     }
+    /// For a pinhole or thin lens: the equivalent camera with its per-render constants
+    /// precomputed, which the render loop uses (without dynamic dispatch) for its many rays;
+    /// None (the default) to use this camera as it is.
+    fn prepared(&self) -> Option<PreparedPerspective> {
+        None
+    }
 }
 
 /// The perspective projection shared by [`Pinhole`] and [`ThinLens`]: a vertical field of view
@@ -111,6 +117,93 @@ impl Perspective {
     }
 }
 
+/// [`Perspective::film_to_plane`] with its constants precomputed (no `tan` per ray):
+/// x = px·2s_x/W − s_x, y = s_y − py·2s_y/H with s_y = tan(yfov/2), s_x = s_y·W/H.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PlaneMap {
+    kx: f32,
+    sx: f32,
+    ky: f32,
+    sy: f32,
+}
+
+impl PlaneMap {
+    fn new(p: &Perspective) -> Self {
+        let t = (0.5 * p.yfov_rad).tan();
+        let (w, h) = (p.width_px as f32, p.height_px as f32);
+        let sx = t * w / h;
+        PlaneMap {
+            kx: 2.0 * sx / w,
+            sx,
+            ky: 2.0 * t / h,
+            sy: t,
+        }
+    }
+    #[inline]
+    fn film_to_plane(&self, film_px: Vec2) -> Vec3 {
+        Vec3::new(
+            film_px.x * self.kx - self.sx,
+            self.sy - film_px.y * self.ky,
+            -1.0,
+        )
+    }
+}
+
+/// A pinhole or thin lens with its film-to-plane constants precomputed ([`Camera::prepared`]);
+/// aperture radius 0 is the pinhole.
+#[derive(Debug, Clone, Copy)]
+pub struct PreparedPerspective {
+    perspective: Perspective,
+    map: PlaneMap,
+    aperture_radius_m: f32,
+    focus_distance_m: f32,
+}
+
+impl Camera for PreparedPerspective {
+    fn film_size_px(&self) -> (u32, u32) {
+        (self.perspective.width_px, self.perspective.height_px)
+    }
+    fn output_quantity(&self) -> OutputQuantity {
+        OutputQuantity::Radiance
+    }
+    #[inline]
+    fn generate_ray(&self, film_px: Vec2, lens_uv: Vec2, _wl: &[f32; 4]) -> Option<CameraRay> {
+        let p = self.map.film_to_plane(film_px);
+        if self.aperture_radius_m == 0.0 {
+            return Some(CameraRay {
+                origin_m: Vec3::ZERO,
+                direction: p.normalize(),
+                weight: [1.0; 4],
+                wavelength_dependent: false,
+            });
+        }
+        // as ThinLens::generate_ray
+        let focus = p * self.focus_distance_m;
+        let a = crate::sampling::square_to_disk_concentric(lens_uv) * self.aperture_radius_m;
+        let origin = Vec3::new(a.x, a.y, 0.0);
+        Some(CameraRay {
+            origin_m: origin,
+            direction: (focus - origin).normalize(),
+            weight: [1.0; 4],
+            wavelength_dependent: false,
+        })
+    }
+    fn center_ray(&self, film_px: Vec2) -> Option<CameraRay> {
+        Some(CameraRay {
+            origin_m: Vec3::ZERO,
+            direction: self.map.film_to_plane(film_px).normalize(),
+            weight: [1.0; 4],
+            wavelength_dependent: false,
+        })
+    }
+    fn near_clip_m(&self) -> f32 {
+        self.perspective.znear_m
+    }
+    fn far_clip_m(&self) -> f32 {
+        self.perspective.zfar_m
+    }
+}
+
 /// Ideal pinhole: every ray starts at the camera centre.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pinhole {
@@ -121,6 +214,14 @@ pub struct Pinhole {
 impl Camera for Pinhole {
     fn film_size_px(&self) -> (u32, u32) {
         (self.perspective.width_px, self.perspective.height_px)
+    }
+    fn prepared(&self) -> Option<PreparedPerspective> {
+        Some(PreparedPerspective {
+            perspective: self.perspective,
+            map: PlaneMap::new(&self.perspective),
+            aperture_radius_m: 0.0,
+            focus_distance_m: 1.0,
+        })
     }
     fn output_quantity(&self) -> OutputQuantity {
         OutputQuantity::Radiance
@@ -161,6 +262,14 @@ pub struct ThinLens {
 impl Camera for ThinLens {
     fn film_size_px(&self) -> (u32, u32) {
         (self.perspective.width_px, self.perspective.height_px)
+    }
+    fn prepared(&self) -> Option<PreparedPerspective> {
+        Some(PreparedPerspective {
+            perspective: self.perspective,
+            map: PlaneMap::new(&self.perspective),
+            aperture_radius_m: self.aperture_radius_m,
+            focus_distance_m: self.focus_distance_m,
+        })
     }
     fn output_quantity(&self) -> OutputQuantity {
         OutputQuantity::Radiance
@@ -220,6 +329,40 @@ mod tests {
         assert!((c - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-6);
         let top = p.film_to_plane(Vec2::new(160.0, 0.0));
         assert!((top.y.atan2(1.0) - 0.35).abs() < 1e-6);
+    }
+
+    /// The prepared pinhole and thin lens give the rays of the plain ones (to rounding).
+    #[test]
+    fn prepared_cameras_match() {
+        let pin = Pinhole {
+            perspective: persp(),
+        };
+        let thin = ThinLens {
+            perspective: persp(),
+            aperture_radius_m: 0.05,
+            focus_distance_m: 2.5,
+        };
+        for cam in [&pin as &dyn Camera, &thin as &dyn Camera] {
+            let p = cam.prepared().expect("prepared");
+            assert_eq!(p.film_size_px(), cam.film_size_px());
+            assert_eq!(p.near_clip_m(), cam.near_clip_m());
+            assert_eq!(p.far_clip_m(), cam.far_clip_m());
+            for &(x, y, u, v) in &[
+                (0.0, 0.0, 0.1, 0.9),
+                (160.3, 99.7, 0.5, 0.5),
+                (319.9, 199.9, 0.8, 0.3),
+            ] {
+                let (f, l) = (Vec2::new(x, y), Vec2::new(u, v));
+                let (a, b) = (
+                    cam.generate_ray(f, l, &[550.0; 4]).unwrap(),
+                    p.generate_ray(f, l, &[550.0; 4]).unwrap(),
+                );
+                assert!((a.origin_m - b.origin_m).length() < 1e-7);
+                assert!((a.direction - b.direction).length() < 1e-6, "{a:?} {b:?}");
+                let (a, b) = (cam.center_ray(f).unwrap(), p.center_ray(f).unwrap());
+                assert!((a.direction - b.direction).length() < 1e-6);
+            }
+        }
     }
 
     #[test]
