@@ -741,3 +741,76 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
         "skipped_shots": skipped,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::demo::{generate_capture_set, Concealment, DemoSpec};
+    use crate::simulate::shot_electron_rate;
+
+    /// The forward model through cached pixel planes equals `simulate`'s per-shot electron
+    /// rates of the same camera (QE blocks and an optics block applied), also on a cache hit.
+    #[test]
+    fn plane_cache_rates_equal_the_simulator_rates() {
+        let dir = tempfile::tempdir().unwrap();
+        let spec = DemoSpec {
+            effects: vec![("qe_shift".into(), -6.0)],
+            concealment: Concealment::Mimicked,
+            rows: 16,
+            cols: 24,
+            seed: 1,
+        };
+        let truth = generate_capture_set(&spec, dir.path()).unwrap();
+        let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
+        let camera_json: Value =
+            serde_json::from_str(&std::fs::read_to_string(&set.camera_path).unwrap()).unwrap();
+        let fw = SimForward {
+            set: Mutex::new(set.clone()),
+            camera_json,
+            camera_path: set.camera_path.clone(),
+            shots: (0..set.shots.len()).collect(),
+            planes: Mutex::new(PlaneCache::default()),
+        };
+        let nch = set.camera.sensor.channel_qe.len();
+        let mut qe = vec![0.0; nch];
+        qe[0] = 4.0;
+        qe[nch - 1] = -7.0;
+        let mut ir = vec![0.0; nch];
+        ir[0] = 0.02;
+        let specs = [
+            RateSpec::default(),
+            RateSpec {
+                qe_shift_nm: Some(qe.clone()),
+                ..Default::default()
+            },
+            RateSpec {
+                qe_shift_nm: Some(qe),
+                ir_leakage: Some(ir),
+                glare_fraction: Some(0.05),
+                ..Default::default()
+            },
+        ];
+        for spec in &specs {
+            for pass in 0..2 {
+                let got = fw.rates(spec).unwrap();
+                let mut s2 = set.clone();
+                s2.camera = fw.camera_for(spec).unwrap();
+                let grid = wavelength_grid(&s2);
+                for (si, g) in got.iter().enumerate() {
+                    let want = shot_electron_rate(&s2, si, &grid).unwrap().electrons_per_s;
+                    let scale = want.iter().fold(0f32, |m, &x| m.max(x.abs())).max(1e-30);
+                    let err = want
+                        .iter()
+                        .zip(g.iter())
+                        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                    assert!(
+                        err <= 1e-5 * scale,
+                        "{spec:?} pass {pass} shot {si}: max |Δ| {err} of {scale}"
+                    );
+                }
+            }
+        }
+        // the QE candidates shared one optics entry; the glare spec added a second
+        assert_eq!(fw.planes.lock().unwrap().entries.len(), 2);
+    }
+}
