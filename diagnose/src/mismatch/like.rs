@@ -34,7 +34,7 @@ use std::sync::{Arc, Mutex};
 pub mod prof {
     use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
     /// (nanoseconds, calls) per stage.
-    pub static T: [AtomicU64; 8] = [const { AtomicU64::new(0) }; 8];
+    pub static T: [AtomicU64; 6] = [const { AtomicU64::new(0) }; 6];
     /// Adds the time since `t0` to timer `k` and counts a call.
     pub fn add(k: usize, t0: std::time::Instant) {
         T[2 * k].fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
@@ -46,12 +46,7 @@ pub mod prof {
     }
     /// One line: time and calls per stage.
     pub fn summary() -> String {
-        let names = [
-            "eval fit rows",
-            "eval all rows",
-            "forward",
-            "transform/combine",
-        ];
+        let names = ["likelihood, fit rows", "likelihood, all rows", "forward model"];
         names
             .iter()
             .enumerate()
