@@ -12,7 +12,7 @@ mod figures;
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure};
 use crate::error::CliError;
 use crate::raw_input::read_frame_with;
-use crate::simulate::{shot_electron_rate, wavelength_grid};
+use crate::simulate::{sampling_for, shot_irradiance, wavelength_grid};
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_diagnose::mismatch::{
@@ -49,6 +49,14 @@ impl Default for DiagnoseCmdOptions {
 /// The forward model of the believed camera with a [`RateSpec`] applied: the camera file is
 /// edited as JSON (the effect blocks of the effects contract), parsed like any camera, and
 /// `simulate`'s scene → optics → pixel-integration stages give each shot's electron rates.
+///
+/// The QE blocks (`qe_shift`, `ir_leakage`) change only the spectral weights of pixel
+/// integration, not the irradiance, and the integration is linear in the irradiance's basis
+/// terms: rate_i = p²·FF·Σ_k (∫ QE_c(λ) B_k(λ) dλ) · Ā_k(i), with Ā_k the plane of term k
+/// averaged over pixel i (camsim_sensor::electron_rate in another order of summation). So
+/// the pixel-averaged planes Ā_k are kept per optics configuration ([`PlaneCache`]) and a
+/// candidate QE costs one weighted sum per pixel instead of a re-render of every target
+/// (issue 6, acceptance 4: the qe_shift candidate's re-renders were 40 % of the 1 MP bench).
 struct SimForward {
     /// The capture set whose camera is replaced per call (behind a lock: calls are
     /// sequential, each internally parallel).
@@ -57,10 +65,40 @@ struct SimForward {
     camera_path: PathBuf,
     /// Indices in the capture set of the data set's shots.
     shots: Vec<usize>,
+    /// Pixel-averaged irradiance planes per optics configuration.
+    planes: Mutex<PlaneCache>,
 }
 
-impl Forward for SimForward {
-    fn rates(&self, spec: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
+/// The irradiance of one target averaged over every pixel, one plane per spectral basis term.
+struct PixelPlanes {
+    /// 1×1 image carrying the basis (for the spectral integrals of the channels).
+    basis: camsim_core::SpectralImage,
+    /// Row-major sensor-size planes, one per basis term.
+    planes: Vec<Vec<f32>>,
+}
+
+/// Pixel planes by optics key, then by target key; least recently used evicted first when
+/// the planes exceed [`PLANE_CACHE_BYTES`].
+#[derive(Default)]
+struct PlaneCache {
+    entries: HashMap<String, (u64, HashMap<String, Arc<PixelPlanes>>)>,
+    bytes: usize,
+    stamp: u64,
+}
+
+/// Memory for cached pixel planes.
+const PLANE_CACHE_BYTES: usize = 384 << 20;
+
+fn planes_bytes(m: &HashMap<String, Arc<PixelPlanes>>) -> usize {
+    m.values()
+        .map(|p| p.planes.iter().map(|x| x.len() * 4).sum::<usize>())
+        .sum()
+}
+
+impl SimForward {
+    /// The capture set's camera with `spec` applied (crosstalk removed: the diagnosis applies
+    /// it).
+    fn camera_for(&self, spec: &RateSpec) -> Result<crate::config::Camera, String> {
         let mut v = self.camera_json.clone();
         let names: Vec<String> = self
             .set
@@ -71,7 +109,6 @@ impl Forward for SimForward {
             .channel_names
             .clone();
         apply_rate_spec(&mut v, spec, &names);
-        // The diagnosis applies crosstalk itself.
         if let Some(s) = v.get_mut("sensor").and_then(Value::as_object_mut) {
             s.remove("crosstalk");
         }
@@ -81,28 +118,184 @@ impl Forward for SimForward {
                 self.camera_path.display()
             )
         })?;
-        let cam = camera_from_file(&self.camera_path, raw).map_err(|e| e.one_line())?;
+        camera_from_file(&self.camera_path, raw).map_err(|e| e.one_line())
+    }
+
+    /// Key of everything but the QE blocks that shapes the pixel planes: the optics blocks,
+    /// the scene sampling and, when the optics depend on wavelength (per-wavelength PSFs,
+    /// warps) or the planes are wavelength bands, the wavelength grid.
+    fn optics_key(set: &CaptureSet, spec: &RateSpec, grid: &camsim_core::WavelengthGrid) -> String {
+        use camsim_optics::Blur;
+        let optics_spec = RateSpec {
+            ir_leakage: None,
+            qe_shift_nm: None,
+            ..spec.clone()
+        };
+        let cam = &set.camera;
+        let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
+        let grid_free = matches!(
+            cam.optics.blur,
+            Blur::None | Blur::Gaussian { .. } | Blur::Pillbox { .. }
+        ) && !cam.optics.effects.has_warp();
+        let g = if grid_free {
+            String::new()
+        } else {
+            format!("{:?}", grid.wavelength_nm)
+        };
+        format!("{} os {os} margin {margin} {g}", optics_spec.key())
+    }
+}
+
+/// Averages every plane of a sensor irradiance over every pixel (the pixel integration of
+/// `camsim_sensor::electron_rate`, per basis term).
+fn pixel_planes(
+    sensor: &camsim_sensor::SensorModel,
+    irr: &camsim_core::SensorIrradiance,
+) -> PixelPlanes {
+    let img = &irr.irradiance;
+    let wy = camsim_sensor::box_weights(
+        img.rows,
+        irr.sample_pitch_m,
+        sensor.rows,
+        sensor.pixel_pitch_m,
+    );
+    let wx = camsim_sensor::box_weights(
+        img.cols,
+        irr.sample_pitch_m,
+        sensor.cols,
+        sensor.pixel_pitch_m,
+    );
+    let ic = img.cols;
+    let planes = img
+        .planes
+        .iter()
+        .map(|p| {
+            let mut out = vec![0f32; sensor.rows * sensor.cols];
+            out.par_chunks_mut(sensor.cols).enumerate().for_each_init(
+                || vec![0f64; ic],
+                |line, (r, row)| {
+                    line.iter_mut().for_each(|l| *l = 0.0);
+                    for &(y, w) in &wy[r] {
+                        line.iter_mut()
+                            .zip(&p[y * ic..(y + 1) * ic])
+                            .for_each(|(l, s)| *l += w * *s as f64);
+                    }
+                    for (o, wc) in row.iter_mut().zip(&wx) {
+                        *o = wc.iter().map(|&(x, w)| w * line[x]).sum::<f64>() as f32;
+                    }
+                },
+            );
+            out
+        })
+        .collect();
+    let basis = camsim_core::SpectralImage::new(
+        1,
+        1,
+        img.basis.clone(),
+        vec![vec![0f32]; img.planes.len()],
+    )
+    .expect("one plane per term");
+    PixelPlanes { basis, planes }
+}
+
+/// Mean photo-electron rate of every pixel from its averaged planes: p²·FF·Σ_k w_ck Ā_k with
+/// w_ck the channel's (effective, QE blocks included) spectral integral of basis term k.
+fn rates_from_planes(sensor: &camsim_sensor::SensorModel, pp: &PixelPlanes) -> Vec<f32> {
+    let weights: Vec<Vec<(usize, f64)>> = (0..sensor.channel_qe.len())
+        .map(|c| {
+            let used = sensor.cfa.tile.iter().flatten().any(|&t| t == c);
+            if !used {
+                return Vec::new();
+            }
+            camsim_sensor::channel_term_integrals(sensor, &pp.basis, c)
+                .into_iter()
+                .enumerate()
+                .filter(|(_, w)| *w != 0.0)
+                .collect()
+        })
+        .collect();
+    let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
+    let cols = sensor.cols;
+    let mut out = vec![0f32; sensor.rows * cols];
+    out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
+        for (c, o) in row.iter_mut().enumerate() {
+            let i = r * cols + c;
+            let e: f64 = weights[sensor.cfa.channel_at(r, c)]
+                .iter()
+                .map(|&(t, w)| w * pp.planes[t][i] as f64)
+                .sum();
+            *o = (k * e) as f32;
+        }
+    });
+    out
+}
+
+impl Forward for SimForward {
+    fn rates(&self, spec: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
+        let cam = self.camera_for(spec)?;
         let mut set = self
             .set
             .lock()
             .map_err(|_| "forward model lock poisoned".to_string())?;
         set.camera = cam;
         let grid = wavelength_grid(&set);
-        let mut cache: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
+        let okey = Self::optics_key(&set, spec, &grid);
+        let cached = {
+            let mut pc = self
+                .planes
+                .lock()
+                .map_err(|_| "forward model lock poisoned".to_string())?;
+            pc.stamp += 1;
+            let st = pc.stamp;
+            pc.entries.get_mut(&okey).map(|e| {
+                e.0 = st;
+                e.1.clone()
+            })
+        };
+        let mut by_target: HashMap<String, Arc<PixelPlanes>> = cached.clone().unwrap_or_default();
+        let mut rate_by_target: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
         let mut out = Vec::with_capacity(self.shots.len());
         for &si in &self.shots {
             let key = set.shots[si].target_key.clone();
-            if let Some(r) = cache.get(&key) {
+            if let Some(r) = rate_by_target.get(&key) {
                 out.push(r.clone());
                 continue;
             }
-            let r = Arc::new(
-                shot_electron_rate(&set, si, &grid)
-                    .map_err(|e| e.one_line())?
-                    .electrons_per_s,
-            );
-            cache.insert(key, r.clone());
+            let pp = match by_target.get(&key) {
+                Some(p) => p.clone(),
+                None => {
+                    let irr = shot_irradiance(&set, si, &grid).map_err(|e| e.one_line())?;
+                    let p = Arc::new(pixel_planes(&set.camera.sensor, &irr));
+                    by_target.insert(key.clone(), p.clone());
+                    p
+                }
+            };
+            let r = Arc::new(rates_from_planes(&set.camera.sensor, &pp));
+            rate_by_target.insert(key, r.clone());
             out.push(r);
+        }
+        // Keep the planes (when they fit in the cache's memory).
+        let bytes = planes_bytes(&by_target);
+        if cached.is_none() && bytes <= PLANE_CACHE_BYTES {
+            let mut pc = self
+                .planes
+                .lock()
+                .map_err(|_| "forward model lock poisoned".to_string())?;
+            while pc.bytes + bytes > PLANE_CACHE_BYTES && !pc.entries.is_empty() {
+                let oldest = pc
+                    .entries
+                    .iter()
+                    .min_by_key(|(_, v)| v.0)
+                    .map(|(k, _)| k.clone())
+                    .expect("non-empty");
+                if let Some((_, m)) = pc.entries.remove(&oldest) {
+                    pc.bytes -= planes_bytes(&m);
+                }
+            }
+            pc.stamp += 1;
+            let st = pc.stamp;
+            pc.bytes += bytes;
+            pc.entries.insert(okey, (st, by_target));
         }
         Ok(out)
     }
@@ -384,6 +577,7 @@ pub fn run_diagnose(
         camera_json: camera_json.clone(),
         camera_path: set.camera_path.clone(),
         shots: used,
+        planes: Mutex::new(PlaneCache::default()),
     };
     let believed = ModelState {
         sensor: set.camera.sensor.clone(),
@@ -400,13 +594,23 @@ pub fn run_diagnose(
     let t0 = std::time::Instant::now();
     let progress = |m: &str| {
         if profile {
-            eprintln!("camsim: {:8.3} s  {m}", t0.elapsed().as_secs_f64());
+            eprintln!(
+                "camsim: {:8.3} s  {m}  [{} likelihood evaluations so far]",
+                t0.elapsed().as_secs_f64(),
+                camsim_diagnose::mismatch::prof::calls()
+            );
         }
         spinner.set_message(m.to_string())
     };
     let diag = diagnose(&data, &forward, &believed, &dopts, &progress)
         .map_err(|e| CliError::Other(format!("diagnose: {e}")))?;
     spinner.finish_and_clear();
+    if profile {
+        eprintln!(
+            "camsim: profile: {}",
+            camsim_diagnose::mismatch::prof::summary()
+        );
+    }
     let names = &set.camera.sensor.channel_names;
     let camera_dir = set.camera_path.parent().unwrap_or(Path::new("."));
     let fitted = fitted_camera_json(&camera_json, camera_dir, &diag, names);
@@ -536,4 +740,77 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
                      "bic_threshold": d.bic_threshold},
         "skipped_shots": skipped,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::demo::{generate_capture_set, Concealment, DemoSpec};
+    use crate::simulate::shot_electron_rate;
+
+    /// The forward model through cached pixel planes equals `simulate`'s per-shot electron
+    /// rates of the same camera (QE blocks and an optics block applied), also on a cache hit.
+    #[test]
+    fn plane_cache_rates_equal_the_simulator_rates() {
+        let dir = tempfile::tempdir().unwrap();
+        let spec = DemoSpec {
+            effects: vec![("qe_shift".into(), -6.0)],
+            concealment: Concealment::Mimicked,
+            rows: 16,
+            cols: 24,
+            seed: 1,
+        };
+        let truth = generate_capture_set(&spec, dir.path()).unwrap();
+        let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
+        let camera_json: Value =
+            serde_json::from_str(&std::fs::read_to_string(&set.camera_path).unwrap()).unwrap();
+        let fw = SimForward {
+            set: Mutex::new(set.clone()),
+            camera_json,
+            camera_path: set.camera_path.clone(),
+            shots: (0..set.shots.len()).collect(),
+            planes: Mutex::new(PlaneCache::default()),
+        };
+        let nch = set.camera.sensor.channel_qe.len();
+        let mut qe = vec![0.0; nch];
+        qe[0] = 4.0;
+        qe[nch - 1] = -7.0;
+        let mut ir = vec![0.0; nch];
+        ir[0] = 0.02;
+        let specs = [
+            RateSpec::default(),
+            RateSpec {
+                qe_shift_nm: Some(qe.clone()),
+                ..Default::default()
+            },
+            RateSpec {
+                qe_shift_nm: Some(qe),
+                ir_leakage: Some(ir),
+                glare_fraction: Some(0.05),
+                ..Default::default()
+            },
+        ];
+        for spec in &specs {
+            for pass in 0..2 {
+                let got = fw.rates(spec).unwrap();
+                let mut s2 = set.clone();
+                s2.camera = fw.camera_for(spec).unwrap();
+                let grid = wavelength_grid(&s2);
+                for (si, g) in got.iter().enumerate() {
+                    let want = shot_electron_rate(&s2, si, &grid).unwrap().electrons_per_s;
+                    let scale = want.iter().fold(0f32, |m, &x| m.max(x.abs())).max(1e-30);
+                    let err = want
+                        .iter()
+                        .zip(g.iter())
+                        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                    assert!(
+                        err <= 1e-5 * scale,
+                        "{spec:?} pass {pass} shot {si}: max |Δ| {err} of {scale}"
+                    );
+                }
+            }
+        }
+        // the QE candidates shared one optics entry; the glare spec added a second
+        assert_eq!(fw.planes.lock().unwrap().entries.len(), 2);
+    }
 }

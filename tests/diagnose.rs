@@ -61,6 +61,16 @@ fn diagnose_generated(effects: &[(&str, f64)], concealment: Concealment, seed: u
     for (a, b) in findings(&written).iter().zip(findings(&report)) {
         assert!(a.0 == b.0 && (a.1 - b.1).abs() <= 1e-12 * b.1.abs());
     }
+    // One line per diagnosis (shown with --nocapture; docs/diagnose.md's matrix is made from
+    // these lines).
+    eprintln!(
+        "diagnose-outcome {effects:?} {concealment:?} seed {seed}: findings {:?}, undecided {:?}, chi2/dof {:.4} -> {:.4} (dof {})",
+        findings(&report),
+        undecided(&report),
+        report["fit_before"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
+        report["fit_after"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
+        report["fit_after"]["dof"]
+    );
     Outcome {
         truth: truth
             .effects

@@ -205,8 +205,8 @@ fn scales(ctx: &Ctx, state: &ModelState) -> Result<Scales, String> {
 
 /// −log L on the fit rows with rates from `base` transformed by the state.
 fn neg_ll_base(ctx: &Ctx, st: &ModelState, base: &[Arc<Vec<f32>>]) -> f64 {
-    let rates = ctx.transform(base, st);
-    let v = -ctx.evaluate_with(st, &rates, RowSel::Fit).logl;
+    let rates = ctx.transform_fit(base, st);
+    let v = -ctx.logl_with(st, &rates, RowSel::Fit);
     if v.is_finite() {
         v
     } else {
@@ -242,8 +242,30 @@ fn fit_1d(
     }
 }
 
-/// Per-shot sum of a base rate set and weighted basis sets (shared images stay shared).
-fn combine(base0: &Rates, basis: &[Rates], theta: &[f64]) -> Rates {
+/// `f` of every pixel of the rows a fit-row evaluation reads ([`Ctx::calc_rows`]; every
+/// pixel when the fit uses all rows), 0 elsewhere: the candidates' rate algebra touches only
+/// what the fit looks at (issue 6, acceptance 4: full 1 MP images per likelihood evaluation
+/// otherwise).
+fn on_calc_rows(ctx: &Ctx, n: usize, f: &(dyn Fn(usize) -> f32 + Sync)) -> Vec<f32> {
+    if ctx.calc_rows.is_empty() {
+        return (0..n).into_par_iter().map(f).collect();
+    }
+    let cols = ctx.data.cols;
+    let rows: Vec<(usize, Vec<f32>)> = ctx
+        .calc_rows
+        .par_iter()
+        .map(|&r| (r, (r * cols..(r + 1) * cols).map(f).collect()))
+        .collect();
+    let mut v = vec![0f32; n];
+    for (r, row) in rows {
+        v[r * cols..(r + 1) * cols].copy_from_slice(&row);
+    }
+    v
+}
+
+/// Per-shot sum of a base rate set and weighted basis sets (shared images stay shared), on
+/// the rows of fit-row evaluations.
+fn combine(ctx: &Ctx, base0: &Rates, basis: &[Rates], theta: &[f64]) -> Rates {
     let mut out: Rates = Vec::with_capacity(base0.len());
     for s in 0..base0.len() {
         if let Some(j) = (0..s).find(|&j| Arc::ptr_eq(&base0[j], &base0[s])) {
@@ -251,34 +273,28 @@ fn combine(base0: &Rates, basis: &[Rates], theta: &[f64]) -> Rates {
             continue;
         }
         let b0 = &base0[s];
-        let v: Vec<f32> = (0..b0.len())
-            .into_par_iter()
-            .map(|i| {
-                let mut x = b0[i] as f64;
-                for (k, t) in theta.iter().enumerate() {
-                    x += t * basis[k][s][i] as f64;
-                }
-                x.max(0.0) as f32
-            })
-            .collect();
+        let v = on_calc_rows(ctx, b0.len(), &|i| {
+            let mut x = b0[i] as f64;
+            for (k, t) in theta.iter().enumerate() {
+                x += t * basis[k][s][i] as f64;
+            }
+            x.max(0.0) as f32
+        });
         out.push(Arc::new(v));
     }
     out
 }
 
-/// `a − b` per shot (shared images stay shared).
-fn difference(a: &Rates, b: &Rates) -> Rates {
+/// `a − b` per shot (shared images stay shared), on the rows of fit-row evaluations.
+fn difference(ctx: &Ctx, a: &Rates, b: &Rates) -> Rates {
     let mut out: Rates = Vec::with_capacity(a.len());
     for s in 0..a.len() {
         if let Some(j) = (0..s).find(|&j| Arc::ptr_eq(&b[j], &b[s]) && Arc::ptr_eq(&a[j], &a[s])) {
             out.push(out[j].clone());
             continue;
         }
-        let v: Vec<f32> = a[s]
-            .par_iter()
-            .zip(b[s].par_iter())
-            .map(|(x, y)| x - y)
-            .collect();
+        let (x, y) = (&a[s], &b[s]);
+        let v = on_calc_rows(ctx, x.len(), &|i| x[i] - y[i]);
         out.push(Arc::new(v));
     }
     out
@@ -316,11 +332,11 @@ fn gauss_newton(
     let mut theta = theta0.to_vec();
     clampv(&mut theta);
     let mut st = make(&theta);
-    let mut f = neg_ll_base(ctx, &st, &combine(base0, basis, &theta));
+    let mut f = neg_ll_base(ctx, &st, &combine(ctx, base0, basis, &theta));
     let kk = basis.len();
     for _ in 0..10 {
-        let rates = ctx.transform(&combine(base0, basis, &theta), &st);
-        let tb: Vec<Rates> = basis.iter().map(|b| ctx.transform(b, &st)).collect();
+        let rates = ctx.transform_fit(&combine(ctx, base0, basis, &theta), &st);
+        let tb: Vec<Rates> = basis.iter().map(|b| ctx.transform_fit(b, &st)).collect();
         let (a, b) = ctx.normal_equations(&st, &rates, &tb, RowSel::Fit);
         let mut m = nalgebra::DMatrix::from_row_slice(kk, kk, &a);
         for k in 0..kk {
@@ -340,7 +356,7 @@ fn gauss_newton(
                 .collect();
             clampv(&mut th);
             let s2 = make(&th);
-            let f2 = neg_ll_base(ctx, &s2, &combine(base0, basis, &th));
+            let f2 = neg_ll_base(ctx, &s2, &combine(ctx, base0, basis, &th));
             if f2 < f - 1e-9 {
                 let gain = f - f2;
                 theta = th;
@@ -400,8 +416,8 @@ fn fit_surrogate_1d(
             (Ok(a), Ok(b), Ok(c)) => (a, b, c),
             _ => break,
         };
-        let dm = difference(&rm, &rc);
-        let dp = difference(&rp, &rc);
+        let dm = difference(ctx, &rm, &rc);
+        let dp = difference(ctx, &rp, &rc);
         let basis = [dm, dp];
         // Lagrange weights of the outer nodes at x (the centre's weight is 1 − their sum).
         let lag = |x: f64| -> [f64; 2] {
@@ -411,7 +427,7 @@ fn fit_surrogate_1d(
         };
         let (a, b) = ((xc - 3.0 * h).max(lo), (xc + 3.0 * h).min(hi));
         let (x_star, f_sur) = minimize_1d(
-            |x| neg_ll_base(ctx, &at(x), &combine(&rc, &basis, &lag(x))),
+            |x| neg_ll_base(ctx, &at(x), &combine(ctx, &rc, &basis, &lag(x))),
             a,
             b,
             13,
@@ -453,7 +469,15 @@ pub(crate) fn fit_effect(
     }
     let base = ctx.base_rates(&state.rates)?;
     let eval_base = |st: &ModelState| neg_ll_base(ctx, st, &base);
-    let f0 = eval_base(state);
+    // (= eval_base(state); shared by every candidate of a round and by `scales`)
+    let f0 = {
+        let v = -ctx.evaluate(state, RowSel::Fit)?.logl;
+        if v.is_finite() {
+            v
+        } else {
+            f64::INFINITY
+        }
+    };
     let sc = scales(ctx, state)?;
     let s0 = &state.sensor;
     let out = |st: ModelState, f: f64, k: usize| {
@@ -616,8 +640,19 @@ pub(crate) fn fit_effect(
         }
         Effect::FullWell => {
             let w0 = s0.well_capacity_e.ln();
+            // A well whose charge the ADC clips first in every shot never enters the
+            // prediction (ShotConst::adc_first): all such wells have one likelihood, computed
+            // once (about 40 % of the grid on a sensor whose well fills the ADC range).
+            let adc_value = std::sync::Mutex::new(None::<f64>);
+            let eval_well = |st: &ModelState| {
+                if !ctx.consts(st).iter().all(|c| c.adc_first) {
+                    return eval_base(st);
+                }
+                let mut v = adc_value.lock().expect("adc value");
+                *v.get_or_insert_with(|| eval_base(st))
+            };
             let (st, f) = fit_1d(
-                &eval_base,
+                &eval_well,
                 state,
                 f0,
                 &|st, x| st.sensor.well_capacity_e = x.exp(),
@@ -652,11 +687,11 @@ pub(crate) fn fit_effect(
             let mut s_one = state.rates.clone();
             s_one.glare_fraction = Some(1.0);
             let b0 = ctx.base_rates(&s_zero)?;
-            let b1 = difference(&*ctx.base_rates(&s_one)?, &b0);
+            let b1 = difference(ctx, &*ctx.base_rates(&s_one)?, &b0);
             let g0 = state.rates.glare_fraction.unwrap_or(0.0);
             let eval = |st: &ModelState| {
                 let g = st.rates.glare_fraction.unwrap_or(0.0);
-                neg_ll_base(ctx, st, &combine(&b0, std::slice::from_ref(&b1), &[g]))
+                neg_ll_base(ctx, st, &combine(ctx, &b0, std::slice::from_ref(&b1), &[g]))
             };
             let hi = (2.0 * g0).max(0.3);
             let (st, f) = fit_1d(
@@ -765,14 +800,15 @@ fn fit_hot(
     base: &Arc<Rates>,
     f0: f64,
 ) -> Result<FitOutcome, String> {
-    let rates = ctx.transform(base, state);
+    let rates = ctx.transform_fit(base, state);
     let eval = |st: &ModelState| neg_ll_base(ctx, st, base);
     let (fr0, v0, ls0) = match state.sensor.effects.hot_pixels {
         Some(h) if h.fraction > 0.0 && h.dark_voltage_v_per_s > 0.0 => {
             (h.fraction, h.dark_voltage_v_per_s, h.log_sigma)
         }
         _ => {
-            let scan = ctx.hot_scan(state, &rates, 6.0);
+            // Start values from the fit rows (the fit's own data).
+            let scan = ctx.hot_scan(state, &rates, 6.0, RowSel::Fit);
             if scan.is_empty() {
                 return Ok(FitOutcome::Fitted {
                     state: state.clone(),
@@ -780,7 +816,7 @@ fn fit_hot(
                     k: 2,
                 });
             }
-            let n = ctx.data.pixels() as f64;
+            let n = (ctx.fit_rows.len() * ctx.data.cols) as f64;
             let lv: Vec<f64> = scan.iter().map(|x| x.1.max(1e-30).ln()).collect();
             let med = median(&lv);
             let spread = super::num::robust_sigma(&lv);
@@ -880,7 +916,7 @@ fn fit_falloff(ctx: &Ctx, state: &ModelState) -> Result<FitOutcome, String> {
     for k in 0..FALLOFF_MAX_ORDER {
         let mut c = vec![0.0; FALLOFF_MAX_ORDER];
         c[k] = 1.0;
-        basis.push(difference(&*ctx.base_rates(&spec_with(c))?, &b0));
+        basis.push(difference(ctx, &*ctx.base_rates(&spec_with(c))?, &b0));
     }
     let n_obs = ctx.data.pixels() as f64 * ctx.data.shots.len() as f64;
     let cur = state.rates.falloff.clone().unwrap_or_default();
@@ -924,7 +960,7 @@ fn fit_ir(ctx: &Ctx, state: &ModelState, f0: f64) -> Result<FitOutcome, String> 
     for c in 0..nch {
         let mut v = vec![0.0; nch];
         v[c] = 1.0;
-        let b = difference(&*ctx.base_rates(&spec_with(v))?, &b0);
+        let b = difference(ctx, &*ctx.base_rates(&spec_with(v))?, &b0);
         if max_abs(&b) > 0.0 {
             basis.push(b);
             chans.push(c);

@@ -274,6 +274,22 @@ pub fn censored_pixel(
     if n_rail > 0 {
         return true;
     }
+    // Quick exit without the medians (this runs for every pixel of every shot): the level
+    // lies within the neighbours' range, the MAD is at most 1.4826 × that range and the
+    // median variance at most the largest, so a range 6 such upper bounds away from both
+    // rails cannot be censored by the rule below.
+    if !neighbour_means.is_empty() {
+        let (lo, hi) = neighbour_means
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        let v_max = neighbour_vars.iter().fold(0f64, |a, &x| a.max(x));
+        let s_ub = (v_max + (1.4826 * (hi - lo)).powi(2)).max(9.0).sqrt();
+        if lo - 6.0 * s_ub > 0.0 && hi + 6.0 * s_ub < max_dn {
+            return false;
+        }
+    }
     let med = |x: &mut [f64]| -> f64 {
         x.sort_by(|a, b| a.total_cmp(b));
         let n = x.len();

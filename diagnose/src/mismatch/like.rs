@@ -29,8 +29,45 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
+/// Stage timers for `CAMSIM_PROFILE` (nanoseconds, calls): fit-row and all-row evaluations,
+/// forward-model calls.
+pub mod prof {
+    use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+    /// (nanoseconds, calls) per stage.
+    pub static T: [AtomicU64; 6] = [const { AtomicU64::new(0) }; 6];
+    /// Adds the time since `t0` to timer `k` and counts a call.
+    pub fn add(k: usize, t0: std::time::Instant) {
+        T[2 * k].fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+        T[2 * k + 1].fetch_add(1, Relaxed);
+    }
+    /// Likelihood evaluations so far (fit and all rows).
+    pub fn calls() -> u64 {
+        T[1].load(Relaxed) + T[3].load(Relaxed)
+    }
+    /// One line: time and calls per stage.
+    pub fn summary() -> String {
+        let names = ["likelihood, fit rows", "likelihood, all rows", "forward model"];
+        names
+            .iter()
+            .enumerate()
+            .map(|(k, n)| {
+                format!(
+                    "{n}: {:.2} s / {} calls",
+                    T[2 * k].load(Relaxed) as f64 * 1e-9,
+                    T[2 * k + 1].load(Relaxed)
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("; ")
+    }
+}
+
 /// Rows per work block (fixed, so sums do not depend on the thread count).
 const BLOCK_ROWS: usize = 8;
+/// Rows per work block of the pixel pass (fixed, as [`BLOCK_ROWS`]).
+const PIXEL_BLOCK_ROWS: usize = 2;
+/// Most pixel-shot predictions the column pass keeps for the pixel pass (80 bytes each).
+const PRED_STORE: usize = 1 << 20;
 /// Fewest rows for the column decomposition.
 pub(crate) const MIN_COLUMN_ROWS: usize = 8;
 
@@ -47,9 +84,36 @@ pub(crate) struct Ctx<'a> {
     pub all_rows: Vec<usize>,
     /// Pixels left out of the column means (isolated outliers found in the data alone).
     pub col_excluded: Vec<bool>,
+    /// The fit rows and their neighbours above and below: the rows a rate image must hold
+    /// for a fit-row evaluation (crosstalk reads the neighbours). Empty when the fit rows are
+    /// all rows.
+    pub calc_rows: Vec<usize>,
+    /// The data of the fit rows, pixel-major: ((row position in `fit_rows`)·cols + column)·
+    /// shots + shot.
+    fit_pix: Vec<PixShot>,
     /// Forward-model results by rate spec, with their insertion stamp (oldest evicted first).
     cache: Mutex<HashMap<String, (u64, Arc<Rates>)>>,
     stamp: std::sync::atomic::AtomicU64,
+    /// The last evaluations of whole states (the selection and every candidate of a round
+    /// start from the same state; the final fit check repeats the last acceptance's).
+    memo: Mutex<Vec<(ModelState, RowSel, Arc<Eval>)>>,
+    /// Reused buffer of the column pass's predictions.
+    pred_buf: Mutex<Vec<Pred>>,
+}
+
+/// Evaluations kept in [`Ctx`]'s memo.
+const MEMO_EVALS: usize = 4;
+
+/// One pixel's data in one shot, stored pixel-major for the fit rows ([`Ctx::fit_pix`]): the
+/// pixel pass reads every shot of a pixel together, which from the per-shot arrays is one
+/// cache miss per shot and field.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct PixShot {
+    mean: f32,
+    var: f32,
+    n_lo: u16,
+    n_hi: u16,
+    censored: bool,
 }
 
 /// Which rows an evaluation covers.
@@ -164,7 +228,30 @@ impl<'a> Ctx<'a> {
             rows
         };
         let col_excluded = outlier_pixels(data);
+        let calc_rows = if fit_rows.len() == data.rows {
+            Vec::new()
+        } else {
+            let mut v: Vec<usize> = fit_rows
+                .iter()
+                .flat_map(|&r| [r.saturating_sub(1), r, (r + 1).min(data.rows - 1)])
+                .collect();
+            v.sort_unstable();
+            v.dedup();
+            v
+        };
+        let ns = data.shots.len();
+        let mut fit_pix = vec![PixShot::default(); fit_rows.len() * data.cols * ns];
+        fit_pix
+            .par_chunks_mut(data.cols * ns)
+            .zip(fit_rows.par_iter())
+            .for_each(|(row, &r)| {
+                for j in 0..data.cols {
+                    gather_pixel(data, r * data.cols + j, &mut row[j * ns..(j + 1) * ns]);
+                }
+            });
         Ctx {
+            calc_rows,
+            fit_pix,
             data,
             forward,
             fit_rows,
@@ -172,6 +259,8 @@ impl<'a> Ctx<'a> {
             col_excluded,
             cache: Mutex::new(HashMap::new()),
             stamp: std::sync::atomic::AtomicU64::new(0),
+            memo: Mutex::new(Vec::new()),
+            pred_buf: Mutex::new(Vec::new()),
         }
     }
 
@@ -186,7 +275,9 @@ impl<'a> Ctx<'a> {
             r.0 = next();
             return Ok(r.1.clone());
         }
+        let t0 = std::time::Instant::now();
         let r = self.forward.rates(spec)?;
+        prof::add(2, t0);
         if r.len() != self.data.shots.len() {
             return Err(format!(
                 "forward model returned {} rate images for {} shots",
@@ -252,6 +343,64 @@ impl<'a> Ctx<'a> {
         out
     }
 
+    /// [`Ctx::transform`] on the fit rows only (elsewhere 0): for fit-row evaluations of rate
+    /// images that hold [`Ctx::calc_rows`]. Same values on the fit rows (the same scaling and
+    /// crosstalk rule, camsim_sensor::apply_crosstalk).
+    pub fn transform_fit(&self, base: &[Arc<Vec<f32>>], state: &ModelState) -> Rates {
+        let ct = state.sensor.effects.crosstalk;
+        let f = state.exposure_factor;
+        if self.calc_rows.is_empty() || (f == 1.0 && ct.is_none()) {
+            return self.transform(base, state);
+        }
+        let (rows, cols) = (self.data.rows, self.data.cols);
+        let mut out: Vec<Arc<Vec<f32>>> = Vec::with_capacity(base.len());
+        for (i, b) in base.iter().enumerate() {
+            if let Some(j) = (0..i).find(|&j| Arc::ptr_eq(&base[j], b)) {
+                out.push(out[j].clone());
+                continue;
+            }
+            // the scaled image (f32, as transform stores it) at (r, c)
+            let at = |r: usize, c: usize| -> f64 {
+                let x = b[r * cols + c];
+                (if f == 1.0 { x } else { (x as f64 * f) as f32 }) as f64
+            };
+            let fit_rows: Vec<(usize, Vec<f32>)> = self
+                .fit_rows
+                .par_iter()
+                .map(|&r| {
+                    let row: Vec<f32> = (0..cols)
+                        .map(|c| match &ct {
+                            None => at(r, c) as f32,
+                            Some(ct) => {
+                                let mut e = (1.0 - ct.total()) * at(r, c);
+                                if c + 1 < cols {
+                                    e += ct.left * at(r, c + 1);
+                                }
+                                if c > 0 {
+                                    e += ct.right * at(r, c - 1);
+                                }
+                                if r + 1 < rows {
+                                    e += ct.up * at(r + 1, c);
+                                }
+                                if r > 0 {
+                                    e += ct.down * at(r - 1, c);
+                                }
+                                e as f32
+                            }
+                        })
+                        .collect();
+                    (r, row)
+                })
+                .collect();
+            let mut v = vec![0f32; rows * cols];
+            for (r, row) in fit_rows {
+                v[r * cols..(r + 1) * cols].copy_from_slice(&row);
+            }
+            out.push(Arc::new(v));
+        }
+        out
+    }
+
     fn rows(&self, sel: RowSel) -> &[usize] {
         match sel {
             RowSel::Fit => &self.fit_rows,
@@ -266,8 +415,32 @@ impl<'a> Ctx<'a> {
 
     /// Log-likelihood and χ² of the state.
     pub fn evaluate(&self, state: &ModelState, sel: RowSel) -> Result<Eval, String> {
+        if let Some(e) = self.memo_get(state, sel) {
+            return Ok(e);
+        }
         let rates = self.rates(state)?;
-        Ok(self.evaluate_with(state, &rates, sel))
+        Ok(self.evaluate_memo(state, &rates, sel))
+    }
+
+    fn memo_get(&self, state: &ModelState, sel: RowSel) -> Option<Eval> {
+        let m = self.memo.lock().expect("memo");
+        m.iter()
+            .find(|(st, s, _)| *s == sel && st == state)
+            .map(|x| (*x.2).clone())
+    }
+
+    /// [`Ctx::evaluate_with`] for `rates` = [`Ctx::rates`] of `state`, remembered.
+    pub(crate) fn evaluate_memo(&self, state: &ModelState, rates: &Rates, sel: RowSel) -> Eval {
+        if let Some(e) = self.memo_get(state, sel) {
+            return e;
+        }
+        let e = self.evaluate_with(state, rates, sel);
+        let mut m = self.memo.lock().expect("memo");
+        if m.len() >= MEMO_EVALS {
+            m.remove(0);
+        }
+        m.push((state.clone(), sel, Arc::new(e.clone())));
+        e
     }
 
     /// Per-shot chain constants.
@@ -280,36 +453,90 @@ impl<'a> Ctx<'a> {
     }
 
     /// Column-mean statistics of the residuals (per shot, column), shot-major.
-    pub fn column_stats(
+    /// With `store`, also every pixel-shot's prediction, at
+    /// ((row position in the selection)·cols + column)·shots + shot, for the pixel pass.
+    fn column_stats_store(
         &self,
-        state: &ModelState,
         rates: &Rates,
         consts: &[ShotConst],
         sel: RowSel,
+        store: Option<&mut [Pred]>,
     ) -> Vec<ColStat> {
         let d = self.data;
         let (ns, cols) = (d.shots.len(), d.cols);
         let rows = self.rows(sel);
+        let per_block = BLOCK_ROWS * cols * ns;
+        let mut dummy: Vec<Pred> = Vec::new();
+        let (stored, buf): (bool, &mut [Pred]) = match store {
+            Some(b) => (true, b),
+            None => (false, &mut dummy[..]),
+        };
+        let n_blocks = rows.len().div_ceil(BLOCK_ROWS);
+        let mut bufs: Vec<&mut [Pred]> = if stored {
+            buf.chunks_mut(per_block).collect()
+        } else {
+            (0..n_blocks).map(|_| &mut [][..]).collect()
+        };
+        // Pixel-major data of these rows (the fit rows, or all rows when they are the same).
+        let pix = (sel == RowSel::Fit || self.calc_rows.is_empty()).then_some(&self.fit_pix[..]);
         let blocks: Vec<Vec<ColAcc>> = rows
             .par_chunks(BLOCK_ROWS)
-            .map(|blk| {
+            .zip(bufs.par_iter_mut())
+            .enumerate()
+            .map(|(bi, (blk, pb))| {
                 let mut acc = vec![ColAcc::default(); ns * cols];
-                for &r in blk {
-                    for (s, sh) in d.shots.iter().enumerate() {
-                        let c = &consts[s];
-                        let rate = &rates[s];
-                        for j in 0..cols {
-                            let i = r * cols + j;
-                            if self.col_excluded[i] || sh.censored[i] {
-                                continue;
+                match (stored, pix) {
+                    (true, Some(pix)) => {
+                        // pixel-major: the predictions are written in the order the pixel
+                        // pass reads them (the same sums per (shot, column) as below)
+                        for (ri, &r) in blk.iter().enumerate() {
+                            for j in 0..cols {
+                                let i = r * cols + j;
+                                let at = (ri * cols + j) * ns;
+                                let px = &pix[((bi * BLOCK_ROWS + ri) * cols + j) * ns..][..ns];
+                                for s in 0..ns {
+                                    let c = &consts[s];
+                                    let p = c.predict(rates[s][i] as f64 * c.t, 0.0);
+                                    pb[at + s] = p;
+                                    if self.col_excluded[i] || px[s].censored {
+                                        continue;
+                                    }
+                                    let a = &mut acc[s * cols + j];
+                                    a.n += 1.0;
+                                    a.sr += px[s].mean as f64 - p.mean;
+                                    a.sa += c.var_mean(&p);
+                                    a.su += p.u;
+                                    a.sw2 += p.w * p.w;
+                                }
                             }
-                            let p = c.predict(rate[i] as f64 * c.t, 0.0);
-                            let a = &mut acc[s * cols + j];
-                            a.n += 1.0;
-                            a.sr += sh.mean_dn[i] as f64 - p.mean;
-                            a.sa += c.var_mean(&p);
-                            a.su += p.u;
-                            a.sw2 += p.w * p.w;
+                        }
+                    }
+                    _ => {
+                        for (ri, &r) in blk.iter().enumerate() {
+                            for (s, sh) in d.shots.iter().enumerate() {
+                                let c = &consts[s];
+                                let rate = &rates[s];
+                                for j in 0..cols {
+                                    let i = r * cols + j;
+                                    let skip = self.col_excluded[i] || sh.censored[i];
+                                    if skip && !stored {
+                                        continue;
+                                    }
+                                    let p = c.predict(rate[i] as f64 * c.t, 0.0);
+                                    if stored {
+                                        pb[(ri * cols + j) * ns + s] = p;
+                                    }
+                                    if skip {
+                                        continue;
+                                    }
+                                    let a = &mut acc[s * cols + j];
+                                    a.n += 1.0;
+                                    a.sr += sh.mean_dn[i] as f64 - p.mean;
+                                    a.sa += c.var_mean(&p);
+                                    a.su += p.u;
+                                    a.sw2 += p.w * p.w;
+                                }
+                            }
                         }
                     }
                 }
@@ -326,7 +553,6 @@ impl<'a> Ctx<'a> {
                 t.sw2 += x.sw2;
             }
         }
-        let _ = state;
         tot.iter()
             .map(|a| {
                 if a.n < 1.0 {
@@ -346,6 +572,22 @@ impl<'a> Ctx<'a> {
 
     /// Evaluation with given (transformed) rates.
     pub fn evaluate_with(&self, state: &ModelState, rates: &Rates, sel: RowSel) -> Eval {
+        let t0 = std::time::Instant::now();
+        let e = self.evaluate_inner(state, rates, sel, true);
+        prof::add(if sel == RowSel::Fit { 0 } else { 1 }, t0);
+        e
+    }
+
+    /// The log-likelihood alone (what the fits maximise): [`Ctx::evaluate_with`] without the
+    /// χ² and moment sums.
+    pub fn logl_with(&self, state: &ModelState, rates: &Rates, sel: RowSel) -> f64 {
+        let t0 = std::time::Instant::now();
+        let e = self.evaluate_inner(state, rates, sel, false);
+        prof::add(if sel == RowSel::Fit { 0 } else { 1 }, t0);
+        e.logl
+    }
+
+    fn evaluate_inner(&self, state: &ModelState, rates: &Rates, sel: RowSel, stats: bool) -> Eval {
         let d = self.data;
         let (ns, cols, nch) = (d.shots.len(), d.cols, d.channels());
         let consts = self.consts(state);
@@ -367,11 +609,22 @@ impl<'a> Ctx<'a> {
                 log_sigma: h.log_sigma,
             });
         let use_cols = self.column_term(sel);
+        let rows = self.rows(sel);
+        // The column pass keeps its predictions for the pixel pass (when they fit in
+        // PRED_STORE pixel-shots, e.g. the fit rows of a large sensor).
+        let n_ps = rows.len() * cols * ns;
+        let mut store: Vec<Pred> = Vec::new();
+        let use_store = use_cols && n_ps <= PRED_STORE;
+        if use_store {
+            store = std::mem::take(&mut *self.pred_buf.lock().expect("pred buffer"));
+            store.resize(n_ps, Pred::default());
+        }
         let col = if use_cols {
-            self.column_stats(state, rates, &consts, sel)
+            self.column_stats_store(rates, &consts, sel, use_store.then_some(&mut store[..]))
         } else {
             Vec::new()
         };
+        let stored: Option<&[Pred]> = use_store.then_some(&store[..]);
         // Column term: per column, the S-vector of column-mean residuals.
         let mut logl_columns = 0.0;
         if use_cols {
@@ -401,24 +654,36 @@ impl<'a> Ctx<'a> {
                 .collect();
             logl_columns = terms.iter().sum();
         }
-        // Pixel term.
-        let rows = self.rows(sel);
+        // Pixel term (blocks of PIXEL_BLOCK_ROWS rows: enough pieces to balance the threads
+        // on a few fit rows).
         let blocks: Vec<(f64, Vec<ScStat>, usize)> = rows
-            .par_chunks(BLOCK_ROWS)
-            .map(|blk| {
+            .par_chunks(PIXEL_BLOCK_ROWS)
+            .enumerate()
+            .map(|(bi, blk)| {
                 let mut ll = 0.0;
                 let mut sc = vec![ScStat::default(); ns * nch];
                 let mut n_hot = 0usize;
                 let mut preds: Vec<Pred> = vec![Pred::default(); ns];
                 let mut es: Vec<f64> = vec![0.0; ns];
-                for &r in blk {
+                let mut pxbuf: Vec<PixShot> = vec![PixShot::default(); ns];
+                for (ri, &r) in blk.iter().enumerate() {
                     for j in 0..cols {
                         let i = r * cols + j;
                         let ch = d.channel[i] as usize;
+                        let at = ((bi * PIXEL_BLOCK_ROWS + ri) * cols + j) * ns;
+                        let px: &[PixShot] = if sel == RowSel::Fit || self.calc_rows.is_empty() {
+                            &self.fit_pix[at..at + ns]
+                        } else {
+                            gather_pixel(d, i, &mut pxbuf);
+                            &pxbuf
+                        };
                         for sidx in 0..ns {
                             let c = &consts[sidx];
                             es[sidx] = rates[sidx][i] as f64 * c.t;
-                            preds[sidx] = c.predict(es[sidx], 0.0);
+                            preds[sidx] = match stored {
+                                Some(st) => st[at + sidx],
+                                None => c.predict(es[sidx], 0.0),
+                            };
                         }
                         let cs = |sidx: usize| -> Option<&ColStat> {
                             if use_cols {
@@ -429,7 +694,7 @@ impl<'a> Ctx<'a> {
                             }
                         };
                         let l0 = self.pixel_ll(
-                            i,
+                            px,
                             &preds,
                             &consts,
                             &cs,
@@ -443,7 +708,7 @@ impl<'a> Ctx<'a> {
                             None => l0,
                             Some(h) => {
                                 let (lh, hp) = self.hot_ll(
-                                    i, &preds, &es, &consts, &cs, sig_d, sig_p, sig_c, use_cols, h,
+                                    px, &preds, &es, &consts, &cs, sig_d, sig_p, sig_c, use_cols, h,
                                 );
                                 let a = (1.0 - h.fraction).ln() + l0;
                                 let b = h.fraction.ln() + lh;
@@ -457,15 +722,19 @@ impl<'a> Ctx<'a> {
                             }
                         };
                         ll += li;
+                        if !stats {
+                            continue;
+                        }
                         // Reported χ² (marginal per pixel-shot) with the pixel's class.
                         let used = hot_preds.as_deref().unwrap_or(&preds);
                         for sidx in 0..ns {
                             let sh = &d.shots[sidx];
+                            let x = &px[sidx];
                             let p = &used[sidx];
                             let st = &mut sc[sidx * nch + ch];
                             let f = consts[sidx].frames;
-                            let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
-                            if sh.censored[i] {
+                            let (nlo, nhi) = (x.n_lo as f64, x.n_hi as f64);
+                            if x.censored {
                                 // Deviance (likelihood-ratio G², 1 dof) of the rail counts:
                                 // 2·(lnL of the saturated multinomial − lnL of the model), the
                                 // same likelihood the fit maximises. (Pearson's (n−m)²/var is
@@ -490,7 +759,7 @@ impl<'a> Ctx<'a> {
                                 st.dof += 1.0;
                                 continue;
                             }
-                            let m = sh.mean_dn[i] as f64;
+                            let m = x.mean as f64;
                             let rr = m - p.mean;
                             let vm = consts[sidx].var_mean(p)
                                 + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
@@ -505,7 +774,7 @@ impl<'a> Ctx<'a> {
                             st.sum_var_mean += vm;
                             st.sum_r2 += rr * rr;
                             if sh.has_variance() {
-                                let v = sh.var_dn[i] as f64;
+                                let v = x.var as f64;
                                 st.chi2 += (f - 1.0) * v / p.var_t;
                                 st.dof += f - 1.0;
                                 st.sum_data_var += v;
@@ -527,6 +796,9 @@ impl<'a> Ctx<'a> {
             }
             hot_pixels += nh;
         }
+        if use_store {
+            *self.pred_buf.lock().expect("pred buffer") = store;
+        }
         let chi2 = per_sc.iter().map(|x| x.chi2).sum();
         let dof = per_sc.iter().map(|x| x.dof).sum();
         Eval {
@@ -543,7 +815,7 @@ impl<'a> Ctx<'a> {
     #[allow(clippy::too_many_arguments)]
     fn pixel_ll<'c>(
         &self,
-        i: usize,
+        px: &[PixShot],
         preds: &[Pred],
         consts: &[ShotConst],
         col: &dyn Fn(usize) -> Option<&'c ColStat>,
@@ -555,15 +827,15 @@ impl<'a> Ctx<'a> {
         let mut wb = Woodbury::default();
         let mut ll = 0.0;
         let sig_u = (sig_d * sig_d + sig_c_pixel * sig_c_pixel).sqrt();
-        for (sidx, sh) in d.shots.iter().enumerate() {
+        for (sidx, (sh, x)) in d.shots.iter().zip(px).enumerate() {
             let p = &preds[sidx];
             let f = consts[sidx].frames;
-            let (nlo, nhi) = (sh.n_low[i] as f64, sh.n_high[i] as f64);
-            if sh.censored[i] {
+            let (nlo, nhi) = (x.n_lo as f64, x.n_hi as f64);
+            if x.censored {
                 ll += rail_stats(p, f, nlo, nhi).ll;
                 continue;
             }
-            let mut r = sh.mean_dn[i] as f64 - p.mean;
+            let mut r = x.mean as f64 - p.mean;
             let mut kappa = 1.0;
             if let Some(c) = col(sidx) {
                 r -= c.c_hat;
@@ -573,7 +845,7 @@ impl<'a> Ctx<'a> {
             let sk = kappa.sqrt();
             wb.add(r, a, [sk * sig_u * p.u, sk * sig_p * p.w, 0.0]);
             if sh.has_variance() {
-                ll += temporal_ll(sh.var_dn[i] as f64, p.var_t, f);
+                ll += temporal_ll(x.var as f64, p.var_t, f);
             }
         }
         if !wb.is_empty() {
@@ -587,7 +859,7 @@ impl<'a> Ctx<'a> {
     #[allow(clippy::too_many_arguments)]
     fn hot_ll<'c>(
         &self,
-        i: usize,
+        px: &[PixShot],
         preds: &[Pred],
         es: &[f64],
         consts: &[ShotConst],
@@ -598,17 +870,16 @@ impl<'a> Ctx<'a> {
         use_cols: bool,
         h: &Hot,
     ) -> (f64, Vec<Pred>) {
-        let d = self.data;
         // Linearised response to an extra dark rate V: h_s = c_s V, c_s = DN/e · t/g.
         let (mut srr, mut scc) = (0.0, 0.0);
-        for (sidx, sh) in d.shots.iter().enumerate() {
-            if sh.censored[i] {
+        for (sidx, x) in px.iter().enumerate() {
+            if x.censored {
                 continue;
             }
             let p = &preds[sidx];
             let c = &consts[sidx];
             let cs = p.dn_per_e * c.t / c.g;
-            let mut r = sh.mean_dn[i] as f64 - p.mean;
+            let mut r = x.mean as f64 - p.mean;
             if let Some(x) = col(sidx) {
                 r -= x.c_hat;
             }
@@ -648,7 +919,7 @@ impl<'a> Ctx<'a> {
             .map(|(c, &e)| c.predict(e, c.t * v / c.g))
             .collect();
         let l = self.pixel_ll(
-            i,
+            px,
             &hp,
             consts,
             col,
@@ -657,6 +928,19 @@ impl<'a> Ctx<'a> {
             if use_cols { 0.0 } else { sig_c },
         );
         (l + log_prior_term, hp)
+    }
+}
+
+/// The data of pixel `i` in every shot.
+fn gather_pixel(d: &DataSet, i: usize, out: &mut [PixShot]) {
+    for (o, sh) in out.iter_mut().zip(&d.shots) {
+        *o = PixShot {
+            mean: sh.mean_dn[i],
+            var: if sh.has_variance() { sh.var_dn[i] } else { 0.0 },
+            n_lo: sh.n_low[i],
+            n_hi: sh.n_high[i],
+            censored: sh.censored[i],
+        };
     }
 }
 
@@ -860,12 +1144,13 @@ impl Ctx<'_> {
         state: &ModelState,
         rates: &Rates,
         z_min: f64,
+        sel: RowSel,
     ) -> Vec<(usize, f64, f64)> {
         let d = self.data;
         let (ns, cols) = (d.shots.len(), d.cols);
         let consts = self.consts(state);
         let blocks: Vec<Vec<(usize, f64, f64)>> = self
-            .all_rows
+            .rows(sel)
             .par_chunks(BLOCK_ROWS)
             .map(|blk| {
                 let mut out = Vec::new();

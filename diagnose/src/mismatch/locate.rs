@@ -124,7 +124,7 @@ impl Ctx<'_> {
     /// The decompositions of "locate" for `state` (all pixels).
     pub(crate) fn locate(&self, state: &ModelState) -> Result<(Located, Eval), String> {
         let rates = self.rates(state)?;
-        let ev = self.evaluate_with(state, &rates, RowSel::All);
+        let ev = self.evaluate_memo(state, &rates, RowSel::All);
         let d = self.data;
         let nch = d.channels();
         let mut shot_channels = Vec::new();

@@ -26,7 +26,7 @@ mod select;
 pub use candidates::magnitude;
 pub use data::{DataSet, ShotAccumulator, ShotData, TargetClass};
 pub use effects::{alike, AlikePair, Effect, ALIKE};
-pub use like::{Eval, ScStat};
+pub use like::{prof, Eval, ScStat};
 pub use locate::{EdgeMtf, Located, ShotChannel, ShotMaps, ShotProfiles};
 pub use model::{Forward, ModelState, RateSpec};
 pub use select::{CandidateRow, Finding, SelectOptions, Selection, Undecided};

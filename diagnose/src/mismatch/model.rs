@@ -76,6 +76,8 @@ pub(crate) struct ShotConst {
     pub frames: f64,
     /// PRNU σ (fraction).
     pub prnu: f64,
+    /// The ADC saturates below the well's DN (then the ADC clip alone matters).
+    pub adc_first: bool,
     /// Variance of the fixed volt offsets (DSNU² + column σ², V²).
     pub fix_v2: f64,
 }
@@ -124,7 +126,7 @@ impl ShotConst {
             .reset_noise
             .filter(|r| !r.cds)
             .map_or(0.0, |r| r.sigma_v);
-        ShotConst {
+        let mut c = ShotConst {
             t: exposure_s,
             dark_e: exposure_s * sensor.dark_voltage_v_per_s / sensor.conversion_gain_v_per_e,
             well: sensor.well_capacity_e,
@@ -147,7 +149,11 @@ impl ShotConst {
             } else {
                 0.0
             } + sensor.column_fpn.map_or(0.0, |c| c.offset_sigma_v.powi(2)),
-        }
+            adc_first: false,
+        };
+        c.adc_first = c.base_dn + c.k * c.nonlinear(c.well * c.g).0
+            > c.hi_dn - CENSOR_SIGMAS * c.const_var.sqrt();
+        c
     }
 
     /// Pixel voltage after the nonlinearity, and its derivative.
@@ -195,8 +201,7 @@ impl ShotConst {
         let var_ne = var_n + var_p;
         // Step 4: the well, as censoring of the electron count (temporal + PRNU spread) —
         // unless the ADC saturates below the well's DN, when the ADC clip alone matters.
-        let adc_first = self.base_dn + self.k * self.nonlinear(self.well * self.g).0
-            > self.hi_dn - CENSOR_SIGMAS * self.const_var.sqrt();
+        let adc_first = self.adc_first;
         let (n_mean, n_var_t, n_var_f, rho_w) = if adc_first {
             (lam, var_n, var_p, 1.0)
         } else if var_ne > 0.0 && self.well - lam < CENSOR_SIGMAS * var_ne.sqrt() {
