@@ -225,12 +225,19 @@ fn inputs_describe_the_lenses_camsim_reads() {
             }
             assert_eq!(a.semi_diameter_mm, b["semi_diameter_mm"].as_f64());
             // Conic and even-asphere terms (absent in the input = spherical).
-            assert_eq!(a.conic, b["conic"].as_f64().unwrap_or(0.0), "{name} surface {i}");
+            assert_eq!(
+                a.conic,
+                b["conic"].as_f64().unwrap_or(0.0),
+                "{name} surface {i}"
+            );
             let coeffs: Vec<f64> = b["aspheric_coeffs"]
                 .as_array()
                 .map(|v| v.iter().map(num).collect())
                 .unwrap_or_default();
-            assert_eq!(a.aspheric_coeffs, coeffs, "{name} surface {i}: aspheric terms");
+            assert_eq!(
+                a.aspheric_coeffs, coeffs,
+                "{name} surface {i}: aspheric terms"
+            );
             assert_eq!(
                 i == c.lens.stop_index,
                 b["stop"].as_bool().unwrap_or(false),

@@ -46,7 +46,11 @@ pub mod prof {
     }
     /// One line: time and calls per stage.
     pub fn summary() -> String {
-        let names = ["likelihood, fit rows", "likelihood, all rows", "forward model"];
+        let names = [
+            "likelihood, fit rows",
+            "likelihood, all rows",
+            "forward model",
+        ];
         names
             .iter()
             .enumerate()
