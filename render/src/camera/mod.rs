@@ -149,6 +149,27 @@ impl PlaneMap {
     }
 }
 
+/// Thin-lens camera ray through the film point whose pinhole direction meets the plane z = −1
+/// at `p_plane`: the ray leaves a point of the aperture disc (concentric map of `lens_uv`) towards
+/// that direction's point on the focus plane z = −focus_distance (pbrt-v4 §5.2.3).
+#[inline]
+fn thin_lens_ray(
+    p_plane: Vec3,
+    lens_uv: Vec2,
+    focus_distance_m: f32,
+    aperture_radius_m: f32,
+) -> CameraRay {
+    let focus = p_plane * focus_distance_m;
+    let a = crate::sampling::square_to_disk_concentric(lens_uv) * aperture_radius_m;
+    let origin = Vec3::new(a.x, a.y, 0.0);
+    CameraRay {
+        origin_m: origin,
+        direction: (focus - origin).normalize(),
+        weight: [1.0; 4],
+        wavelength_dependent: false,
+    }
+}
+
 /// A pinhole or thin lens with its film-to-plane constants precomputed ([`Camera::prepared`]);
 /// aperture radius 0 is the pinhole.
 #[derive(Debug, Clone, Copy)]
@@ -177,16 +198,12 @@ impl Camera for PreparedPerspective {
                 wavelength_dependent: false,
             });
         }
-        // as ThinLens::generate_ray
-        let focus = p * self.focus_distance_m;
-        let a = crate::sampling::square_to_disk_concentric(lens_uv) * self.aperture_radius_m;
-        let origin = Vec3::new(a.x, a.y, 0.0);
-        Some(CameraRay {
-            origin_m: origin,
-            direction: (focus - origin).normalize(),
-            weight: [1.0; 4],
-            wavelength_dependent: false,
-        })
+        Some(thin_lens_ray(
+            p,
+            lens_uv,
+            self.focus_distance_m,
+            self.aperture_radius_m,
+        ))
     }
     fn center_ray(&self, film_px: Vec2) -> Option<CameraRay> {
         Some(CameraRay {
@@ -276,15 +293,12 @@ impl Camera for ThinLens {
     }
     fn generate_ray(&self, film_px: Vec2, lens_uv: Vec2, _wl: &[f32; 4]) -> Option<CameraRay> {
         let p = self.perspective.film_to_plane(film_px); // z = −1
-        let focus = p * self.focus_distance_m; // on z = −focus_distance
-        let a = crate::sampling::square_to_disk_concentric(lens_uv) * self.aperture_radius_m;
-        let origin = Vec3::new(a.x, a.y, 0.0);
-        Some(CameraRay {
-            origin_m: origin,
-            direction: (focus - origin).normalize(),
-            weight: [1.0; 4],
-            wavelength_dependent: false,
-        })
+        Some(thin_lens_ray(
+            p,
+            lens_uv,
+            self.focus_distance_m,
+            self.aperture_radius_m,
+        ))
     }
     fn center_ray(&self, film_px: Vec2) -> Option<CameraRay> {
         Some(CameraRay {
