@@ -288,6 +288,34 @@ pub fn channel_term_integrals(sensor: &SensorModel, img: &SpectralImage, c: usiz
     sum
 }
 
+/// The crosstalk stencil at pixel (r, c): `keep` (= 1 − total) of its own signal plus the
+/// shares its 4 neighbours pass to it; `at(row, col)` gives the signal before crosstalk.
+#[inline]
+pub fn crosstalk_at(
+    ct: &Crosstalk,
+    keep: f64,
+    rows: usize,
+    cols: usize,
+    r: usize,
+    c: usize,
+    at: impl Fn(usize, usize) -> f64,
+) -> f64 {
+    let mut e = keep * at(r, c);
+    if c + 1 < cols {
+        e += ct.left * at(r, c + 1);
+    }
+    if c > 0 {
+        e += ct.right * at(r, c - 1);
+    }
+    if r + 1 < rows {
+        e += ct.up * at(r + 1, c);
+    }
+    if r > 0 {
+        e += ct.down * at(r - 1, c);
+    }
+    e
+}
+
 /// Shares the mean photo-electron rate with the 4 nearest neighbours (in place): pixel i
 /// keeps `(1 − total)·e_i` and receives `left·e` of its right neighbour, `right·e` of its left
 /// neighbour, `up·e` of the pixel below and `down·e` of the pixel above. Charge crossing the
@@ -300,20 +328,7 @@ pub fn apply_crosstalk(ct: &Crosstalk, rate: &mut ElectronRate) {
     out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
         let at = |rr: usize, c: usize| src[rr * cols + c] as f64;
         for (c, o) in row.iter_mut().enumerate() {
-            let mut e = keep * at(r, c);
-            if c + 1 < cols {
-                e += ct.left * at(r, c + 1);
-            }
-            if c > 0 {
-                e += ct.right * at(r, c - 1);
-            }
-            if r + 1 < rows {
-                e += ct.up * at(r + 1, c);
-            }
-            if r > 0 {
-                e += ct.down * at(r - 1, c);
-            }
-            *o = e as f32;
+            *o = crosstalk_at(ct, keep, rows, cols, r, c, at) as f32;
         }
     });
     rate.electrons_per_s = out;

@@ -375,22 +375,15 @@ impl<'a> Ctx<'a> {
                     let row: Vec<f32> = (0..cols)
                         .map(|c| match &ct {
                             None => at(r, c) as f32,
-                            Some(ct) => {
-                                let mut e = (1.0 - ct.total()) * at(r, c);
-                                if c + 1 < cols {
-                                    e += ct.left * at(r, c + 1);
-                                }
-                                if c > 0 {
-                                    e += ct.right * at(r, c - 1);
-                                }
-                                if r + 1 < rows {
-                                    e += ct.up * at(r + 1, c);
-                                }
-                                if r > 0 {
-                                    e += ct.down * at(r - 1, c);
-                                }
-                                e as f32
-                            }
+                            Some(ct) => camsim_sensor::effects::crosstalk_at(
+                                ct,
+                                1.0 - ct.total(),
+                                rows,
+                                cols,
+                                r,
+                                c,
+                                &at,
+                            ) as f32,
                         })
                         .collect();
                     (r, row)
