@@ -204,6 +204,27 @@ pub(crate) struct ColStat {
     pub var_diag: f64,
     pub u_bar: f64,
     pub w_rms: f64,
+    /// 1 − 1/n: the variance share a pixel keeps once its column mean is removed.
+    pub kappa: f64,
+    /// √kappa.
+    pub sqrt_kappa: f64,
+}
+
+/// One column's [`ColStat`]s (shot-major table, column `j`); a shot's entry counts when the
+/// column has at least two pixels in it.
+#[derive(Clone, Copy)]
+struct ColView<'c> {
+    stats: &'c [ColStat],
+    cols: usize,
+    j: usize,
+}
+
+impl<'c> ColView<'c> {
+    #[inline]
+    fn get(&self, shot: usize) -> Option<&'c ColStat> {
+        let x = &self.stats[shot * self.cols + self.j];
+        (x.n >= 2.0).then_some(x)
+    }
 }
 
 /// Hot-pixel mixture parameters.
@@ -561,6 +582,8 @@ impl<'a> Ctx<'a> {
                         var_diag: a.sa / (a.n * a.n),
                         u_bar: a.su / a.n,
                         w_rms: (a.sw2 / a.n).sqrt(),
+                        kappa: 1.0 - 1.0 / a.n,
+                        sqrt_kappa: (1.0 - 1.0 / a.n).sqrt(),
                     }
                 }
             })
@@ -640,7 +663,7 @@ impl<'a> Ctx<'a> {
                         if c.n < 2.0 || c.var_diag <= 0.0 {
                             continue;
                         }
-                        wb.add(c.c_hat, c.var_diag, [b1 * c.u_bar, b2 * c.w_rms, 0.0]);
+                        wb.add(c.c_hat, c.var_diag, [b1 * c.u_bar, b2 * c.w_rms]);
                     }
                     if wb.is_empty() {
                         0.0
@@ -660,8 +683,9 @@ impl<'a> Ctx<'a> {
                 let mut ll = 0.0;
                 let mut sc = vec![ScStat::default(); ns * nch];
                 let mut n_hot = 0usize;
-                let mut preds: Vec<Pred> = vec![Pred::default(); ns];
+                let mut preds_buf: Vec<Pred> = vec![Pred::default(); ns];
                 let mut es: Vec<f64> = vec![0.0; ns];
+                let mut hot_buf: Vec<Pred> = vec![Pred::default(); ns];
                 let mut pxbuf: Vec<PixShot> = vec![PixShot::default(); ns];
                 for (ri, &r) in blk.iter().enumerate() {
                     for j in 0..cols {
@@ -674,46 +698,57 @@ impl<'a> Ctx<'a> {
                             gather_pixel(d, i, &mut pxbuf);
                             &pxbuf
                         };
-                        for sidx in 0..ns {
-                            let c = &consts[sidx];
-                            es[sidx] = rates[sidx][i] as f64 * c.t;
-                            preds[sidx] = match stored {
-                                Some(st) => st[at + sidx],
-                                None => c.predict(es[sidx], 0.0),
-                            };
-                        }
-                        let cs = |sidx: usize| -> Option<&ColStat> {
-                            if use_cols {
-                                let x = &col[sidx * cols + j];
-                                (x.n >= 2.0).then_some(x)
-                            } else {
-                                None
+                        // the column pass's predictions, or computed here
+                        let preds: &[Pred] = match stored {
+                            Some(st) => &st[at..at + ns],
+                            None => {
+                                for (sidx, c) in consts.iter().enumerate() {
+                                    preds_buf[sidx] = c.predict(rates[sidx][i] as f64 * c.t, 0.0);
+                                }
+                                &preds_buf
                             }
                         };
+                        let cs = use_cols.then_some(ColView {
+                            stats: &col,
+                            cols,
+                            j,
+                        });
                         let l0 = self.pixel_ll(
                             px,
-                            &preds,
+                            preds,
                             &consts,
-                            &cs,
+                            cs,
                             sig_d,
                             sig_p,
                             if use_cols { 0.0 } else { sig_c },
                         );
-                        let mut hot_post = 0.0;
-                        let mut hot_preds: Option<Vec<Pred>> = None;
+                        let mut hot_class = false;
                         let li = match &hot {
                             None => l0,
                             Some(h) => {
-                                let (lh, hp) = self.hot_ll(
-                                    px, &preds, &es, &consts, &cs, sig_d, sig_p, sig_c, use_cols, h,
+                                for (sidx, c) in consts.iter().enumerate() {
+                                    es[sidx] = rates[sidx][i] as f64 * c.t;
+                                }
+                                let lh = self.hot_ll(
+                                    px,
+                                    preds,
+                                    &es,
+                                    &consts,
+                                    cs,
+                                    sig_d,
+                                    sig_p,
+                                    sig_c,
+                                    use_cols,
+                                    h,
+                                    &mut hot_buf,
                                 );
                                 let a = (1.0 - h.fraction).ln() + l0;
                                 let b = h.fraction.ln() + lh;
                                 let tot = log_add_exp(a, b);
-                                hot_post = (b - tot).exp();
-                                if hot_post > 0.5 {
+                                // posterior of the hot class > 1/2
+                                if b - tot > -std::f64::consts::LN_2 {
                                     n_hot += 1;
-                                    hot_preds = Some(hp);
+                                    hot_class = true;
                                 }
                                 tot
                             }
@@ -723,7 +758,7 @@ impl<'a> Ctx<'a> {
                             continue;
                         }
                         // Reported χ² (marginal per pixel-shot) with the pixel's class.
-                        let used = hot_preds.as_deref().unwrap_or(&preds);
+                        let used = if hot_class { &hot_buf[..] } else { preds };
                         for sidx in 0..ns {
                             let sh = &d.shots[sidx];
                             let x = &px[sidx];
@@ -777,7 +812,6 @@ impl<'a> Ctx<'a> {
                                 st.sum_data_var += v;
                             }
                         }
-                        let _ = hot_post;
                     }
                 }
                 (ll, sc, n_hot)
@@ -815,7 +849,7 @@ impl<'a> Ctx<'a> {
         px: &[PixShot],
         preds: &[Pred],
         consts: &[ShotConst],
-        col: &dyn Fn(usize) -> Option<&'c ColStat>,
+        col: Option<ColView<'c>>,
         sig_d: f64,
         sig_p: f64,
         sig_c_pixel: f64,
@@ -833,16 +867,23 @@ impl<'a> Ctx<'a> {
                 continue;
             }
             let mut r = x.mean as f64 - p.mean;
-            let mut kappa = 1.0;
-            if let Some(c) = col(sidx) {
+            let (mut kappa, mut sk) = (1.0, 1.0);
+            if let Some(c) = col.and_then(|v| v.get(sidx)) {
                 r -= c.c_hat;
-                kappa = 1.0 - 1.0 / c.n;
+                kappa = c.kappa;
+                sk = c.sqrt_kappa;
             }
             let a = kappa * consts[sidx].var_mean(p);
-            let sk = kappa.sqrt();
-            wb.add(r, a, [sk * sig_u * p.u, sk * sig_p * p.w, 0.0]);
+            wb.add(r, a, [sk * sig_u * p.u, sk * sig_p * p.w]);
             if sh.has_variance() {
-                ll += temporal_ll(x.var as f64, p.var_t, f);
+                // temporal_ll, with its −(F−1)/2 · ln σ² folded into the determinant
+                let k = f as u32 - 1;
+                if f == (k + 1) as f64 && k <= 64 {
+                    ll += -0.5 * (f - 1.0) * (x.var as f64 / p.var_t);
+                    wb.mul_det_pow(p.var_t, k);
+                } else {
+                    ll += temporal_ll(x.var as f64, p.var_t, f);
+                }
             }
         }
         if !wb.is_empty() {
@@ -851,8 +892,8 @@ impl<'a> Ctx<'a> {
         ll
     }
 
-    /// Log-likelihood of one pixel as a hot pixel (Laplace integral over its rate), and its
-    /// predictions at the most probable rate.
+    /// Log-likelihood of one pixel as a hot pixel (Laplace integral over its rate); its
+    /// predictions at the most probable rate go to `hp`.
     #[allow(clippy::too_many_arguments)]
     fn hot_ll<'c>(
         &self,
@@ -860,13 +901,14 @@ impl<'a> Ctx<'a> {
         preds: &[Pred],
         es: &[f64],
         consts: &[ShotConst],
-        col: &dyn Fn(usize) -> Option<&'c ColStat>,
+        col: Option<ColView<'c>>,
         sig_d: f64,
         sig_p: f64,
         sig_c: f64,
         use_cols: bool,
         h: &Hot,
-    ) -> (f64, Vec<Pred>) {
+        hp: &mut [Pred],
+    ) -> f64 {
         // Linearised response to an extra dark rate V: h_s = c_s V, c_s = DN/e · t/g.
         let (mut srr, mut scc) = (0.0, 0.0);
         for (sidx, x) in px.iter().enumerate() {
@@ -877,7 +919,7 @@ impl<'a> Ctx<'a> {
             let c = &consts[sidx];
             let cs = p.dn_per_e * c.t / c.g;
             let mut r = x.mean as f64 - p.mean;
-            if let Some(x) = col(sidx) {
+            if let Some(x) = col.and_then(|v| v.get(sidx)) {
                 r -= x.c_hat;
             }
             let a = c.var_mean(p);
@@ -910,21 +952,19 @@ impl<'a> Ctx<'a> {
             (mu, 0.0)
         };
         let v = x_star.exp();
-        let hp: Vec<Pred> = consts
-            .iter()
-            .zip(es)
-            .map(|(c, &e)| c.predict(e, c.t * v / c.g))
-            .collect();
+        for ((o, c), &e) in hp.iter_mut().zip(consts).zip(es) {
+            *o = c.predict(e, c.t * v / c.g);
+        }
         let l = self.pixel_ll(
             px,
-            &hp,
+            hp,
             consts,
             col,
             sig_d,
             sig_p,
             if use_cols { 0.0 } else { sig_c },
         );
-        (l + log_prior_term, hp)
+        l + log_prior_term
     }
 }
 
@@ -964,17 +1004,18 @@ pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
     use super::num::{gauss_hermite_24, norm_cdf};
     let nmid = f - nlo - nhi;
     let one = [(0.0, 1.0)];
-    let nodes: &[(f64, f64)] = if p.s_f > 1e-9 * p.s_t.max(1e-300) {
+    let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
+    let nodes: &[(f64, f64)] = if s_f > 1e-9 * s_t.max(1e-300) {
         gauss_hermite_24()
     } else {
         &one
     };
-    let st = p.s_t.max(1e-9);
+    let st = s_t.max(1e-9);
     let mut lmax = f64::NEG_INFINITY;
     let mut terms = [(0.0f64, 0.0f64, 0.0f64); 24];
     let mut m1 = 0.0;
     for (k, &(z, w)) in nodes.iter().enumerate() {
-        let y = p.y + p.s_f * z;
+        let y = p.y + s_f * z;
         let plo = norm_cdf((0.5 - y) / st);
         let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / st);
         let pm = (1.0 - plo - phi).max(0.0);
@@ -1198,8 +1239,8 @@ mod tests {
         for &(y, n) in &[(0.3, 5.0), (2.0, 1.0), (4.5, 1.0), (1.0, 16.0), (0.0, 0.0)] {
             let p = Pred {
                 y,
-                s_t: 1.0,
-                s_f: 0.0,
+                s2_t: 1.0,
+                s2_f: 0.0,
                 hi: 255.0,
                 ..Default::default()
             };

@@ -100,10 +100,10 @@ pub(crate) struct Pred {
     pub dn_per_e: f64,
     /// Mean DN before the ADC clip.
     pub y: f64,
-    /// Temporal standard deviation before the clip (DN).
-    pub s_t: f64,
-    /// Fixed-pattern standard deviation before the clip (DN).
-    pub s_f: f64,
+    /// Temporal variance before the clip (DN²).
+    pub s2_t: f64,
+    /// Fixed-pattern variance before the clip (DN²).
+    pub s2_f: f64,
     /// Upper clip (DN).
     pub hi: f64,
 }
@@ -204,7 +204,11 @@ impl ShotConst {
         let adc_first = self.adc_first;
         let (n_mean, n_var_t, n_var_f, rho_w) = if adc_first {
             (lam, var_n, var_p, 1.0)
-        } else if var_ne > 0.0 && self.well - lam < CENSOR_SIGMAS * var_ne.sqrt() {
+        } else if var_ne > 0.0 && {
+            // well − λ < CENSOR_SIGMAS·σ, without the square root
+            let dw = self.well - lam;
+            dw < 0.0 || dw * dw < CENSOR_SIGMAS * CENSOR_SIGMAS * var_ne
+        } {
             let c = censored(lam, var_ne.sqrt(), f64::NEG_INFINITY, self.well);
             let unsat = 1.0 - c.p_hi;
             let t = var_n * unsat;
@@ -224,8 +228,10 @@ impl ShotConst {
         let w_lin = rho_w * dn_per_e * e;
         let x_well =
             (dn_per_e * dn_per_e * n_var_f - w_lin * w_lin * self.prnu * self.prnu).max(0.0);
-        let s_tot = (var_t + var_f).sqrt();
-        if y < CENSOR_SIGMAS * s_tot || self.hi_dn - y < CENSOR_SIGMAS * s_tot {
+        // within CENSOR_SIGMAS·σ of a rail (compared squared: no square root on the fast path)
+        let near = y.min(self.hi_dn - y);
+        if near < 0.0 || near * near < CENSOR_SIGMAS * CENSOR_SIGMAS * (var_t + var_f) {
+            let s_tot = (var_t + var_f).sqrt();
             // Steps 6–7: the ADC rails, censoring the marginal (temporal + fixed) distribution.
             let c = censored(y, s_tot, 0.0, self.hi_dn);
             let rho = (1.0 - c.p_lo - c.p_hi).max(0.0);
@@ -241,8 +247,8 @@ impl ShotConst {
                 w,
                 dn_per_e: rho * dn_per_e,
                 y,
-                s_t: var_t.sqrt(),
-                s_f: var_f.sqrt(),
+                s2_t: var_t,
+                s2_f: var_f,
                 hi: self.hi_dn,
             }
         } else {
@@ -254,8 +260,8 @@ impl ShotConst {
                 w: w_lin,
                 dn_per_e,
                 y,
-                s_t: var_t.sqrt(),
-                s_f: var_f.sqrt(),
+                s2_t: var_t,
+                s2_f: var_f,
                 hi: self.hi_dn,
             }
         }

@@ -80,34 +80,90 @@ pub fn censored(m: f64, s: f64, lo: f64, hi: f64) -> Censored {
     }
 }
 
+/// A product of positive factors kept as mantissa × 2^exponent, so that `ln Π x` costs one
+/// logarithm however many factors (the determinants of the per-pixel likelihoods: one `ln`
+/// per pixel instead of one per pixel-shot). Zero, infinite or NaN factors go to `ln` directly.
+#[derive(Debug, Clone, Copy)]
+pub struct LogProd {
+    m: f64,
+    e: i64,
+    extra: f64,
+}
+
+impl Default for LogProd {
+    fn default() -> Self {
+        LogProd {
+            m: 1.0,
+            e: 0,
+            extra: 0.0,
+        }
+    }
+}
+
+impl LogProd {
+    /// Multiplies `x` into the product.
+    #[inline]
+    pub fn mul(&mut self, x: f64) {
+        let m = self.m * x;
+        if m.is_normal() && x.is_normal() {
+            // m = 1.f × 2^(exp−1023): keep the exponent, reset the mantissa to [1, 2)
+            let bits = m.to_bits();
+            self.e += ((bits >> 52) & 0x7ff) as i64 - 1023;
+            self.m = f64::from_bits((bits & !(0x7ffu64 << 52)) | (1023u64 << 52));
+        } else {
+            self.extra += x.ln();
+        }
+    }
+
+    /// Multiplies `x^k` into the product.
+    #[inline]
+    pub fn mul_pow(&mut self, x: f64, k: u32) {
+        for _ in 0..k {
+            self.mul(x);
+        }
+    }
+
+    /// `ln` of the product.
+    #[inline]
+    pub fn ln(&self) -> f64 {
+        self.m.ln() + self.e as f64 * std::f64::consts::LN_2 + self.extra
+    }
+}
+
 /// Accumulates the Gaussian log-likelihood of a residual vector `r` with covariance
-/// `diag(a) + Σ_k b_k b_kᵀ` (rank ≤ 3) by the Woodbury identity and the matrix determinant
+/// `diag(a) + Σ_k b_k b_kᵀ` (rank ≤ 2) by the Woodbury identity and the matrix determinant
 /// lemma: `rᵀC⁻¹r = Σ r²/a − qᵀM⁻¹q`, `ln det C = Σ ln a + ln det M`, `M = I + BᵀA⁻¹B`,
 /// `q = BᵀA⁻¹r` (Golub & Van Loan, *Matrix Computations*, §2.1.4).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Woodbury {
     rr: f64,
-    logdet_a: f64,
-    q: [f64; 3],
-    m: [[f64; 3]; 3],
+    det: LogProd,
+    q: [f64; 2],
+    m: [f64; 3],
     n: usize,
 }
 
 impl Woodbury {
     /// Adds one component: residual `r`, diagonal variance `a > 0`, low-rank loadings `b`.
     #[inline]
-    pub fn add(&mut self, r: f64, a: f64, b: [f64; 3]) {
+    pub fn add(&mut self, r: f64, a: f64, b: [f64; 2]) {
         let ia = 1.0 / a;
         self.rr += r * r * ia;
-        self.logdet_a += a.ln();
-        for k in 0..3 {
-            let bk = b[k] * ia;
-            self.q[k] += bk * r;
-            for l in 0..=k {
-                self.m[k][l] += bk * b[l];
-            }
-        }
+        self.det.mul(a);
+        let (b0, b1) = (b[0] * ia, b[1] * ia);
+        self.q[0] += b0 * r;
+        self.q[1] += b1 * r;
+        self.m[0] += b0 * b[0];
+        self.m[1] += b1 * b[0];
+        self.m[2] += b1 * b[1];
         self.n += 1;
+    }
+
+    /// Multiplies an extra factor `x^k` into the determinant (a term `−k/2 · ln x` of
+    /// [`Woodbury::log_likelihood`] that costs no logarithm of its own).
+    #[inline]
+    pub fn mul_det_pow(&mut self, x: f64, k: u32) {
+        self.det.mul_pow(x, k);
     }
 
     /// Number of components added.
@@ -122,36 +178,18 @@ impl Woodbury {
 
     /// (quadratic form rᵀC⁻¹r, ln det C).
     pub fn finish(&self) -> (f64, f64) {
-        // Cholesky of M = I + BᵀA⁻¹B (symmetric positive definite, 3×3).
-        let mut l = [[0f64; 3]; 3];
-        let mut logdet_m = 0.0;
-        for i in 0..3 {
-            for j in 0..=i {
-                let mut s = self.m[i][j] + if i == j { 1.0 } else { 0.0 };
-                for k in 0..j {
-                    s -= l[i][k] * l[j][k];
-                }
-                if i == j {
-                    let d = s.max(1e-300).sqrt();
-                    l[i][i] = d;
-                    logdet_m += 2.0 * d.ln();
-                } else {
-                    l[i][j] = s / l[j][j];
-                }
-            }
-        }
+        // Cholesky of M = I + BᵀA⁻¹B (symmetric positive definite, 2×2).
+        let l00 = (self.m[0] + 1.0).max(1e-300).sqrt();
+        let l10 = self.m[1] / l00;
+        let l11 = (self.m[2] + 1.0 - l10 * l10).max(1e-300).sqrt();
         // qᵀM⁻¹q = |L⁻¹q|²
-        let mut y = [0f64; 3];
-        let mut qmq = 0.0;
-        for i in 0..3 {
-            let mut s = self.q[i];
-            for k in 0..i {
-                s -= l[i][k] * y[k];
-            }
-            y[i] = s / l[i][i];
-            qmq += y[i] * y[i];
-        }
-        ((self.rr - qmq).max(0.0), self.logdet_a + logdet_m)
+        let y0 = self.q[0] / l00;
+        let y1 = (self.q[1] - l10 * y0) / l11;
+        let qmq = y0 * y0 + y1 * y1;
+        let mut det = self.det;
+        det.mul(l00 * l00);
+        det.mul(l11 * l11);
+        ((self.rr - qmq).max(0.0), det.ln())
     }
 
     /// Gaussian log-likelihood without the `−n/2 ln 2π` constant.
@@ -404,8 +442,12 @@ mod tests {
         let r = [0.2, -1.0, 0.4, 2.0];
         let mut w = Woodbury::default();
         for i in 0..4 {
-            w.add(r[i], a[i], [b1[i], b2[i], 0.0]);
+            w.add(r[i], a[i], [b1[i], b2[i]]);
         }
+        // an extra determinant factor x^k adds k·ln x to ln det
+        let mut wx = w;
+        wx.mul_det_pow(3.0, 2);
+        assert!((wx.finish().1 - w.finish().1 - 2.0 * 3f64.ln()).abs() < 1e-12);
         let (q, ld) = w.finish();
         let mut c = nalgebra::DMatrix::<f64>::zeros(4, 4);
         for i in 0..4 {
@@ -418,6 +460,41 @@ mod tests {
         let q_ref = (rv.transpose() * ci * rv)[(0, 0)];
         let ld_ref = c.determinant().ln();
         assert!((q - q_ref).abs() < 1e-10 && (ld - ld_ref).abs() < 1e-10);
+    }
+
+    #[test]
+    fn log_prod_equals_the_sum_of_logarithms() {
+        // factors far beyond f64's range when multiplied: 200 × 1e200, 200 × 1e-200, mixed
+        let mut xs: Vec<f64> = Vec::new();
+        for i in 0..600 {
+            xs.push(match i % 3 {
+                0 => 1e200 * (1.0 + i as f64 * 1e-3),
+                1 => 3.7e-200 / (1.0 + i as f64),
+                _ => 0.5 + i as f64,
+            });
+        }
+        let mut p = LogProd::default();
+        for &x in &xs {
+            p.mul(x);
+        }
+        let want: f64 = xs.iter().map(|x| x.ln()).sum();
+        assert!(
+            (p.ln() - want).abs() < 1e-12 * want.abs().max(1.0),
+            "{} {want}",
+            p.ln()
+        );
+        let mut q = LogProd::default();
+        q.mul_pow(7.5, 5);
+        assert!((q.ln() - 5.0 * 7.5f64.ln()).abs() < 1e-13);
+        // a zero factor gives −∞, a subnormal one its own logarithm
+        let mut z = LogProd::default();
+        z.mul(2.0);
+        z.mul(0.0);
+        assert_eq!(z.ln(), f64::NEG_INFINITY);
+        let mut sub = LogProd::default();
+        sub.mul(1e-310);
+        sub.mul(4.0);
+        assert!((sub.ln() - (1e-310f64.ln() + 4f64.ln())).abs() < 1e-12);
     }
 
     #[test]
