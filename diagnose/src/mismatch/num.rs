@@ -105,14 +105,34 @@ impl LogProd {
     #[inline]
     pub fn mul(&mut self, x: f64) {
         let m = self.m * x;
-        if m.is_normal() && x.is_normal() {
-            // m = 1.f × 2^(exp−1023): keep the exponent, reset the mantissa to [1, 2)
-            let bits = m.to_bits();
-            self.e += ((bits >> 52) & 0x7ff) as i64 - 1023;
-            self.m = f64::from_bits((bits & !(0x7ffu64 << 52)) | (1023u64 << 52));
+        // (NaN fails the test and goes to the slow path)
+        if m > 1e-150 && m < 1e150 {
+            self.m = m;
         } else {
-            self.extra += x.ln();
+            self.mul_slow(x);
         }
+    }
+
+    /// `mul` when the running mantissa leaves (1e-150, 1e150): move the exponents of the
+    /// product and of `x` into `e`, keeping the mantissa in [1, 2).
+    #[cold]
+    fn mul_slow(&mut self, x: f64) {
+        if !(x.is_normal() && x > 0.0) {
+            self.extra += x.ln();
+            return;
+        }
+        let split = |v: f64| -> (f64, i64) {
+            let bits = v.to_bits();
+            (
+                f64::from_bits((bits & !(0x7ffu64 << 52)) | (1023u64 << 52)),
+                ((bits >> 52) & 0x7ff) as i64 - 1023,
+            )
+        };
+        // self.m is positive and normal here (it only ever holds in-range products)
+        let (xm, xe) = split(x);
+        let (pm, pe) = split(self.m * xm);
+        self.m = pm;
+        self.e += xe + pe;
     }
 
     /// Multiplies `x^k` into the product.
