@@ -138,8 +138,13 @@ impl LogProd {
     /// Multiplies `x^k` into the product.
     #[inline]
     pub fn mul_pow(&mut self, x: f64, k: u32) {
-        for _ in 0..k {
-            self.mul(x);
+        let xk = x.powi(k as i32);
+        if k <= 32 && xk > 1e-150 && xk < 1e150 {
+            self.mul(xk);
+        } else {
+            for _ in 0..k {
+                self.mul(x);
+            }
         }
     }
 
