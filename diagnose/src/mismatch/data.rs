@@ -56,6 +56,10 @@ pub struct ShotData {
     /// Pixels treated as censored (see [`censored_pixel`]): compared with the model through
     /// their rail counts only.
     pub censored: Vec<bool>,
+    /// Censored pixels that the neighbourhood rule alone would not censor: they are censored
+    /// because a frame of their own hit a rail, so their rail counts are seen only given at
+    /// least one rail frame (the χ² summary's expected deviance is conditional on that).
+    pub rail_only: Vec<bool>,
 }
 
 impl ShotData {
@@ -209,7 +213,7 @@ impl ShotAccumulator {
         };
         let max = self.max_dn as f64;
         let (rows, cols) = (self.rows, self.cols);
-        let censored = (0..mean_dn.len())
+        let (censored, rail_only): (Vec<bool>, Vec<bool>) = (0..mean_dn.len())
             .into_par_iter()
             .map(|i| {
                 let (r, c) = (i / cols.max(1), i % cols.max(1));
@@ -233,15 +237,13 @@ impl ShotAccumulator {
                         k += 1;
                     }
                 }
-                censored_pixel(
-                    self.n_low[i] + self.n_high[i],
-                    &mut m[..k],
-                    &mut v[..k],
-                    mean_dn[i] as f64,
-                    max,
-                )
+                let n_rail = self.n_low[i] + self.n_high[i];
+                let c = censored_pixel(n_rail, &mut m[..k], &mut v[..k], mean_dn[i] as f64, max);
+                let by_rails_only = n_rail > 0
+                    && !censored_pixel(0, &mut m[..k], &mut v[..k], mean_dn[i] as f64, max);
+                (c, by_rails_only)
             })
-            .collect();
+            .unzip();
         ShotData {
             id,
             target,
@@ -254,6 +256,7 @@ impl ShotAccumulator {
             n_low: self.n_low,
             n_high: self.n_high,
             censored,
+            rail_only,
         }
     }
 }
@@ -335,5 +338,8 @@ mod tests {
         assert_eq!(s.n_low, vec![1, 0, 0]);
         assert_eq!(s.n_high, vec![0, 0, 2]);
         assert_eq!(s.censored, vec![true, true, true]);
+        // A 10-DN range lies within 6 × 3 DN of a rail everywhere: the neighbourhood rule
+        // alone censors every pixel.
+        assert_eq!(s.rail_only, vec![false, false, false]);
     }
 }

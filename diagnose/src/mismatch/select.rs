@@ -126,6 +126,16 @@ fn misfit_abs(ctx: &Ctx, st: &ModelState) -> Result<f64, String> {
     Ok((e.chi2 - e.dof).abs())
 }
 
+/// The goodness of fit of a model on the fit rows: χ²/dof, dof, and the share of the
+/// pixel-shots compared through their rail counts (censored).
+fn fit_summary(ctx: &Ctx, st: &ModelState) -> Result<(f64, f64, f64), String> {
+    let e = ctx.evaluate(st, RowSel::Fit)?;
+    let cens: f64 = e.per_sc.iter().map(|x| x.censored).sum();
+    let unc: f64 = e.per_sc.iter().map(|x| x.n).sum();
+    let dof = e.dof.max(1.0);
+    Ok((e.chi2 / dof, dof, cens / (cens + unc).max(1.0)))
+}
+
 /// Most coordinate sweeps of the joint refit.
 const JOINT_SWEEPS: usize = 8;
 
@@ -349,6 +359,25 @@ pub(crate) fn select(
                 best.id(),
                 gain,
                 share_needed
+            ));
+            break;
+        }
+        // Censored-dominated data (e.g. 8-bit darks at the black rail, issue 6): the rail
+        // counts are sparse, 2ΔlnL there is large for any shift of the per-frame rail
+        // probabilities, and the χ² summary's dof (the model's own expected deviance) moves
+        // with the model. A finding must then also bring χ²/dof closer to 1 (within the noise
+        // of χ²/dof, min_drop_sigma·√(2/dof)): an effect that the likelihood prefers but that
+        // leaves the recording worse explained is not accepted.
+        let (r_before, _, cens_share) = fit_summary(ctx, &state)?;
+        let (r_after, dof_after, _) = fit_summary(ctx, &best_state)?;
+        let worse = (r_after - 1.0).abs() - (r_before - 1.0).abs();
+        if cens_share > 0.5 && worse > opts.min_drop_sigma * (2.0 / dof_after).sqrt() {
+            progress(&format!(
+                "round {}: {} moves χ²/dof from {:.3} to {:.3} on censored data: stop",
+                round + 1,
+                best.id(),
+                r_before,
+                r_after
             ));
             break;
         }
