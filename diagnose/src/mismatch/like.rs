@@ -1076,17 +1076,18 @@ pub(crate) fn rail_expected_deviance(p: &Pred, f: f64, given_rail: bool) -> f64 
     if nf == 0 {
         return 0.0;
     }
+    let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
     let one = [(0.0, 1.0)];
-    let nodes: &[(f64, f64)] = if p.s_f > 1e-9 * p.s_t.max(1e-300) {
+    let nodes: &[(f64, f64)] = if s_f > 1e-9 * s_t.max(1e-300) {
         gauss_hermite_24()
     } else {
         &one
     };
-    let st = p.s_t.max(1e-9);
+    let st = s_t.max(1e-9);
     let mut ln_node = [(0.0f64, 0.0f64, 0.0f64, 0.0f64); 24];
     let (mut max_lo, mut max_hi) = (0.0f64, 0.0f64);
     for (k, &(z, w)) in nodes.iter().enumerate() {
-        let y = p.y + p.s_f * z;
+        let y = p.y + s_f * z;
         let plo = norm_cdf((0.5 - y) / st);
         let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / st);
         let pm = (1.0 - plo - phi).max(0.0);
@@ -1184,8 +1185,8 @@ impl ExpectedDevianceCache {
     fn get(&mut self, p: &Pred, f: f64, given_rail: bool) -> f64 {
         let key = [
             p.y.to_bits(),
-            p.s_t.to_bits(),
-            p.s_f.to_bits(),
+            p.s2_t.to_bits(),
+            p.s2_f.to_bits(),
             p.hi.to_bits(),
             f.to_bits(),
             given_rail as u64,
@@ -1451,8 +1452,8 @@ mod tests {
         let q = Normal::new(0.0, 1.0).unwrap().inverse_cdf(p_lo);
         Pred {
             y: 0.5 - q,
-            s_t: 1.0,
-            s_f,
+            s2_t: 1.0,
+            s2_f: s_f * s_f,
             hi: 255.0,
             ..Default::default()
         }
@@ -1461,9 +1462,10 @@ mod tests {
     /// Rail counts of one pixel-shot drawn from the model: a fixed offset z ~ N(0, s_f²) per
     /// pixel-shot, then F independent frames.
     fn draw(rng: &mut Rng, p: &Pred, f: usize) -> (f64, f64) {
-        let y = p.y + p.s_f * rng.normal();
-        let plo = norm_cdf((0.5 - y) / p.s_t);
-        let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / p.s_t);
+        let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
+        let y = p.y + s_f * rng.normal();
+        let plo = norm_cdf((0.5 - y) / s_t);
+        let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / s_t);
         let (mut lo, mut hi) = (0.0, 0.0);
         for _ in 0..f {
             let u = rng.unif();
