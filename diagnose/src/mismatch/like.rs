@@ -998,28 +998,59 @@ pub(crate) struct RailStat {
     pub mean: f64,
 }
 
-/// The frames of a pixel share its fixed pattern, so its rail counts are a mixture over the
-/// pixel's fixed offset z ~ N(0, s_f²) of multinomials with per-frame probabilities
-/// p_lo(z) = Φ((0.5 − y − z)/s_t), p_hi(z) = 1 − Φ((M − 0.5 − y − z)/s_t) (24-point
-/// Gauss–Hermite quadrature over z).
-pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
+/// Per-frame rail probabilities of a pixel-shot at the nodes of the fixed-pattern mixture
+/// (z ~ N(0, s_f²), 24-point Gauss–Hermite; one node without fixed pattern): weight w,
+/// p_lo(z) = Φ((0.5 − y − z)/s_t), p_hi(z) = 1 − Φ((M − 0.5 − y − z)/s_t).
+struct RailNodes {
+    n: usize,
+    w: [f64; 24],
+    plo: [f64; 24],
+    phi: [f64; 24],
+}
+
+impl RailNodes {
+    /// (w, p_lo, p_hi) of each node.
+    fn iter(&self) -> impl Iterator<Item = (f64, f64, f64)> + '_ {
+        (0..self.n).map(|k| (self.w[k], self.plo[k], self.phi[k]))
+    }
+}
+
+fn rail_nodes(p: &Pred) -> RailNodes {
     use super::num::{gauss_hermite_24, norm_cdf};
-    let nmid = f - nlo - nhi;
-    let one = [(0.0, 1.0)];
     let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
+    let one = [(0.0, 1.0)];
     let nodes: &[(f64, f64)] = if s_f > 1e-9 * s_t.max(1e-300) {
         gauss_hermite_24()
     } else {
         &one
     };
     let st = s_t.max(1e-9);
+    let mut r = RailNodes {
+        n: nodes.len(),
+        w: [0.0; 24],
+        plo: [0.0; 24],
+        phi: [0.0; 24],
+    };
+    for (k, &(z, w)) in nodes.iter().enumerate() {
+        let y = p.y + s_f * z;
+        r.w[k] = w;
+        r.plo[k] = norm_cdf((0.5 - y) / st);
+        r.phi[k] = 1.0 - norm_cdf((p.hi - 0.5 - y) / st);
+    }
+    r
+}
+
+/// The frames of a pixel share its fixed pattern, so its rail counts are a mixture over the
+/// pixel's fixed offset z ~ N(0, s_f²) of multinomials with per-frame probabilities
+/// p_lo(z) = Φ((0.5 − y − z)/s_t), p_hi(z) = 1 − Φ((M − 0.5 − y − z)/s_t) (24-point
+/// Gauss–Hermite quadrature over z).
+pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
+    let nmid = f - nlo - nhi;
+    let nodes = rail_nodes(p);
     let mut lmax = f64::NEG_INFINITY;
     let mut terms = [(0.0f64, 0.0f64, 0.0f64); 24];
     let mut m1 = 0.0;
-    for (k, &(z, w)) in nodes.iter().enumerate() {
-        let y = p.y + s_f * z;
-        let plo = norm_cdf((0.5 - y) / st);
-        let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / st);
+    for (k, (w, plo, phi)) in nodes.iter().enumerate() {
         let pm = (1.0 - plo - phi).max(0.0);
         let mut l = 0.0;
         if nlo > 0.0 {
@@ -1037,10 +1068,7 @@ pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
         let pr = (plo + phi).min(1.0);
         m1 += w * pr;
     }
-    let sum: f64 = terms[..nodes.len()]
-        .iter()
-        .map(|t| (t.0 - lmax).exp())
-        .sum();
+    let sum: f64 = terms[..nodes.n].iter().map(|t| (t.0 - lmax).exp()).sum();
     RailStat {
         ll: lmax + sum.ln(),
         mean: f * m1,
@@ -1071,25 +1099,14 @@ pub(crate) fn rail_deviance(rs: &RailStat, f: f64, nlo: f64, nhi: f64) -> f64 {
 /// only with n_lo + n_hi ≥ 1 and the expectation is conditional on that. Costs
 /// (F + 1)·24 exponentials near one rail, (F + 1)(F + 2)/2·24 near both.
 pub(crate) fn rail_expected_deviance(p: &Pred, f: f64, given_rail: bool) -> f64 {
-    use super::num::{gauss_hermite_24, norm_cdf};
     let nf = f.round().max(0.0) as usize;
     if nf == 0 {
         return 0.0;
     }
-    let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
-    let one = [(0.0, 1.0)];
-    let nodes: &[(f64, f64)] = if s_f > 1e-9 * s_t.max(1e-300) {
-        gauss_hermite_24()
-    } else {
-        &one
-    };
-    let st = s_t.max(1e-9);
+    let nodes = rail_nodes(p);
     let mut ln_node = [(0.0f64, 0.0f64, 0.0f64, 0.0f64); 24];
     let (mut max_lo, mut max_hi) = (0.0f64, 0.0f64);
-    for (k, &(z, w)) in nodes.iter().enumerate() {
-        let y = p.y + s_f * z;
-        let plo = norm_cdf((0.5 - y) / st);
-        let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / st);
+    for (k, (w, plo, phi)) in nodes.iter().enumerate() {
         let pm = (1.0 - plo - phi).max(0.0);
         ln_node[k] = (
             w.ln(),
@@ -1100,7 +1117,7 @@ pub(crate) fn rail_expected_deviance(p: &Pred, f: f64, given_rail: bool) -> f64 
         max_lo = max_lo.max(plo);
         max_hi = max_hi.max(phi);
     }
-    let ln_node = &ln_node[..nodes.len()];
+    let ln_node = &ln_node[..nodes.n];
     let mut lo_on = max_lo * f >= 1e-15;
     let mut hi_on = max_hi * f >= 1e-15;
     if given_rail && !lo_on && !hi_on {
