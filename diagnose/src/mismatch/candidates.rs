@@ -808,7 +808,12 @@ fn fit_hot(
         }
         _ => {
             // Start values from the fit rows (the fit's own data).
-            let scan = ctx.hot_scan(state, &rates, 6.0, RowSel::Fit);
+            let mut scan = ctx.hot_scan(state, &rates, 6.0, RowSel::Fit, false);
+            if scan.is_empty() {
+                // Every informative pixel-shot censored (e.g. black-clipped darks): the
+                // censored shots with no frame at a rail still show their level.
+                scan = ctx.hot_scan(state, &rates, 6.0, RowSel::Fit, true);
+            }
             if scan.is_empty() {
                 return Ok(FitOutcome::Fitted {
                     state: state.clone(),

@@ -14,7 +14,8 @@
 //!   from them (within-column part), the exact decomposition of a Gaussian random-effects
 //!   model with equal pixel variances;
 //! * **hot pixels**: a two-component mixture per pixel: normal, or an extra dark rate V whose
-//!   logarithm is N(ln V_h, σ_h²) across hot pixels, integrated by Laplace's method;
+//!   logarithm is N(ln V_h, σ_h²) across hot pixels, integrated by Laplace's method (by
+//!   Gauss–Hermite quadrature over that prior when every shot of the pixel is censored);
 //! * **clipping**: a pixel-shot with any frame at 0 DN or at the ADC maximum contributes the
 //!   multinomial probability of its rail counts instead of its mean and variance.
 //!
@@ -690,6 +691,11 @@ impl<'a> Ctx<'a> {
                 let mut hot_buf: Vec<Pred> = vec![Pred::default(); ns];
                 let mut pxbuf: Vec<PixShot> = vec![PixShot::default(); ns];
                 let mut edev = ExpectedDevianceCache::default();
+                // Hot-class likelihoods of pixels censored in every shot: they depend on the
+                // pixel's expected electrons and rail counts alone (the rail likelihood reads
+                // neither the column nor the fixed-pattern terms), which most pixels of a
+                // uniform shot share.
+                let mut hot_memo: HashMap<Vec<(u64, u16, u16)>, (f64, Vec<Pred>)> = HashMap::new();
                 for (ri, &r) in blk.iter().enumerate() {
                     for j in 0..cols {
                         let i = r * cols + j;
@@ -732,19 +738,36 @@ impl<'a> Ctx<'a> {
                                 for (sidx, c) in consts.iter().enumerate() {
                                     es[sidx] = rates[sidx][i] as f64 * c.t;
                                 }
-                                let lh = self.hot_ll(
-                                    px,
-                                    preds,
-                                    &es,
-                                    &consts,
-                                    cs,
-                                    sig_d,
-                                    sig_p,
-                                    sig_c,
-                                    use_cols,
-                                    h,
-                                    &mut hot_buf,
-                                );
+                                let key: Option<Vec<(u64, u16, u16)>> =
+                                    px.iter().all(|x| x.censored).then(|| {
+                                        px.iter()
+                                            .zip(&es)
+                                            .map(|(x, e)| (e.to_bits(), x.n_lo, x.n_hi))
+                                            .collect()
+                                    });
+                                let memo = key.as_ref().and_then(|k| hot_memo.get(k));
+                                let lh = if let Some((l, hpm)) = memo {
+                                    hot_buf.copy_from_slice(hpm);
+                                    *l
+                                } else {
+                                    let lh = self.hot_ll(
+                                        px,
+                                        preds,
+                                        &es,
+                                        &consts,
+                                        cs,
+                                        sig_d,
+                                        sig_p,
+                                        sig_c,
+                                        use_cols,
+                                        h,
+                                        &mut hot_buf,
+                                    );
+                                    if let Some(k) = key {
+                                        hot_memo.insert(k, (lh, hot_buf.clone()));
+                                    }
+                                    lh
+                                };
                                 let a = (1.0 - h.fraction).ln() + l0;
                                 let b = h.fraction.ln() + lh;
                                 let tot = log_add_exp(a, b);
@@ -891,8 +914,10 @@ impl<'a> Ctx<'a> {
         ll
     }
 
-    /// Log-likelihood of one pixel as a hot pixel (Laplace integral over its rate); its
-    /// predictions at the most probable rate go to `hp`.
+    /// Log-likelihood of one pixel as a hot pixel (Laplace integral over its rate, or
+    /// quadrature over the rate's prior when every shot is censored: the Laplace step's
+    /// linearised rate uses uncensored shots only); its predictions at the most probable
+    /// rate go to `hp`.
     #[allow(clippy::too_many_arguments)]
     fn hot_ll<'c>(
         &self,
@@ -926,6 +951,39 @@ impl<'a> Ctx<'a> {
             scc += cs * cs / a;
         }
         let mu = h.ln_rate;
+        if h.log_sigma > 1e-6 && scc == 0.0 {
+            // Every shot censored: the rail counts alone carry the rate; the Laplace step
+            // has no data curvature to work with, so integrate over the prior of ln V
+            // (Gauss–Hermite) with the full (rail) likelihood.
+            let gh = super::num::gauss_hermite_24();
+            let mut terms = [0.0f64; 24];
+            let (mut best, mut v_best) = (f64::NEG_INFINITY, mu.exp());
+            for (k, &(z, w)) in gh.iter().enumerate() {
+                let v = (mu + h.log_sigma * z).exp();
+                for ((o, c), &e) in hp.iter_mut().zip(consts).zip(es) {
+                    *o = c.predict(e, c.t * v / c.g);
+                }
+                let l = self.pixel_ll(
+                    px,
+                    hp,
+                    consts,
+                    col,
+                    sig_d,
+                    sig_p,
+                    if use_cols { 0.0 } else { sig_c },
+                );
+                terms[k] = l + w.ln();
+                if terms[k] > best {
+                    best = terms[k];
+                    v_best = v;
+                }
+            }
+            let sum: f64 = terms.iter().map(|t| (t - best).exp()).sum();
+            for ((o, c), &e) in hp.iter_mut().zip(consts).zip(es) {
+                *o = c.predict(e, c.t * v_best / c.g);
+            }
+            return best + sum.ln();
+        }
         let (x_star, log_prior_term) = if h.log_sigma > 1e-6 && scc > 0.0 {
             let v_hat = srr / scc;
             let s2 = h.log_sigma * h.log_sigma;
@@ -1351,13 +1409,17 @@ impl Ctx<'_> {
 
     /// Pixels whose residuals over the shots are best explained by an extra dark rate: per
     /// pixel the least-squares rate V̂ and its significance z = V̂·√I (I: Fisher information);
-    /// returns (pixel, V̂, z) for z > `z_min`.
+    /// returns (pixel, V̂, z) for z > `z_min`. With `rail_free`, censored pixel-shots with no
+    /// frame at a rail (censored by their neighbourhood only) count too: start values for
+    /// data censored everywhere (the frame mean is then biased near a rail, which a start
+    /// value tolerates).
     pub(crate) fn hot_scan(
         &self,
         state: &ModelState,
         rates: &Rates,
         z_min: f64,
         sel: RowSel,
+        rail_free: bool,
     ) -> Vec<(usize, f64, f64)> {
         let d = self.data;
         let (ns, cols) = (d.shots.len(), d.cols);
@@ -1373,7 +1435,9 @@ impl Ctx<'_> {
                         let (mut srr, mut scc) = (0.0, 0.0);
                         for sidx in 0..ns {
                             let sh = &d.shots[sidx];
-                            if sh.censored[i] {
+                            if sh.censored[i]
+                                && !(rail_free && sh.n_low[i] == 0 && sh.n_high[i] == 0)
+                            {
                                 continue;
                             }
                             let c = &consts[sidx];
