@@ -12,7 +12,7 @@ OUT=${OUT:-target/diagnose-seeds}
 run() {
   local d="$OUT/$1-$2-$SEED"
   rm -rf "$d"
-  "$BIN" demo diagnose --effect "$1" --conceal "$2" --rows 32 --cols 48 --seed "$SEED" --out "$d/set" >/dev/null
+  "$BIN" demo diagnose --effect "$1" --conceal "$2" --rows 32 --cols 48 --seed "$SEED" --out "$d/set" >/dev/null 2>&1
   local s e
   s=$(date +%s)
   "$BIN" --threads 2 diagnose "$d/set/captures.json" --out "$d/out" >/dev/null 2>&1
