@@ -951,6 +951,17 @@ impl<'a> Ctx<'a> {
             scc += cs * cs / a;
         }
         let mu = h.ln_rate;
+        // The pixel's predictions with an extra dark rate v (V/s), and its likelihood then.
+        let predict_at = |v: f64, hp: &mut [Pred]| {
+            for ((o, c), &e) in hp.iter_mut().zip(consts).zip(es) {
+                *o = c.predict(e, c.t * v / c.g);
+            }
+        };
+        let ll_at = |v: f64, hp: &mut [Pred]| -> f64 {
+            predict_at(v, hp);
+            let sig_c_pixel = if use_cols { 0.0 } else { sig_c };
+            self.pixel_ll(px, hp, consts, col, sig_d, sig_p, sig_c_pixel)
+        };
         if h.log_sigma > 1e-6 && scc == 0.0 {
             // Every shot censored: the rail counts alone carry the rate; the Laplace step
             // has no data curvature to work with, so integrate over the prior of ln V
@@ -960,28 +971,14 @@ impl<'a> Ctx<'a> {
             let (mut best, mut v_best) = (f64::NEG_INFINITY, mu.exp());
             for (k, &(z, w)) in gh.iter().enumerate() {
                 let v = (mu + h.log_sigma * z).exp();
-                for ((o, c), &e) in hp.iter_mut().zip(consts).zip(es) {
-                    *o = c.predict(e, c.t * v / c.g);
-                }
-                let l = self.pixel_ll(
-                    px,
-                    hp,
-                    consts,
-                    col,
-                    sig_d,
-                    sig_p,
-                    if use_cols { 0.0 } else { sig_c },
-                );
-                terms[k] = l + w.ln();
+                terms[k] = ll_at(v, hp) + w.ln();
                 if terms[k] > best {
                     best = terms[k];
                     v_best = v;
                 }
             }
             let sum: f64 = terms.iter().map(|t| (t - best).exp()).sum();
-            for ((o, c), &e) in hp.iter_mut().zip(consts).zip(es) {
-                *o = c.predict(e, c.t * v_best / c.g);
-            }
+            predict_at(v_best, hp);
             return best + sum.ln();
         }
         let (x_star, log_prior_term) = if h.log_sigma > 1e-6 && scc > 0.0 {
@@ -1008,20 +1005,7 @@ impl<'a> Ctx<'a> {
         } else {
             (mu, 0.0)
         };
-        let v = x_star.exp();
-        for ((o, c), &e) in hp.iter_mut().zip(consts).zip(es) {
-            *o = c.predict(e, c.t * v / c.g);
-        }
-        let l = self.pixel_ll(
-            px,
-            hp,
-            consts,
-            col,
-            sig_d,
-            sig_p,
-            if use_cols { 0.0 } else { sig_c },
-        );
-        l + log_prior_term
+        ll_at(x_star.exp(), hp) + log_prior_term
     }
 }
 
