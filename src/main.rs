@@ -1,7 +1,7 @@
 //! `camsim`: physically based digital camera simulation (ISET pipeline).
-use camsim::config::load_captures;
-use camsim::error::CliError;
-use camsim::simulate::{simulate, SimulateOptions};
+use camsim_pipeline::config::load_captures;
+use camsim_pipeline::error::CliError;
+use camsim_pipeline::simulate::{simulate, SimulateOptions};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -126,12 +126,12 @@ enum Command {
     /// Generated capture sets with concealed effects and their truth (`demo diagnose`).
     Demo {
         #[command(subcommand)]
-        cmd: camsim::demo::DemoCommand,
+        cmd: camsim_pipeline::demo::DemoCommand,
     },
     /// Lens prescriptions (.json, .zmx, ISET .dat/.json): report, spot, field-model, psf.
     Lens {
         #[command(subcommand)]
-        cmd: camsim::lens_cmd::LensCommand,
+        cmd: camsim_pipeline::lens_cmd::LensCommand,
     },
     /// Run a parameter study (docs/study.md): every point of the sweep evaluated once
     /// (finished points are reused), then DIR/table.csv, table.json and report.html.
@@ -142,8 +142,8 @@ enum Command {
         #[arg(long, default_value = "out/study")]
         out: PathBuf,
         /// Where the points run.
-        #[arg(long, value_enum, default_value_t = camsim::study::EngineKind::Local)]
-        engine: camsim::study::EngineKind,
+        #[arg(long, value_enum, default_value_t = camsim_pipeline::study::EngineKind::Local)]
+        engine: camsim_pipeline::study::EngineKind,
         /// Evaluate at most this many unfinished points, then stop (run again to resume).
         #[arg(long)]
         max_points: Option<usize>,
@@ -168,7 +168,7 @@ enum Command {
         out: PathBuf,
     },
     /// Path-trace a glTF 2.0 scene into a spectral EXR (band radiance + Z depth).
-    Render(camsim::render_cmd::RenderArgs),
+    Render(camsim_pipeline::render_cmd::RenderArgs),
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
@@ -203,7 +203,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             Ok(())
         }
         Command::Run { config, out } => {
-            let summary = camsim::run::run(config.as_deref(), &out, true)?;
+            let summary = camsim_pipeline::run::run(config.as_deref(), &out, true)?;
             if let Some(de) = summary.get("delta_e_2000") {
                 eprintln!(
                     "camsim: mean ΔE2000 = {:.2}",
@@ -219,7 +219,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             out,
         } => {
             let set = load_captures(&captures, camera.as_deref())?;
-            let summary = camsim::calibrate_cmd::run_calibrate(&set, &out, true)?;
+            let summary = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, true)?;
             for k in [
                 "black_level_dn",
                 "dark_voltage_v_per_s",
@@ -253,7 +253,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         } => {
             let set = load_captures(&captures, camera.as_deref())?;
             let seed = seed.or(set.simulation.seed).unwrap_or(0);
-            camsim::validate_cmd::run_validate(&set, &out, seed, true)?;
+            camsim_pipeline::validate_cmd::run_validate(&set, &out, seed, true)?;
             eprintln!("camsim: wrote {} (open report.html)", out.display());
             Ok(())
         }
@@ -265,7 +265,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             basis,
         } => {
             let set = load_captures(&captures, camera.as_deref())?;
-            let report = camsim::scene_cmd::write_scene(&set, &shot, &out, basis)?;
+            let report = camsim_pipeline::scene_cmd::write_scene(&set, &shot, &out, basis)?;
             println!(
                 "{}",
                 serde_json::to_string_pretty(&report).unwrap_or_default()
@@ -280,12 +280,12 @@ fn run(cli: Cli) -> Result<(), CliError> {
             effects,
         } => {
             let set = load_captures(&captures, camera.as_deref())?;
-            let opts = camsim::diagnose_cmd::DiagnoseCmdOptions {
+            let opts = camsim_pipeline::diagnose_cmd::DiagnoseCmdOptions {
                 bic_threshold,
                 effects,
                 progress: true,
             };
-            let report = camsim::diagnose_cmd::run_diagnose(&set, &out, &opts)?;
+            let report = camsim_pipeline::diagnose_cmd::run_diagnose(&set, &out, &opts)?;
             let findings = report["findings"].as_array().map_or(0, |f| f.len());
             eprintln!(
                 "camsim: chi2/dof {:.3} -> {:.3}, {findings} finding(s); wrote {} (open report.html)",
@@ -296,7 +296,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             Ok(())
         }
         Command::NoiseProfiles { file, camera, out } => {
-            let s = camsim::noise_profiles_cmd::run_noise_profiles(&file, camera.as_deref(), &out)?;
+            let s = camsim_pipeline::noise_profiles_cmd::run_noise_profiles(&file, camera.as_deref(), &out)?;
             eprintln!(
                 "camsim: {} profiles, {} with b < 0; wrote {}",
                 s["census"]["profiles"],
@@ -305,8 +305,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             );
             Ok(())
         }
-        Command::Demo { cmd } => camsim::demo::run_demo(cmd),
-        Command::Lens { cmd } => camsim::lens_cmd::run_lens(cmd),
+        Command::Demo { cmd } => camsim_pipeline::demo::run_demo(cmd),
+        Command::Lens { cmd } => camsim_pipeline::lens_cmd::run_lens(cmd),
         Command::Study {
             spec,
             out,
@@ -316,18 +316,18 @@ fn run(cli: Cli) -> Result<(), CliError> {
             ray_num_cpus,
             ray_python,
         } => {
-            let opts = camsim::study::StudyOptions {
+            let opts = camsim_pipeline::study::StudyOptions {
                 out: out.clone(),
                 engine,
                 max_points,
-                ray: camsim::study::ray::RayOptions {
+                ray: camsim_pipeline::study::ray::RayOptions {
                     address: ray_address,
                     num_cpus: ray_num_cpus,
                     python: ray_python,
                 },
                 progress: true,
             };
-            let s = camsim::study::run_study(&spec, &opts)?;
+            let s = camsim_pipeline::study::run_study(&spec, &opts)?;
             eprintln!(
                 "camsim: study: {} points: {} evaluated, {} reused, {} pending; wrote {} (open report.html)",
                 s.points,
@@ -339,11 +339,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
             Ok(())
         }
         Command::StudyPoint { point, out } => {
-            camsim::study::run_point_file(&point, &out)?;
+            camsim_pipeline::study::run_point_file(&point, &out)?;
             Ok(())
         }
         Command::Render(a) => {
-            let s = camsim::render_cmd::run_render(&a, true)?;
+            let s = camsim_pipeline::render_cmd::run_render(&a, true)?;
             println!("{s}");
             Ok(())
         }

@@ -133,14 +133,14 @@ fn calibrate_recovers_the_simulated_camera() {
     )
     .unwrap();
     assert_eq!(fitted["sensor"]["read_noise_v"], c["read_noise_v"]["value"]);
-    camsim::config::load_camera(&d.path().join("cal/fitted_camera.json")).unwrap();
+    camsim_pipeline::config::load_camera(&d.path().join("cal/fitted_camera.json")).unwrap();
     for f in [
         "photon_transfer.png",
         "dark_signal.png",
         "dsnu_histogram.png",
         "spectral_qe.png",
     ] {
-        let k = camsim::plots::check_figure(&d.path().join("cal").join(f)).unwrap();
+        let k = camsim_pipeline::plots::check_figure(&d.path().join("cal").join(f)).unwrap();
         assert!(
             k.distinct_colours > 8 && k.non_white_per_mille > 10,
             "{f}: {k:?}"

@@ -145,12 +145,12 @@ fn frames_are_16bit_png_at_their_paths_and_deterministic_across_threads() {
         let a = std::fs::read(outs[0].join(f)).unwrap();
         let b = std::fs::read(outs[1].join(f)).unwrap();
         assert_eq!(a, b, "{f} differs between 1 and 2 threads");
-        let frame = camsim::frames::read_png16(&outs[0].join(f)).unwrap();
+        let frame = camsim_pipeline::frames::read_png16(&outs[0].join(f)).unwrap();
         assert_eq!((frame.rows, frame.cols), (48, 64));
     }
     // two frames of one shot differ (new temporal noise), nothing else was written
-    let a = camsim::frames::read_png16(&outs[0].join("raw/flat-0.png")).unwrap();
-    let b = camsim::frames::read_png16(&outs[0].join("raw/flat-1.png")).unwrap();
+    let a = camsim_pipeline::frames::read_png16(&outs[0].join("raw/flat-0.png")).unwrap();
+    let b = camsim_pipeline::frames::read_png16(&outs[0].join("raw/flat-1.png")).unwrap();
     assert_ne!(a.dn, b.dn);
     let names: Vec<_> = std::fs::read_dir(&outs[0])
         .unwrap()
@@ -240,7 +240,7 @@ fn bad_input_gives_one_clear_line_and_writes_nothing() {
         adc_bits: 12,
         dn: vec![0; 32],
     };
-    camsim::frames::write_png16(&dir.join("raw/flat-0.png"), &wrong).unwrap();
+    camsim_pipeline::frames::write_png16(&dir.join("raw/flat-0.png"), &wrong).unwrap();
     assert_bad(dir, &["flat-0.png", "4×8", "8×8"]);
     // a recorded frame of the wrong bit depth (8-bit PNG)
     let img = image::GrayImage::new(8, 8);
@@ -275,7 +275,7 @@ fn shipped_example_runs() {
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
-    let f = camsim::frames::read_png16(&dir.path().join("o/raw/macbeth-0.png")).unwrap();
+    let f = camsim_pipeline::frames::read_png16(&dir.path().join("o/raw/macbeth-0.png")).unwrap();
     assert_eq!((f.rows, f.cols), (480, 640));
     // auto-exposure to 90 % of the swing: the brightest pixels sit near 0.9 · 1023
     let max = *f.dn.iter().max().unwrap() as f64;
@@ -298,7 +298,7 @@ fn frames_are_written_in_the_recording_format() {
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
-    let tif = camsim::raw_input::read_frame(&dir.path().join("o/raw/flat-0.tif")).unwrap();
+    let tif = camsim_pipeline::raw_input::read_frame(&dir.path().join("o/raw/flat-0.tif")).unwrap();
     assert_eq!((tif.rows, tif.cols), (16, 24));
     assert_eq!(
         &std::fs::read(dir.path().join("o/raw/flat-0.tif")).unwrap()[..2],
@@ -314,7 +314,7 @@ fn frames_are_written_in_the_recording_format() {
         .output()
         .unwrap();
     assert!(st.status.success());
-    let png = camsim::frames::read_png16(&dir.path().join("p/raw/flat-0.png")).unwrap();
+    let png = camsim_pipeline::frames::read_png16(&dir.path().join("p/raw/flat-0.png")).unwrap();
     assert_eq!(tif.dn, png.dn);
 }
 
@@ -397,14 +397,14 @@ fn headerless_raw_frames_round_trip_and_real_raw_reads() {
     );
     let bytes = std::fs::read(dir.path().join("o/raw/flat-0.raw")).unwrap();
     assert_eq!(bytes.len(), 4 + 16 * 24 * 2);
-    let set = camsim::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
+    let set = camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
     let fmt = set.raw_format.unwrap();
-    let f = camsim::raw_input::read_raw(&dir.path().join("o/raw/flat-0.raw"), &fmt).unwrap();
+    let f = camsim_pipeline::raw_input::read_raw(&dir.path().join("o/raw/flat-0.raw"), &fmt).unwrap();
     assert_eq!(u16::from_be_bytes([bytes[4], bytes[5]]), f.dn[0]);
     assert!(f.dn.iter().any(|&v| v > 64), "a lit frame");
     // a raw file of the wrong length is one clear error
-    let bad = camsim::raw_input::RawFormat { rows: 10, ..fmt };
-    let e = camsim::raw_input::read_raw(&dir.path().join("o/raw/flat-0.raw"), &bad)
+    let bad = camsim_pipeline::raw_input::RawFormat { rows: 10, ..fmt };
+    let e = camsim_pipeline::raw_input::read_raw(&dir.path().join("o/raw/flat-0.raw"), &bad)
         .unwrap_err()
         .one_line();
     assert!(e.contains("flat-0.raw") && e.contains("bytes"), "{e}");
@@ -412,14 +412,14 @@ fn headerless_raw_frames_round_trip_and_real_raw_reads() {
     let real = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(
         "../shared/data/real/captures/mushfiqulalam_bayer/DSC_1339_768x512_rggb_uint16le.raw",
     );
-    let fmt = camsim::raw_input::RawFormat {
+    let fmt = camsim_pipeline::raw_input::RawFormat {
         rows: 512,
         cols: 768,
         bytes_per_sample: 2,
         little_endian: true,
         header_bytes: 0,
     };
-    let r = camsim::raw_input::read_raw(&real, &fmt).unwrap();
+    let r = camsim_pipeline::raw_input::read_raw(&real, &fmt).unwrap();
     let max = *r.dn.iter().max().unwrap();
     let min = *r.dn.iter().min().unwrap();
     assert!(

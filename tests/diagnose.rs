@@ -1,8 +1,8 @@
 //! `camsim diagnose` on concealed-effect capture sets (issue 6, acceptance 1–3).
 //!
-//! Every set comes from the project's generator (`camsim::demo::generate_capture_set`, the
+//! Every set comes from the project's generator (`camsim_pipeline::demo::generate_capture_set`, the
 //! library path of `camsim demo diagnose`), whose effect shapes differ from the fitted models
-//! (docs/effects.md, "forms"); the diagnosis runs through `camsim::diagnose_cmd::run_diagnose`
+//! (docs/effects.md, "forms"); the diagnosis runs through `camsim_pipeline::diagnose_cmd::run_diagnose`
 //! (the library path of `camsim diagnose`) and is judged from its report.json against the
 //! generator's truth.json.
 //!
@@ -11,9 +11,9 @@
 //!   near zero (stated per case);
 //! * χ²/dof after the fit: |χ²/dof − 1| ≤ 5·√(2/dof) (the χ² of `dof` independent unit terms
 //!   has σ = √(2·dof); 5σ), with dof from the report (≈ 2·10⁴ on these sets, so ≈ 0.05).
-use camsim::config::load_captures;
-use camsim::demo::{generate_capture_set, Concealment, DemoSpec};
-use camsim::diagnose_cmd::{run_diagnose, DiagnoseCmdOptions};
+use camsim_pipeline::config::load_captures;
+use camsim_pipeline::demo::{generate_capture_set, Concealment, DemoSpec};
+use camsim_pipeline::diagnose_cmd::{run_diagnose, DiagnoseCmdOptions};
 use serde_json::Value;
 use std::path::Path;
 
@@ -414,7 +414,7 @@ fn ambiguous_set_is_reported_undecided() {
 /// camera file: the expected image carries no drawn pattern, the recording does). Pixels
 /// with a frame at an ADC rail are left out. Returns (mean z, mean z², pixels).
 fn z_stats(
-    set: &camsim::config::CaptureSet,
+    set: &camsim_pipeline::config::CaptureSet,
     set_dir: &Path,
     shot: usize,
     expected_exr: &Path,
@@ -425,7 +425,7 @@ fn z_stats(
         .frames
         .iter()
         .map(|f| {
-            camsim::raw_input::read_frame_with(&set_dir.join(f), None)
+            camsim_pipeline::raw_input::read_frame_with(&set_dir.join(f), None)
                 .unwrap()
                 .dn
         })
@@ -463,7 +463,7 @@ fn z_stats(
 
 #[test]
 fn fitted_camera_simulates_the_recorded_mean() {
-    use camsim::simulate::{simulate, SimulateOptions};
+    use camsim_pipeline::simulate::{simulate, SimulateOptions};
     let o = diagnose_generated(&[("conversion_gain", 0.9)], Concealment::Mimicked, 2);
     assert!(findings(&o.report).iter().any(|f| f.0 == "conversion_gain"));
     let set_dir = o.dir.path().join("set");
@@ -568,8 +568,8 @@ fn every_output_of_the_spec_is_written() {
     assert!(!f["where"].as_str().unwrap().is_empty());
     // fitted_camera.json is a camera `camsim simulate` reads, with the finding in it.
     let out = o.dir.path().join("out");
-    let cam = camsim::config::load_camera(&out.join("fitted_camera.json")).unwrap();
-    let believed = camsim::config::load_camera(&o.dir.path().join("set/camera.json")).unwrap();
+    let cam = camsim_pipeline::config::load_camera(&out.join("fitted_camera.json")).unwrap();
+    let believed = camsim_pipeline::config::load_camera(&o.dir.path().join("set/camera.json")).unwrap();
     let dbl = cam.sensor.black_level_dn - believed.sensor.black_level_dn;
     assert!(
         (dbl - 6.5).abs() < 0.3 * 6.5,

@@ -1,8 +1,8 @@
 //! The effect blocks of effects.md (docs/effects.md) end to end: camera.json parsing and the
 //! Serialize round trip, one-line errors, and every block's physics through `camsim simulate`'s
 //! library path (scene → optics → sensor), each against a closed form or a direct computation.
-use camsim::config::{camera_file_json, load_camera, load_captures, read_camera_file, CaptureSet};
-use camsim::simulate::{shot_electron_rate, shot_irradiance, wavelength_grid};
+use camsim_pipeline::config::{camera_file_json, load_camera, load_captures, read_camera_file, CaptureSet};
+use camsim_pipeline::simulate::{shot_electron_rate, shot_irradiance, wavelength_grid};
 use camsim_sensor::{electron_rate, expected_dn, ElectronRate, Shot};
 use serde_json::{json, Value};
 use std::f64::consts::PI;
@@ -133,7 +133,7 @@ fn every_block_parses_and_round_trips_through_serialize() {
         let mut edited = raw.clone();
         edited.sensor.conversion_gain_v_per_e *= 1.1;
         edited.optics.exposure_scale = None;
-        camsim::config::write_camera_file(&q, &edited).unwrap();
+        camsim_pipeline::config::write_camera_file(&q, &edited).unwrap();
         let c = load_camera(&q).unwrap();
         assert!(c.optics.effects.exposure_scale.is_none());
         assert!(
@@ -792,9 +792,9 @@ fn expected_images_reflect_every_mean_effect_and_omit_hot_pixels() {
         let d = dir.path().join(name);
         std::fs::create_dir_all(&d).unwrap();
         let set = load(&d, cam, shots.clone(), None);
-        camsim::simulate::simulate(
+        camsim_pipeline::simulate::simulate(
             &set,
-            &camsim::simulate::SimulateOptions {
+            &camsim_pipeline::simulate::SimulateOptions {
                 out_dir: d.join("out"),
                 seed: 1,
                 expected: true,
@@ -888,9 +888,9 @@ fn nonlinearity_and_hot_pixels_in_simulated_frames() {
     let e = expected_dn(s, &rt, &Shot::new(s, t));
     let v = rt.electrons_per_s[0] as f64 * t * 5e-5;
     assert!((e[0] as f64 - (64.0 + 4095.0 * (v - a * v * v))).abs() < 1e-3);
-    camsim::simulate::simulate(
+    camsim_pipeline::simulate::simulate(
         &set,
-        &camsim::simulate::SimulateOptions {
+        &camsim_pipeline::simulate::SimulateOptions {
             out_dir: dir.path().join("out"),
             seed: 9,
             expected: false,
@@ -917,7 +917,7 @@ fn nonlinearity_and_hot_pixels_in_simulated_frames() {
 // ---------------------------------------------------------------------------------------
 // The concealed-effect generator (`camsim demo diagnose`)
 
-use camsim::demo::{generate_capture_set, Concealment, DemoSpec, EFFECT_IDS};
+use camsim_pipeline::demo::{generate_capture_set, Concealment, DemoSpec, EFFECT_IDS};
 
 fn demo_spec(effects: &[(&str, f64)], concealment: Concealment, seed: u64) -> DemoSpec {
     DemoSpec {
@@ -1024,9 +1024,9 @@ fn demo_null_set_is_the_believed_camera_exactly_and_effects_change_the_frames() 
     // Re-simulating the set with its own (believed) camera and seed gives the same frames.
     let set = load_captures(&t.captures_json, None).unwrap();
     let again = root.path().join("again");
-    camsim::simulate::simulate(
+    camsim_pipeline::simulate::simulate(
         &set,
-        &camsim::simulate::SimulateOptions {
+        &camsim_pipeline::simulate::SimulateOptions {
             out_dir: again.clone(),
             seed: 7,
             expected: false,

@@ -12,7 +12,7 @@
 //! pupil shifted by the real aim point), so the comparisons use the rayoptics backend, and
 //! tolerances are widened by the optiland–rayoptics spread where they differ.
 use crate::util::camsim;
-use camsim::plots::check_figure;
+use camsim_pipeline::plots::check_figure;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

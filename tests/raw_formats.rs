@@ -5,7 +5,7 @@
 //! the same numbers as the same frames stored as PNG.
 use crate::cli::{camera, write_set};
 use crate::util::camsim;
-use camsim::raw_input::{dng::read_dng, read_frame, read_raw, RawFormat};
+use camsim_pipeline::raw_input::{dng::read_dng, read_frame, read_raw, RawFormat};
 use serde_json::{json, Value};
 use std::io::Cursor;
 use std::path::Path;

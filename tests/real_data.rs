@@ -59,11 +59,11 @@ pub fn flea3_dark_set(dir: &Path) -> PathBuf {
 fn flea3_dark_series_dark_growth_and_hot_pixels() {
     let d = tempfile::tempdir().unwrap();
     let caps = flea3_dark_set(d.path());
-    let set = camsim::config::load_captures(&caps, None).unwrap();
+    let set = camsim_pipeline::config::load_captures(&caps, None).unwrap();
     // The data themselves: pixels above 10 DN appear only at long exposures (README: 0 → 18).
     let count_above = |id: &str| -> usize {
         let s = set.shots.iter().find(|s| s.id == id).unwrap();
-        let f = camsim::raw_input::read_frame(&set.dir.join(&s.frames[0])).unwrap();
+        let f = camsim_pipeline::raw_input::read_frame(&set.dir.join(&s.frames[0])).unwrap();
         f.dn.iter().filter(|&&v| v > 10).count()
     };
     let (short, long) = (count_above("d1-dark-25ms"), count_above("d1-dark-3916ms"));
@@ -72,7 +72,7 @@ fn flea3_dark_series_dark_growth_and_hot_pixels() {
         "pixels > 10 DN: {short} at 25 ms, {long} at 3.9 s"
     );
     let out = d.path().join("cal");
-    let c = camsim::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
+    let c = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
     eprintln!("flea3 calibration: {}", serde_json::to_string_pretty(&json!({
         "black_level_dn": c["black_level_dn"], "dark_voltage_v_per_s": c["dark_voltage_v_per_s"],
         "read_noise_v": c["read_noise_v"], "dsnu_sigma_v": c["dsnu_sigma_v"],
@@ -99,7 +99,7 @@ fn flea3_dark_series_dark_growth_and_hot_pixels() {
     // * yet the dark signal does grow with exposure in the data (mean DN of session 1):
     let mean_dn = |id: &str| -> f64 {
         let s = set.shots.iter().find(|s| s.id == id).unwrap();
-        let f = camsim::raw_input::read_frame(&set.dir.join(&s.frames[0])).unwrap();
+        let f = camsim_pipeline::raw_input::read_frame(&set.dir.join(&s.frames[0])).unwrap();
         f.dn.iter().map(|&v| v as f64).sum::<f64>() / f.dn.len() as f64
     };
     let (m0, m1) = (mean_dn("d1-dark-25ms"), mean_dn("d1-dark-3916ms"));
@@ -132,10 +132,10 @@ fn flea3_dark_series_dark_growth_and_hot_pixels() {
 #[test]
 fn flea3_bandpass_recovers_channel_efficiencies() {
     let d = tempfile::tempdir().unwrap();
-    let caps = camsim::datasets::llanos_flea3_bandpass(&flea3_dir(), d.path()).unwrap();
-    let set = camsim::config::load_captures(&caps, None).unwrap();
+    let caps = camsim_pipeline::datasets::llanos_flea3_bandpass(&flea3_dir(), d.path()).unwrap();
+    let set = camsim_pipeline::config::load_captures(&caps, None).unwrap();
     let out = d.path().join("cal");
-    let c = camsim::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
+    let c = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
     let ch = &c["chart_channel_qe"];
     assert_eq!(ch["fit"]["status"], "estimated", "{}", ch["fit"]);
     let notes = ch["notes"].to_string();
@@ -198,7 +198,7 @@ fn flea3_bandpass_recovers_channel_efficiencies() {
     }
     // the fit's figures exist and are drawn; copied for the docs on request
     for fig in ["chart_spectral_qe.png", "chart_fit.png"] {
-        let chk = camsim::plots::check_figure(&out.join(fig)).unwrap();
+        let chk = camsim_pipeline::plots::check_figure(&out.join(fig)).unwrap();
         assert!(chk.non_white_per_mille > 20, "{fig}: {chk:?}");
     }
     if let Ok(dir) = std::env::var("CAMSIM_DOC_FIGURES") {
@@ -232,14 +232,14 @@ fn flea3_dark_series_through_diagnose() {
         .unwrap()
         .retain(|s| s["id"].as_str().unwrap().starts_with("d1"));
     std::fs::write(&caps, c.to_string()).unwrap();
-    let set = camsim::config::load_captures(&caps, None).unwrap();
+    let set = camsim_pipeline::config::load_captures(&caps, None).unwrap();
     let out = d.path().join("diag");
-    let opts = camsim::diagnose_cmd::DiagnoseCmdOptions {
+    let opts = camsim_pipeline::diagnose_cmd::DiagnoseCmdOptions {
         bic_threshold: 10.0,
         effects: Vec::new(),
         progress: false,
     };
-    let r = camsim::diagnose_cmd::run_diagnose(&set, &out, &opts).unwrap();
+    let r = camsim_pipeline::diagnose_cmd::run_diagnose(&set, &out, &opts).unwrap();
     println!(
         "flea3 diagnose: {}",
         serde_json::to_string_pretty(&json!({
@@ -293,7 +293,7 @@ fn noise_profiles_cli_on_the_darktable_file() {
         "noise_camera_full_scale.png",
         "noise_camera_read_noise.png",
     ] {
-        let chk = camsim::plots::check_figure(&out.join(fig)).unwrap();
+        let chk = camsim_pipeline::plots::check_figure(&out.join(fig)).unwrap();
         assert!(chk.non_white_per_mille > 10, "{fig}: {chk:?}");
     }
     let st = crate::util::camsim()

@@ -145,7 +145,7 @@ fn render_reports_bad_input_on_one_line() {
 #[test]
 fn run_accepts_a_gltf_scene() {
     let d = tempfile::tempdir().unwrap();
-    let mut cam: Value = serde_json::from_str(camsim::run::TABLE1_CAMERA).unwrap();
+    let mut cam: Value = serde_json::from_str(camsim_pipeline::run::TABLE1_CAMERA).unwrap();
     cam["sensor"]["rows"] = json!(48);
     cam["sensor"]["cols"] = json!(64);
     let cfg = json!({

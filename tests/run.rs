@@ -1,6 +1,6 @@
 //! `camsim run`: the paper's §3 study end to end (issue: processor, display, metrics).
 use crate::util::camsim;
-use camsim::plots::check_figure;
+use camsim_pipeline::plots::check_figure;
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -48,7 +48,7 @@ fn default_run_writes_every_product_and_real_figures() {
         assert!(e.image.plane_means().iter().sum::<f64>() > 0.0);
     }
     // raw is the sensor's 16-bit mosaic
-    let raw = camsim::frames::read_png16(&o.join("raw.png")).unwrap();
+    let raw = camsim_pipeline::frames::read_png16(&o.join("raw.png")).unwrap();
     assert_eq!((raw.rows, raw.cols), (480, 640));
     // the paper's setup: Table 1 camera, tungsten Macbeth at 61 cd/m²
     assert!((s["scene_mean_luminance_cd_m2"].as_f64().unwrap() - 61.0).abs() < 0.01);
@@ -75,7 +75,7 @@ fn default_run_writes_every_product_and_real_figures() {
 }
 
 fn small_config(dir: &Path, processor: Value) -> std::path::PathBuf {
-    let mut cam: Value = serde_json::from_str(camsim::run::TABLE1_CAMERA).unwrap();
+    let mut cam: Value = serde_json::from_str(camsim_pipeline::run::TABLE1_CAMERA).unwrap();
     cam["sensor"]["rows"] = json!(120);
     cam["sensor"]["cols"] = json!(180);
     cam["optics"]["blur"] = json!({"kind": "none"});
@@ -158,7 +158,7 @@ fn figures_module_draws_every_kind() {
     let p = d.path();
     let xs: Vec<f64> = (0..30).map(|i| i as f64).collect();
     let ys: Vec<f64> = xs.iter().map(|x| x * 0.9 + 3.0).collect();
-    camsim::plots::scatter(
+    camsim_pipeline::plots::scatter(
         &p.join("s.png"),
         "scatter",
         &xs,
@@ -168,8 +168,8 @@ fn figures_module_draws_every_kind() {
         true,
     )
     .unwrap();
-    camsim::plots::histogram(&p.join("h.png"), "hist", &ys, 10, "v").unwrap();
-    camsim::plots::bar_chart(
+    camsim_pipeline::plots::histogram(&p.join("h.png"), "hist", &ys, 10, "v").unwrap();
+    camsim_pipeline::plots::bar_chart(
         &p.join("b.png"),
         "bars",
         &xs.iter().map(|x| x.to_string()).collect::<Vec<_>>(),
@@ -177,7 +177,7 @@ fn figures_module_draws_every_kind() {
         "v",
     )
     .unwrap();
-    camsim::plots::line_plot(
+    camsim_pipeline::plots::line_plot(
         &p.join("l.png"),
         "lines",
         &[(
@@ -197,7 +197,7 @@ fn figures_module_draws_every_kind() {
     }
     // a blank canvas fails the check that the tests rely on
     let blank = vec![255u8; 30 * 20 * 3];
-    camsim::plots::rgb8_png(&p.join("blank.png"), &blank, 20, 30).unwrap();
+    camsim_pipeline::plots::rgb8_png(&p.join("blank.png"), &blank, 20, 30).unwrap();
     let c = check_figure(&p.join("blank.png")).unwrap();
     assert_eq!((c.distinct_colours, c.non_white_per_mille), (1, 0));
 }

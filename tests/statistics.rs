@@ -1,8 +1,8 @@
 //! Simulated frames agree statistically with the baseline model over a 1-megapixel flat
 //! field: mean within 0.5 %, variance within 3 % of the model's (spec acceptance 3).
 use crate::cli::{camera, captures, write_set};
-use camsim::config::load_captures;
-use camsim::simulate::{shot_electron_rate, wavelength_grid};
+use camsim_pipeline::config::load_captures;
+use camsim_pipeline::simulate::{shot_electron_rate, wavelength_grid};
 use camsim_sensor::{expected_dn, expose, fixed_pattern, Shot};
 
 #[test]

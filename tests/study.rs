@@ -546,7 +546,7 @@ fn codesign_ci_reproduces_the_expected_trends() {
     let mut n_fig = 0;
     for part in html.split("src=\"").skip(1) {
         let src = &part[..part.find('"').unwrap()];
-        let f = camsim::plots::check_figure(&out.join(src)).unwrap();
+        let f = camsim_pipeline::plots::check_figure(&out.join(src)).unwrap();
         assert!(f.width >= 16 && f.height >= 16, "{src}");
         assert!(
             f.distinct_colours >= 3 && f.non_white_per_mille >= 20,
@@ -731,7 +731,7 @@ fn dof_study_ci_depth_path_agrees_with_the_real_lens() {
     let mut n_fig = 0;
     for part in html.split("src=\"").skip(1) {
         let src = &part[..part.find('"').unwrap()];
-        let f = camsim::plots::check_figure(&out.join(src)).unwrap();
+        let f = camsim_pipeline::plots::check_figure(&out.join(src)).unwrap();
         assert!(f.width >= 16 && f.height >= 16, "{src}");
         assert!(
             f.distinct_colours >= 3 && f.non_white_per_mille >= 20,
@@ -863,7 +863,7 @@ fn lightfield_study_ci_refocus_and_resolution_loss() {
     let mut n_fig = 0;
     for part in html.split("src=\"").skip(1) {
         let src = &part[..part.find('"').unwrap()];
-        let f = camsim::plots::check_figure(&out.join(src)).unwrap();
+        let f = camsim_pipeline::plots::check_figure(&out.join(src)).unwrap();
         assert!(f.width >= 16 && f.height >= 16, "{src}");
         assert!(
             f.distinct_colours >= 3 && f.non_white_per_mille >= 20,

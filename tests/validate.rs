@@ -1,11 +1,11 @@
-//! `camsim validate` (library API `camsim::validate_cmd::run_validate`): a capture set recorded
+//! `camsim validate` (library API `camsim_pipeline::validate_cmd::run_validate`): a capture set recorded
 //! with `camsim simulate` is validated against the camera that made it (agreement) and against
 //! a camera whose conversion gain is 20 % off (the mismatch is found); the figures are real;
 //! a recording of the wrong size is one clear error and nothing is written.
 use crate::cli::{camera, write_set};
 use crate::util::camsim;
-use camsim::config::load_captures;
-use camsim::validate_cmd::run_validate;
+use camsim_pipeline::config::load_captures;
+use camsim_pipeline::validate_cmd::run_validate;
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -190,14 +190,14 @@ fn same_camera_agrees_and_figures_are_real() {
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     for fig in &figs {
-        let k = camsim::plots::check_figure(&out.join(fig)).unwrap();
+        let k = camsim_pipeline::plots::check_figure(&out.join(fig)).unwrap();
         assert!(
             k.distinct_colours > 8 && k.non_white_per_mille > 10,
             "{fig}: {k:?}"
         );
         assert!(html.contains(fig), "{fig} not in the report");
     }
-    let res = camsim::plots::check_figure(&out.join("residual_macbeth.png")).unwrap();
+    let res = camsim_pipeline::plots::check_figure(&out.join("residual_macbeth.png")).unwrap();
     assert_eq!((res.width, res.height), (COLS as u32, ROWS as u32));
 
     // with the recording's own seed the simulation reproduces the recording exactly
@@ -269,7 +269,7 @@ fn recording_of_the_wrong_size_is_one_clear_error_and_writes_nothing() {
         adc_bits: 12,
         dn: vec![100; 32],
     };
-    camsim::frames::write_png16(&d.path().join("raw/flat-1.png"), &wrong).unwrap();
+    camsim_pipeline::frames::write_png16(&d.path().join("raw/flat-1.png"), &wrong).unwrap();
     let set = load_captures(&d.path().join("captures.json"), None).unwrap();
     let out = d.path().join("val");
     let e = run_validate(&set, &out, VALIDATE_SEED, false).unwrap_err();

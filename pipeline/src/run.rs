@@ -32,9 +32,9 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
 /// The embedded default: the paper's §3 setup.
-pub const DEFAULT_CONFIG: &str = include_str!("../examples/run/default.json");
+pub const DEFAULT_CONFIG: &str = include_str!("../../examples/run/default.json");
 /// The Table 1 camera the default uses.
-pub const TABLE1_CAMERA: &str = include_str!("../examples/table1/camera.json");
+pub const TABLE1_CAMERA: &str = include_str!("../../examples/table1/camera.json");
 
 /// A run configuration as written (docs/run.md).
 #[derive(Debug, Clone, Deserialize)]

@@ -9,7 +9,7 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 
 /// The launcher script (tools/ray_study.py).
-pub const RAY_STUDY_PY: &str = include_str!("../../tools/ray_study.py");
+pub const RAY_STUDY_PY: &str = include_str!("../../../tools/ray_study.py");
 
 /// Ray settings.
 #[derive(Debug, Clone, Default)]

@@ -11,7 +11,7 @@ static FONT: Once = Once::new();
 /// Register the embedded font under the family name "sans-serif" (idempotent).
 pub fn init_fonts() {
     FONT.call_once(|| {
-        let bytes: &'static [u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+        let bytes: &'static [u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, bytes);
     });
 }
