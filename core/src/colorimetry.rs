@@ -1,4 +1,6 @@
-//! CIE colorimetry: XYZ, luminance, CIELAB and ΔE*ab (CIE 15:2004).
+//! CIE colorimetry: XYZ, luminance, CIELAB and ΔE*ab (CIE 15:2004), and the sRGB colour space
+//! (IEC 61966-2-1:1999): its XYZ ↔ linear-RGB matrices and its transfer curve. Every crate
+//! takes these from here; none keeps a copy.
 use crate::constants::LUMINOUS_EFFICACY_LM_PER_W;
 use crate::data;
 use crate::spectrum::Spectrum;
@@ -155,5 +157,96 @@ mod tests {
             8.492362455389074,
             max_relative = 1e-9
         );
+    }
+}
+
+/// CIE XYZ → linear sRGB (IEC 61966-2-1:1999, D65 white), applied as `rgb = M · xyz`: the
+/// matrix derived from the sRGB primaries and the D65 white point at full precision (the
+/// standard prints it rounded to four decimals); the exact inverse of [`LINEAR_SRGB_TO_XYZ`].
+pub const XYZ_TO_LINEAR_SRGB: [[f64; 3]; 3] = [
+    [3.2404542, -1.5371385, -0.4985314],
+    [-0.9692660, 1.8760108, 0.0415560],
+    [0.0556434, -0.2040259, 1.0572252],
+];
+
+/// Linear sRGB → CIE XYZ (IEC 61966-2-1:1999, D65 white), applied as `xyz = M · rgb`; its
+/// middle row is the luminance of the three primaries (sRGB (1, 1, 1) has Y = 1).
+pub const LINEAR_SRGB_TO_XYZ: [[f64; 3]; 3] = [
+    [0.4124564, 0.3575761, 0.1804375],
+    [0.2126729, 0.7151522, 0.0721750],
+    [0.0193339, 0.1191920, 0.9503041],
+];
+
+/// `m · v` for a row-major 3×3 matrix.
+#[inline]
+pub fn mat3_apply(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
+}
+
+/// Linear sRGB → CIE XYZ ([`LINEAR_SRGB_TO_XYZ`]).
+pub fn linear_srgb_to_xyz(rgb: [f64; 3]) -> [f64; 3] {
+    mat3_apply(&LINEAR_SRGB_TO_XYZ, rgb)
+}
+
+/// CIE XYZ → linear sRGB ([`XYZ_TO_LINEAR_SRGB`]).
+pub fn xyz_to_linear_srgb(xyz: [f64; 3]) -> [f64; 3] {
+    mat3_apply(&XYZ_TO_LINEAR_SRGB, xyz)
+}
+
+/// The sRGB transfer curve, linear → encoded (IEC 61966-2-1:1999 §5.2): `12.92 v` for
+/// `v ≤ 0.0031308`, else `1.055 v^(1/2.4) − 0.055`. Negative inputs are mirrored (odd
+/// extension), so the curve is invertible on the whole line; quantisation is the caller's.
+pub fn srgb_encode(v: f64) -> f64 {
+    if v < 0.0 {
+        -srgb_encode(-v)
+    } else if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The sRGB transfer curve, encoded → linear (IEC 61966-2-1:1999 §5.2): `e / 12.92` for
+/// `e ≤ 0.04045`, else `((e + 0.055) / 1.055)^2.4`; odd extension for negative inputs.
+pub fn srgb_decode(e: f64) -> f64 {
+    if e < 0.0 {
+        -srgb_decode(-e)
+    } else if e <= 0.040_45 {
+        e / 12.92
+    } else {
+        ((e + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+#[cfg(test)]
+mod srgb_tests {
+    use super::*;
+
+    #[test]
+    fn srgb_matrices_invert_and_white_maps_to_d65() {
+        for i in 0..3 {
+            for j in 0..3 {
+                let e: f64 = (0..3)
+                    .map(|k| XYZ_TO_LINEAR_SRGB[i][k] * LINEAR_SRGB_TO_XYZ[k][j])
+                    .sum();
+                assert!((e - if i == j { 1.0 } else { 0.0 }).abs() < 2e-6, "{i}{j}: {e}");
+            }
+        }
+        // D65 white (x, y) = (0.3127, 0.3290), Y = 1.
+        let w = linear_srgb_to_xyz([1.0; 3]);
+        let s = w[0] + w[1] + w[2];
+        assert!((w[1] - 1.0).abs() < 1e-6);
+        assert!((w[0] / s - 0.3127).abs() < 5e-5 && (w[1] / s - 0.3290).abs() < 5e-5);
+    }
+
+    #[test]
+    fn srgb_curve_round_trips_and_is_continuous_at_the_knee() {
+        for k in -100..=100 {
+            let v = k as f64 / 80.0;
+            assert!((srgb_decode(srgb_encode(v)) - v).abs() < 1e-12);
+        }
+        let a = 12.92 * 0.003_130_8;
+        let b = 1.055 * 0.003_130_8_f64.powf(1.0 / 2.4) - 0.055;
+        assert!((a - b).abs() < 1e-6);
     }
 }

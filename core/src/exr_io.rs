@@ -92,6 +92,68 @@ fn exr_err(path: &Path, e: impl std::fmt::Display) -> CoreError {
     }
 }
 
+/// One float32 channel of an EXR file: its name and `width × height` samples, row-major.
+#[derive(Debug, Clone)]
+pub struct ExrChannel {
+    /// Channel name (e.g. `S0.550,000000nm`, `Z`, `Y`).
+    pub name: String,
+    /// Row-major samples.
+    pub data: Vec<f32>,
+}
+
+impl ExrChannel {
+    /// A named channel.
+    pub fn new(name: impl Into<String>, data: Vec<f32>) -> Self {
+        ExrChannel {
+            name: name.into(),
+            data,
+        }
+    }
+}
+
+/// The one EXR writer of the workspace: float32 `channels` of `width × height` with the given
+/// text header attributes, lossless, written atomically (temporary file + rename); errors as
+/// strings for the caller to wrap.
+pub fn write_exr_channels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: Vec<ExrChannel>,
+    text_attributes: &[(&str, &str)],
+) -> Result<(), String> {
+    let n = width.checked_mul(height).ok_or("image size overflows")?;
+    if let Some(c) = channels.iter().find(|c| c.data.len() != n) {
+        return Err(format!(
+            "channel {} has {} samples, expected {width} x {height}",
+            c.name,
+            c.data.len()
+        ));
+    }
+    let channels: Vec<AnyChannel<FlatSamples>> = channels
+        .into_iter()
+        .map(|c| AnyChannel::new(c.name.as_str(), FlatSamples::F32(c.data)))
+        .collect();
+    let mut attrs = LayerAttributes::default();
+    for (k, v) in text_attributes {
+        attrs
+            .other
+            .insert(Text::from(*k), AttributeValue::Text(Text::from(*v)));
+    }
+    let layer = Layer::new(
+        (width, height),
+        attrs,
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(channels.into_iter().collect()),
+    );
+    let img = Image::from_layer(layer);
+    write_atomically(path, |tmp| {
+        img.write()
+            .to_file(tmp)
+            .map_err(|e| std::io::Error::other(e.to_string()))
+    })
+    .map_err(|e| e.to_string())
+}
+
 /// Write a band image (values per nm in `emissive_units`) with optional depth.
 pub fn write_spectral_exr(
     path: &Path,
@@ -108,39 +170,28 @@ pub fn write_spectral_exr(
             ))
         }
     };
-    let mut channels: Vec<AnyChannel<FlatSamples>> = grid
+    let mut channels: Vec<ExrChannel> = grid
         .wavelength_nm
         .iter()
         .zip(&image.planes)
-        .map(|(w, p)| AnyChannel::new(channel_name(*w).as_str(), FlatSamples::F32(p.clone())))
+        .map(|(w, p)| ExrChannel::new(channel_name(*w), p.clone()))
         .collect();
     if let Some(d) = depth_m {
         if d.rows != image.rows || d.cols != image.cols {
             return Err(exr_err(path, "depth plane size differs from the image"));
         }
-        channels.push(AnyChannel::new("Z", FlatSamples::F32(d.data.clone())));
+        channels.push(ExrChannel::new("Z", d.data.clone()));
     }
-    let mut attrs = LayerAttributes::default();
-    attrs.other.insert(
-        Text::from("spectralLayoutVersion"),
-        AttributeValue::Text(Text::from("1.0")),
-    );
-    attrs.other.insert(
-        Text::from("emissiveUnits"),
-        AttributeValue::Text(Text::from(emissive_units)),
-    );
-    let layer = Layer::new(
-        (image.cols, image.rows),
-        attrs,
-        Encoding::FAST_LOSSLESS,
-        AnyChannels::sort(channels.into_iter().collect()),
-    );
-    let img = Image::from_layer(layer);
-    write_atomically(path, |tmp| {
-        img.write()
-            .to_file(tmp)
-            .map_err(|e| std::io::Error::other(e.to_string()))
-    })
+    write_exr_channels(
+        path,
+        image.cols,
+        image.rows,
+        channels,
+        &[
+            ("spectralLayoutVersion", "1.0"),
+            ("emissiveUnits", emissive_units),
+        ],
+    )
     .map_err(|e| exr_err(path, e))
 }
 
@@ -150,19 +201,13 @@ pub fn write_single_channel_exr(
     channel: &str,
     plane: &Plane,
 ) -> Result<(), CoreError> {
-    let ch = AnyChannel::new(channel, FlatSamples::F32(plane.data.clone()));
-    let layer = Layer::new(
-        (plane.cols, plane.rows),
-        LayerAttributes::default(),
-        Encoding::FAST_LOSSLESS,
-        AnyChannels::sort(smallvec::smallvec![ch]),
-    );
-    let img = Image::from_layer(layer);
-    write_atomically(path, |tmp| {
-        img.write()
-            .to_file(tmp)
-            .map_err(|e| std::io::Error::other(e.to_string()))
-    })
+    write_exr_channels(
+        path,
+        plane.cols,
+        plane.rows,
+        vec![ExrChannel::new(channel, plane.data.clone())],
+        &[],
+    )
     .map_err(|e| exr_err(path, e))
 }
 

@@ -7,12 +7,7 @@ use camsim_core::{data, Spectrum};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-/// XYZ → linear sRGB (IEC 61966-2-1:1999, D65 white), applied as `rgb = M · xyz`.
-pub const XYZ_TO_LINEAR_SRGB: [[f64; 3]; 3] = [
-    [3.2406, -1.5372, -0.4986],
-    [-0.9689, 1.8758, 0.0415],
-    [0.0557, -0.2040, 1.0570],
-];
+pub use camsim_core::colorimetry::XYZ_TO_LINEAR_SRGB;
 
 /// Index of the white patch ("white 9.5", row 4 column 1) in the row-major Macbeth order of
 /// [`camsim_core::data::macbeth_reflectances_row_major`].

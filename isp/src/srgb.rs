@@ -3,29 +3,7 @@
 use crate::mosaic::RgbImage;
 use rayon::prelude::*;
 
-/// Linear → sRGB-encoded value: `12.92 v` for `v ≤ 0.0031308`, else `1.055 v^(1/2.4) − 0.055`
-/// (IEC 61966-2-1). Negative inputs are mirrored (odd extension), so the curve is invertible on
-/// the whole line; quantisation clips to [0, 1].
-pub fn srgb_encode(v: f64) -> f64 {
-    if v < 0.0 {
-        -srgb_encode(-v)
-    } else if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-/// sRGB-encoded → linear: `e / 12.92` for `e ≤ 0.04045`, else `((e + 0.055) / 1.055)^2.4`.
-pub fn srgb_decode(e: f64) -> f64 {
-    if e < 0.0 {
-        -srgb_decode(-e)
-    } else if e <= 0.040_45 {
-        e / 12.92
-    } else {
-        ((e + 0.055) / 1.055).powf(2.4)
-    }
-}
+pub use camsim_core::colorimetry::{srgb_decode, srgb_encode};
 
 fn quantise(img: &RgbImage, max_code: f64) -> Vec<f64> {
     img.data

@@ -37,8 +37,15 @@ pub fn camera_equation_factor_isetcam(f_number: f64, magnification: f64) -> f64 
 /// Plain cos⁴ relative illumination at distance `r_m` from the optical axis: `cos⁴θ` with
 /// `tan θ = r / f`, i.e. `(f² / (f² + r²))²`.
 pub fn relative_illumination_cos4(r_m: f64, focal_length_m: f64) -> f64 {
+    relative_illumination_cos4_r2(r_m * r_m, focal_length_m)
+}
+
+/// [`relative_illumination_cos4`] from the squared distance `r2_m2 = x² + y²` (no square root,
+/// for per-pixel loops): `(f² / (f² + r²))²`.
+#[inline]
+pub fn relative_illumination_cos4_r2(r2_m2: f64, focal_length_m: f64) -> f64 {
     let f2 = focal_length_m * focal_length_m;
-    let c2 = f2 / (f2 + r_m * r_m);
+    let c2 = f2 / (f2 + r2_m2);
     c2 * c2
 }
 

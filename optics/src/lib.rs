@@ -35,8 +35,6 @@ mod lens_blur;
 mod psf_set;
 
 pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
-/// The lens ray tracer (prescriptions, field models) used by [`Blur::Lens`].
-pub use camsim_lens as lens;
 pub use effects::{
     equivalent_gaussian_sigma_um, two_circle_overlap_fraction, Defocus, Distortion, Falloff,
     LateralColor, LateralColorKind, OpticsEffects,
@@ -45,6 +43,7 @@ pub use error::OpticsError;
 pub use formulas::{
     airy_first_zero_m, airy_first_zero_rad, airy_psf, bessel_j1, camera_equation_factor,
     camera_equation_factor_isetcam, diffraction_otf, magnification, relative_illumination_cos4,
+    relative_illumination_cos4_r2,
     relative_illumination_isetcam, sigma_from_fwhm, thin_lens_image_distance_m,
 };
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};

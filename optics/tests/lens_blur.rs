@@ -2,7 +2,7 @@
 //! point-source positions and spreads, energy and relative illumination of a uniform scene,
 //! and distortion of a line grid.
 use camsim_core::{SpectralBasis, SpectralImage, Spectrum, WavelengthGrid};
-use camsim_optics::lens::{Clipping, GlassCatalog, LensPrescription};
+use camsim_lens::{Clipping, GlassCatalog, LensPrescription};
 use camsim_optics::{
     camera_equation_factor, form_image, Blur, LensBlur, LensBlurOptions, OpticsModel, SceneRadiance,
 };
@@ -29,8 +29,8 @@ fn scaled(l: &LensPrescription, s: f64) -> LensPrescription {
     }
     l.object_distance_mm = l.object_distance_mm.map(|d| d * s);
     l.aperture = match l.aperture {
-        camsim_optics::lens::prescription::Aperture::EntrancePupilDiameter(d) => {
-            camsim_optics::lens::prescription::Aperture::EntrancePupilDiameter(d * s)
+        camsim_lens::prescription::Aperture::EntrancePupilDiameter(d) => {
+            camsim_lens::prescription::Aperture::EntrancePupilDiameter(d * s)
         }
         a => a,
     };
@@ -119,7 +119,7 @@ fn point_sources_land_on_the_traced_spot_with_the_traced_rms() {
     let mut o = LensBlurOptions::covering(6.5);
     o.wavelengths_nm = vec![w];
     let lb = LensBlur::from_prescription(&l, &o).unwrap();
-    assert_eq!(lb.model.psf_kind, camsim_optics::lens::PsfKind::Geometric);
+    assert_eq!(lb.model.psf_kind, camsim_lens::PsfKind::Geometric);
     let pt = per_tan(&lf);
     let dx = 10e-6;
     let half = 630usize;

@@ -7,6 +7,7 @@
 //! filters, at several exposures) feed Appendix B per patch ([`patch_spectral`]).
 pub mod patch_spectral;
 
+use crate::report::html_escape;
 use crate::config::CaptureSet;
 use crate::error::CliError;
 use crate::plots;
@@ -188,11 +189,6 @@ fn outcome_row(name: &str, o: &Outcome<camsim_diagnose::Estimate>) -> String {
     }
 }
 
-fn html_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
 
 /// Run the calibration and write its outputs into `out` (all or nothing).
 pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Value, CliError> {

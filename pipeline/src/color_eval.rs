@@ -7,15 +7,7 @@ use camsim_isp::{srgb_decode, srgb_encode, RgbImage};
 use camsim_metrics::{delta_e_2000, delta_e_stats, patch_sample_rect, ChartLayout, DeltaEStats};
 use serde_json::{json, Value};
 
-/// Linear sRGB → XYZ (inverse of IEC 61966-2-1's XYZ → linear sRGB).
-pub fn srgb_to_xyz(rgb: [f64; 3]) -> [f64; 3] {
-    let m = [
-        [0.4124564, 0.3575761, 0.1804375],
-        [0.2126729, 0.7151522, 0.0721750],
-        [0.0193339, 0.1191920, 0.9503041],
-    ];
-    [0, 1, 2].map(|i| m[i][0] * rgb[0] + m[i][1] * rgb[1] + m[i][2] * rgb[2])
-}
+pub use camsim_core::colorimetry::linear_srgb_to_xyz as srgb_to_xyz;
 
 /// CIELAB of a linear sRGB value, the white being sRGB (1, 1, 1).
 pub fn linear_srgb_to_lab(v: [f64; 3]) -> Lab {

@@ -10,7 +10,8 @@
 //! functions). Deterministic in the seed.
 use crate::config::{load_camera, load_captures, CameraFile};
 use crate::error::CliError;
-use crate::simulate::{shot_electron_rate, simulate, wavelength_grid, SimulateOptions};
+use crate::chain::{shot_electron_rate, wavelength_grid};
+use crate::simulate::{simulate, SimulateOptions};
 use camsim_core::image::SpectralImage;
 use camsim_core::spectrum::WavelengthGrid;
 use camsim_optics::{two_circle_overlap_fraction, Defocus};

@@ -12,7 +12,7 @@ mod figures;
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure};
 use crate::error::CliError;
 use crate::raw_input::read_frame_with;
-use crate::simulate::{sampling_for, shot_irradiance, wavelength_grid};
+use crate::chain::{sampling_for, shot_irradiance, wavelength_grid};
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_diagnose::mismatch::{
@@ -746,7 +746,7 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
 mod tests {
     use super::*;
     use crate::demo::{generate_capture_set, Concealment, DemoSpec};
-    use crate::simulate::shot_electron_rate;
+    use crate::chain::shot_electron_rate;
 
     /// The forward model through cached pixel planes equals `simulate`'s per-shot electron
     /// rates of the same camera (QE blocks and an optics block applied), also on a cache hit.

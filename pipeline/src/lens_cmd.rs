@@ -32,6 +32,7 @@
 //!   on-axis polychromatic RMS spot of the report wavelengths), as ref_lens.py's
 //!   `mtf_best_focus_primary`; `--mtf-focus paraxial` uses the paraxial image plane.
 //!   On axis the tangential and sagittal MTFs coincide; their mean is reported.
+use crate::report::html_escape;
 use crate::error::CliError;
 use crate::plots;
 use crate::staging::with_staging;
@@ -721,12 +722,6 @@ pub fn lens_report(
     })
 }
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
 
 /// Write report.json, report.html and the figures into `dir` (a staging folder); returns the
 /// relative file names.
@@ -899,8 +894,8 @@ fn write_report_files(
     h.push_str("<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}figure{display:inline-block;margin:8px;vertical-align:top}figure img{max-width:520px;border:1px solid #ccc}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f3f3f3}</style></head><body>");
     h.push_str(&format!(
         "<h1>camsim lens report</h1><p>{} — <code>{}</code></p>",
-        esc(&data.name),
-        esc(&lens_path.display().to_string())
+        html_escape(&data.name),
+        html_escape(&lens_path.display().to_string())
     ));
     h.push_str("<h2>First order</h2><table>");
     for (k, label) in [
@@ -918,7 +913,7 @@ fn write_report_files(
     h.push_str("</table>");
     h.push_str("<h2>Fields</h2><table><tr><th>fraction</th><th>angle (°)</th><th>chief-ray height (mm)</th><th>paraxial height (mm)</th><th>distortion (%)</th><th>lateral colour F−C (µm)</th>");
     for key in &opts.wavelengths {
-        h.push_str(&format!("<th>RMS spot {} nm (µm)</th>", esc(key.trim())));
+        h.push_str(&format!("<th>RMS spot {} nm (µm)</th>", html_escape(key.trim())));
     }
     h.push_str("</tr>");
     for f in &fields {
@@ -964,7 +959,7 @@ fn write_report_files(
     for key in &opts.wavelengths {
         h.push_str(&format!(
             "<th>sagittal {0} nm (mm)</th><th>tangential {0} nm (mm)</th>",
-            esc(key.trim())
+            html_escape(key.trim())
         ));
     }
     h.push_str("</tr>");
@@ -1018,8 +1013,8 @@ fn write_report_files(
     for (file, caption) in &figures {
         h.push_str(&format!(
             "<figure><img src=\"{0}\" alt=\"{1}\"><figcaption>{1}</figcaption></figure>",
-            esc(file),
-            esc(caption)
+            html_escape(file),
+            html_escape(caption)
         ));
     }
     h.push_str(
@@ -1580,7 +1575,7 @@ pub fn draw_svg(
     };
     let mut o = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w_px:.0}\" height=\"{h_px:.0}\" viewBox=\"0 0 {w_px:.0} {h_px:.0}\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n<text x=\"{margin}\" y=\"20\" font-family=\"sans-serif\" font-size=\"14\">{} — EFL {:.3} mm, F/{:.2}, fields 0° and {:.2}° at {} nm</text>\n",
-        esc(&lens.name),
+        html_escape(&lens.name),
         fo.efl_mm,
         fo.f_number,
         max_field_deg,

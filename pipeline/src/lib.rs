@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod calibrate_cmd;
+pub mod chain;
 pub mod color_eval;
 pub mod config;
 pub mod datasets;
@@ -23,6 +24,7 @@ pub mod report;
 pub mod run;
 pub mod scene_cmd;
 pub mod simulate;
+pub mod spectrum_file;
 pub mod staging;
 pub mod study;
 pub mod targets;

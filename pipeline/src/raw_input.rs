@@ -4,9 +4,39 @@
 pub mod dng;
 
 use crate::error::CliError;
-use crate::frames::read_png16;
 use camsim_core::RawFrame;
+use std::fs::File;
+use std::io::BufReader;
 use std::path::Path;
+
+/// Read a 16-bit greyscale PNG frame.
+pub fn read_png16(path: &Path) -> Result<RawFrame, CliError> {
+    let f =
+        File::open(path).map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
+    let mut r = png::Decoder::new(BufReader::new(f))
+        .read_info()
+        .map_err(|e| CliError::input(path, format!("not a readable PNG: {e}")))?;
+    let info = r.info().clone();
+    if info.bit_depth != png::BitDepth::Sixteen || info.color_type != png::ColorType::Grayscale {
+        return Err(CliError::input(
+            path,
+            "frame must be a single-channel 16-bit PNG",
+        ));
+    }
+    let mut buf = vec![0u8; r.output_buffer_size().unwrap_or(0)];
+    r.next_frame(&mut buf)
+        .map_err(|e| CliError::input(path, format!("corrupt PNG: {e}")))?;
+    let dn = buf
+        .chunks_exact(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect();
+    Ok(RawFrame {
+        rows: info.height as usize,
+        cols: info.width as usize,
+        adc_bits: 16,
+        dn,
+    })
+}
 
 /// Layout of a headerless raw frame file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

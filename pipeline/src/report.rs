@@ -2,7 +2,9 @@
 //! numbers of summary.json.
 use serde_json::Value;
 
-fn esc(s: &str) -> String {
+/// Escapes text for HTML element content and attribute values (`&`, `<`, `>`, `"`): the one
+/// escaping function of every report page.
+pub fn html_escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
@@ -71,8 +73,8 @@ pub fn run_report_html(summary: &Value, figures: &[(&str, &str)]) -> String {
     for (k, v) in rows {
         h.push_str(&format!(
             "<tr><th style=\"text-align:left\">{}</th><td style=\"text-align:left\">{}</td></tr>",
-            esc(k),
-            esc(&v)
+            html_escape(k),
+            html_escape(&v)
         ));
     }
     h.push_str("</table>");
@@ -94,9 +96,9 @@ pub fn run_report_html(summary: &Value, figures: &[(&str, &str)]) -> String {
     for (file, caption) in figures {
         h.push_str(&format!(
             "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
-            esc(file),
-            esc(caption),
-            esc(caption)
+            html_escape(file),
+            html_escape(caption),
+            html_escape(caption)
         ));
     }
     if let Some(snr) = summary.get("patch_snr") {
@@ -121,7 +123,7 @@ pub fn run_report_html(summary: &Value, figures: &[(&str, &str)]) -> String {
     h.push_str("<h2>Files</h2><ul>");
     for f in summary["files"].as_array().into_iter().flatten() {
         let f = f.as_str().unwrap_or("");
-        h.push_str(&format!("<li><a href=\"{0}\">{0}</a></li>", esc(f)));
+        h.push_str(&format!("<li><a href=\"{0}\">{0}</a></li>", html_escape(f)));
     }
     h.push_str("</ul></body></html>\n");
     h

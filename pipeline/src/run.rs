@@ -9,7 +9,7 @@ use crate::color_eval::{self, patch_means};
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure, SimulationFile};
 use crate::error::CliError;
 use crate::plots;
-use crate::simulate::{shot_scene, wavelength_grid};
+use crate::chain::{shot_scene, wavelength_grid};
 use crate::staging::with_staging;
 use crate::targets::target_from_value;
 use camsim_core::constants::SI;
@@ -26,7 +26,7 @@ use camsim_isp::{
     XYZ_TO_LINEAR_SRGB,
 };
 use camsim_metrics::{patch_stats, ChartLayout};
-use camsim_sensor::{electron_rate, expose, fixed_pattern, Shot as SensorShot};
+use camsim_sensor::{electron_rate, fixed_pattern};
 use serde::Deserialize;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -418,7 +418,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     )
     .expect("grid");
     let (os, margin) =
-        crate::simulate::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
+        crate::chain::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
     let scene = match &r.render {
         Some(rf) => render_scene(rf, r.seed, sensor, os, margin, &grid)?,
         None => shot_scene(set, 0, &grid)?,
@@ -440,8 +440,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 
     // 2. Optics
     bar.set_message("optics");
-    let irr = camsim_optics::form_image(&cam.optics, &scene, &grid)
-        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
+    let irr = crate::chain::irradiance_of(set, &scene, &grid)?;
     let mut irr_w =
         to_sensor_pixels(&irr.irradiance, os, margin, sensor.rows, sensor.cols).to_bands(&exr_grid);
     bands_energy_to_photons(&mut irr_w, &SI, true);
@@ -452,16 +451,17 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     // 3. Sensor
     bar.set_message("sensor");
     let rate = electron_rate(sensor, &irr);
-    let exposure_s = match set.shots[0].exposure {
-        Exposure::Fixed(t) => t,
-        Exposure::Auto(f) => camsim_sensor::auto_exposure_s(sensor, &rate, f),
-    };
-    let shot = SensorShot {
-        exposure_s,
-        analog_gain: set.shots[0].analog_gain,
-    };
+    let shot = crate::chain::shot_exposure(set, 0, &rate);
+    let exposure_s = shot.exposure_s;
     let fixed = fixed_pattern(sensor, r.seed);
-    let raw = expose(sensor, &rate, &shot, &fixed, r.seed, &[0, 0]);
+    let raw = crate::chain::simulate_frame(
+        sensor,
+        &rate,
+        &shot,
+        camsim_sensor::PatternSource::Maps(&fixed),
+        r.seed,
+        &[0, 0],
+    );
     let p = put("raw.png");
     crate::frames::write_png16(&p, &raw)?;
     let max_dn = (1u32 << sensor.adc_bits) - 1;

@@ -3,14 +3,13 @@
 //! a k-term linear model (§2.A of the paper).
 use crate::config::CaptureSet;
 use crate::error::CliError;
-use crate::simulate::{shot_scene, wavelength_grid};
+use crate::chain::{shot_scene, wavelength_grid};
 use camsim_core::constants::SI;
 use camsim_core::exr_io::{
     bands_energy_to_photons, write_atomically, write_spectral_exr, IRRADIANCE_UNITS, RADIANCE_UNITS,
 };
 use camsim_core::linear_model::compress;
 use camsim_core::scene::mean_luminance;
-use camsim_optics::form_image;
 use serde_json::json;
 use std::path::Path;
 
@@ -40,8 +39,7 @@ pub fn write_scene(
         })?;
     let grid = wavelength_grid(set);
     let scene = shot_scene(set, idx, &grid)?;
-    let irr = form_image(&set.camera.optics, &scene, &grid)
-        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?;
+    let irr = crate::chain::irradiance_of(set, &scene, &grid)?;
     std::fs::create_dir_all(out).map_err(|e| CliError::output(out, e))?;
     let mut rad_w = scene.radiance.to_bands(&grid);
     bands_energy_to_photons(&mut rad_w, &SI, true);

@@ -1,18 +1,18 @@
 //! `camsim simulate`: the baseline forward model of ../spec/capture-format.md applied to every
 //! shot of a capture set: target → SceneRadiance → optics → SensorIrradiance → sensor →
 //! frames (or, with `--expected`, the noise-free expected image per shot).
-use crate::config::{CaptureSet, Exposure};
+use crate::config::CaptureSet;
 use crate::error::CliError;
 use crate::frames;
 use camsim_core::constants::SI;
 use camsim_core::exr_io::write_single_channel_exr;
-use camsim_core::image::{Plane, SceneRadiance, SensorIrradiance};
+use camsim_core::image::{SceneRadiance, SensorIrradiance};
 use camsim_core::scene::{render_target, scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};
 use camsim_sensor::{
-    electron_rate, expected_dn, expose_with, fixed_pattern, ElectronRate, FixedPattern,
-    PatternSource, SensorModel, Shot,
+    electron_rate, fixed_pattern, ElectronRate, FixedPattern,
+    PatternSource, SensorModel,
 };
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -254,7 +254,7 @@ fn uniform_electron_rate(
     // at the pixel centres ((j − (cols−1)/2)·dx, (i − (rows−1)/2)·dx); R = 1 without fall-off.
     let cos4 = cam.optics.relative_illumination == RelativeIllumination::Cos4;
     let (f, dx) = (cam.optics.focal_length_m, irr.sample_pitch_m);
-    let f2 = f * f;
+    let cos4_at = |r2_m2: f64| camsim_optics::relative_illumination_cos4_r2(r2_m2, f);
     let (yc, xc) = ((s.rows as f64 - 1.0) / 2.0, (s.cols as f64 - 1.0) / 2.0);
     let x2: Vec<f64> = (0..s.cols)
         .map(|c| ((c as f64 - xc) * dx).powi(2))
@@ -274,8 +274,7 @@ fn uniform_electron_rate(
         let factor = |r: usize, c: usize| -> f64 {
             let (y, x) = ((r as f64 - yc) * dx, (c as f64 - xc) * dx);
             let ri = if cos4 {
-                let c2 = f2 / (f2 + x * x + y * y);
-                c2 * c2
+                cos4_at(x * x + y * y)
             } else {
                 1.0
             };
@@ -304,10 +303,9 @@ fn uniform_electron_rate(
         out.par_chunks_mut(s.cols).enumerate().for_each(|(r, row)| {
             let k = &k_rows[r % k_rows.len()];
             if cos4 {
-                let fy = f2 + ((r as f64 - yc) * dx).powi(2);
+                let y2 = ((r as f64 - yc) * dx).powi(2);
                 for ((o, &k), &x2) in row.iter_mut().zip(k).zip(&x2) {
-                    let c2 = f2 / (fy + x2);
-                    *o = (k * (c2 * c2)) as f32;
+                    *o = (k * cos4_at(x2 + y2)) as f32;
                 }
             } else {
                 for (o, &k) in row.iter_mut().zip(k) {
@@ -395,23 +393,11 @@ fn run_into(
             cache.insert(shot.target_key.as_str(), rate);
         }
         let rate = &cache[shot.target_key.as_str()];
-        let exposure_s = match shot.exposure {
-            Exposure::Fixed(t) => t,
-            Exposure::Auto(f) => camsim_sensor::auto_exposure_s(sensor, rate, f),
-        };
-        summary.exposures_s.push((shot.id.clone(), exposure_s));
-        let sh = Shot {
-            exposure_s,
-            analog_gain: shot.analog_gain,
-        };
+        let sh = crate::chain::shot_exposure(set, si, rate);
+        summary.exposures_s.push((shot.id.clone(), sh.exposure_s));
         if opts.expected {
-            let dn = expected_dn(sensor, rate, &sh);
+            let plane = crate::chain::expected_frame(sensor, rate, &sh);
             let rel = PathBuf::from(format!("{}.exr", shot.id));
-            let plane = Plane {
-                rows: sensor.rows,
-                cols: sensor.cols,
-                data: dn,
-            };
             write_single_channel_exr(&staging.join(&rel), "Y", &plane)
                 .map_err(|e| CliError::output(&rel, e))?;
             summary.files.push(rel);
@@ -427,7 +413,7 @@ fn run_into(
                     }
                     PatternSource::Maps(fixed.as_ref().expect("built above"))
                 };
-                let frame = expose_with(
+                let frame = crate::chain::simulate_frame(
                     sensor,
                     rate,
                     &sh,

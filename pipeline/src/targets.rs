@@ -1,7 +1,7 @@
 //! Shot targets as written in captures.json (spec kinds `dark`, `uniform`, `patches`,
 //! `slanted_edge`, `image`, plus camsim's `macbeth`, `ramp`, `frequency_sweep`,
 //! `point_array`, `grid_lines`; docs/config.md) → [`Target`] with photon-unit spectra.
-use crate::config::to_photons;
+use crate::spectrum_file::to_photons;
 use camsim_core::constants::SI;
 use camsim_core::data;
 use camsim_core::exr_io::{self, read_spectral_exr};
@@ -83,7 +83,7 @@ fn radiance_checked(s: Spectrum, k: &str, photons: bool) -> Result<Spectrum, Str
 }
 
 fn spectrum(v: &Value) -> Result<Spectrum, String> {
-    serde_json::from_value::<crate::config::SpectrumValue>(v.clone())
+    serde_json::from_value::<crate::spectrum_file::SpectrumValue>(v.clone())
         .map(|s| s.0)
         .map_err(|e| e.to_string())
 }

@@ -16,19 +16,20 @@
 //! set that `camsim simulate --seed S` wrote, with seed S and the same camera, reproduces the
 //! recording exactly. Outputs: DIR/validation.json, DIR/report.html and the figures, all or
 //! nothing.
+use crate::report::html_escape;
 use crate::color_eval::{patch_delta_e, through_srgb8};
-use crate::config::{CaptureSet, Exposure};
+use crate::config::CaptureSet;
 use crate::error::CliError;
 use crate::plots;
 use crate::raw_input::read_frame_with;
-use crate::simulate::{shot_electron_rate, wavelength_grid};
+use crate::chain::{shot_electron_rate, wavelength_grid};
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_core::RawFrame;
 use camsim_isp::{fit_color_correction, macbeth_target_linear_srgb};
 use camsim_metrics::{patch_sample_rect, ChartLayout};
 use camsim_sensor::{
-    expected_dn, expose, fixed_pattern, ElectronRate, FixedPattern, SensorModel, Shot,
+    fixed_pattern, ElectronRate, FixedPattern, PatternSource, SensorModel, Shot,
 };
 use serde_json::{json, Value};
 use std::collections::HashMap;
@@ -262,12 +263,6 @@ fn channel_colour(name: &str, k: usize) -> [u8; 3] {
     }
 }
 
-fn html_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
 
 /// Checks every recorded frame (readable, the sensor's size, within the ADC range) before
 /// anything is simulated.
@@ -416,15 +411,9 @@ fn validate_into(
             cache.insert(shot.target_key.as_str(), rate);
         }
         let rate = &cache[shot.target_key.as_str()];
-        let exposure_s = match shot.exposure {
-            Exposure::Fixed(t) => t,
-            Exposure::Auto(f) => camsim_sensor::auto_exposure_s(sensor, rate, f),
-        };
-        let sh = Shot {
-            exposure_s,
-            analog_gain: shot.analog_gain,
-        };
-        let expected = expected_dn(sensor, rate, &sh);
+        let sh = crate::chain::shot_exposure(set, si, rate);
+        let exposure_s = sh.exposure_s;
+        let expected = crate::chain::expected_frame(sensor, rate, &sh).data;
         let model = NoiseModel::new(sensor, &sh);
         let layout = chart_layout(&shot.target.target);
         let n_patches = layout.map_or(0, |l| l.chart_rows * l.chart_cols);
@@ -465,7 +454,14 @@ fn validate_into(
             let path = set.dir.join(f);
             let measured = read_frame_with(&path, set.raw_format.as_ref())?;
             check_size(&path, &measured, sensor)?;
-            let simulated = expose(sensor, rate, &sh, fixed_ref, seed, &[si as u64, fi as u64]);
+            let simulated = crate::chain::simulate_frame(
+                sensor,
+                rate,
+                &sh,
+                PatternSource::Maps(fixed_ref),
+                seed,
+                &[si as u64, fi as u64],
+            );
             for (a, &v) in measured_sum.iter_mut().zip(&measured.dn) {
                 *a += v as f64;
             }

@@ -969,21 +969,7 @@ fn coefficient_table() -> &'static Vec<[f32; 3]> {
     })
 }
 
-fn srgb_to_linear(v: f64) -> f64 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-fn linear_to_srgb(v: f64) -> f64 {
-    if v <= 0.0031308 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
-}
+use camsim_core::colorimetry::{srgb_decode as srgb_to_linear, srgb_encode as linear_to_srgb};
 
 /// Coefficients for a linear-RGB colour from the table.
 fn table_lookup(rgb: [f64; 3]) -> SigmoidPoly {

@@ -8,14 +8,12 @@ use crate::camera::OutputQuantity;
 use crate::error::RenderError;
 use crate::integrator::RenderOutput;
 use camsim_core::constants::SI;
-use camsim_core::exr_io::{channel_name, write_atomically, IRRADIANCE_UNITS, RADIANCE_UNITS};
+use camsim_core::exr_io::{
+    channel_name, write_exr_channels, ExrChannel, IRRADIANCE_UNITS, RADIANCE_UNITS,
+};
 use camsim_core::image::{Plane, SpectralBasis, SpectralImage};
 use camsim_core::spectrum::WavelengthGrid;
 use camsim_core::SceneRadiance;
-use exr::prelude::{
-    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer, LayerAttributes,
-    Text, WritableImage,
-};
 use std::path::Path;
 
 /// Which channels to write.
@@ -39,91 +37,63 @@ pub fn band_grid(out: &RenderOutput) -> WavelengthGrid {
 
 /// Write the render as a spectral EXR (atomically: temp file + rename).
 pub fn write_exr(path: &Path, out: &RenderOutput, ch: ExrChannels) -> Result<(), RenderError> {
-    let mut channels: Vec<AnyChannel<FlatSamples>> = Vec::new();
+    let mut channels: Vec<ExrChannel> = Vec::new();
     for b in 0..out.bands.count {
         let c = out.bands.center_nm(b);
-        channels.push(AnyChannel::new(
-            channel_name(c).as_str(),
-            FlatSamples::F32(out.band_planes[b].clone()),
-        ));
+        channels.push(ExrChannel::new(channel_name(c), out.band_planes[b].clone()));
         if ch.mitsuba {
-            channels.push(AnyChannel::new(
-                out.bands.mitsuba_name(b).as_str(),
-                FlatSamples::F32(out.band_planes[b].clone()),
+            channels.push(ExrChannel::new(
+                out.bands.mitsuba_name(b),
+                out.band_planes[b].clone(),
             ));
         }
         if ch.variance {
             if let Some(v) = &out.variance_planes {
-                channels.push(AnyChannel::new(
-                    format!("variance.{}", channel_name(c)).as_str(),
-                    FlatSamples::F32(v[b].clone()),
+                channels.push(ExrChannel::new(
+                    format!("variance.{}", channel_name(c)),
+                    v[b].clone(),
                 ));
                 if ch.mitsuba {
-                    channels.push(AnyChannel::new(
-                        format!("{}.variance", out.bands.mitsuba_name(b)).as_str(),
-                        FlatSamples::F32(v[b].clone()),
+                    channels.push(ExrChannel::new(
+                        format!("{}.variance", out.bands.mitsuba_name(b)),
+                        v[b].clone(),
                     ));
                 }
             }
         }
     }
-    channels.push(AnyChannel::new(
-        "Z",
-        FlatSamples::F32(out.depth_z_m.clone()),
-    ));
+    channels.push(ExrChannel::new("Z", out.depth_z_m.clone()));
     if ch.mitsuba {
-        channels.push(AnyChannel::new(
-            "depth_center.T",
-            FlatSamples::F32(out.depth_center_m.clone()),
-        ));
+        channels.push(ExrChannel::new("depth_center.T", out.depth_center_m.clone()));
         if !out.depth_mean_m.is_empty() {
-            channels.push(AnyChannel::new(
-                "depth.T",
-                FlatSamples::F32(out.depth_mean_m.clone()),
-            ));
+            channels.push(ExrChannel::new("depth.T", out.depth_mean_m.clone()));
         }
     }
-    let mut attrs = LayerAttributes::default();
-    attrs.other.insert(
-        Text::from("spectralLayoutVersion"),
-        AttributeValue::Text(Text::from("1.0")),
-    );
     let units = match out.quantity {
         OutputQuantity::Radiance => RADIANCE_UNITS,
         OutputQuantity::SensorIrradiance => IRRADIANCE_UNITS,
     };
-    attrs.other.insert(
-        Text::from("emissiveUnits"),
-        AttributeValue::Text(Text::from(units)),
+    let note = format!(
+        "spp={} bands={}:{}:{} band-averaged",
+        out.spp,
+        out.bands.lo_nm,
+        out.bands.hi_nm(),
+        out.bands.step_nm
     );
-    attrs.other.insert(
-        Text::from("camsimRender"),
-        AttributeValue::Text(Text::from(
-            format!(
-                "spp={} bands={}:{}:{} band-averaged",
-                out.spp,
-                out.bands.lo_nm,
-                out.bands.hi_nm(),
-                out.bands.step_nm
-            )
-            .as_str(),
-        )),
-    );
-    let layer = Layer::new(
-        (out.width, out.height),
-        attrs,
-        Encoding::FAST_LOSSLESS,
-        AnyChannels::sort(channels.into_iter().collect()),
-    );
-    let img = Image::from_layer(layer);
-    write_atomically(path, |tmp| {
-        img.write()
-            .to_file(tmp)
-            .map_err(|e| std::io::Error::other(e.to_string()))
-    })
-    .map_err(|e| RenderError::Output {
+    write_exr_channels(
+        path,
+        out.width,
+        out.height,
+        channels,
+        &[
+            ("spectralLayoutVersion", "1.0"),
+            ("emissiveUnits", units),
+            ("camsimRender", note.as_str()),
+        ],
+    )
+    .map_err(|msg| RenderError::Output {
         path: path.display().to_string(),
-        msg: e.to_string(),
+        msg,
     })
 }
 
@@ -176,29 +146,14 @@ pub fn write_planes_exr(
     planes: Vec<(String, Vec<f32>)>,
     units: &str,
 ) -> Result<(), RenderError> {
-    let channels: Vec<AnyChannel<FlatSamples>> = planes
+    let channels = planes
         .into_iter()
-        .map(|(n, p)| AnyChannel::new(n.as_str(), FlatSamples::F32(p)))
+        .map(|(n, p)| ExrChannel::new(n, p))
         .collect();
-    let mut attrs = LayerAttributes::default();
-    attrs.other.insert(
-        Text::from("emissiveUnits"),
-        AttributeValue::Text(Text::from(units)),
-    );
-    let layer = Layer::new(
-        (width, height),
-        attrs,
-        Encoding::FAST_LOSSLESS,
-        AnyChannels::sort(channels.into_iter().collect()),
-    );
-    let img = Image::from_layer(layer);
-    write_atomically(path, |tmp| {
-        img.write()
-            .to_file(tmp)
-            .map_err(|e| std::io::Error::other(e.to_string()))
-    })
-    .map_err(|e| RenderError::Output {
-        path: path.display().to_string(),
-        msg: e.to_string(),
-    })
+    write_exr_channels(path, width, height, channels, &[("emissiveUnits", units)]).map_err(
+        |msg| RenderError::Output {
+            path: path.display().to_string(),
+            msg,
+        },
+    )
 }

@@ -260,18 +260,7 @@ struct FitTables {
     d65_norm: TabulatedSpectrum,
 }
 
-/// CIE XYZ → linear sRGB (IEC 61966-2-1, D65 white).
-pub const XYZ_TO_SRGB: [[f64; 3]; 3] = [
-    [3.2404542, -1.5371385, -0.4985314],
-    [-0.9692660, 1.8760108, 0.0415560],
-    [0.0556434, -0.2040259, 1.0572252],
-];
-/// Linear sRGB → CIE XYZ.
-pub const SRGB_TO_XYZ: [[f64; 3]; 3] = [
-    [0.4124564, 0.3575761, 0.1804375],
-    [0.2126729, 0.7151522, 0.0721750],
-    [0.0193339, 0.1191920, 0.9503041],
-];
+pub use camsim_core::colorimetry::{LINEAR_SRGB_TO_XYZ as SRGB_TO_XYZ, XYZ_TO_LINEAR_SRGB as XYZ_TO_SRGB};
 
 fn fit_tables() -> &'static FitTables {
     static T: OnceLock<FitTables> = OnceLock::new();

@@ -360,7 +360,7 @@ pub fn hot_pixel_map(sensor: &SensorModel, seed: u64) -> Vec<HotPixel> {
     }
     let mut rng = stream(
         seed,
-        &[crate::noise::FIXED_PATTERN_TAG, HOT_PIXEL_STREAM_KIND],
+        &[crate::pixel_rng::FIXED_PATTERN_TAG, HOT_PIXEL_STREAM_KIND],
     );
     // Uniform integer in [0, m) by the multiply-shift reduction (bias < m / 2^64).
     let mut below = |m: usize| ((rng.next_u64() as u128 * m as u128) >> 64) as usize;
@@ -399,39 +399,6 @@ pub(crate) fn hot_row(map: &[HotPixel], r: usize) -> &[HotPixel] {
     &map[a..b]
 }
 
-/// The magnitude of `nonlinearity` (effects.md) for `sensor` at `analog_gain`:
-/// `1 − S(n80) / L(n80)`, where `S(n)` is the expected signal (DN above the zero-signal DN) of
-/// a pixel holding `n` photo-electrons (dark current excluded), `L(n) = S'(0)·n` the line
-/// through the low-signal response, and `n80` the charge at which the line reaches 80 % of the
-/// full scale `2^bits − 1 − DN(0)` (the DN range above the black level). Well capacity, swing
-/// and ADC clipping are part of S, so a camera without the block can still have a
-/// non-zero magnitude when it clips before 80 % of full scale.
-pub fn nonlinearity_magnitude(sensor: &SensorModel, analog_gain: f64) -> f64 {
-    let shot = crate::Shot {
-        exposure_s: 1.0,
-        analog_gain,
-    };
-    let mut s = sensor.clone();
-    s.dark_voltage_v_per_s = 0.0;
-    let chain = crate::noise::Chain::new(&s, &shot);
-    // Expected DN of n photo-electrons (exposure 1 s, rate n).
-    let dn = |n: f64| chain.dn(chain.expected_u(n));
-    let dn0 = dn(0.0);
-    let full_scale = sensor.max_dn() - dn0;
-    if full_scale <= 0.0 {
-        return 0.0;
-    }
-    // Low-signal slope S'(0) from a charge far below any compression (1e-6 of the
-    // uncompressed full scale), DN per electron.
-    let linear_dn_per_e = sensor.dn_per_e(analog_gain);
-    let n_small = 1e-6 * full_scale / linear_dn_per_e;
-    let slope = (dn(n_small) - dn0) / n_small;
-    if slope <= 0.0 {
-        return 0.0;
-    }
-    let n80 = 0.8 * full_scale / slope;
-    1.0 - (dn(n80) - dn0) / (0.8 * full_scale)
-}
 
 /// Checks the effect blocks against the sensor; errors name the block's key.
 pub(crate) fn validate(sensor: &SensorModel) -> Result<(), SensorError> {

@@ -37,12 +37,13 @@ use thiserror::Error;
 pub use camsim_core::{RawFrame, SensorIrradiance};
 pub use effects::{
     apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map,
-    nonlinearity_magnitude, Crosstalk, HotPixel, HotPixels, IrLeakage, Nonlinearity, QeShift,
+    Crosstalk, HotPixel, HotPixels, IrLeakage, Nonlinearity, QeShift,
     SensorEffects,
 };
 pub use integrate::{box_weights, electron_rate};
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
+    nonlinearity_magnitude,
     PatternSource, FIXED_PATTERN_TAG,
 };
 
@@ -256,6 +257,39 @@ fn bad(field: impl Into<String>, value: impl std::fmt::Display, reason: &str) ->
 }
 
 impl SensorModel {
+    /// A monochrome test sensor, every noise term on: 2 µm pixels, fill factor 1, a flat QE of
+    /// 1, a 10 000 e⁻ well, 100 µV/e⁻, a 1 V swing, unity analog gain, a 12-bit ADC with a black
+    /// level of 64 DN, 1 mV/s dark voltage, 1 mV read noise, 1 mV DSNU and 1 % PRNU. The one
+    /// fixture of the workspace's tests (its fields are public: a test overrides what it needs).
+    pub fn mono_test(rows: usize, cols: usize) -> SensorModel {
+        SensorModel {
+            rows,
+            cols,
+            pixel_pitch_m: 2e-6,
+            fill_factor: 1.0,
+            cfa: Cfa::mono(),
+            channel_names: vec!["m".into()],
+            channel_qe: vec![Spectrum::constant(1.0)],
+            well_capacity_e: 10000.0,
+            conversion_gain_v_per_e: 1e-4,
+            voltage_swing_v: 1.0,
+            analog_gain: 1.0,
+            analog_offset_v: 0.0,
+            adc_bits: 12,
+            black_level_dn: 64.0,
+            dark_voltage_v_per_s: 1e-3,
+            read_noise_v: 1e-3,
+            dsnu_sigma_v: 1e-3,
+            prnu_sigma_percent: 1.0,
+            noise: NoiseSwitches::default(),
+            column_fpn: None,
+            reset_noise: None,
+            effects: SensorEffects::default(),
+        }
+    }
+}
+
+impl SensorModel {
     /// Largest DN, `2^bits − 1` (step 7).
     pub fn max_dn(&self) -> f64 {
         ((1u64 << self.adc_bits) - 1) as f64
@@ -385,32 +419,9 @@ impl SensorModel {
 pub(crate) mod test_util {
     use super::*;
 
-    /// A monochrome sensor with a flat QE of 1, every noise term on.
+    /// [`SensorModel::mono_test`].
     pub fn mono(rows: usize, cols: usize) -> SensorModel {
-        SensorModel {
-            rows,
-            cols,
-            pixel_pitch_m: 2e-6,
-            fill_factor: 1.0,
-            cfa: Cfa::mono(),
-            channel_names: vec!["m".into()],
-            channel_qe: vec![Spectrum::constant(1.0)],
-            well_capacity_e: 10000.0,
-            conversion_gain_v_per_e: 1e-4,
-            voltage_swing_v: 1.0,
-            analog_gain: 1.0,
-            analog_offset_v: 0.0,
-            adc_bits: 12,
-            black_level_dn: 64.0,
-            dark_voltage_v_per_s: 1e-3,
-            read_noise_v: 1e-3,
-            dsnu_sigma_v: 1e-3,
-            prnu_sigma_percent: 1.0,
-            noise: NoiseSwitches::default(),
-            column_fpn: None,
-            reset_noise: None,
-            effects: SensorEffects::default(),
-        }
+        SensorModel::mono_test(rows, cols)
     }
 }
 

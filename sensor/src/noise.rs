@@ -8,9 +8,7 @@ use camsim_core::rng::stream;
 use camsim_core::RawFrame;
 use rayon::prelude::*;
 
-/// First stream id of every fixed-pattern stream: `stream(seed, &[FIXED_PATTERN_TAG, kind, …])`
-/// with kind 0 = PRNU (per row), 1 = DSNU (per row), 2 = column offsets.
-pub const FIXED_PATTERN_TAG: u64 = 0x4650_4E5F_5441_4721; // "FPN_TAG!"
+pub use crate::pixel_rng::FIXED_PATTERN_TAG;
 
 /// Draws the fixed per-pixel patterns of a camera: `1 + P_i` with `P_i ~ N(0, prnu²)` (step 4),
 /// `D_i ~ N(0, dsnu²)` (step 5) and, with column FPN, one N(0, σ²) offset per column. The
@@ -518,6 +516,40 @@ pub fn auto_exposure_s(
     let t = need_v / (sensor.analog_gain * g * e_per_s);
     let t_well = sensor.well_capacity_e / e_per_s;
     t.min(t_well)
+}
+
+/// The magnitude of `nonlinearity` (effects.md) for `sensor` at `analog_gain`:
+/// `1 − S(n80) / L(n80)`, where `S(n)` is the expected signal (DN above the zero-signal DN) of
+/// a pixel holding `n` photo-electrons (dark current excluded), `L(n) = S'(0)·n` the line
+/// through the low-signal response, and `n80` the charge at which the line reaches 80 % of the
+/// full scale `2^bits − 1 − DN(0)` (the DN range above the black level). Well capacity, swing
+/// and ADC clipping are part of S, so a camera without the block can still have a
+/// non-zero magnitude when it clips before 80 % of full scale.
+pub fn nonlinearity_magnitude(sensor: &SensorModel, analog_gain: f64) -> f64 {
+    let shot = crate::Shot {
+        exposure_s: 1.0,
+        analog_gain,
+    };
+    let mut s = sensor.clone();
+    s.dark_voltage_v_per_s = 0.0;
+    let chain = Chain::new(&s, &shot);
+    // Expected DN of n photo-electrons (exposure 1 s, rate n).
+    let dn = |n: f64| chain.dn(chain.expected_u(n));
+    let dn0 = dn(0.0);
+    let full_scale = sensor.max_dn() - dn0;
+    if full_scale <= 0.0 {
+        return 0.0;
+    }
+    // Low-signal slope S'(0) from a charge far below any compression (1e-6 of the
+    // uncompressed full scale), DN per electron.
+    let linear_dn_per_e = sensor.dn_per_e(analog_gain);
+    let n_small = 1e-6 * full_scale / linear_dn_per_e;
+    let slope = (dn(n_small) - dn0) / n_small;
+    if slope <= 0.0 {
+        return 0.0;
+    }
+    let n80 = 0.8 * full_scale / slope;
+    1.0 - (dn(n80) - dn0) / (0.8 * full_scale)
 }
 
 #[cfg(test)]

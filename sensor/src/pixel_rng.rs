@@ -9,6 +9,10 @@ use camsim_core::rng::CamRng;
 use rand::{Rng, TryRng};
 use std::convert::Infallible;
 
+/// First stream id of every fixed-pattern stream: `stream(seed, &[FIXED_PATTERN_TAG, kind, …])`
+/// with kind 0 = PRNU (per row), 1 = DSNU (per row), 2 = column offsets, 3 = hot pixels.
+pub const FIXED_PATTERN_TAG: u64 = 0x4650_4E5F_5441_4721; // "FPN_TAG!"
+
 /// xoshiro256++ state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PixelRng {

@@ -4,30 +4,13 @@ use camsim_core::{SensorIrradiance, SpectralImage, Spectrum};
 use camsim_sensor::*;
 
 fn mono(rows: usize, cols: usize) -> SensorModel {
-    SensorModel {
-        rows,
-        cols,
-        pixel_pitch_m: 2e-6,
-        fill_factor: 0.5,
-        cfa: Cfa::mono(),
-        channel_names: vec!["m".into()],
-        channel_qe: vec![Spectrum::constant(1.0)],
-        well_capacity_e: 20000.0,
-        conversion_gain_v_per_e: 5e-5,
-        voltage_swing_v: 1.0,
-        analog_gain: 1.0,
-        analog_offset_v: 0.0,
-        adc_bits: 12,
-        black_level_dn: 64.0,
-        dark_voltage_v_per_s: 1e-3,
-        read_noise_v: 1e-3,
-        dsnu_sigma_v: 0.0,
-        prnu_sigma_percent: 0.0,
-        noise: NoiseSwitches::default(),
-        column_fpn: None,
-        reset_noise: None,
-        effects: Default::default(),
-    }
+    let mut s = SensorModel::mono_test(rows, cols);
+    s.fill_factor = 0.5;
+    s.well_capacity_e = 20000.0;
+    s.conversion_gain_v_per_e = 5e-5;
+    s.dsnu_sigma_v = 0.0;
+    s.prnu_sigma_percent = 0.0;
+    s
 }
 
 /// A Bayer sensor (g r / b g) with sampled QE curves on 400–700 nm.

@@ -6,30 +6,9 @@ use camsim_sensor::*;
 use statrs::distribution::{ChiSquared, ContinuousCDF, Discrete, Normal, Poisson};
 
 fn mono(rows: usize, cols: usize) -> SensorModel {
-    SensorModel {
-        rows,
-        cols,
-        pixel_pitch_m: 2e-6,
-        fill_factor: 1.0,
-        cfa: Cfa::mono(),
-        channel_names: vec!["m".into()],
-        channel_qe: vec![Spectrum::constant(1.0)],
-        well_capacity_e: 20000.0,
-        conversion_gain_v_per_e: 1e-4,
-        voltage_swing_v: 1.0,
-        analog_gain: 1.0,
-        analog_offset_v: 0.0,
-        adc_bits: 12,
-        black_level_dn: 64.0,
-        dark_voltage_v_per_s: 1e-3,
-        read_noise_v: 1e-3,
-        dsnu_sigma_v: 1e-3,
-        prnu_sigma_percent: 1.0,
-        noise: NoiseSwitches::default(),
-        column_fpn: None,
-        reset_noise: None,
-        effects: Default::default(),
-    }
+    let mut s = SensorModel::mono_test(rows, cols);
+    s.well_capacity_e = 20000.0;
+    s
 }
 
 fn flat_rate(s: &SensorModel, r: f32) -> ElectronRate {

@@ -294,30 +294,7 @@ mod tests {
     use camsim_sensor::{Cfa, NoiseSwitches, SensorEffects};
 
     pub(crate) fn sensor() -> SensorModel {
-        SensorModel {
-            rows: 4,
-            cols: 4,
-            pixel_pitch_m: 2e-6,
-            fill_factor: 1.0,
-            cfa: Cfa::mono(),
-            channel_names: vec!["m".into()],
-            channel_qe: vec![Spectrum::constant(1.0)],
-            well_capacity_e: 10000.0,
-            conversion_gain_v_per_e: 1e-4,
-            voltage_swing_v: 1.0,
-            analog_gain: 1.0,
-            analog_offset_v: 0.0,
-            adc_bits: 12,
-            black_level_dn: 64.0,
-            dark_voltage_v_per_s: 1e-3,
-            read_noise_v: 1e-3,
-            dsnu_sigma_v: 1e-3,
-            prnu_sigma_percent: 1.0,
-            noise: NoiseSwitches::default(),
-            column_fpn: None,
-            reset_noise: None,
-            effects: SensorEffects::default(),
-        }
+        SensorModel::mono_test(4, 4)
     }
 
     #[test]

@@ -1,4 +1,5 @@
 //! Figures and the HTML page of `camsim diagnose`.
+use crate::report::html_escape;
 use crate::error::CliError;
 use crate::plots;
 use camsim_diagnose::mismatch::{DataSet, Diagnosis, Located, ShotMaps};
@@ -16,12 +17,6 @@ pub struct Figure {
     pub section: &'static str,
 }
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
 
 /// Normalised residuals binned to at most 512 pixels a side (block sum / √n keeps unit
 /// variance), drawn blue (model too bright) – white – red (model too dark), ±4 σ.
@@ -418,11 +413,11 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
             h.push_str(&format!(
                 "<tr><td>{}</td><td><b>{}</b></td><td class=num>{} {}</td><td>{}</td><td>{}</td><td class=num>{}</td><td class=num>{} → {}</td></tr>",
                 i + 1,
-                esc(f["effect"].as_str().unwrap_or("")),
+                html_escape(f["effect"].as_str().unwrap_or("")),
                 fmt(&f["magnitude"]),
-                esc(f["unit"].as_str().unwrap_or("")),
-                esc(f["where"].as_str().unwrap_or("")),
-                esc(f["explanation"].as_str().unwrap_or("")),
+                html_escape(f["unit"].as_str().unwrap_or("")),
+                html_escape(f["where"].as_str().unwrap_or("")),
+                html_escape(f["explanation"].as_str().unwrap_or("")),
                 fmt(&f["evidence"]["delta_bic"]),
                 fmt(&f["evidence"]["chi2_per_dof_before"]),
                 fmt(&f["fit_after"]["chi2_per_dof"]),
@@ -435,10 +430,10 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
         for x in u {
             h.push_str(&format!(
                 "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-                esc(&x["effects"].to_string()),
-                esc(&x["delta_bic"].to_string()),
-                esc(&x["magnitudes"].to_string()),
-                esc(&x["would_separate"].to_string())
+                html_escape(&x["effects"].to_string()),
+                html_escape(&x["delta_bic"].to_string()),
+                html_escape(&x["magnitudes"].to_string()),
+                html_escape(&x["would_separate"].to_string())
             ));
         }
         h.push_str("</table>");
@@ -448,8 +443,8 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
         for x in u {
             h.push_str(&format!(
                 "<li><b>{}</b>: {}</li>",
-                esc(x["effect"].as_str().unwrap_or("")),
-                esc(x["reason"].as_str().unwrap_or(""))
+                html_escape(x["effect"].as_str().unwrap_or("")),
+                html_escape(x["reason"].as_str().unwrap_or(""))
             ));
         }
         h.push_str("</ul>");
@@ -465,7 +460,7 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
                 x.delta_logl,
                 x.k,
                 x.magnitude,
-                esc(x.effect.unit())
+                html_escape(x.effect.unit())
             ));
         }
         h.push_str("</table>");
@@ -479,8 +474,8 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
             .find(|x| x.shot == b.shot && x.channel == b.channel);
         h.push_str(&format!(
             "<tr><td>{}</td><td>{}</td><td class=num>{:.3}</td><td class=num>{}</td><td class=num>{:.2}</td><td class=num>{:.2}</td><td class=num>{}</td></tr>",
-            esc(&data.shots[b.shot].id),
-            esc(&data.channel_names[b.channel]),
+            html_escape(&data.shots[b.shot].id),
+            html_escape(&data.channel_names[b.channel]),
             b.chi2_per_dof,
             a.map_or("–".into(), |a| format!("{:.3}", a.chi2_per_dof)),
             b.data_mean_dn,
@@ -493,13 +488,13 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
     for f in figs {
         if f.section != section {
             section = f.section;
-            h.push_str(&format!("<h2>{}</h2>", esc(section)));
+            h.push_str(&format!("<h2>{}</h2>", html_escape(section)));
         }
         h.push_str(&format!(
             "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
-            esc(&f.file),
-            esc(&f.caption),
-            esc(&f.caption)
+            html_escape(&f.file),
+            html_escape(&f.caption),
+            html_escape(&f.caption)
         ));
     }
     h.push_str("</body></html>\n");

@@ -24,7 +24,8 @@
 //! luminance and scaled (the chain is linear up to the sensor), and cached in-process by
 //! content, so points that differ only in light level or exposure share them; the values are
 //! bit-identical with or without the cache.
-use super::point::{cache_key, PointOutput};
+use super::hash::cache_key;
+use super::output::PointOutput;
 use crate::color_eval::{patch_delta_e, patch_means, srgb_to_xyz};
 use crate::config::{
     camera_from_file, Camera, CameraFile, CaptureSet, Exposure, Shot, SimulationFile,
@@ -43,7 +44,7 @@ use camsim_isp::{
 };
 use camsim_metrics::{slanted_edge_mtf, ChartLayout};
 use camsim_optics::Blur;
-use camsim_sensor::{expected_dn, expose, fixed_pattern, ElectronRate, SensorModel};
+use camsim_sensor::{expected_dn, fixed_pattern, ElectronRate, SensorModel};
 use serde::Deserialize;
 use serde_json::{json, Value};
 use std::collections::HashMap;
@@ -242,10 +243,10 @@ fn camera_file(d: &CaptureDoc) -> Result<CameraFile, String> {
     serde_json::from_value(cam).map_err(|e| format!("camera: {e}"))
 }
 
-fn lens_prescription(lens: &Value) -> Result<camsim_optics::lens::LensPrescription, String> {
-    camsim_optics::lens::LensPrescription::from_json_str(
+fn lens_prescription(lens: &Value) -> Result<camsim_lens::LensPrescription, String> {
+    camsim_lens::LensPrescription::from_json_str(
         &lens.to_string(),
-        &camsim_optics::lens::GlassCatalog::bundled(),
+        &camsim_lens::GlassCatalog::bundled(),
     )
     .map_err(|e| format!("lens: {e}"))
 }
@@ -441,8 +442,8 @@ impl Ctx<'_> {
                 simulation: self.sim.clone(),
                 raw_format: None,
             };
-            let grid = crate::simulate::wavelength_grid(&set);
-            crate::simulate::shot_electron_rate(&set, 0, &grid)
+            let grid = crate::chain::wavelength_grid(&set);
+            crate::chain::shot_electron_rate(&set, 0, &grid)
         })?;
         let k = (self.luminance_cd_m2 / REFERENCE_LUMINANCE_CD_M2) as f32;
         Ok(ElectronRate {
@@ -464,11 +465,11 @@ impl Ctx<'_> {
     }
 
     fn frame(&self, rate: &ElectronRate, stream: u64) -> camsim_core::image::RawFrame {
-        expose(
+        crate::chain::simulate_frame(
             self.sensor(),
             rate,
             &self.shot(),
-            &self.fixed,
+            camsim_sensor::PatternSource::Maps(&self.fixed),
             self.seed,
             &[stream, 0],
         )

@@ -125,6 +125,16 @@ pub fn json_hash(v: &Value) -> String {
     hex(&sha256(canonical_json(v).as_bytes()))
 }
 
+/// A stable key of a JSON value for the in-process caches.
+pub fn cache_key(parts: &[&Value]) -> String {
+    let mut s = String::new();
+    for p in parts {
+        s.push_str(&canonical_json(p));
+        s.push('\u{1f}');
+    }
+    hex(&sha256(s.as_bytes()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

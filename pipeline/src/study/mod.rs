@@ -20,6 +20,7 @@
 //! which other points run, in which order, on how many threads or on which machine.
 pub mod capture;
 pub mod hash;
+pub mod output;
 pub mod point;
 pub mod ray;
 pub mod render;

@@ -8,7 +8,8 @@
 //! variant of [`PointKind`] and its own module; the spec, hashing, folders, engines, tables
 //! and reports do not change.
 use super::capture;
-use super::hash::canonical_json;
+pub use super::hash::cache_key;
+pub use super::output::PointOutput;
 use super::render;
 use crate::error::CliError;
 use camsim_core::exr_io::write_atomically;
@@ -39,29 +40,6 @@ impl PointKind {
     }
 }
 
-/// Metric values and images of one evaluated point.
-#[derive(Debug, Clone, Default)]
-pub struct PointOutput {
-    /// (column, value) in a fixed order; `None` = not measurable (written as null).
-    pub metrics: Vec<(String, Option<f64>)>,
-    /// (file name in the point folder, caption).
-    pub images: Vec<(String, String)>,
-    /// Curves and other detail kept in result.json only (not in the tables).
-    pub detail: Value,
-}
-
-impl PointOutput {
-    /// Add a metric value (non-finite values become `None`).
-    pub fn put(&mut self, name: &str, v: f64) {
-        self.metrics
-            .push((name.to_string(), if v.is_finite() { Some(v) } else { None }));
-    }
-    /// Add a metric that may be missing.
-    pub fn put_opt(&mut self, name: &str, v: Option<f64>) {
-        self.metrics
-            .push((name.to_string(), v.filter(|x| x.is_finite())));
-    }
-}
 
 /// Check a point document without evaluating it (cheap: no lens field model, no images).
 pub fn validate(doc: &Value) -> Result<(), String> {
@@ -156,14 +134,4 @@ pub fn evaluate_into(doc: &Value, hash: &str, dir: &Path) -> Result<Value, CliEr
     write_atomically(&p, |tmp| std::fs::write(tmp, text.as_bytes()))
         .map_err(|e| CliError::output(&p, e))?;
     Ok(result)
-}
-
-/// A stable key of a JSON value for the in-process caches.
-pub fn cache_key(parts: &[&Value]) -> String {
-    let mut s = String::new();
-    for p in parts {
-        s.push_str(&canonical_json(p));
-        s.push('\u{1f}');
-    }
-    super::hash::hex(&super::hash::sha256(s.as_bytes()))
 }

@@ -16,7 +16,7 @@
 //!  "render": {"width_px": 128, "spp": 64, "pinhole_spp": 16, "band_nm": [500, 600], "layers": 32},
 //!  "metrics": {"mtf50_threshold_cy_per_px": 0.15, "roi_fraction": 0.75}}
 //! ```
-use super::point::PointOutput;
+use super::output::PointOutput;
 use crate::error::CliError;
 use camsim_core::stats::Rect;
 use camsim_lens::{GlassCatalog, LensPrescription};

@@ -5,6 +5,7 @@
 //! y metric), and is repeated for every combination of the remaining parameters (facets).
 //! Without `plots` in the spec, every metric is plotted against the first numeric parameter
 //! with the next parameter as series.
+use crate::report::html_escape;
 use super::spec::{PlotSpec, Study};
 use super::table::{Cell, Table};
 use super::StudySummary;
@@ -18,12 +19,6 @@ const MAX_FACETS: usize = 12;
 /// Most rows of an image strip.
 const MAX_STRIP_ROWS: usize = 12;
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
 
 /// The plots to draw: the spec's, or the default ones.
 pub fn plot_specs(study: &Study, table: &Table) -> Vec<PlotSpec> {
@@ -226,16 +221,16 @@ pub fn write(
     let mut h = String::new();
     h.push_str(&format!(
         "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>",
-        esc(&study.title)
+        html_escape(&study.title)
     ));
     h.push_str("<style>body{font-family:sans-serif;max-width:1300px;margin:2em auto;color:#222}figure{display:inline-block;margin:6px;vertical-align:top}figure img{max-width:600px;border:1px solid #ccc}.strip img{width:96px;image-rendering:pixelated;border:1px solid #ccc}.strip figure{margin:2px;font-size:11px;text-align:center}table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}th{background:#f3f3f3}</style></head><body>");
-    h.push_str(&format!("<h1>{}</h1>", esc(&study.title)));
+    h.push_str(&format!("<h1>{}</h1>", html_escape(&study.title)));
     if !study.description.is_empty() {
-        h.push_str(&format!("<p>{}</p>", esc(&study.description)));
+        h.push_str(&format!("<p>{}</p>", html_escape(&study.description)));
     }
     h.push_str(&format!(
         "<p>Study <code>{}</code>: {} points ({} sweep); this run evaluated {}, reused {} finished; {} pending. Tables: <a href=\"table.csv\">table.csv</a>, <a href=\"table.json\">table.json</a>. Definitions of the metrics: docs/study.md.</p>",
-        esc(&study.name),
+        html_escape(&study.name),
         summary.points,
         match study.sweep { super::spec::Sweep::Grid => "grid", super::spec::Sweep::List => "list" },
         summary.evaluated,
@@ -246,17 +241,17 @@ pub fn write(
     for p in &study.parameters {
         h.push_str(&format!(
             "<tr><th style=\"text-align:left\">{}</th><td style=\"text-align:left\">{}</td></tr>",
-            esc(&p.name),
-            esc(&p.labels.join(", "))
+            html_escape(&p.name),
+            html_escape(&p.labels.join(", "))
         ));
     }
     h.push_str("</table><h2>Plots</h2>");
     for (f, c) in &figs {
         h.push_str(&format!(
             "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
-            esc(f),
-            esc(c),
-            esc(c)
+            html_escape(f),
+            html_escape(c),
+            html_escape(c)
         ));
     }
     // Image strips: per image kind, one row per combination of the non-x parameters.
@@ -281,13 +276,13 @@ pub fn write(
         for (file, caption) in &kinds {
             h.push_str(&format!(
                 "<h3>{} — along {}</h3>",
-                esc(caption),
-                esc(&study.parameters[x].name)
+                html_escape(caption),
+                html_escape(&study.parameters[x].name)
             ));
             for key in facet_keys(study, &others, &[]).iter().take(MAX_STRIP_ROWS) {
                 h.push_str(&format!(
                     "<div class=\"strip\"><div>{}</div>",
-                    esc(&facet_label(study, &others, key))
+                    html_escape(&facet_label(study, &others, key))
                 ));
                 for (p, r) in study.points.iter().zip(results) {
                     let k: Vec<usize> = others.iter().map(|&f| p.coords[f]).collect();
@@ -301,9 +296,9 @@ pub fn write(
                     let q = &study.parameters[x];
                     h.push_str(&format!(
                         "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
-                        esc(&src),
-                        esc(file),
-                        esc(&format!("{} = {}", q.name, q.labels[p.coords[x]]))
+                        html_escape(&src),
+                        html_escape(file),
+                        html_escape(&format!("{} = {}", q.name, q.labels[p.coords[x]]))
                     ));
                 }
                 h.push_str("</div>");
@@ -312,7 +307,7 @@ pub fn write(
     }
     h.push_str("<h2>Table</h2><table><tr>");
     for c in &table.columns {
-        h.push_str(&format!("<th>{}</th>", esc(c)));
+        h.push_str(&format!("<th>{}</th>", html_escape(c)));
     }
     h.push_str("</tr>");
     for row in &table.rows {
@@ -323,7 +318,7 @@ pub fn write(
                 Cell::Text(t) => t.clone(),
                 Cell::Empty => "–".into(),
             };
-            h.push_str(&format!("<td>{}</td>", esc(&s)));
+            h.push_str(&format!("<td>{}</td>", html_escape(&s)));
         }
         h.push_str("</tr>");
     }

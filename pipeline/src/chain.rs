@@ -1,0 +1,69 @@
+//! The one chain of camsim: scene → irradiance → electrons → frame → image → display, for the
+//! shots of a capture set. Every command (`run`, `simulate`, `validate`, `scene`, `demo`,
+//! `study`, `diagnose`) goes through these functions; none chains the stages itself.
+//!
+//! | step | function | stage call |
+//! |---|---|---|
+//! | scene radiance of a shot | [`shot_scene`] | `camsim_core::scene::render_target` |
+//! | optics | [`shot_irradiance`], [`irradiance_of`] | [`camsim_optics::form_image`] |
+//! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
+//! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |
+//! | expected frame (DN) | [`expected_frame`] | [`camsim_sensor::expected_dn`] |
+//! | noisy frame (DN) | [`simulate_frame`] | [`camsim_sensor::expose_with`] |
+use crate::config::{CaptureSet, Exposure};
+use crate::error::CliError;
+use camsim_core::image::{Plane, RawFrame, SceneRadiance, SensorIrradiance};
+use camsim_core::spectrum::WavelengthGrid;
+use camsim_sensor::{ElectronRate, PatternSource, SensorModel, Shot};
+
+pub use crate::simulate::{
+    sampling_for, shot_electron_rate, shot_irradiance, shot_scene, wavelength_grid,
+};
+
+/// The optics stage of the set's camera applied to a scene that does not come from a shot's
+/// target (a glTF render, an image): [`camsim_optics::form_image`] with the camera's optics.
+pub fn irradiance_of(
+    set: &CaptureSet,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<SensorIrradiance, CliError> {
+    camsim_optics::form_image(&set.camera.optics, scene, grid)
+        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+}
+
+/// The exposure and gain of shot `shot_index`: its fixed exposure, or the auto exposure that
+/// puts the brightest channel mean at the stated fraction of full scale for `rate`.
+pub fn shot_exposure(set: &CaptureSet, shot_index: usize, rate: &ElectronRate) -> Shot {
+    let shot = &set.shots[shot_index];
+    let exposure_s = match shot.exposure {
+        Exposure::Fixed(t) => t,
+        Exposure::Auto(f) => camsim_sensor::auto_exposure_s(&set.camera.sensor, rate, f),
+    };
+    Shot {
+        exposure_s,
+        analog_gain: shot.analog_gain,
+    }
+}
+
+/// The noise-free expected frame (DN, before quantisation) of `rate` under `shot`.
+pub fn expected_frame(sensor: &SensorModel, rate: &ElectronRate, shot: &Shot) -> Plane {
+    Plane {
+        rows: sensor.rows,
+        cols: sensor.cols,
+        data: camsim_sensor::expected_dn(sensor, rate, shot),
+    }
+}
+
+/// One noisy frame (DN as stored) of `rate` under `shot`: fixed patterns from `pattern`, the
+/// temporal noise from the stream `(seed, stream)` — the same frame for the same arguments,
+/// whatever the thread count.
+pub fn simulate_frame(
+    sensor: &SensorModel,
+    rate: &ElectronRate,
+    shot: &Shot,
+    pattern: PatternSource<'_>,
+    seed: u64,
+    stream: &[u64],
+) -> RawFrame {
+    camsim_sensor::expose_with(sensor, rate, shot, pattern, seed, stream)
+}
