@@ -553,6 +553,18 @@ impl RealLensCamera {
         direction: [f64; 3],
         wavelength_nm: f64,
     ) -> Option<LensExit> {
+        self.trace_surfaces(origin_mm, direction, wavelength_nm, true)
+    }
+
+    /// The surface loop of every sensor-side trace: intersect, clip (with `clip`: at the clear
+    /// radii, and a backwards step), refract, and record the stop crossing.
+    fn trace_surfaces(
+        &self,
+        origin_mm: [f64; 3],
+        direction: [f64; 3],
+        wavelength_nm: f64,
+        clip: bool,
+    ) -> Option<LensExit> {
         let mut r = LensRay {
             origin_mm,
             direction,
@@ -562,7 +574,7 @@ impl RealLensCamera {
         let mut stop = [f64::NAN; 2];
         for (i, s) in self.surfaces.iter().enumerate() {
             let (t, q) = intersect(&s.surface, s.z_mm, &r)?;
-            if t < -1e-9 || q[0] * q[0] + q[1] * q[1] > s.sd2_mm2 {
+            if clip && (t < -1e-9 || q[0] * q[0] + q[1] * q[1] > s.sd2_mm2) {
                 return None;
             }
             let nrm = normal(&s.surface, [q[0], q[1], q[2] - s.z_mm])?;
@@ -716,33 +728,12 @@ impl RealLensCamera {
     ) -> Option<LensExit> {
         let d = [q[0] - p[0], q[1] - p[1], self.rear_z_mm];
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        let mut r = LensRay {
-            origin_mm: [p[0], p[1], 0.0],
-            direction: [d[0] / l, d[1] / l, d[2] / l],
-            opl_mm: 0.0,
-        };
-        let mut n1 = 1.0;
-        let mut stop = [f64::NAN; 2];
-        for (i, s) in self.surfaces.iter().enumerate() {
-            let (_, q) = intersect(&s.surface, s.z_mm, &r)?;
-            let nrm = normal(&s.surface, [q[0], q[1], q[2] - s.z_mm])?;
-            let n2 = self.index.index(s.medium_after, wavelength_nm);
-            let d = refract(r.direction, nrm, n1, n2)?;
-            if i == self.stop_rev {
-                stop = [q[0], q[1]];
-            }
-            r = LensRay {
-                origin_mm: q,
-                direction: d,
-                opl_mm: 0.0,
-            };
-            n1 = n2;
-        }
-        Some(LensExit {
-            origin_mm: r.origin_mm,
-            direction: r.direction,
-            stop_mm: stop,
-        })
+        self.trace_surfaces(
+            [p[0], p[1], 0.0],
+            [d[0] / l, d[1] / l, d[2] / l],
+            wavelength_nm,
+            false,
+        )
     }
 
     fn compute_chief_rays(&self, primary_nm: f64) -> Vec<Option<f64>> {
