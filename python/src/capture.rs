@@ -116,6 +116,11 @@ fn run_each(
 fn frames_array<'py>(py: Python<'py>, frames: Vec<RawFrame>) -> PyResult<Bound<'py, PyAny>> {
     let (rows, cols) = frames.first().map_or((0, 0), |f| (f.rows, f.cols));
     let n = frames.len();
+    if n == 1 {
+        // one frame: hand its buffer to NumPy as it is (no copy)
+        let f = frames.into_iter().next().expect("one frame");
+        return arr(py, f.dn, &[1, rows, cols]);
+    }
     let mut data = Vec::with_capacity(n * rows * cols);
     for f in frames {
         data.extend_from_slice(&f.dn);

@@ -14,8 +14,20 @@ use numpy::{AllowTypeChange, PyArrayLikeDyn};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
-/// A band cube (rows, cols, bands) as float32 from band-major planes.
-fn cube<'py>(py: Python<'py>, img: &SpectralImage) -> PyResult<Bound<'py, PyAny>> {
+/// A band cube (rows, cols, bands) as float32 on `grid` (a linear-model image is evaluated on
+/// the grid's bands first).
+fn cube<'py>(
+    py: Python<'py>,
+    img: &SpectralImage,
+    grid: &WavelengthGrid,
+) -> PyResult<Bound<'py, PyAny>> {
+    let banded;
+    let img = if matches!(&img.basis, SpectralBasis::Bands(g) if g == grid) {
+        img
+    } else {
+        banded = img.to_bands(grid);
+        &banded
+    };
     let (r, c, b) = (img.rows, img.cols, img.planes.len());
     let mut v = vec![0f32; r * c * b];
     for (k, p) in img.planes.iter().enumerate() {
@@ -78,11 +90,10 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// A scene in band form on `grid`.
-    pub(crate) fn from_radiance(mut scene: SceneRadiance, grid: WavelengthGrid) -> Self {
-        if !matches!(&scene.radiance.basis, SpectralBasis::Bands(g) if *g == grid) {
-            scene.radiance = scene.radiance.to_bands(&grid);
-        }
+    /// A scene kept in its own spectral representation (a linear model stays one, so the
+    /// optics and sensor see exactly what the CLI's do); `grid` is the wavelength grid of
+    /// wavelength-dependent optics and of the band view `radiance`.
+    pub(crate) fn from_radiance(scene: SceneRadiance, grid: WavelengthGrid) -> Self {
         Scene { scene, grid }
     }
 }
@@ -165,7 +176,7 @@ impl Scene {
 
     /// Write the radiance as a spectral OpenEXR in W/(sr·m²·nm) (as `camsim scene` does).
     fn write_exr(&self, path: PathBuf) -> PyResult<()> {
-        let mut w = self.scene.radiance.clone();
+        let mut w = self.scene.radiance.to_bands(&self.grid);
         bands_energy_to_photons(&mut w, &SI, true);
         write_spectral_exr(&path, &w, RADIANCE_UNITS, self.scene.depth_m.as_ref())
             .map_err(|e| err(CliError::output(&path, e)))
@@ -174,7 +185,7 @@ impl Scene {
     /// Radiance, photons/(s·sr·m²·nm), float32 (rows, cols, bands).
     #[getter]
     fn radiance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        cube(py, &self.scene.radiance)
+        cube(py, &self.scene.radiance, &self.grid)
     }
     /// Wavelengths of the bands (nm).
     #[getter]
@@ -254,11 +265,8 @@ pub struct Irradiance {
 }
 
 impl Irradiance {
-    /// An irradiance in band form on `grid`.
-    pub(crate) fn new(mut irr: SensorIrradiance, grid: WavelengthGrid) -> Self {
-        if !matches!(&irr.irradiance.basis, SpectralBasis::Bands(g) if *g == grid) {
-            irr.irradiance = irr.irradiance.to_bands(&grid);
-        }
+    /// An irradiance kept in its own spectral representation; `grid` is that of its band view.
+    pub(crate) fn new(irr: SensorIrradiance, grid: WavelengthGrid) -> Self {
         Irradiance { irr, grid }
     }
 }
@@ -295,7 +303,7 @@ impl Irradiance {
     /// Irradiance, photons/(s·m²·nm), float32 (rows, cols, bands).
     #[getter]
     fn irradiance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        cube(py, &self.irr.irradiance)
+        cube(py, &self.irr.irradiance, &self.grid)
     }
     /// Wavelengths of the bands (nm).
     #[getter]
@@ -318,7 +326,7 @@ impl Irradiance {
     }
     /// Write as a spectral OpenEXR in W/(m²·nm).
     fn write_exr(&self, path: PathBuf) -> PyResult<()> {
-        let mut w = self.irr.irradiance.clone();
+        let mut w = self.irr.irradiance.to_bands(&self.grid);
         bands_energy_to_photons(&mut w, &SI, true);
         write_spectral_exr(&path, &w, IRRADIANCE_UNITS, None)
             .map_err(|e| err(CliError::output(&path, e)))
