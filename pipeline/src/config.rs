@@ -1313,11 +1313,9 @@ pub fn write_camera_file(path: &Path, camera: &CameraFile) -> Result<(), CliErro
         .map_err(|e| CliError::output(path, e))
 }
 
-/// Read and validate a capture set; `camera_override` replaces the camera it names.
-pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<CaptureSet, CliError> {
-    let raw: CapturesFile = read_json(path)?;
-    let dir = path
-        .parent()
+/// The folder of a file (`.` for a bare file name).
+fn folder_of(path: &Path) -> PathBuf {
+    path.parent()
         .map(|p| {
             if p.as_os_str().is_empty() {
                 Path::new(".")
@@ -1326,12 +1324,31 @@ pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<Capt
             }
         })
         .unwrap_or(Path::new("."))
-        .to_path_buf();
+        .to_path_buf()
+}
+
+/// Read and validate a capture set; `camera_override` replaces the camera it names.
+pub fn load_captures(path: &Path, camera_override: Option<&Path>) -> Result<CaptureSet, CliError> {
+    let raw: CapturesFile = read_json(path)?;
+    let dir = folder_of(path);
     let camera_path = match camera_override {
         Some(p) => p.to_path_buf(),
         None => dir.join(&raw.camera),
     };
     let camera = load_camera(&camera_path)?;
+    captures_with_camera(path, raw, camera, camera_path)
+}
+
+/// Validate a parsed capture set whose camera is already loaded (`raw.camera` is not read):
+/// the in-memory form of [`load_captures`] used by the Python package. `path` names the
+/// capture set in messages and its folder resolves target files and frames.
+pub fn captures_with_camera(
+    path: &Path,
+    raw: CapturesFile,
+    camera: Camera,
+    camera_path: PathBuf,
+) -> Result<CaptureSet, CliError> {
+    let dir = folder_of(path);
     check(
         path,
         !raw.shots.is_empty(),

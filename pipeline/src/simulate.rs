@@ -350,23 +350,46 @@ pub fn simulate(set: &CaptureSet, opts: &SimulateOptions) -> Result<SimulateSumm
     Ok(summary)
 }
 
-fn run_into(
+/// One product of [`simulate_each`].
+#[derive(Debug)]
+pub enum SimOutput {
+    /// A simulated frame of shot `shot` (index into the capture set), frame `frame`.
+    Frame {
+        /// shot index
+        shot: usize,
+        /// frame index within the shot
+        frame: usize,
+        /// the frame (DN)
+        raw: camsim_core::image::RawFrame,
+    },
+    /// The noise-free expected image of shot `shot` (DN, row-major, sensor size).
+    Expected {
+        /// shot index
+        shot: usize,
+        /// expected DN per pixel
+        dn: Plane,
+    },
+}
+
+/// The simulation loop of `camsim simulate` without any file output: every frame of every
+/// shot (or, with `expected`, every shot's expected image) is handed to `sink` in order;
+/// `progress(done, total)` is called after each. Returns the exposure used per shot (s).
+/// `simulate` writes what this produces, so a caller of this function gets the CLI's numbers.
+pub fn simulate_each(
     set: &CaptureSet,
-    opts: &SimulateOptions,
-    staging: &Path,
-) -> Result<SimulateSummary, CliError> {
+    seed: u64,
+    expected: bool,
+    progress: &mut dyn FnMut(u64, u64),
+    sink: &mut dyn FnMut(SimOutput) -> Result<(), CliError>,
+) -> Result<Vec<(String, f64)>, CliError> {
     let sensor = &set.camera.sensor;
     let grid = wavelength_grid(set);
-    let total: u64 = if opts.expected {
+    let total: u64 = if expected {
         set.shots.len() as u64
     } else {
         set.shots.iter().map(|s| s.frames.len() as u64).sum()
     };
-    let bar = crate::progress::bar(
-        opts.progress,
-        total,
-        "{spinner} simulate [{bar:40}] {pos}/{len} {msg} ({eta})",
-    );
+    let mut done = 0u64;
     let profile = std::env::var_os("CAMSIM_PROFILE").is_some();
     let mut tick = std::time::Instant::now();
     let mut lap = |what: &str| {
@@ -377,16 +400,15 @@ fn run_into(
     };
     // Fixed patterns: one frame draws them row by row inside the frame loop (same values,
     // no full-size maps); several frames share the maps, built once on first use.
-    let total_frames: usize = if opts.expected {
+    let total_frames: usize = if expected {
         0
     } else {
         set.shots.iter().map(|s| s.frames.len()).sum()
     };
     let mut fixed: Option<FixedPattern> = None;
     let mut cache: HashMap<&str, ElectronRate> = HashMap::new();
-    let mut summary = SimulateSummary::default();
+    let mut exposures_s = Vec::with_capacity(set.shots.len());
     for (si, shot) in set.shots.iter().enumerate() {
-        bar.set_message(shot.id.clone());
         if !cache.contains_key(shot.target_key.as_str()) {
             let rate = shot_electron_rate(set, si, &grid)?;
             lap("scene + optics + pixel integration");
@@ -394,21 +416,22 @@ fn run_into(
         }
         let rate = &cache[shot.target_key.as_str()];
         let sh = crate::chain::shot_exposure(set, si, rate);
-        summary.exposures_s.push((shot.id.clone(), sh.exposure_s));
-        if opts.expected {
+        exposures_s.push((shot.id.clone(), sh.exposure_s));
+        if expected {
             let plane = crate::chain::expected_frame(sensor, rate, &sh);
-            let rel = PathBuf::from(format!("{}.exr", shot.id));
-            write_single_channel_exr(&staging.join(&rel), "Y", &plane)
-                .map_err(|e| CliError::output(&rel, e))?;
-            summary.files.push(rel);
-            bar.inc(1);
+            sink(SimOutput::Expected {
+                shot: si,
+                dn: plane,
+            })?;
+            done += 1;
+            progress(done, total);
         } else {
-            for (fi, f) in shot.frames.iter().enumerate() {
+            for fi in 0..shot.frames.len() {
                 let pattern = if total_frames <= 1 {
-                    PatternSource::Seeded(opts.seed)
+                    PatternSource::Seeded(seed)
                 } else {
                     if fixed.is_none() {
-                        fixed = Some(fixed_pattern(sensor, opts.seed));
+                        fixed = Some(fixed_pattern(sensor, seed));
                         lap("fixed pattern");
                     }
                     PatternSource::Maps(fixed.as_ref().expect("built above"))
@@ -418,24 +441,69 @@ fn run_into(
                     rate,
                     &sh,
                     pattern,
-                    opts.seed,
+                    seed,
                     &[si as u64, fi as u64],
                 );
                 lap("expose");
-                let rel = PathBuf::from(f);
+                sink(SimOutput::Frame {
+                    shot: si,
+                    frame: fi,
+                    raw: frame,
+                })?;
+                lap("write");
+                done += 1;
+                progress(done, total);
+            }
+        }
+    }
+    Ok(exposures_s)
+}
+
+fn run_into(
+    set: &CaptureSet,
+    opts: &SimulateOptions,
+    staging: &Path,
+) -> Result<SimulateSummary, CliError> {
+    let total: u64 = if opts.expected {
+        set.shots.len() as u64
+    } else {
+        set.shots.iter().map(|s| s.frames.len() as u64).sum()
+    };
+    let bar = crate::progress::bar(
+        opts.progress,
+        total,
+        "{spinner} simulate [{bar:40}] {pos}/{len} {msg} ({eta})",
+    );
+    let mut files = Vec::new();
+    let mut sink = |out: SimOutput| -> Result<(), CliError> {
+        match out {
+            SimOutput::Expected { shot, dn } => {
+                let rel = PathBuf::from(format!("{}.exr", set.shots[shot].id));
+                write_single_channel_exr(&staging.join(&rel), "Y", &dn)
+                    .map_err(|e| CliError::output(&rel, e))?;
+                files.push(rel);
+            }
+            SimOutput::Frame { shot, frame, raw } => {
+                let rel = PathBuf::from(&set.shots[shot].frames[frame]);
                 let dst = staging.join(&rel);
                 if let Some(parent) = dst.parent() {
                     std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
                 }
-                frames::write_frame_with(&dst, &frame, set.raw_format.as_ref())?;
-                lap("write PNG");
-                summary.files.push(rel);
-                bar.inc(1);
+                frames::write_frame_with(&dst, &raw, set.raw_format.as_ref())?;
+                files.push(rel);
             }
         }
-    }
+        Ok(())
+    };
+    let exposures_s = simulate_each(
+        set,
+        opts.seed,
+        opts.expected,
+        &mut |done, _| bar.set_position(done),
+        &mut sink,
+    )?;
     bar.finish_and_clear();
-    Ok(summary)
+    Ok(SimulateSummary { files, exposures_s })
 }
 
 /// Used by tests: the photon spectrum of a W spectrum with the baseline constants.
