@@ -8,10 +8,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUDGET_S=${BUDGET_S:-20}
-out=$(cargo test --release -q -p camsim-diagnose --test spectral_and_sets \
+# --workspace: the same feature set as .ci/run, so the build cache is shared.
+out=$(cargo test --release -q --workspace --test spectral_and_sets \
     sixty_megapixel_frames_calibrate_timing -- --ignored --nocapture 2>&1) \
     || { echo "$out"; exit 1; }
-line=$(grep -m1 '^calibrate 60 ×' <<<"$out") || { echo "$out"; echo "no timing line"; exit 1; }
+line=$(grep -o -m1 'calibrate 60 × [0-9]*×[0-9]*: [0-9.]* s' <<<"$out") \
+    || { echo "$out"; echo "no timing line"; exit 1; }
 dt=$(sed -E 's/.*: ([0-9.]+) s$/\1/' <<<"$line")
 echo "$line (budget ${BUDGET_S} s; $(nproc) CPUs, load $(cut -d' ' -f1-3 /proc/loadavg))"
 python3 - "$dt" "$BUDGET_S" <<'PY'

@@ -314,10 +314,9 @@ fn prnu_mimicking_shot_noise() {
     single("prnu", 2.0, Concealment::Mimicked, 0.0);
 }
 
-#[test]
-fn column_fpn_below_noise() {
-    single("column_fpn", 1.0e-3, Concealment::BelowNoise, 0.0);
-}
+ci_and_full!(column_fpn_below_noise, column_fpn_below_noise_full, &[], |c| {
+    single_with("column_fpn", 1.0e-3, Concealment::BelowNoise, 0.0, c);
+});
 
 ci_and_full!(hot_pixels_under_scene, hot_pixels_under_scene_full, &[], |c| {
     single_with("hot_pixels", 0.004, Concealment::UnderScene, 0.0, c);
@@ -671,7 +670,14 @@ fn every_output_of_the_spec_is_written() {
 
 #[test]
 fn edge_shots_give_an_mtf_figure() {
-    let o = diagnose_generated(&[("defocus", 1.5)], Concealment::UnderScene, 2);
+    // The figure comes from the edge shots whatever the candidates: CI candidates (the full
+    // search of this set is defocus_under_scene_full's).
+    let o = diagnose_generated_with(
+        &[("defocus", 1.5)],
+        Concealment::UnderScene,
+        2,
+        Candidates::Ci(&["defocus"]),
+    );
     let html = std::fs::read_to_string(o.dir.path().join("out/report.html")).unwrap();
     assert!(html.contains("mtf_0.png"), "no MTF figure");
     assert!(o.dir.path().join("out/mtf_0.png").is_file());

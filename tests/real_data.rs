@@ -218,10 +218,10 @@ fn flea3_bandpass_recovers_channel_efficiencies() {
 
 /// `camsim diagnose` on the Flea3 dark series (session 1; session 2 is rejected by size):
 /// what the missing-physics search finds on real 8-bit darks (docs/diagnose_real.md).
-/// Ignored in CI: ~8 min on 2 cores. Run with
+/// Ignored in CI: 56 s of CPU (≈ 30 s on 2 quiet cores, 9 min at load 20). Run with
 /// `cargo test --release --test tests real_data::flea3_dark_series_through_diagnose -- --ignored --nocapture`.
 #[test]
-#[ignore = "slow (~8 min): diagnose's effect search on 14 real frames"]
+#[ignore = "slow (56 CPU-s, ≈ 30 s on 2 quiet cores): diagnose's effect search on 14 real frames"]
 fn flea3_dark_series_through_diagnose() {
     let d = tempfile::tempdir().unwrap();
     let caps = flea3_dark_set(d.path());
