@@ -113,7 +113,12 @@ fn calibrate_recovers_the_simulated_camera() {
         (v.iter().map(|&x| (x as f64 - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
     };
     within(&c, "dsnu_sigma_v", sample_sd(&fp.dsnu_v), 4.0);
-    within(&c, "prnu_sigma_percent", 100.0 * sample_sd(&fp.prnu_gain), 4.0);
+    within(
+        &c,
+        "prnu_sigma_percent",
+        100.0 * sample_sd(&fp.prnu_gain),
+        4.0,
+    );
     // Appendix B: the constant QE 0.5 is recovered within 5 % of peak (RMS) over 410–690 nm
     let q = &c["channel_qe"];
     assert_eq!(q["status"], "estimated", "{q}");

@@ -223,7 +223,10 @@ fn run_accepts_a_gltf_scene() {
     }
     eprintln!("glTF run: irradiance vs camera equation over {bands} bands: worst {worst:.4}");
     assert!(bands >= 10, "only {bands} common bands");
-    assert!(worst <= 0.03, "irradiance off the camera equation by {worst}");
+    assert!(
+        worst <= 0.03,
+        "irradiance off the camera equation by {worst}"
+    );
     // target and render together are refused
     let cfg = json!({"render": {"scene": "x.gltf"}, "target": {"kind": "macbeth"}});
     std::fs::write(&p, cfg.to_string()).unwrap();

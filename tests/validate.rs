@@ -122,8 +122,7 @@ fn flat_mean_dn_closed_form(ch: &str) -> f64 {
             n_px += 1.0;
         }
     }
-    let electrons =
-        t_s * pitch_m * pitch_m * f(&s["fill_factor"]) * photons_axis * cos4_sum / n_px;
+    let electrons = t_s * pitch_m * pitch_m * f(&s["fill_factor"]) * photons_axis * cos4_sum / n_px;
     let volts = electrons * f(&s["conversion_gain_v_per_e"]) + f(&s["dark_voltage_v_per_s"]) * t_s;
     let dn_per_v = (2f64.powf(f(&s["adc_bits"])) - 1.0) / f(&s["voltage_swing_v"]);
     f(&s["black_level_dn"]) + volts * dn_per_v

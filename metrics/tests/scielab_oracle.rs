@@ -91,11 +91,7 @@ fn grating(f_cpd: f64, col: usize) -> f64 {
 
 /// Measured and predicted mean ΔE*ab of a grating of `f_cpd` along channel `ch` against the
 /// uniform base, with the filter terms `filters` (None: the default `scielab`).
-fn grating_response(
-    ch: usize,
-    f_cpd: f64,
-    filters: Option<[Vec<GaussianTerm>; 3]>,
-) -> (f64, f64) {
+fn grating_response(ch: usize, f_cpd: f64, filters: Option<[Vec<GaussianTerm>; 3]>) -> (f64, f64) {
     // δ: 10⁻⁴ of the base luminance along the opponent axis.
     let delta = 4e-3;
     let a: Vec<Xyz> = (0..ROWS * COLS)
@@ -148,7 +144,10 @@ fn grating_gain_matches_the_closed_form_frequency_response() {
     for (ch, f) in CASES {
         let (measured, predicted) = grating_response(ch, f, None);
         let h = closed_form_gain(&published_filters_1996()[ch], f);
-        println!("O{} at {f} cpd: H = {h:.5}; mean ΔE {measured:.6e} vs closed form {predicted:.6e}", ch + 1);
+        println!(
+            "O{} at {f} cpd: H = {h:.5}; mean ΔE {measured:.6e} vs closed form {predicted:.6e}",
+            ch + 1
+        );
         assert!(
             (measured / predicted - 1.0).abs() <= REL_TOL,
             "O{} at {f} cpd: mean ΔE {measured:e} vs closed form {predicted:e} (H = {h})",
