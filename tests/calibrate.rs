@@ -97,6 +97,28 @@ fn calibrate_recovers_the_simulated_camera() {
     assert!((dsnu / 1.0e-3 - 1.0).abs() < 0.1, "DSNU {dsnu}");
     let prnu = c["prnu_sigma_percent"]["value"].as_f64().unwrap();
     assert!((prnu / 1.0 - 1.0).abs() < 0.25, "PRNU {prnu}");
+    // ... and, tied to the stated noise: the pattern `camsim simulate --seed 3` drew is
+    // recomputed (`fixed_pattern(sensor, seed)`, the simulator's own draw) and its sample
+    // standard deviation is the reference; the estimate must lie within 4 reported standard
+    // errors of it (two-sided normal, false-failure rate 6·10⁻⁵ each; the reported σ also
+    // covers the pattern-vs-population spread, so the z against the drawn pattern is narrower
+    // than N(0, 1) and the rate is lower still).
+    let sensor = camsim_pipeline::config::load_camera(&d.path().join("camera.json"))
+        .unwrap()
+        .sensor;
+    let fp = camsim_sensor::fixed_pattern(&sensor, 3);
+    let sample_sd = |v: &[f32]| {
+        let n = v.len() as f64;
+        let m = v.iter().map(|&x| x as f64).sum::<f64>() / n;
+        (v.iter().map(|&x| (x as f64 - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    };
+    within(&c, "dsnu_sigma_v", sample_sd(&fp.dsnu_v), 4.0);
+    within(
+        &c,
+        "prnu_sigma_percent",
+        100.0 * sample_sd(&fp.prnu_gain),
+        4.0,
+    );
     // Appendix B: the constant QE 0.5 is recovered within 5 % of peak (RMS) over 410–690 nm
     let q = &c["channel_qe"];
     assert_eq!(q["status"], "estimated", "{q}");

@@ -41,17 +41,67 @@ fn spec(effects: &[(&str, f64)], concealment: Concealment, seed: u64) -> DemoSpe
 }
 
 fn diagnose_generated(effects: &[(&str, f64)], concealment: Concealment, seed: u64) -> Outcome {
+    diagnose_generated_with(effects, concealment, seed, Candidates::All)
+}
+
+/// Which candidate effects a diagnosis searches.
+#[derive(Clone, Copy, Debug)]
+enum Candidates {
+    /// Every effect id (the full matrix; `camsim diagnose`'s default).
+    All,
+    /// CI size: the sensor-side candidates (cheap: no re-render of the optics) plus these
+    /// optics-side ids (the truth and its optics look-alikes of docs/diagnose.md).
+    Ci(&'static [&'static str]),
+}
+
+/// The sensor-side effect ids: their candidates refit the sensor stage on the believed
+/// irradiance. The optics-side ids (relative_illumination, veiling_glare, defocus,
+/// distortion, lateral_color) re-render the optics for every trial value, which is what
+/// makes the chart/edge/point sets slow; CI sets name the ones they need.
+const SENSOR_SIDE: [&str; 14] = [
+    "exposure_scale",
+    "conversion_gain",
+    "black_level",
+    "dark_current",
+    "read_noise",
+    "dsnu",
+    "prnu",
+    "column_fpn",
+    "hot_pixels",
+    "nonlinearity",
+    "full_well",
+    "crosstalk",
+    "ir_leakage",
+    "qe_shift",
+];
+
+fn options_for(c: Candidates) -> DiagnoseCmdOptions {
+    match c {
+        Candidates::All => DiagnoseCmdOptions::default(),
+        Candidates::Ci(optics) => DiagnoseCmdOptions {
+            effects: SENSOR_SIDE
+                .iter()
+                .chain(optics)
+                .map(|s| s.to_string())
+                .collect(),
+            ..Default::default()
+        },
+    }
+}
+
+fn diagnose_generated_with(
+    effects: &[(&str, f64)],
+    concealment: Concealment,
+    seed: u64,
+    candidates: Candidates,
+) -> Outcome {
     let dir = tempfile::tempdir().unwrap();
     let set_dir = dir.path().join("set");
     let truth = generate_capture_set(&spec(effects, concealment, seed), &set_dir)
         .unwrap_or_else(|e| panic!("{effects:?}: generator: {e}"));
     let set = load_captures(&truth.captures_json, None).unwrap();
-    let report = run_diagnose(
-        &set,
-        &dir.path().join("out"),
-        &DiagnoseCmdOptions::default(),
-    )
-    .unwrap_or_else(|e| panic!("{effects:?}: diagnose: {e}"));
+    let report = run_diagnose(&set, &dir.path().join("out"), &options_for(candidates))
+        .unwrap_or_else(|e| panic!("{effects:?}: diagnose: {e}"));
     // The written report.json is the returned one.
     let written: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("out/report.json")).unwrap())
@@ -64,7 +114,7 @@ fn diagnose_generated(effects: &[(&str, f64)], concealment: Concealment, seed: u
     // One line per diagnosis (shown with --nocapture; docs/diagnose.md's matrix is made from
     // these lines).
     eprintln!(
-        "diagnose-outcome {effects:?} {concealment:?} seed {seed}: findings {:?}, undecided {:?}, chi2/dof {:.4} -> {:.4} (dof {})",
+        "diagnose-outcome {effects:?} {concealment:?} seed {seed} ({candidates:?}): findings {:?}, undecided {:?}, chi2/dof {:.4} -> {:.4} (dof {})",
         findings(&report),
         undecided(&report),
         report["fit_before"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
@@ -161,8 +211,33 @@ fn assert_found_exactly(o: &Outcome, floor: f64, what: &str) {
 }
 
 fn single(id: &str, magnitude: f64, conceal: Concealment, floor: f64) {
-    let o = diagnose_generated(&[(id, magnitude)], conceal, 1);
-    assert_found_exactly(&o, floor, &format!("{id}={magnitude} ({conceal:?})"));
+    single_with(id, magnitude, conceal, floor, Candidates::All);
+}
+
+fn single_with(id: &str, magnitude: f64, conceal: Concealment, floor: f64, c: Candidates) {
+    let o = diagnose_generated_with(&[(id, magnitude)], conceal, 1, c);
+    assert_found_exactly(&o, floor, &format!("{id}={magnitude} ({conceal:?}, {c:?})"));
+}
+
+/// A matrix case in two sizes: the CI test searches the CI candidates (sensor side + the
+/// listed optics ids), the `_full` twin (ignored in CI; docs/testing.md) every candidate,
+/// with the same set and the same assertions.
+macro_rules! ci_and_full {
+    ($(#[$doc:meta])* $ci:ident, $full:ident, $optics:expr, |$c:ident| $body:block) => {
+        $(#[$doc])*
+        #[test]
+        fn $ci() {
+            let $c = Candidates::Ci($optics);
+            $body
+        }
+        $(#[$doc])*
+        #[test]
+        #[ignore = "full diagnose matrix (every candidate): docs/testing.md"]
+        fn $full() {
+            let $c = Candidates::All;
+            $body
+        }
+    };
 }
 
 // ---------------------------------------------------------------------------------------
@@ -239,25 +314,21 @@ fn prnu_mimicking_shot_noise() {
     single("prnu", 2.0, Concealment::Mimicked, 0.0);
 }
 
-#[test]
-fn column_fpn_below_noise() {
-    single("column_fpn", 1.0e-3, Concealment::BelowNoise, 0.0);
-}
+ci_and_full!(column_fpn_below_noise, column_fpn_below_noise_full, &[], |c| {
+    single_with("column_fpn", 1.0e-3, Concealment::BelowNoise, 0.0, c);
+});
 
-#[test]
-fn hot_pixels_under_scene() {
-    single("hot_pixels", 0.004, Concealment::UnderScene, 0.0);
-}
+ci_and_full!(hot_pixels_under_scene, hot_pixels_under_scene_full, &[], |c| {
+    single_with("hot_pixels", 0.004, Concealment::UnderScene, 0.0, c);
+});
 
-#[test]
-fn nonlinearity_under_scene() {
-    single("nonlinearity", 0.06, Concealment::UnderScene, 0.0);
-}
+ci_and_full!(nonlinearity_under_scene, nonlinearity_under_scene_full, &[], |c| {
+    single_with("nonlinearity", 0.06, Concealment::UnderScene, 0.0, c);
+});
 
-#[test]
-fn full_well_under_scene() {
-    single("full_well", 7000.0, Concealment::UnderScene, 0.0);
-}
+ci_and_full!(full_well_under_scene, full_well_under_scene_full, &[], |c| {
+    single_with("full_well", 7000.0, Concealment::UnderScene, 0.0, c);
+});
 
 #[test]
 fn full_well_mimicking_prnu() {
@@ -280,15 +351,13 @@ fn relative_illumination_below_noise_with_flats() {
     single("relative_illumination", 0.05, Concealment::BelowNoise, 0.0);
 }
 
-#[test]
-fn veiling_glare_under_scene() {
-    single("veiling_glare", 0.03, Concealment::UnderScene, 0.0);
-}
+ci_and_full!(veiling_glare_under_scene, veiling_glare_under_scene_full, &["veiling_glare"], |c| {
+    single_with("veiling_glare", 0.03, Concealment::UnderScene, 0.0, c);
+});
 
-#[test]
-fn defocus_under_scene() {
-    single("defocus", 1.5, Concealment::UnderScene, 0.0);
-}
+ci_and_full!(defocus_under_scene, defocus_under_scene_full, &["defocus"], |c| {
+    single_with("defocus", 1.5, Concealment::UnderScene, 0.0, c);
+});
 
 #[test]
 fn crosstalk_mimicking_qe() {
@@ -305,15 +374,13 @@ fn qe_shift_mimicking_crosstalk() {
     single("qe_shift", -6.0, Concealment::Mimicked, 0.0);
 }
 
-#[test]
-fn distortion_under_scene() {
-    single("distortion", -0.04, Concealment::UnderScene, 0.0);
-}
+ci_and_full!(distortion_under_scene, distortion_under_scene_full, &["distortion", "lateral_color"], |c| {
+    single_with("distortion", -0.04, Concealment::UnderScene, 0.0, c);
+});
 
-#[test]
-fn lateral_color_under_scene() {
-    single("lateral_color", 2.5, Concealment::UnderScene, 0.0);
-}
+ci_and_full!(lateral_color_under_scene, lateral_color_under_scene_full, &["lateral_color", "distortion"], |c| {
+    single_with("lateral_color", 2.5, Concealment::UnderScene, 0.0, c);
+});
 
 // Null sets: the believed camera made the frames; the right answer is nothing.
 
@@ -603,7 +670,14 @@ fn every_output_of_the_spec_is_written() {
 
 #[test]
 fn edge_shots_give_an_mtf_figure() {
-    let o = diagnose_generated(&[("defocus", 1.5)], Concealment::UnderScene, 2);
+    // The figure comes from the edge shots whatever the candidates: CI candidates (the full
+    // search of this set is defocus_under_scene_full's).
+    let o = diagnose_generated_with(
+        &[("defocus", 1.5)],
+        Concealment::UnderScene,
+        2,
+        Candidates::Ci(&["defocus"]),
+    );
     let html = std::fs::read_to_string(o.dir.path().join("out/report.html")).unwrap();
     assert!(html.contains("mtf_0.png"), "no MTF figure");
     assert!(o.dir.path().join("out/mtf_0.png").is_file());

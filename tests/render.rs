@@ -180,6 +180,53 @@ fn run_accepts_a_gltf_scene() {
     let s: Value =
         serde_json::from_str(&std::fs::read_to_string(o.join("summary.json")).unwrap()).unwrap();
     assert!(s["raw_mean_dn"].as_f64().unwrap() > 0.0);
+    // Physical content: the rendered radiance went through the camera equation. Per band, the
+    // mean sensor irradiance equals π·T/(4N²) · mean over the pixels of L(x)·cos⁴θ(x)
+    // (tan θ = r/f at the pixel centres, object at infinity: the chart is metres away, so
+    // (1 + m)² differs from 1 by < 10⁻²); the diffraction blur keeps the power except what it
+    // spreads over the border (Airy radius 1.22·λ·N ≈ 2.7 µm ≈ 1.2 px at 550 nm on a 48 × 64
+    // image: ≲ 2 % of a border-heavy scene). Hence 3 %.
+    let l = camsim_core::exr_io::read_spectral_exr(&o.join("scene_radiance.exr")).unwrap();
+    let e = camsim_core::exr_io::read_spectral_exr(&o.join("sensor_irradiance.exr")).unwrap();
+    assert_eq!((l.image.rows, l.image.cols), (48, 64));
+    assert_eq!((e.image.rows, e.image.cols), (48, 64));
+    let optics = &cam["optics"];
+    let n_f = optics["f_number"].as_f64().unwrap();
+    let t = optics["transmittance"].as_f64().unwrap();
+    let focal_m = optics["focal_length_mm"].as_f64().unwrap() * 1e-3;
+    let pitch_m = cam["sensor"]["pixel_pitch_um"].as_f64().unwrap() * 1e-6;
+    let factor = std::f64::consts::PI * t / (4.0 * n_f * n_f);
+    let cos4: Vec<f64> = (0..48 * 64)
+        .map(|i| {
+            let y = ((i / 64) as f64 - 23.5) * pitch_m;
+            let x = ((i % 64) as f64 - 31.5) * pitch_m;
+            (focal_m * focal_m / (focal_m * focal_m + x * x + y * y)).powi(2)
+        })
+        .collect();
+    let (mut worst, mut bands) = (0f64, 0);
+    for (k, plane) in l.image.planes.iter().enumerate() {
+        let w = l.grid.wavelength_nm[k];
+        let Some(ke) = e.grid.wavelength_nm.iter().position(|&x| x == w) else {
+            continue;
+        };
+        let predicted = factor
+            * plane
+                .iter()
+                .zip(&cos4)
+                .map(|(&v, c)| v as f64 * c)
+                .sum::<f64>()
+            / cos4.len() as f64;
+        let got = e.image.planes[ke].iter().map(|&v| v as f64).sum::<f64>() / cos4.len() as f64;
+        assert!(predicted > 0.0, "{w} nm: no radiance");
+        worst = worst.max((got / predicted - 1.0).abs());
+        bands += 1;
+    }
+    eprintln!("glTF run: irradiance vs camera equation over {bands} bands: worst {worst:.4}");
+    assert!(bands >= 10, "only {bands} common bands");
+    assert!(
+        worst <= 0.03,
+        "irradiance off the camera equation by {worst}"
+    );
     // target and render together are refused
     let cfg = json!({"render": {"scene": "x.gltf"}, "target": {"kind": "macbeth"}});
     std::fs::write(&p, cfg.to_string()).unwrap();

@@ -55,6 +55,28 @@ fn default_run_writes_every_product_and_real_figures() {
     assert_eq!(s["sensor"]["pixel_pitch_um"].as_f64().unwrap(), 2.2);
     let de = s["delta_e_2000"]["mean"].as_f64().unwrap();
     assert!(de > 0.3 && de < 8.0, "mean ΔE2000 {de}");
+    // The headline recomputed from the reported patch values (desired and rendered linear
+    // sRGB) by an independent colour path (IEC 61966-2-1 matrix at its published 4 digits,
+    // CIE 15 Lab with the exact constants, D65 white = M·(1, 1, 1)) and Sharma's CIEDE2000.
+    // Tolerance: the 4-digit matrix against camsim's full-precision one moves Lab by ≲ 10⁻³,
+    // so the mean of 24 ΔE2000 agrees to 0.01.
+    let patches = s["patches"].as_array().unwrap();
+    assert_eq!(patches.len(), 24);
+    let rgb = |v: &Value| -> [f64; 3] { [0, 1, 2].map(|k| v[k].as_f64().unwrap()) };
+    let recomputed = patches
+        .iter()
+        .map(|p| {
+            delta_e_2000_reference(
+                rgb(&p["desired_linear_srgb"]),
+                rgb(&p["rendered_linear_srgb"]),
+            )
+        })
+        .sum::<f64>()
+        / 24.0;
+    assert!(
+        (recomputed - de).abs() <= 0.01,
+        "reported mean ΔE2000 {de} vs recomputed from the patches {recomputed}"
+    );
     // every figure the report shows exists and shows something (not a blank canvas)
     let html = std::fs::read_to_string(o.join("report.html")).unwrap();
     let figs = s["figures"].as_array().unwrap();
@@ -72,6 +94,39 @@ fn default_run_writes_every_product_and_real_figures() {
     // per-patch SNR rises with the patch signal (shot-noise limited): white > black patch
     let g = &s["patch_snr"]["g"];
     assert!(g[18]["snr_db"].as_f64().unwrap() > g[23]["snr_db"].as_f64().unwrap() + 6.0);
+}
+
+/// ΔE2000 between two linear-sRGB colours by a path independent of camsim's colour code:
+/// XYZ by the IEC 61966-2-1 matrix, CIELAB (CIE 15:2004, ε = 216/24389, κ = 24389/27) against
+/// the sRGB white, CIEDE2000 of camsim_metrics (tested on Sharma et al.'s data).
+fn delta_e_2000_reference(a: [f64; 3], b: [f64; 3]) -> f64 {
+    const M: [[f64; 3]; 3] = [
+        [0.4124, 0.3576, 0.1805],
+        [0.2126, 0.7152, 0.0722],
+        [0.0193, 0.1192, 0.9505],
+    ];
+    let xyz = |c: [f64; 3]| -> [f64; 3] {
+        [0, 1, 2].map(|r| M[r][0] * c[0] + M[r][1] * c[1] + M[r][2] * c[2])
+    };
+    let white = xyz([1.0, 1.0, 1.0]);
+    let lab = |c: [f64; 3]| -> camsim_core::colorimetry::Lab {
+        let (eps, kappa) = (216.0 / 24389.0, 24389.0 / 27.0);
+        let x = xyz(c);
+        let f = |t: f64| {
+            if t > eps {
+                t.cbrt()
+            } else {
+                (kappa * t + 16.0) / 116.0
+            }
+        };
+        let (fx, fy, fz) = (f(x[0] / white[0]), f(x[1] / white[1]), f(x[2] / white[2]));
+        camsim_core::colorimetry::Lab {
+            l: 116.0 * fy - 16.0,
+            a: 500.0 * (fx - fy),
+            b: 200.0 * (fy - fz),
+        }
+    };
+    camsim_metrics::delta_e_2000(lab(a), lab(b))
 }
 
 fn small_config(dir: &Path, processor: Value) -> std::path::PathBuf {

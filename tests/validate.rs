@@ -61,6 +61,73 @@ fn recorded_set(dir: &Path) {
     );
 }
 
+/// Mean DN of channel `ch` of the flat shot of [`captures`] on [`colour_camera`], written out
+/// independently of camsim's code (paper Eq. 1–3):
+/// * sensor irradiance `E(λ) = L(λ) · T · π / (4 N²) · cos⁴θ` (object at infinity, m = 0),
+///   `cos⁴θ = (f² / (f² + r²))²` at each pixel centre;
+/// * electrons `n = t · p² · FF · ∫ QE_c(λ) E(λ) λ / (h c) dλ` with the channel's QE linear
+///   between its 10 nm samples (integrated exactly: QE·λ is quadratic on each interval,
+///   Simpson's rule is exact);
+/// * DN `= black + (n · g + V_dark · t) · (2^bits − 1) / V_swing` (unit analog gain, no offset;
+///   the mean of the zero-mean read noise, DSNU and PRNU patterns is 0 and 1).
+fn flat_mean_dn_closed_form(ch: &str) -> f64 {
+    let cam = colour_camera();
+    let s = &cam["sensor"];
+    let o = &cam["optics"];
+    let (h, c_light) = (6.626_070_15e-34, 299_792_458.0);
+    let (radiance, t_s) = (0.002, 0.1); // the flat shot of `captures()`
+    let n_f = f(&o["f_number"]);
+    let focal_m = f(&o["focal_length_mm"]) * 1e-3;
+    let pitch_m = f(&s["pixel_pitch_um"]) * 1e-6;
+    let (rows, cols) = (ROWS, COLS);
+    let wl: Vec<f64> = s["channels"][ch]["wavelength_nm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(f)
+        .collect();
+    let qe: Vec<f64> = s["channels"][ch]["values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(f)
+        .collect();
+    // ∫ QE(λ) λ dλ over the samples (nm · m), Simpson per linear piece.
+    let mut qe_lambda = 0.0;
+    for i in 0..wl.len() - 1 {
+        let (a, b) = (wl[i], wl[i + 1]);
+        let m = 0.5 * (a + b);
+        let q = |x: f64| qe[i] + (qe[i + 1] - qe[i]) * (x - a) / (b - a);
+        qe_lambda += (b - a) / 6.0 * (q(a) * a + 4.0 * q(m) * m + q(b) * b) * 1e-9;
+    }
+    let photons_axis = radiance * f(&o["transmittance"]) * std::f64::consts::PI / (4.0 * n_f * n_f)
+        * qe_lambda
+        / (h * c_light);
+    // CFA gb/rg: g at (even, even) and (odd, odd), b at (even, odd), r at (odd, even).
+    let (mut cos4_sum, mut n_px) = (0.0, 0.0);
+    for r in 0..rows {
+        for c in 0..cols {
+            let here = match (r % 2, c % 2) {
+                (0, 0) | (1, 1) => "g",
+                (0, 1) => "b",
+                _ => "r",
+            };
+            if here != ch {
+                continue;
+            }
+            let y = (r as f64 - (rows as f64 - 1.0) / 2.0) * pitch_m;
+            let x = (c as f64 - (cols as f64 - 1.0) / 2.0) * pitch_m;
+            let c2 = focal_m * focal_m / (focal_m * focal_m + x * x + y * y);
+            cos4_sum += c2 * c2;
+            n_px += 1.0;
+        }
+    }
+    let electrons = t_s * pitch_m * pitch_m * f(&s["fill_factor"]) * photons_axis * cos4_sum / n_px;
+    let volts = electrons * f(&s["conversion_gain_v_per_e"]) + f(&s["dark_voltage_v_per_s"]) * t_s;
+    let dn_per_v = (2f64.powf(f(&s["adc_bits"])) - 1.0) / f(&s["voltage_swing_v"]);
+    f(&s["black_level_dn"]) + volts * dn_per_v
+}
+
 fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
@@ -108,6 +175,36 @@ fn same_camera_agrees_and_figures_are_real() {
             assert!((chi2 - 1.0).abs() < 0.1, "{id}/{ch}: χ² {chi2}");
         }
     }
+    // The recording and the validation share camsim's forward model, so their agreement alone
+    // cannot catch an error common to both. An independent path: the flat shot's channel means
+    // from the camera equation, written out here (flat_mean_dn_closed_form).
+    let flat = shot(&v, "flat");
+    for ch in ["r", "g", "b"] {
+        let c = &flat["channels"][ch];
+        let reference = flat_mean_dn_closed_form(ch);
+        let (measured, expected, sigma) = (
+            f(&c["measured_mean_dn"]),
+            f(&c["expected_mean_dn"]),
+            f(&c["sigma_model_dn"]),
+        );
+        eprintln!(
+            "flat/{ch}: camera equation {reference:.4} DN, recorded {measured:.4} ± {sigma:.4}, \
+             validate's expectation {expected:.4}"
+        );
+        // The expectation is the same integral in f32 planes: 10⁻⁵ relative.
+        assert!(
+            (expected - reference).abs() <= 1e-5 * (reference - 64.0),
+            "flat/{ch}: validate's expected mean {expected} DN vs camera equation {reference} DN"
+        );
+        // The recording: its mean scatters by the model's standard error of the mean (shot,
+        // read, DSNU, PRNU, quantisation); 4.5σ two-sided (false-failure rate 7·10⁻⁶ per
+        // channel) plus the f32 allowance above.
+        assert!(
+            (measured - reference).abs() <= 4.5 * sigma + 1e-5 * (reference - 64.0),
+            "flat/{ch}: recorded mean {measured} DN vs camera equation {reference} DN (σ {sigma})"
+        );
+    }
+
     // the dark shot: no signal above black to form a ratio, residual still ~ 0
     let dark = &shot(&v, "dark")["all_pixels"];
     assert!(dark["relative_mismatch"].is_null(), "{dark}");

@@ -155,6 +155,44 @@ fn summary(zs: &[Vec<f64>]) -> Vec<(usize, usize, f64)> {
         .collect()
 }
 
+/// Joint false-failure rate of [`pooled_z_checks`] for a calibrated estimator (Gaussian z of
+/// unit variance, independent trials): at most this, by the union bound over its 12 one-sided
+/// and two-sided tests, whatever the correlation between the six estimators within a trial.
+const POOLED_ALPHA: f64 = 1e-3;
+
+/// The z-scores pooled per estimator over the trials: under H0 (unbiased estimate, honest
+/// reported σ) the trials give `Σ z² ~ χ²(n)` and `mean z ~ N(0, 1/n)`. Each of the 6
+/// estimators gets an upper-tail χ² test (errors underestimated, or a bias: Σ z² grows by
+/// n·bias²) and a two-sided test of the mean (bias), each at α = POOLED_ALPHA/12, so the joint
+/// false-failure rate of the 12 tests is ≤ POOLED_ALPHA = 10⁻³. DSNU and PRNU are compared with
+/// the drawn pattern, whose z has variance below 1: both tests are conservative there.
+fn pooled_z_checks(zs: &[Vec<f64>]) {
+    use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
+    let alpha_each = POOLED_ALPHA / (2.0 * NAMES.len() as f64);
+    for (z, name) in zs.iter().zip(NAMES) {
+        let n = z.len() as f64;
+        let chi2_max = ChiSquared::new(n).unwrap().inverse_cdf(1.0 - alpha_each);
+        let mean_max = Normal::new(0.0, 1.0)
+            .unwrap()
+            .inverse_cdf(1.0 - alpha_each / 2.0)
+            / n.sqrt();
+        let s2: f64 = z.iter().map(|v| v * v).sum();
+        let mean = z.iter().sum::<f64>() / n;
+        println!(
+            "{name}: Σz² = {s2:.1} (χ²({n}) bound {chi2_max:.1}), mean z {mean:+.3} (bound ±{mean_max:.3})"
+        );
+        assert!(
+            s2 <= chi2_max,
+            "{name}: Σ z² = {s2:.1} over {n} trials exceeds the χ²({n}) bound {chi2_max:.1} \
+             (α = {alpha_each:.1e}): errors underestimated or biased"
+        );
+        assert!(
+            mean.abs() <= mean_max,
+            "{name}: mean z {mean:+.3} over {n} trials beyond ±{mean_max:.3} (α = {alpha_each:.1e}): biased"
+        );
+    }
+}
+
 /// The acceptance check on 20 trials: every estimate within 2 reported σ of the truth in
 /// ≥ 18 of 20 trials. DSNU and PRNU are compared with this camera's drawn pattern (its sample
 /// standard deviation), which differs from the population parameter by ≈ 1 reported σ.
@@ -163,9 +201,18 @@ fn summary(zs: &[Vec<f64>]) -> Vec<(usize, usize, f64)> {
 /// 0.75 per estimator (0.18 for six jointly); 18/20 has 0.93 per estimator and still fails
 /// any bias or underestimated error of about half a σ or more (checked separately over 60
 /// trials below).
+///
+/// Joint false-failure rate. The count checks below are kept as regression checks on these
+/// fixed seeds (they pass here); on a fresh seed set a calibrated estimator passes all six
+/// ≥ 18/20 counts with probability 0.940⁶ ≈ 0.69, all six ≥ 19/20 99 %-interval counts with
+/// 0.983⁶ ≈ 0.90, both ≈ 0.62 (binomial, estimators taken as independent), so a seed change
+/// that fails only a count is not by itself evidence of a defect. The
+/// statistical verdict is [`pooled_z_checks`]: the z-scores pooled per estimator, joint
+/// false-failure rate ≤ 10⁻³ (POOLED_ALPHA).
 #[test]
 fn estimates_cover_truth_in_20_trials() {
     let zs = z_table(1..=20, true);
+    pooled_z_checks(&zs);
     for ((inside, inside99, rms), name) in summary(&zs).into_iter().zip(NAMES) {
         assert!(inside >= 18, "{name}: only {inside}/20 within 2σ");
         // acceptance: the truth lies inside the reported (99 %) interval in ≥ 95 % of trials

@@ -271,10 +271,10 @@ fn hot_pixels_are_found_and_kept_out_of_the_dark_estimates() {
     );
 }
 
-#[test]
-fn sixty_megapixel_frames_calibrate_fast() {
-    // 60 frames of 1024 × 1024: 3 darks × 4 frames, 8 flats × 6 frames.
-    let s = bayer(1024, 1024);
+/// The 60-frame set of the calibration speed benchmark (3 darks × 4 frames, 8 flats × 6
+/// frames) on a `rows × cols` Bayer sensor, calibrated; returns the wall time of `calibrate`.
+fn sixty_frame_set_calibrates(rows: usize, cols: usize) -> f64 {
+    let s = bayer(rows, cols);
     let mut plan = vec![dark(0.001, 4), dark(0.1, 4), dark(0.3, 4)];
     for f in [0.1, 0.2, 0.3, 0.45, 0.6, 0.8, 0.9, 1.0] {
         plan.push(flat(0.02 * f, 6, &[2e5, 1.5e5, 1e5]));
@@ -304,7 +304,23 @@ fn sixty_megapixel_frames_calibrate_fast() {
     let t0 = std::time::Instant::now();
     let r = calibrate(&s, &shots, &CalibrationOptions::default());
     let dt = t0.elapsed().as_secs_f64();
-    println!("calibrate 60 × 1 MP: {dt:.2} s");
+    println!("calibrate 60 × {rows}×{cols}: {dt:.2} s");
     assert!(r.prnu_sigma_percent.get().is_some() && r.conversion_gain_v_per_e.get().is_some());
-    assert!(dt < 20.0, "{dt} s");
+    dt
+}
+
+/// CI size of the 60-frame set: every estimate the speed benchmark needs is produced. (The
+/// wall time is not a test: bench/calibrate.sh times the 1 MP set.)
+#[test]
+fn sixty_frames_calibrate() {
+    sixty_frame_set_calibrates(256, 256);
+}
+
+/// The speed benchmark's harness: 60 frames of 1024 × 1024, timed (prints
+/// "calibrate 60 × 1024×1024: … s"). Run by bench/calibrate.sh, which holds the budget:
+/// `cargo test --release --workspace --test spectral_and_sets sixty_megapixel -- --ignored --nocapture`.
+#[test]
+#[ignore = "benchmark harness (bench/calibrate.sh): 60 × 1 MP frames"]
+fn sixty_megapixel_frames_calibrate_timing() {
+    sixty_frame_set_calibrates(1024, 1024);
 }

@@ -3,6 +3,8 @@
 //! accept are also validated, given first-order properties and traced a little, again without
 //! panics. Inputs: the `.zmx` and `.dat` files of /work/shared/data/real/lens/prescriptions,
 //! the ISET `.dat` and `.json` lenses of /work/shared/data/iset/lenses and `lenses/*.json`.
+//! Without the shared data the test fails (naming the folders) unless
+//! `CAMSIM_LENS_FUZZ_WITHOUT_SHARED=1` asks for the reduced, JSON-only run.
 //! Mutations (xorshift64*, fixed seed): delete / duplicate / swap / replace lines, flip,
 //! delete or insert characters, truncate, replace a number by garbage (NaN, inf, 1e308, -0,
 //! 0, empty, huge integers, …), and raw byte flips for `.zmx` (exercising `decode_text`).
@@ -260,6 +262,26 @@ fn mutated_lens_files_never_panic() {
     let ours = files(lens_dir().to_str().unwrap(), "json");
     zmx.sort();
     dat.sort();
+    // Without ../shared the fuzz would shrink to the repository's JSON lenses and still pass:
+    // fail loudly instead, unless CAMSIM_LENS_FUZZ_WITHOUT_SHARED=1 asks for the reduced run
+    // (then said on stderr).
+    if zmx.is_empty() || dat.is_empty() || iset_json.is_empty() {
+        let why = format!(
+            "lens reader fuzz: no .zmx/.dat/ISET .json seed files ({} .zmx, {} .dat, {} ISET .json) \
+             under {real} and {iset}: the shared data (../shared beside the checkout) is missing",
+            zmx.len(),
+            dat.len(),
+            iset_json.len()
+        );
+        if std::env::var_os("CAMSIM_LENS_FUZZ_WITHOUT_SHARED").is_some_and(|v| v == "1") {
+            eprintln!(
+                "{why}; CAMSIM_LENS_FUZZ_WITHOUT_SHARED=1: fuzzing only the {} lenses/*.json",
+                ours.len()
+            );
+        } else {
+            panic!("{why}; set CAMSIM_LENS_FUZZ_WITHOUT_SHARED=1 to fuzz only lenses/*.json");
+        }
+    }
     assert!(
         !ours.is_empty(),
         "no lenses/*.json found in {}",
