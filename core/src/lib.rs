@@ -11,7 +11,7 @@
 //!   [`image::RawFrame`];
 //! * [`scene`]: test targets (Macbeth, uniform, slanted edge, sweep, ramp, point array, grid
 //!   lines, patch charts) and luminance scaling;
-//! * [`colorimetry`]: XYZ, luminance, CIELAB, ΔE*ab;
+//! * [`colorimetry`]: XYZ, luminance, CIELAB, ΔE*ab; [`cieluv`]: u′v′, CIELUV, ΔE*uv;
 //! * [`data`]: ISETCam spectral and device data embedded in the binary (MIT, see data/iset);
 //! * [`exr_io`]: spectral OpenEXR in the Fichet et al. (JCGT 2021) layout;
 //! * [`linear_model`]: SVD compression of spectral images with round-trip error;
@@ -21,6 +21,7 @@
 //! Units live in names: `_nm`, `_m`, `_um`, `_s`, `_v`, `_e` (electrons), `_dn`.
 #![deny(missing_docs)]
 
+pub mod cieluv;
 pub mod colorimetry;
 pub mod constants;
 pub mod data;

@@ -33,7 +33,7 @@ pub use color::{
 };
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
-pub use pipeline::{develop, IspPipeline, RenderedImage};
+pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};
 pub use srgb::{srgb_decode, srgb_encode, to_srgb16, to_srgb8};
 
 use thiserror::Error;

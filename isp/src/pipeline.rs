@@ -17,6 +17,11 @@ pub struct IspPipeline {
     pub ccm: Option<ColorMatrix>,
     /// Scalar multiplying the linear output before encoding.
     pub exposure_gain: f64,
+    /// ISETCam's convention (its image processor clips its result below zero): set negative
+    /// linear output values to 0 at the end of the chain. Off in the baseline, whose linear
+    /// output keeps the negative values colour correction produces (the sRGB codes are clipped
+    /// either way).
+    pub clip_negative: bool,
 }
 
 impl Default for IspPipeline {
@@ -26,6 +31,7 @@ impl Default for IspPipeline {
             white_balance: WhiteBalance::None,
             ccm: None,
             exposure_gain: 1.0,
+            clip_negative: false,
         }
     }
 }
@@ -61,10 +67,20 @@ pub fn develop(p: &IspPipeline, mosaic: &Mosaic) -> Result<RenderedImage, IspErr
     if m != ColorMatrix::identity() {
         m.apply_image(&mut img);
     }
+    if p.clip_negative {
+        clip_below_zero(&mut img);
+    }
     Ok(RenderedImage {
         srgb8: to_srgb8(&img),
         srgb16: to_srgb16(&img),
         linear: img,
         white_balance_gains: gains,
     })
+}
+
+/// Set every negative linear value to 0 (ISETCam's clip below zero at the end of the ISP).
+pub fn clip_below_zero(img: &mut RgbImage) {
+    img.data
+        .iter_mut()
+        .for_each(|px| px.iter_mut().for_each(|v| *v = v.max(0.0)));
 }

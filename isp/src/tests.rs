@@ -315,6 +315,7 @@ fn grey_world_makes_a_grey_scene_neutral() {
             white_balance: wb,
             ccm: None,
             exposure_gain: 1.0,
+            clip_negative: false,
         };
         let out = develop(&p, &m).unwrap();
         assert!(out
@@ -726,9 +727,51 @@ fn isetcam_oracle_result_is_reproduced() {
         white_balance: WhiteBalance::None,
         ccm: Some(isetcam_combined(&c, Some(&c.wave.clone()))),
         exposure_gain: 1.0,
+        clip_negative: false,
     };
     let mut out = develop(&pipeline, &m).unwrap().linear;
     // ISETCam: max(result) = max(sensor data) / voltage swing; here the swing is 1 V
     isetcam::scale_to_max(&mut out, sensorspace.max_value() as f64).unwrap();
     assert_close(&out, &oracle_rgb("result"), 1e-4, "result");
+}
+
+/// The clip-below-zero option (ISETCam convention): a colour matrix with a negative
+/// coefficient drives a pure-red pixel negative in G; with the option, exactly those values
+/// become 0 and every other value is unchanged; without it the negative value is kept.
+#[test]
+fn clip_negative_option_zeroes_only_negative_values() {
+    let img0 = RgbImage::filled(8, 8, [0.6, 0.0, 0.0]);
+    let m = Mosaic::sample_rgb(&img0, bayer_tiles()[0].1.clone(), names()).unwrap();
+    let ccm = ColorMatrix {
+        m: [[1.0, 0.0, 0.0], [-0.25, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    };
+    let base = IspPipeline {
+        demosaic: DemosaicMethod::Bilinear,
+        ccm: Some(ccm),
+        ..Default::default()
+    };
+    let keep = develop(&base, &m).unwrap();
+    let clip = develop(
+        &IspPipeline {
+            clip_negative: true,
+            ..base.clone()
+        },
+        &m,
+    )
+    .unwrap();
+    let mut negatives = 0;
+    for (a, b) in keep.linear.data.iter().zip(&clip.linear.data) {
+        for c in 0..3 {
+            if a[c] < 0.0 {
+                negatives += 1;
+                assert_eq!(b[c], 0.0);
+            } else {
+                assert_eq!(a[c], b[c]);
+            }
+        }
+    }
+    // G = −0.25 · 0.6 = −0.15 at every pixel of the uniform red field
+    assert_eq!(negatives, 64, "{:?}", keep.linear.data[0]);
+    assert!((keep.linear.data[27][1] + 0.15).abs() < 1e-6);
+    assert_eq!(keep.srgb8, clip.srgb8, "the sRGB codes are clipped either way");
 }

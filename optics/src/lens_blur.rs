@@ -633,14 +633,15 @@ fn fft2(fft: &dyn Fft<f64>, data: &mut [Complex64], l: usize, col: &mut [Complex
 }
 
 /// Image formation for `Blur::Lens` (steps 1–4 of the module docs) of a radiance image;
-/// returns a band image on `bands` (irradiance, before any diffuser).
+/// returns the image split into the bands of `bands` ([`crate::split_into_bands`]; irradiance,
+/// before any diffuser).
 pub(crate) fn form_lens_image(
     optics: &OpticsModel,
     lb: &LensBlur,
     radiance: &SpectralImage,
     bands: &WavelengthGrid,
     dx: f64,
-) -> Result<SpectralImage, OpticsError> {
+) -> Result<crate::BandSplit, OpticsError> {
     let nw = lb.working_f_number;
     if !(nw.is_finite() && nw > 0.0) {
         return Err(OpticsError::InvalidParameter {
@@ -649,7 +650,7 @@ pub(crate) fn form_lens_image(
             reason: "must be a finite number > 0",
         });
     }
-    let mut img = crate::into_bands(radiance.clone(), bands);
+    let mut img = radiance.clone();
     let k = match optics.camera_equation {
         CameraEquation::Baseline => camera_equation_factor(nw, 0.0),
         CameraEquation::IsetCam => camera_equation_factor_isetcam(nw, 0.0),
@@ -664,10 +665,12 @@ pub(crate) fn form_lens_image(
             k
         }
     };
+    // Split after the transmittance, as without a lens blur.
+    let split = crate::split_into_bands(img, bands, optics.padding == Padding::Zero);
+    let (mut img, wl) = (split.image, split.wavelength_nm);
     let (rows, cols) = (img.rows, img.cols);
     let clamp = optics.padding == Padding::Replicate;
     let model = &*lb.table;
-    let wl = bands.wavelength_nm.clone();
     img.planes
         .par_iter_mut()
         .zip(wl.par_iter())
@@ -680,7 +683,10 @@ pub(crate) fn form_lens_image(
                 warped
             };
         });
-    Ok(img)
+    Ok(crate::BandSplit {
+        image: img,
+        wavelength_nm: wl,
+    })
 }
 
 /// Steps 1–3: distortion (inverse mapping), relative illumination and the scalar factor `k`.

@@ -26,6 +26,7 @@
 //! never the default.
 #![deny(missing_docs)]
 
+mod band_split;
 pub mod effects;
 mod error;
 mod fft;
@@ -34,6 +35,7 @@ mod kernels;
 mod lens_blur;
 mod psf_set;
 
+pub use band_split::{split_into_bands, BandSplit};
 pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
 pub use effects::{
     equivalent_gaussian_sigma_um, two_circle_overlap_fraction, Defocus, Distortion, Falloff,
@@ -257,7 +259,8 @@ pub fn form_image(
         return Err(OpticsError::Scene(format!("empty image {rows}×{cols}")));
     }
     if let Blur::Lens(lb) = &optics.blur {
-        let mut img = lens_blur::form_lens_image(optics, lb, &scene.radiance, bands, dx)?;
+        let split = lens_blur::form_lens_image(optics, lb, &scene.radiance, bands, dx)?;
+        let (mut img, band_wl) = (split.image, split.wavelength_nm);
         apply_diffuser(optics, &mut img, dx);
         // Effect blocks with a lens: after the lens's own image formation (an approximation
         // for the fall-off and the warp, which ideally act before its PSFs).
@@ -270,7 +273,10 @@ pub fn form_image(
             } else if s != 1.0 {
                 img.scale(s);
             }
-            apply_warp(optics, &mut img, dx, bands)?;
+            if fx.has_warp() {
+                let wl = Some(band_wl.as_slice()).filter(|_| fx.lateral_color.is_some());
+                effects::warp_planes(fx, &mut img, dx, wl)?;
+            }
             apply_defocus_and_glare(optics, &mut img, dx)?;
         }
         return Ok(SensorIrradiance {
@@ -344,13 +350,26 @@ pub fn form_image(
         }
     }
 
+    // Per-band blurs and lateral colour act on the image split into bands, each band keeping
+    // its exact integral of spectrum × response ([`split_into_bands`]); `band_wl` holds the
+    // wavelength of each plane once split.
+    let per_band = matches!(
+        optics.blur,
+        Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. }
+    ) || optics.effects.lateral_color.is_some();
+    let mut band_wl: Option<Vec<f64>> = None;
+    if per_band {
+        let split = split_into_bands(img, bands, optics.padding == Padding::Zero);
+        img = split.image;
+        band_wl = Some(split.wavelength_nm);
+    }
+
     // Distortion and lateral colour blocks: geometric warp of every wavelength plane.
     if optics.effects.has_warp() {
-        if optics.effects.lateral_color.is_some() {
-            img = into_bands(img, bands);
-        }
-        apply_warp(optics, &mut img, dx, bands)?;
+        let wl = band_wl.as_deref().filter(|_| optics.effects.lateral_color.is_some());
+        effects::warp_planes(&optics.effects, &mut img, dx, wl)?;
     }
+    let band_wl = band_wl.unwrap_or_default();
 
     // 3. Blur.
     let band_finish = match optics.padding {
@@ -360,13 +379,11 @@ pub fn form_image(
     match &optics.blur {
         Blur::None => {}
         Blur::Diffraction => {
-            img = into_bands(img, bands);
-            let lmax = bands.wavelength_nm.iter().cloned().fold(0.0, f64::max) * 1e-9;
+            let lmax = band_wl.iter().cloned().fold(0.0, f64::max) * 1e-9;
             // Airy tail: ~1 % of the energy lies beyond 20 λN.
             let margin = ((20.0 * lmax * n_eff / dx).ceil() as usize).clamp(2, 1024);
             let conv = FftConvolver::new(rows, cols, dx, optics.padding, margin, margin);
-            let wl = bands.wavelength_nm.clone();
-            img.planes.par_iter_mut().zip(wl.par_iter()).for_each_init(
+            img.planes.par_iter_mut().zip(band_wl.par_iter()).for_each_init(
                 || (conv.workspace(), vec![0f32; rows * cols]),
                 |(ws, out), (p, &w)| {
                     let t = Transfer::Diffraction {
@@ -386,19 +403,15 @@ pub fn form_image(
             convolve_planes_with(&mut img, optics.padding, Finish::Keep, |_| psf.clone())?;
         }
         Blur::Psf(set) => {
-            img = into_bands(img, bands);
-            let wl = bands.wavelength_nm.clone();
             convolve_planes_with(&mut img, optics.padding, band_finish, |b| {
-                set.resampled(wl[b], dx)
+                set.resampled(band_wl[b], dx)
             })?;
         }
         Blur::Wavefront {
             defocus_um,
             pupil_samples,
         } => {
-            img = into_bands(img, bands);
-            let wl = bands.wavelength_nm.clone();
-            let psfs: Vec<SampledPsf> = wl
+            let psfs: Vec<SampledPsf> = band_wl
                 .iter()
                 .map(|&w| wavefront_psf(w, n_eff, *defocus_um, *pupil_samples, dx))
                 .collect::<Result<_, _>>()?;
@@ -442,37 +455,6 @@ fn radial_map(
     map
 }
 
-/// The distortion / lateral-colour warp (per band with lateral colour, else per plane).
-fn apply_warp(
-    optics: &OpticsModel,
-    img: &mut SpectralImage,
-    dx: f64,
-    bands: &WavelengthGrid,
-) -> Result<(), OpticsError> {
-    let fx = &optics.effects;
-    if !fx.has_warp() {
-        return Ok(());
-    }
-    let wl = match (&img.basis, fx.lateral_color.is_some()) {
-        (camsim_core::SpectralBasis::Bands(g), true) => Some(g.wavelength_nm.clone()),
-        (_, true) => {
-            *img = into_bands(std::mem::replace(img, empty_image()), bands);
-            Some(bands.wavelength_nm.clone())
-        }
-        (_, false) => None,
-    };
-    effects::warp_planes(fx, img, dx, wl.as_deref())
-}
-
-fn empty_image() -> SpectralImage {
-    SpectralImage {
-        rows: 0,
-        cols: 0,
-        basis: camsim_core::SpectralBasis::Spectra(Vec::new()),
-        planes: Vec::new(),
-    }
-}
-
 /// The defocus block's blur, then the veiling-glare block.
 fn apply_defocus_and_glare(
     optics: &OpticsModel,
@@ -497,14 +479,6 @@ fn apply_diffuser(optics: &OpticsModel, img: &mut SpectralImage, dx: f64) {
         let kern = gaussian_kernel_1d(sigma_from_fwhm(d.fwhm_um * 1e-6), dx);
         let (rows, cols) = (img.rows, img.cols);
         kernels::separable_convolve(&mut img.planes, rows, cols, &kern, optics.padding);
-    }
-}
-
-/// The image as a band cube on `bands` (moved, not copied, when it already is one).
-fn into_bands(img: SpectralImage, bands: &WavelengthGrid) -> SpectralImage {
-    match &img.basis {
-        camsim_core::SpectralBasis::Bands(g) if g == bands => img,
-        _ => img.to_bands(bands),
     }
 }
 
