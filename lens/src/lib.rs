@@ -67,11 +67,13 @@
 //! * Unknown keys are ignored.
 #![deny(missing_docs)]
 
+pub mod agf;
 pub mod analysis;
 pub mod batch;
 pub mod error;
 pub mod field_curvature;
 pub mod field_model;
+pub mod focus;
 pub mod glass;
 pub mod huygens;
 pub mod paraxial;
@@ -82,7 +84,7 @@ pub mod trace;
 pub use batch::{RayBatch, TraceSystem};
 pub use error::LensError;
 pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
-pub use glass::{Glass, GlassCatalog};
+pub use glass::{Glass, GlassCatalog, NearGlass};
 pub use paraxial::FirstOrder;
 pub use prescription::{LensPrescription, PrescriptionFile};
 pub use trace::{Clipping, Ray, TracedRay};
