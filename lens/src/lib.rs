@@ -21,7 +21,10 @@
 //! * [`field_model`]: the ISET-style field model (PSF, distortion, relative illumination over
 //!   image height × wavelength × object distance, interpolation, PSF rotation, JSON
 //!   save/load);
-//! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers.
+//! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers;
+//! * [`agf`]: Zemax `.agf` glass catalogues;
+//! * [`focus`]: pupil sampling set by the OPD slope for FFT PSFs and MTFs, and the MTF best
+//!   focus.
 //!
 //! ## Prescription file format (`lenses/*.json`)
 //!
@@ -50,7 +53,7 @@
 //! * `thickness_mm` is the axial distance to the next vertex; that of the **last** surface is
 //!   the distance to the (flat) image plane.
 //! * `material` is the medium *after* the surface: `"air"`, a catalogue glass
-//!   `{"glass", "catalog"?}` (looked up as `lenses/glass/<catalog>/<glass>.yml`, all vendors when
+//!   `{"glass", "catalog"?}` (looked up in the bundled table `lenses/glass/<catalog>.tsv`, all vendors when
 //!   `catalog` is absent), or `{"nd", "vd"}` (two-term Cauchy model, see [`glass`]).
 //!   Object space is air; catalogue indices are relative to air.
 //! * `semi_diameter_mm` (optional) is the clear semi-aperture, used for vignetting when tracing
