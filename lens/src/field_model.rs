@@ -88,6 +88,9 @@ pub enum Focus {
     At(Option<f64>),
 }
 
+/// Largest pupil grid per side a wave-PSF entry of [`FieldModel::compute`] is given.
+pub const MAX_WAVE_PUPIL_N: usize = 512;
+
 /// How to build a [`FieldModel`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FieldModelOptions {
@@ -105,7 +108,10 @@ pub struct FieldModelOptions {
     pub psf_n: usize,
     /// Pitch of the stored PSFs (µm).
     pub psf_pitch_um: f64,
-    /// Pupil samples per side (OPD grid for wave PSFs, ray grid for geometric ones).
+    /// Pupil samples per side (OPD grid for wave PSFs, ray grid for geometric ones). For wave
+    /// PSFs this is the minimum: an entry whose OPD slope needs more gets more, up to
+    /// [`MAX_WAVE_PUPIL_N`] ([`crate::focus`]); [`FieldModel::aliased_entries`] counts those
+    /// that needed more still.
     pub pupil_n: usize,
     /// Zero-padding factor of the FFT (wave PSFs).
     pub pad: usize,
@@ -191,6 +197,9 @@ pub struct FieldModel {
     pub psf_pitch_um: f64,
     /// One table per object distance, by increasing vergence 1/d (infinity first).
     pub tables: Vec<FieldTable>,
+    /// Wave-PSF entries whose OPD slope needed a pupil grid finer than [`MAX_WAVE_PUPIL_N`]
+    /// (their PSFs alias; callers should warn). Not saved; 0 for a loaded model.
+    pub aliased_entries: usize,
 }
 
 /// One distance of a version-2 file.
@@ -315,6 +324,7 @@ pub fn rotate_psf(psf: &[f64], n: usize, angle_deg: f64) -> Vec<f64> {
 struct Entry {
     real_height_mm: f64,
     psf: Vec<f64>,
+    aliased: bool,
 }
 
 /// The PSF and chief-ray height of field `th` at `w` for `lens` (own object distance and image
@@ -337,9 +347,12 @@ fn entry(
             msg: format!("chief ray lost at {w} nm"),
         })?;
     let mut img = vec![0.0; psf_n * psf_n];
+    let mut aliased = false;
     match opts.kind {
         PsfKind::Wave => {
-            let wo = lens.wave_optics(th, w, opts.pupil_n, opts.pad, &[])?;
+            let s = lens.pupil_sampling(th, w, opts.pupil_n, opts.pupil_n.max(MAX_WAVE_PUPIL_N))?;
+            aliased = !s.alias_free;
+            let wo = lens.wave_optics(th, w, s.samples, opts.pad, &[])?;
             let m = wo.psf.n;
             let cm = (m / 2) as f64;
             // The FFT PSF is point-reflected with respect to the image plane (its energy
@@ -375,6 +388,7 @@ fn entry(
     Ok(Entry {
         real_height_mm: chief.image_mm[1],
         psf: img,
+        aliased,
     })
 }
 
@@ -478,6 +492,7 @@ impl FieldModel {
                     .map(|r| r.relative_illumination)
             })
             .collect::<Result<_, _>>()?;
+        let aliased_entries = entries.iter().filter(|e| e.aliased).count();
         let mut entries = entries.into_iter();
         let mut tables = Vec::with_capacity(nd);
         for (d, l) in lenses.iter().enumerate() {
@@ -522,6 +537,7 @@ impl FieldModel {
             psf_n,
             psf_pitch_um: opts.psf_pitch_um,
             tables,
+            aliased_entries,
         })
     }
 
@@ -679,6 +695,7 @@ impl FieldModel {
                     psf_n: f.psf_n,
                     psf_pitch_um: f.psf_pitch_um,
                     tables,
+                    aliased_entries: 0,
                 }
             }
             Some(1) => {
@@ -712,6 +729,7 @@ impl FieldModel {
                     psf_n: f.psf_n,
                     psf_pitch_um: f.psf_pitch_um,
                     tables: vec![table],
+                    aliased_entries: 0,
                 }
             }
             _ => {

@@ -21,7 +21,10 @@
 //! * [`field_model`]: the ISET-style field model (PSF, distortion, relative illumination over
 //!   image height × wavelength × object distance, interpolation, PSF rotation, JSON
 //!   save/load);
-//! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers.
+//! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers;
+//! * [`agf`]: Zemax `.agf` glass catalogues;
+//! * [`focus`]: pupil sampling set by the OPD slope for FFT PSFs and MTFs, and the MTF best
+//!   focus.
 //!
 //! ## Prescription file format (`lenses/*.json`)
 //!
@@ -50,7 +53,7 @@
 //! * `thickness_mm` is the axial distance to the next vertex; that of the **last** surface is
 //!   the distance to the (flat) image plane.
 //! * `material` is the medium *after* the surface: `"air"`, a catalogue glass
-//!   `{"glass", "catalog"?}` (looked up as `lenses/glass/<catalog>/<glass>.yml`, all vendors when
+//!   `{"glass", "catalog"?}` (looked up in the bundled table `lenses/glass/<catalog>.tsv`, all vendors when
 //!   `catalog` is absent), or `{"nd", "vd"}` (two-term Cauchy model, see [`glass`]).
 //!   Object space is air; catalogue indices are relative to air.
 //! * `semi_diameter_mm` (optional) is the clear semi-aperture, used for vignetting when tracing
@@ -67,11 +70,13 @@
 //! * Unknown keys are ignored.
 #![deny(missing_docs)]
 
+pub mod agf;
 pub mod analysis;
 pub mod batch;
 pub mod error;
 pub mod field_curvature;
 pub mod field_model;
+pub mod focus;
 pub mod glass;
 pub mod huygens;
 pub mod paraxial;
@@ -82,7 +87,7 @@ pub mod trace;
 pub use batch::{RayBatch, TraceSystem};
 pub use error::LensError;
 pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
-pub use glass::{Glass, GlassCatalog};
+pub use glass::{Glass, GlassCatalog, NearGlass};
 pub use paraxial::FirstOrder;
 pub use prescription::{LensPrescription, PrescriptionFile};
 pub use trace::{Clipping, Ray, TracedRay};

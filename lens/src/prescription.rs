@@ -20,7 +20,8 @@ pub enum MaterialFile {
     Catalog {
         /// Glass name.
         glass: String,
-        /// Vendor folder ("schott", "ohara", "hoya", "cdgm"); all searched if absent.
+        /// Vendor ("schott", "ohara", "hoya", "cdgm", "sumita", "hikari", "misc") or .agf
+        /// catalogue name; all searched if absent.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         catalog: Option<String>,
     },

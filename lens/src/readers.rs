@@ -213,12 +213,17 @@ pub fn decode_text(bytes: &[u8]) -> String {
 /// Options of [`read_zmx`].
 #[derive(Debug, Clone)]
 pub struct ZmxOptions {
-    /// Glass catalogue used to resolve `GLAS` names.
+    /// Glass catalogue used to resolve `GLAS` names (the bundled tables, plus any `.agf`
+    /// catalogues added with [`GlassCatalog::with_agf`], e.g. by `--glass-catalog`).
     pub catalog: GlassCatalog,
-    /// Explicit replacements for glass names that are not in the catalogue (e.g. Hikari or
-    /// Sumita names, Ohara `_MOLD` variants), matched case-insensitively. Nothing is ever
-    /// substituted silently: a glass that is neither found nor listed here is an error.
+    /// Explicit replacements for glass names that are not in the catalogue, matched
+    /// case-insensitively. Nothing is ever substituted silently: a glass that is neither
+    /// found, nor a `_MOLD` variant of a catalogue glass (see [`read_zmx`]), nor listed here
+    /// is an error.
     pub substitutions: Vec<(String, MaterialFile)>,
+    /// Folders searched for `<GCAT name>.agf` when a `GCAT` catalogue is not bundled (the
+    /// .zmx file's own folder is added by [`read_zmx_file`]).
+    pub agf_dirs: Vec<std::path::PathBuf>,
 }
 
 impl Default for ZmxOptions {
@@ -226,6 +231,7 @@ impl Default for ZmxOptions {
         ZmxOptions {
             catalog: GlassCatalog::bundled(),
             substitutions: Vec::new(),
+            agf_dirs: Vec::new(),
         }
     }
 }
@@ -244,15 +250,63 @@ impl ZmxOptions {
     }
 }
 
-/// Zemax catalogue name (`GCAT`) → folder of the bundled catalogue.
+/// Zemax catalogue name (`GCAT`) → table of the bundled catalogue.
 fn zemax_vendor(gcat: &str) -> Option<&'static str> {
-    match gcat.to_ascii_uppercase().as_str() {
+    let u = gcat.to_ascii_uppercase();
+    // Zemax ships dated variants such as SUMITA_AUG2011 or OHARA_2017.
+    let base = u.split('_').next().unwrap_or("");
+    match base {
         "SCHOTT" => Some("schott"),
         "OHARA" => Some("ohara"),
         "HOYA" => Some("hoya"),
         "CDGM" => Some("cdgm"),
+        "SUMITA" => Some("sumita"),
+        "HIKARI" => Some("hikari"),
+        "MISC" | "INFRARED" => Some("misc"),
         _ => None,
     }
+}
+
+/// `opts.catalog` plus the `.agf` files of the `GCAT` catalogues that are not bundled, looked
+/// up as `<name>.agf` (case-insensitive) in `opts.agf_dirs`; also the GCAT names not found.
+fn catalog_with_gcat(
+    gcat: &[String],
+    opts: &ZmxOptions,
+) -> Result<(GlassCatalog, Vec<String>), LensError> {
+    let mut catalog = opts.catalog.clone();
+    let mut missing = Vec::new();
+    for g in gcat {
+        if zemax_vendor(g).is_some() || catalog.agf.iter().any(|(c, _)| c.eq_ignore_ascii_case(g)) {
+            continue;
+        }
+        let found = opts.agf_dirs.iter().find_map(|d| {
+            let rd = std::fs::read_dir(d).ok()?;
+            let mut ps: Vec<_> = rd.flatten().map(|e| e.path()).collect();
+            ps.sort();
+            ps.into_iter().find(|p| {
+                p.extension().is_some_and(|x| x.eq_ignore_ascii_case("agf"))
+                    && p.file_stem().is_some_and(|s| s.eq_ignore_ascii_case(g.as_str()))
+            })
+        });
+        match found {
+            Some(p) => catalog = catalog.with_agf(&p)?,
+            None => missing.push(g.clone()),
+        }
+    }
+    Ok((catalog, missing))
+}
+
+/// The glass catalogue a `.zmx` file's glasses resolve in: `opts.catalog` plus the `.agf`
+/// files of its `GCAT` line found in `opts.agf_dirs`. Pass it to
+/// [`LensPrescription::from_file_form`] with the [`read_zmx`] result.
+pub fn zmx_glass_catalog(bytes: &[u8], opts: &ZmxOptions) -> Result<GlassCatalog, LensError> {
+    let text = decode_text(bytes);
+    let gcat: Vec<String> = text
+        .lines()
+        .find_map(|l| l.strip_prefix("GCAT"))
+        .map(|r| r.split_whitespace().map(|s| s.to_string()).collect())
+        .unwrap_or_default();
+    Ok(catalog_with_gcat(&gcat, opts)?.0)
 }
 
 #[derive(Default)]
@@ -431,16 +485,27 @@ pub fn read_zmx(
         ));
     }
     // Glass resolution.
-    let vendors: Vec<&str> = {
-        let mut v: Vec<&str> = gcat.iter().filter_map(|g| zemax_vendor(g)).collect();
-        for x in crate::glass::VENDORS {
+    let (catalog, missing_gcat) = catalog_with_gcat(&gcat, opts)?;
+    let vendors: Vec<String> = {
+        let mut v: Vec<String> = Vec::new();
+        for g in &gcat {
+            let name = match zemax_vendor(g) {
+                Some(b) => b.to_string(),
+                None => g.to_lowercase(),
+            };
+            if !v.contains(&name) {
+                v.push(name);
+            }
+        }
+        for x in catalog.catalog_names() {
             if !v.contains(&x) {
                 v.push(x);
             }
         }
         v
     };
-    let resolve = |s: &ZSurf| -> Result<MaterialFile, LensError> {
+    let mut notes: Vec<String> = Vec::new();
+    let mut resolve = |s: &ZSurf| -> Result<MaterialFile, LensError> {
         let Some((g, rest, ln)) = &s.glass else {
             return Ok(MaterialFile::Name("air".into()));
         };
@@ -472,22 +537,70 @@ pub fn read_zmx(
         {
             return Ok(m.clone());
         }
-        for v in &vendors {
-            if let Ok(found) = opts.catalog.glass(g, Some(v)) {
+        let lookup = |name: &str| -> Result<Option<crate::glass::Glass>, LensError> {
+            for v in &vendors {
+                if let Some(found) = catalog.find(name, Some(v))? {
+                    return Ok(Some(found));
+                }
+            }
+            Ok(None)
+        };
+        if let Some(found) = lookup(g)? {
+            return Ok(MaterialFile::Catalog {
+                glass: found.name,
+                catalog: Some(found.catalog),
+            });
+        }
+        // Zemax catalogues list precision-moulding glasses twice: NAME and NAME_MOLD, the
+        // latter with the index after the moulding process (n_d lower by a few 1e-4 to 1e-3).
+        // The refractiveindex.info data have only NAME; it is used, and a note says so.
+        if let Some(base) = g
+            .strip_suffix("_MOLD")
+            .or_else(|| g.strip_suffix("_mold"))
+        {
+            if let Some(found) = lookup(base)? {
+                notes.push(format!(
+                    "surface {sn}: glass {g} read as {}/{} (no moulded-state data; n_d may \
+                     differ by ~1e-3)",
+                    found.catalog, found.name
+                ));
                 return Ok(MaterialFile::Catalog {
                     glass: found.name,
                     catalog: Some(found.catalog),
                 });
             }
         }
+        // GLAS name solve pickup nd vd …: nd/vd as Zemax stored them (1.5 / 40 are the
+        // placeholders rayoptics writes).
+        let near = match (rest.get(2), rest.get(3)) {
+            (Some(&nd), Some(&vd)) if nd > 1.0 && vd > 0.0 && !(nd == 1.5 && vd == 40.0) => {
+                let n = catalog.nearest(nd, vd, 3);
+                format!(
+                    "; nearest by (nd {nd}, Vd {vd}): {}",
+                    n.iter()
+                        .map(|x| format!("{}/{} ({:.5}, {:.2})", x.catalog, x.name, x.nd, x.vd))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+            _ => String::new(),
+        };
+        let similar = catalog.similar_names(g, 4);
         Err(err(
             *ln,
             format!(
-                "surface {sn}: glass '{g}' is not in the catalogue ({} vendors {:?}; GCAT {:?}); \
-                 add the glass file or pass a substitution",
-                opts.catalog.root.display(),
-                vendors,
-                gcat
+                "surface {sn}: glass '{g}' is not in the catalogues {vendors:?}{}{near}{}; \
+                 give its .agf with --glass-catalog or substitute it with --glass-sub",
+                if missing_gcat.is_empty() {
+                    String::new()
+                } else {
+                    format!(" (GCAT {missing_gcat:?}: no .agf found)")
+                },
+                if similar.is_empty() {
+                    String::new()
+                } else {
+                    format!("; similar names: {}", similar.join(", "))
+                }
             ),
         ))
     };
@@ -559,6 +672,7 @@ pub fn read_zmx(
         return Err(err(0, "no STOP surface".into()));
     }
     let object_distance_mm = surfs[0].disz.map(|d| d * unit_scale);
+    let glass_notes = notes.join("; ");
     // Wavelengths.
     let mut wl_um: Vec<f64> = if !waves.is_empty() {
         waves.sort_by_key(|w| w.0);
@@ -599,11 +713,11 @@ pub fn read_zmx(
         wavelengths_nm,
         primary_nm: Some(primary_nm),
         aperture: ApertureFile::Epd { epd_mm: 1.0 },
-        provenance: None,
+        provenance: (!glass_notes.is_empty()).then(|| format!("Zemax .zmx; {glass_notes}")),
     };
     // First-order data of the lens with a provisional aperture, for the aperture and field
     // conversions.
-    let l = LensPrescription::from_file_form(&f, &opts.catalog)?;
+    let l = LensPrescription::from_file_form(&f, &catalog)?;
     let fo = l.first_order(l.primary_nm)?;
     let a = ynu_trace(&l, l.primary_nm, 1.0, 0.0);
     f.aperture = match aperture {
@@ -688,7 +802,15 @@ pub fn read_zmx_file(
         .file_stem()
         .map(|s| s.to_string_lossy().to_string())
         .unwrap_or_default();
-    read_zmx(&bytes, &stem, opts).map_err(|e| match e {
+    let mut opts = opts.clone();
+    if let Some(dir) = p.parent() {
+        opts.agf_dirs.push(if dir.as_os_str().is_empty() {
+            std::path::PathBuf::from(".")
+        } else {
+            dir.to_path_buf()
+        });
+    }
+    read_zmx(&bytes, &stem, &opts).map_err(|e| match e {
         LensError::Reader { format, line, msg } => LensError::Reader {
             format,
             line,

@@ -314,30 +314,84 @@ impl LensPrescription {
             self.trace_to_stop(&t.ray(0.0, 0.0), wavelength_nm)
                 .map(|p| p[1])
         };
-        let mut a0 = 0.0;
-        let mut f0 = f(a0).ok_or_else(|| err("paraxial chief ray is lost"))?;
-        if f0.abs() < 1e-9 {
+        // Paraxial start (a = 0): the secant search converges in a few steps for most lenses.
+        if let Some(a) = f(0.0).and_then(|f0| aim_secant(&f, 0.0, f0, 1e-3 * aim.entrance_pupil_radius_mm.max(1e-3))) {
+            aim.aim_y_mm = a;
             return Ok(aim);
         }
-        let mut a1 = 1e-3 * aim.entrance_pupil_radius_mm.max(1e-3);
-        let mut f1 = f(a1).ok_or_else(|| err("chief ray lost while aiming"))?;
-        for _ in 0..60 {
-            if (f1 - f0).abs() < 1e-300 {
-                break;
-            }
-            let a2 = a1 - f1 * (a1 - a0) / (f1 - f0);
-            let f2 = f(a2).ok_or_else(|| err("chief ray lost while aiming"))?;
-            a0 = a1;
-            f0 = f1;
-            a1 = a2;
-            f1 = f2;
-            if f1.abs() < 1e-9 {
-                aim.aim_y_mm = a1;
-                return Ok(aim);
+        // Wide angles (fisheyes): the paraxial chief ray misses, or the secant steps leave the
+        // lens. Real-ray aiming from the stop outward: continue the aim from the axis (where
+        // a = 0 is exact) to the field in steps, each started from the previous solution
+        // extrapolated in tan θ, with steps halved while a ray is lost.
+        let th = field_deg.to_radians();
+        let mut prev: (f64, f64) = (0.0, 0.0); // (tan θ, aim) of the last solved field
+        let mut done = 0.0f64; // fraction of the field solved
+        let mut step = 1.0 / 16.0;
+        while done < 1.0 {
+            let next = (done + step).min(1.0);
+            let t_next = (th * next).tan();
+            let mut t = aim;
+            t.field_deg = field_deg * next;
+            let g = |a: f64| -> Option<f64> {
+                let mut u = t;
+                u.aim_y_mm = a;
+                self.trace_to_stop(&u.ray(0.0, 0.0), wavelength_nm)
+                    .map(|p| p[1])
+            };
+            let guess = if prev.0 != 0.0 { prev.1 * t_next / prev.0 } else { 0.0 };
+            let solved = g(guess).and_then(|f0| {
+                aim_secant(&g, guess, f0, 1e-3 * aim.entrance_pupil_radius_mm.max(1e-3))
+            });
+            match solved {
+                Some(a) => {
+                    prev = (t_next, a);
+                    done = next;
+                    step = (step * 1.5).min(0.25);
+                }
+                None if step > 1e-4 => step /= 2.0,
+                None => {
+                    return Err(err(&format!(
+                        "no real chief ray through the stop centre beyond {:.3}° (of {field_deg}°)",
+                        field_deg * done
+                    )))
+                }
             }
         }
-        Err(err(&format!(
-            "did not converge (stop-height residual {f1} mm)"
-        )))
+        aim.aim_y_mm = prev.1;
+        Ok(aim)
     }
+}
+
+/// Secant search for the root of `f` (stop height of the chief ray as a function of the aim
+/// offset), from `a0` (with `f(a0) = f0`) and `a0 + da`, to |f| < 1e-9 mm; a step whose ray is
+/// lost is halved back towards the last good point. `None` if it does not converge in 60 steps.
+fn aim_secant(f: &dyn Fn(f64) -> Option<f64>, a0: f64, f0: f64, da: f64) -> Option<f64> {
+    if f0.abs() < 1e-9 {
+        return Some(a0);
+    }
+    let (mut a0, mut f0) = (a0, f0);
+    let mut a1 = a0 + da;
+    let mut f1 = f(a1)?;
+    for _ in 0..60 {
+        if f1.abs() < 1e-9 {
+            return Some(a1);
+        }
+        if (f1 - f0).abs() < 1e-300 {
+            return None;
+        }
+        let mut a2 = a1 - f1 * (a1 - a0) / (f1 - f0);
+        let mut f2 = f(a2);
+        let mut halvings = 0;
+        while f2.is_none() && halvings < 30 {
+            a2 = 0.5 * (a1 + a2);
+            f2 = f(a2);
+            halvings += 1;
+        }
+        let f2 = f2?;
+        a0 = a1;
+        f0 = f1;
+        a1 = a2;
+        f1 = f2;
+    }
+    (f1.abs() < 1e-9).then_some(a1)
 }

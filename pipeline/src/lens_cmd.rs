@@ -27,20 +27,24 @@
 //! * RMS spot: the n×n square grid ((i + ½)/n·2 − 1) of the paraxial entrance pupil clipped to
 //!   the unit disc (shifted by the real chief-ray aim point off axis), RMS radius about the
 //!   centroid on the paraxial image plane; no clipping at semi-diameters unless `--clip`.
-//! * On-axis MTF: diffraction MTF at the primary wavelength from the OPD map (64² pupil grid,
-//!   4× zero padding), by default on the best-focus plane (the image-plane shift minimising the
-//!   on-axis polychromatic RMS spot of the report wavelengths), as ref_lens.py's
-//!   `mtf_best_focus_primary`; `--mtf-focus paraxial` uses the paraxial image plane.
+//! * On-axis MTF: diffraction MTF at the primary wavelength from the OPD map (pupil grid set by
+//!   the OPD slope, 64…1024 per side, `camsim_lens::focus`; 2× zero padding), by default on the
+//!   best-focus plane (the image-plane shift minimising the on-axis polychromatic RMS spot of
+//!   the report wavelengths), as ref_lens.py's `mtf_best_focus_primary`; `--mtf-focus paraxial`
+//!   uses the paraxial image plane, `--mtf-focus best-mtf` the plane maximising the MTF.
 //!   On axis the tangential and sagittal MTFs coincide; their mean is reported.
 use crate::report::html_escape;
 use crate::error::CliError;
 use crate::plots;
 use crate::staging::with_staging;
 use camsim_lens::analysis::pupil_grid;
+use camsim_lens::focus::MtfMerit;
 use camsim_lens::huygens::{HuygensPsf, HuygensWindow};
-use camsim_lens::readers::{decode_text, read_iset_dat, read_iset_json, read_zmx, ZmxOptions};
+use camsim_lens::readers::{
+    decode_text, read_iset_dat, read_iset_json, read_zmx, zmx_glass_catalog, ZmxOptions,
+};
 use camsim_lens::{
-    Clipping, FieldModel, FieldModelOptions, GlassCatalog, LensPrescription, PrescriptionFile,
+    Clipping, FieldModel, FieldModelOptions, LensPrescription, PrescriptionFile,
     PsfKind,
 };
 use clap::{Subcommand, ValueEnum};
@@ -57,6 +61,9 @@ pub const C_LINE_NM: f64 = 656.3;
 pub enum MtfFocus {
     /// The plane minimising the on-axis polychromatic RMS spot.
     Best,
+    /// The plane maximising the on-axis MTF at the primary wavelength (mean over the report's
+    /// frequencies up to half the cutoff; `camsim_lens::focus`).
+    BestMtf,
     /// The paraxial image plane of the primary wavelength.
     Paraxial,
 }
@@ -71,12 +78,22 @@ pub struct LensArg {
     /// `--glass-sub J-LAK14=ohara/S-LAL14`.
     #[arg(long = "glass-sub", value_name = "FROM=VENDOR/GLASS")]
     pub glass_sub: Vec<String>,
+    /// A Zemax .agf glass catalogue searched before the bundled ones (repeatable). The .agf
+    /// files named on a .zmx's GCAT line are also looked for beside the .zmx.
+    #[arg(long = "glass-catalog", value_name = "FILE.agf")]
+    pub glass_catalog: Vec<PathBuf>,
 }
 
 impl LensArg {
     /// Read the lens (see [`load_lens_with`]).
     pub fn load(&self) -> Result<LensPrescription, CliError> {
         let mut opts = ZmxOptions::default();
+        for p in &self.glass_catalog {
+            opts.catalog = opts
+                .catalog
+                .with_agf(p)
+                .map_err(|e| CliError::input(p, e))?;
+        }
         for s in &self.glass_sub {
             let parsed = s.split_once('=').and_then(|(from, to)| {
                 let (vendor, glass) = to.split_once('/')?;
@@ -306,9 +323,24 @@ pub fn load_lens_with(path: &Path, zmx: &ZmxOptions) -> Result<LensPrescription,
             }
         }
     };
-    let catalog = GlassCatalog::bundled();
+    let mut catalog = zmx.catalog.clone();
     let file: PrescriptionFile = match kind {
-        "zmx" => read_zmx(&bytes, &stem, zmx).map_err(|e| bad(&e))?,
+        "zmx" => {
+            let mut zmx = zmx.clone();
+            if let Some(dir) = path.parent() {
+                zmx.agf_dirs.push(if dir.as_os_str().is_empty() {
+                    PathBuf::from(".")
+                } else {
+                    dir.to_path_buf()
+                });
+            }
+            catalog = zmx_glass_catalog(&bytes, &zmx).map_err(|e| bad(&e))?;
+            let f = read_zmx(&bytes, &stem, &zmx).map_err(|e| bad(&e))?;
+            if let Some(note) = f.provenance.as_deref() {
+                eprintln!("camsim: {}: {note}", path.display());
+            }
+            f
+        }
         "dat" => read_iset_dat(&decode_text(&bytes), &stem).map_err(|e| bad(&e))?,
         _ => {
             let text = decode_text(&bytes);
@@ -349,15 +381,54 @@ fn focused(lens: &LensPrescription, path: &Path) -> Result<LensPrescription, Cli
     Ok(l)
 }
 
-/// The maximum field angle (degrees): `override_deg` or the largest |fields_deg| of the lens.
-fn max_field_deg(lens: &LensPrescription, override_deg: Option<f64>) -> Result<f64, CliError> {
+/// The maximum field angle (degrees): `override_deg`, else the largest |fields_deg| of the lens,
+/// else (pbrt `.dat` and ISET lens files state no field angles) a field stated in the file name
+/// as ISETCam names its lenses (`petzval.12deg.50.0mm.dat` → 12°), said on stderr. When none
+/// of these gives one and `needed` (an off-axis field is asked for), an error asks for
+/// `--max-field-deg`.
+fn max_field_deg(
+    lens: &LensPrescription,
+    override_deg: Option<f64>,
+    path: &Path,
+    needed: bool,
+) -> Result<f64, CliError> {
     match override_deg {
-        Some(d) if d.is_finite() && d.abs() < 90.0 => Ok(d.abs()),
-        Some(d) => Err(CliError::Other(format!(
-            "--max-field-deg {d} must be in [0, 90)"
-        ))),
-        None => Ok(lens.fields_deg.iter().fold(0.0, |m, a| m.max(a.abs()))),
+        Some(d) if d.is_finite() && d.abs() < 90.0 => return Ok(d.abs()),
+        Some(d) => {
+            return Err(CliError::Other(format!(
+                "--max-field-deg {d} must be in [0, 90)"
+            )))
+        }
+        None => {}
     }
+    let own = lens.fields_deg.iter().fold(0.0, |m: f64, a| m.max(a.abs()));
+    if own > 0.0 {
+        return Ok(own);
+    }
+    if let Some(d) = field_deg_from_file_name(path) {
+        eprintln!(
+            "camsim: {}: the file has no field angles; maximum field {d}° taken from its name",
+            path.display()
+        );
+        return Ok(d);
+    }
+    if needed {
+        return Err(CliError::input(
+            path,
+            "the lens file states no field angles (pbrt .dat / ISET lens files have none): \
+             give the maximum field with --max-field-deg",
+        ));
+    }
+    Ok(0.0)
+}
+
+/// A field angle stated in a file name as a dot-separated `<number>deg` part (ISETCam lens
+/// names, e.g. `wide.56deg.50.0mm.json` → 56); `None` if there is none or it is not in (0, 90).
+pub fn field_deg_from_file_name(path: &Path) -> Option<f64> {
+    let name = path.file_name()?.to_string_lossy().to_string();
+    name.split(['.', '_'])
+        .filter_map(|part| part.strip_suffix("deg")?.parse::<f64>().ok())
+        .find(|d| *d > 0.0 && *d < 90.0)
 }
 
 fn field_angle(fraction: f64, max_deg: f64) -> Result<f64, CliError> {
@@ -556,7 +627,12 @@ pub fn lens_report(
     if wls.is_empty() {
         return Err(CliError::Other("--wavelength-nm: no wavelengths".into()));
     }
-    let max_deg = max_field_deg(&lens, opts.max_field_deg)?;
+    let max_deg = max_field_deg(
+        &lens,
+        opts.max_field_deg,
+        path,
+        opts.field_fractions.iter().any(|f| *f != 0.0),
+    )?;
     let primary = lens.primary_nm;
     let fo = lens.first_order(primary).map_err(lerr)?;
     let clipping = if opts.clip {
@@ -635,7 +711,7 @@ pub fn lens_report(
     // On-axis MTF.
     let dz = match opts.mtf_focus {
         MtfFocus::Paraxial => 0.0,
-        MtfFocus::Best => {
+        MtfFocus::Best | MtfFocus::BestMtf => {
             let fans: Vec<_> = wls
                 .iter()
                 .map(|&w| lens.ray_fan(0.0, w, primary, &grid, clipping))
@@ -648,11 +724,41 @@ pub fn lens_report(
             }
         }
     };
+    let dz = if opts.mtf_focus == MtfFocus::BestMtf {
+        // the plane maximising the on-axis MTF (mean over the report's frequencies ≤ 0.5 ν_cut)
+        let nu_cut = 1.0 / (primary * 1e-6 * fo.working_f_number.abs());
+        let mut f: Vec<f64> = opts
+            .mtf_lp_mm
+            .iter()
+            .copied()
+            .filter(|&f| f > 0.0 && f <= 0.5 * nu_cut)
+            .collect();
+        if f.is_empty() {
+            f.push(0.25 * nu_cut);
+        }
+        let (lo, hi) = lens.focus_search_interval_mm(primary, dz).map_err(lerr)?;
+        lens.best_focus_mtf(&MtfMerit::on_axis(primary, &f), lo, hi)
+            .map_err(lerr)?
+            .image_shift_mm
+    } else {
+        dz
+    };
     let img_d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
     let mtf_lens = lens.with_image_distance(img_d + dz);
-    let wo = mtf_lens
-        .wave_optics(0.0, primary, 64, 4, &opts.mtf_lp_mm)
+    // Pupil grid set by the OPD slope (camsim_lens::focus), 64…1024 per side.
+    let (wo, sampling) = mtf_lens
+        .wave_optics_sampled(0.0, primary, 64, 1024, 2, &opts.mtf_lp_mm)
         .map_err(lerr)?;
+    if !sampling.alias_free {
+        eprintln!(
+            "camsim: warning: {}: the on-axis MTF needs a {}² pupil grid for its OPD slope \
+             ({:.0} waves per pupil radius); computed on {}², so it is aliased (too high)",
+            path.display(),
+            sampling.needed,
+            sampling.max_slope_waves,
+            sampling.samples
+        );
+    }
     let mtf: Vec<Value> = wo
         .mtf
         .iter()
@@ -709,6 +815,9 @@ pub fn lens_report(
         "primary_wavelength_nm": primary,
         "fields": fields,
         "mtf_on_axis": mtf,
+        "mtf_image_shift_mm": dz,
+        "mtf_pupil_samples": sampling.samples,
+        "mtf_alias_free": sampling.alias_free,
         "huygens_psf": huygens_json,
     });
     Ok(ReportData {
@@ -948,10 +1057,17 @@ fn write_report_files(
         ", no clipping at the semi-diameters"
     });
     h.push_str(&format!(
-        ". On-axis MTF: FFT of the pupil function (64² OPD grid, 4× padding) at the primary wavelength, image plane shifted {:+.5} mm from the paraxial focus ({}).</p>",
+        ". On-axis MTF: FFT of the pupil function ({}² OPD grid set by the OPD slope{}, 2× padding) at the primary wavelength, image plane shifted {:+.5} mm from the paraxial focus ({}).</p>",
+        data.json["mtf_pupil_samples"],
+        if data.json["mtf_alias_free"].as_bool() == Some(false) {
+            "; too coarse for this lens: aliased"
+        } else {
+            ""
+        },
         data.mtf_focus_shift_mm,
         match opts.mtf_focus {
             MtfFocus::Best => "best focus: minimum on-axis polychromatic RMS spot",
+            MtfFocus::BestMtf => "best focus: maximum on-axis MTF",
             MtfFocus::Paraxial => "paraxial focus",
         }
     ));
@@ -1143,7 +1259,10 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             }
             let path = la.path.clone();
             let lens = focused(&la.load()?, &path)?;
-            let th = field_angle(field_fraction, max_field_deg(&lens, mfd)?)?;
+            let th = field_angle(
+                field_fraction,
+                max_field_deg(&lens, mfd, &path, field_fraction != 0.0)?,
+            )?;
             let g = grid_for_rays(rays);
             let clipping = if clip {
                 Clipping::SemiDiameters
@@ -1233,7 +1352,7 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             }
             let path = la.path.clone();
             let lens = la.load()?;
-            let max_deg = max_field_deg(&lens, mfd)?;
+            let max_deg = max_field_deg(&lens, mfd, &path, true)?;
             if max_deg <= 0.0 {
                 return Err(CliError::input(
                     &path,
@@ -1257,6 +1376,15 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                 ..FieldModelOptions::default()
             };
             let m = FieldModel::compute(&lens, &opts).map_err(|e| CliError::input(&path, e))?;
+            if m.aliased_entries > 0 {
+                eprintln!(
+                    "camsim: warning: {}: {} PSF entries need a pupil grid finer than {}² for \
+                     their OPD slope; they are aliased (use --geometric for such a lens)",
+                    path.display(),
+                    m.aliased_entries,
+                    camsim_lens::field_model::MAX_WAVE_PUPIL_N
+                );
+            }
             if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
                 std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
             }
@@ -1294,7 +1422,7 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
         } => {
             let path = la.path.clone();
             let lens = focused(&la.load()?, &path)?;
-            let max_deg = max_field_deg(&lens, mfd)?;
+            let max_deg = max_field_deg(&lens, mfd, &path, false)?;
             let svg = draw_svg(&lens, max_deg, rays.clamp(1, 101))
                 .map_err(|e| CliError::input(&path, e))?;
             if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -1356,7 +1484,10 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             }
             let path = la.path.clone();
             let lens = focused(&la.load()?, &path)?;
-            let th = field_angle(field_fraction, max_field_deg(&lens, mfd)?)?;
+            let th = field_angle(
+                field_fraction,
+                max_field_deg(&lens, mfd, &path, field_fraction != 0.0)?,
+            )?;
             let d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
             let lens = lens.with_image_distance(d + defocus_mm);
             let (m, sample_mm, mut v, extra) = match method {
