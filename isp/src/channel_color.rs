@@ -228,8 +228,15 @@ impl ChannelMatrix {
     }
 }
 
-/// The 3 × K matrix `M` minimising `Σ_i ‖M · x_i − t_i‖²` (ordinary least squares by SVD).
-/// Needs at least K samples spanning K dimensions.
+/// The 3 × K matrix `M` minimising `Σ_i ‖M · x_i − t_i‖²` (least squares by SVD). Needs at
+/// least K samples. When the samples do not span K dimensions (e.g. a W channel that is exactly
+/// R + G + B, or narrow bands sampling smooth reflectances), directions whose singular value is
+/// below [`FIT_RELATIVE_TOLERANCE`] of the largest are dropped: the minimum-norm solution
+/// (Golub & Van Loan, *Matrix Computations*, §5.5), which does not amplify noise along
+/// directions the calibration capture never exercised.
+pub const FIT_RELATIVE_TOLERANCE: f64 = 1e-4;
+
+/// Fit the 3 × K matrix (see [`FIT_RELATIVE_TOLERANCE`] for rank-deficient samples).
 pub fn fit_channel_matrix(
     samples: &[Vec<f64>],
     targets: &[[f64; 3]],
@@ -257,14 +264,13 @@ pub fn fit_channel_matrix(
         return Err(IspError::Fit("non-finite sample value".into()));
     }
     let svd = a.svd(true, true);
-    let sv = &svd.singular_values;
-    if !(sv.min() > sv.max() * 1e-12) {
-        return Err(IspError::Fit(format!(
-            "samples do not span {k} dimensions (singular values {:?})",
-            sv.as_slice()
-        )));
+    let smax = svd.singular_values.max();
+    if !(smax > 0.0) {
+        return Err(IspError::Fit("all samples are zero".into()));
     }
-    let x = svd.solve(&b, 0.0).map_err(|e| IspError::Fit(e.to_string()))?;
+    let x = svd
+        .solve(&b, smax * FIT_RELATIVE_TOLERANCE)
+        .map_err(|e| IspError::Fit(e.to_string()))?;
     Ok(ChannelMatrix {
         m: [0, 1, 2].map(|i| (0..k).map(|j| x[(j, i)]).collect()),
     })

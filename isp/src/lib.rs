@@ -25,6 +25,7 @@ mod channel_color;
 mod color;
 mod tone;
 mod demosaic;
+pub mod dng_color;
 pub mod isetcam;
 mod mosaic;
 mod pipeline;
@@ -32,7 +33,7 @@ mod srgb;
 
 pub use channel_color::{
     fit_channel_matrix, illuminant_channel_gains, macbeth_channel_responses, reference_channel,
-    ChannelBalance, ChannelMatrix,
+    ChannelBalance, ChannelMatrix, FIT_RELATIVE_TOLERANCE,
 };
 pub use tone::{Bilateral, ToneCurve};
 pub use color::{
@@ -96,3 +97,6 @@ mod tests;
 
 #[cfg(test)]
 mod tests_cfa;
+
+#[cfg(test)]
+mod tests_color;
