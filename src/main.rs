@@ -66,6 +66,9 @@ enum Command {
         /// Headerless raw: camera neutral R,G,B.
         #[arg(long)]
         neutral: Option<String>,
+        /// White adaptation: bradford (DNG specification) | camera (dcraw/LibRaw convention).
+        #[arg(long, default_value = "bradford")]
+        adaptation: String,
     },
     /// Simulate every frame of a capture set (or, with --expected, each shot's expected image).
     Simulate {
@@ -250,6 +253,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             layout,
             color_matrix,
             neutral,
+            adaptation,
         } => {
             let opts = camsim_pipeline::develop_cmd::options_from_args(
                 &demosaic,
@@ -261,6 +265,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 layout,
                 color_matrix.as_deref(),
                 neutral.as_deref(),
+                &adaptation,
             )?;
             let s = camsim_pipeline::develop_cmd::develop(&input, &out, &opts)?;
             eprintln!(

@@ -13,6 +13,10 @@
 //!   Bradford chromatic adaptation (von Kries scaling in the Bradford cone space; Lam 1985, as
 //!   in ICC.1 Annex E). The D50 profile connection space of the spec is passed through
 //!   implicitly: `CA(D50 → D65) · CA(white → D50) = CA(white → D65)`.
+//! * Alternatively ([`WhiteAdaptation::CameraSpace`], the dcraw/LibRaw convention): the white
+//!   balance alone adapts (von Kries in camera space) and the matrix is the one for D65,
+//!   `(diag(1/s) · CM · M_sRGB→XYZ)⁻¹` with `s = CM · M_sRGB→XYZ · (1, 1, 1)` (dcraw's
+//!   `cam_xyz_coeff`); it equals the Bradford path when the neutral is the D65 neutral.
 //! * White-balance gains are `max(neutral) / neutral_k` (the channel with the largest neutral
 //!   keeps gain 1, as in dcraw/LibRaw), and the matrix is scaled so that white-balanced
 //!   (1, 1, 1) has luminance Y = 1: a neutral that just saturates its strongest channel
@@ -90,6 +94,15 @@ pub fn calibration_illuminant_cct_k(code: u32) -> Option<f64> {
     })
 }
 
+/// How the scene white is adapted to the D65 white of sRGB.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WhiteAdaptation {
+    /// DNG specification: Bradford adaptation in XYZ from the white found from the neutral.
+    Bradford,
+    /// dcraw/LibRaw: white-balance gains in camera space, then the D65 matrix.
+    CameraSpace,
+}
+
 /// One calibration of a DNG: matrices for one illuminant.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DngCalibration {
@@ -139,8 +152,17 @@ fn mix(a: &ColorMatrix, b: &ColorMatrix, g: f64) -> ColorMatrix {
     ColorMatrix { m }
 }
 
-/// The white-balance gains and camera → linear sRGB matrix of a DNG (module documentation).
+/// The white-balance gains and camera → linear sRGB matrix of a DNG (module documentation),
+/// Bradford adaptation.
 pub fn dng_camera_to_srgb(c: &DngColor) -> Result<DngRendering, IspError> {
+    dng_camera_to_srgb_with(c, WhiteAdaptation::Bradford)
+}
+
+/// As [`dng_camera_to_srgb`] with a chosen white adaptation.
+pub fn dng_camera_to_srgb_with(
+    c: &DngColor,
+    adaptation: WhiteAdaptation,
+) -> Result<DngRendering, IspError> {
     let bad = |name: &str, v: String, why: &str| IspError::InvalidParameter {
         name: name.into(),
         value: v,
@@ -210,7 +232,38 @@ pub fn dng_camera_to_srgb(c: &DngColor) -> Result<DngRendering, IspError> {
     let ab_inv = inv(&ab, "AnalogBalance")?;
     let fms: Vec<Option<ColorMatrix>> = c.calibrations.iter().map(|k| k.forward_matrix).collect();
     let use_fm = fms.iter().all(|f| f.is_some());
-    let cam_to_xyz_d65 = if use_fm {
+    let cam_to_xyz_d65 = if adaptation == WhiteAdaptation::CameraSpace {
+        // dcraw: rows of CM · M_sRGB→XYZ normalised to sum 1, inverted; gains undone below
+        let srgb_to_xyz = inv(&ColorMatrix { m: XYZ_TO_LINEAR_SRGB }, "sRGB matrix")?;
+        let cam_rgb = ab.after(&cm_at(g)).after(&srgb_to_xyz);
+        let srow = cam_rgb.apply([1.0, 1.0, 1.0]);
+        if srow.iter().any(|&x| !(x > 0.0)) {
+            return Err(bad(
+                "ColorMatrix",
+                format!("{:?}", c.calibrations[0].color_matrix.m),
+                "gives a non-positive camera response to the D65 white",
+            ));
+        }
+        let norm = ColorMatrix {
+            m: [
+                [1.0 / srow[0], 0.0, 0.0],
+                [0.0, 1.0 / srow[1], 0.0],
+                [0.0, 0.0, 1.0 / srow[2]],
+            ],
+        };
+        // white-balanced camera → linear sRGB, expressed as raw camera → XYZ
+        let nmax = c.neutral.iter().cloned().fold(0.0, f64::max);
+        let gains = ColorMatrix {
+            m: [
+                [nmax / c.neutral[0], 0.0, 0.0],
+                [0.0, nmax / c.neutral[1], 0.0],
+                [0.0, 0.0, nmax / c.neutral[2]],
+            ],
+        };
+        srgb_to_xyz
+            .after(&inv(&norm.after(&cam_rgb), "ColorMatrix")?)
+            .after(&gains)
+    } else if use_fm {
         let fm = if fms.len() == 1 {
             fms[0].expect("checked")
         } else {
@@ -258,6 +311,6 @@ pub fn dng_camera_to_srgb(c: &DngColor) -> Result<DngRendering, IspError> {
         white_xy: xy,
         white_cct_k: mccamy_cct_k(xy),
         weight_1: g,
-        used_forward_matrix: use_fm,
+        used_forward_matrix: use_fm && adaptation == WhiteAdaptation::Bradford,
     })
 }

@@ -167,3 +167,28 @@ fn channel_balance_rules() {
     let e = ChannelBalance::Gains(vec![1.0, 2.0]).gains(&p).unwrap_err().to_string();
     assert!(e.contains("need one per channel (4)"), "{e}");
 }
+
+/// dcraw/LibRaw's camera-space adaptation equals the Bradford path for the D65 neutral and
+/// differs for a tungsten neutral; in both cases white-balanced (1, 1, 1) is sRGB white.
+#[test]
+fn camera_space_adaptation_agrees_with_bradford_only_at_d65() {
+    let cm = ColorMatrix { m: CM };
+    let cal = vec![DngCalibration { color_matrix: cm, forward_matrix: None, cct_k: 6504.0 }];
+    let d65 = DngColor { calibrations: cal.clone(), analog_balance: [1.0; 3], neutral: cm.apply(xy_to_xyz(D65_XY)) };
+    let a = dng_camera_to_srgb_with(&d65, WhiteAdaptation::Bradford).unwrap();
+    let b = dng_camera_to_srgb_with(&d65, WhiteAdaptation::CameraSpace).unwrap();
+    for i in 0..3 {
+        for j in 0..3 {
+            assert!(close(a.matrix.m[i][j], b.matrix.m[i][j], 1e-3), "{:?} vs {:?}", a.matrix.m, b.matrix.m);
+        }
+    }
+    let t = DngColor { calibrations: cal, analog_balance: [1.0; 3], neutral: [0.75, 1.0, 0.42] };
+    let a = dng_camera_to_srgb_with(&t, WhiteAdaptation::Bradford).unwrap();
+    let b = dng_camera_to_srgb_with(&t, WhiteAdaptation::CameraSpace).unwrap();
+    let diff: f64 = (0..3).flat_map(|i| (0..3).map(move |j| (i, j))).map(|(i, j)| (a.matrix.m[i][j] - b.matrix.m[i][j]).abs()).sum();
+    assert!(diff > 0.05, "{diff}");
+    for r in [a, b] {
+        let w = r.matrix.apply([1.0; 3]);
+        assert!(w.iter().all(|&x| close(x, 1.0, 5e-3)), "{w:?}");
+    }
+}

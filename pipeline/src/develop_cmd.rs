@@ -21,7 +21,8 @@ use crate::raw_input::dng::read_dng;
 use crate::raw_input::{read_raw, RawFormat};
 use camsim_core::RawFrame;
 use camsim_isp::dng_color::{
-    calibration_illuminant_cct_k, dng_camera_to_srgb, DngCalibration, DngColor,
+    calibration_illuminant_cct_k, dng_camera_to_srgb_with, DngCalibration, DngColor,
+    WhiteAdaptation,
 };
 use camsim_isp::{
     demosaic_planes, to_srgb16, to_srgb8, Bilateral, ChannelBalance, ColorMatrix, DemosaicMethod,
@@ -72,6 +73,8 @@ pub struct DevelopOptions {
     pub denoise: Option<Bilateral>,
     /// Clip white-balanced camera values at the white level before the colour matrix.
     pub highlight_clip: bool,
+    /// White adaptation: Bradford (DNG specification, default) or camera space (dcraw/LibRaw).
+    pub adaptation: WhiteAdaptation,
     /// Layout of a headerless raw file (`--layout`).
     pub layout: Option<String>,
     /// XYZ → camera matrix for a headerless raw (row-major, D65 calibration).
@@ -89,6 +92,7 @@ impl Default for DevelopOptions {
             tone: ToneCurve::None,
             denoise: None,
             highlight_clip: true,
+            adaptation: WhiteAdaptation::Bradford,
             layout: None,
             color_matrix: None,
             neutral: None,
@@ -380,7 +384,9 @@ pub fn develop(input: &Path, out: &Path, o: &DevelopOptions) -> Result<DevelopSu
     })?;
     // 3. white balance + colour
     let rendering = match &color {
-        Some(c) => Some(dng_camera_to_srgb(c).map_err(|e| CliError::input(input, e))?),
+        Some(c) => Some(
+            dng_camera_to_srgb_with(c, o.adaptation).map_err(|e| CliError::input(input, e))?,
+        ),
         None => None,
     };
     let gains: [f64; 3] = match (o.balance, &rendering, o.neutral) {
@@ -519,7 +525,17 @@ pub fn options_from_args(
     layout: Option<String>,
     color_matrix: Option<&str>,
     neutral: Option<&str>,
+    adaptation: &str,
 ) -> Result<DevelopOptions, CliError> {
+    let adaptation = match adaptation {
+        "bradford" => WhiteAdaptation::Bradford,
+        "camera" => WhiteAdaptation::CameraSpace,
+        a => {
+            return Err(CliError::Other(format!(
+                "--adaptation {a}: expected bradford (DNG specification) or camera (dcraw/LibRaw)"
+            )))
+        }
+    };
     let demosaic = demosaic
         .parse()
         .map_err(|e| CliError::Other(format!("--demosaic: {e}")))?;
@@ -549,6 +565,7 @@ pub fn options_from_args(
         tone,
         denoise,
         highlight_clip,
+        adaptation,
         layout,
         color_matrix: color_matrix.map(|s| numbers::<9>("--color-matrix", s)).transpose()?,
         neutral: neutral.map(|s| numbers::<3>("--neutral", s)).transpose()?,
