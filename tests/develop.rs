@@ -14,7 +14,8 @@ fn repo() -> PathBuf {
 /// The real mosaic (MIT, mushfiqulalam/isp; README of ../shared/data/real): 768×512 crop of
 /// a 14-bit Nikon NEF, RGGB, black 600, white 15520 (values of the upstream code).
 fn real_mosaic() -> PathBuf {
-    repo().join("../shared/data/real/captures/mushfiqulalam_bayer/DSC_1339_768x512_rggb_uint16le.raw")
+    repo()
+        .join("../shared/data/real/captures/mushfiqulalam_bayer/DSC_1339_768x512_rggb_uint16le.raw")
 }
 const REAL_ROWS: usize = 512;
 const REAL_COLS: usize = 768;
@@ -53,8 +54,20 @@ fn write_dng(path: &Path, rows: usize, cols: usize, data: &[u16], mut tags: Vec<
             V::Short(x) => (3, x.len(), x.iter().flat_map(|a| a.to_le_bytes()).collect()),
             V::Long(x) => (4, x.len(), x.iter().flat_map(|a| a.to_le_bytes()).collect()),
             V::Byte(x) => (1, x.len(), x.clone()),
-            V::Rational(x) => (5, x.len(), x.iter().flat_map(|(a, b)| [a.to_le_bytes(), b.to_le_bytes()].concat()).collect()),
-            V::SRational(x) => (10, x.len(), x.iter().flat_map(|(a, b)| [a.to_le_bytes(), b.to_le_bytes()].concat()).collect()),
+            V::Rational(x) => (
+                5,
+                x.len(),
+                x.iter()
+                    .flat_map(|(a, b)| [a.to_le_bytes(), b.to_le_bytes()].concat())
+                    .collect(),
+            ),
+            V::SRational(x) => (
+                10,
+                x.len(),
+                x.iter()
+                    .flat_map(|(a, b)| [a.to_le_bytes(), b.to_le_bytes()].concat())
+                    .collect(),
+            ),
         };
         entries.extend_from_slice(&tag.to_le_bytes());
         entries.extend_from_slice(&ty.to_le_bytes());
@@ -105,7 +118,15 @@ fn colour_tags(black: u16, white: u16, neutral: [f64; 3]) -> Vec<(u16, V)> {
         (50714, V::Short(vec![black])),
         (50717, V::Short(vec![white])),
         (50721, V::SRational(CM.iter().map(|&x| rat(x)).collect())),
-        (50728, V::Rational(neutral.iter().map(|&x| ((x * 10000.0).round() as u32, 10000)).collect())),
+        (
+            50728,
+            V::Rational(
+                neutral
+                    .iter()
+                    .map(|&x| ((x * 10000.0).round() as u32, 10000))
+                    .collect(),
+            ),
+        ),
         (50778, V::Short(vec![21])),
     ]
 }
@@ -113,7 +134,9 @@ fn colour_tags(black: u16, white: u16, neutral: [f64; 3]) -> Vec<(u16, V)> {
 /// Camera response to the D65 white (CM · XYZ_D65), the neutral of a D65 scene.
 fn d65_neutral() -> [f64; 3] {
     let w = [0.3127 / 0.3290, 1.0, (1.0 - 0.3127 - 0.3290) / 0.3290];
-    let v: Vec<f64> = (0..3).map(|i| (0..3).map(|j| CM[3 * i + j] * w[j]).sum()).collect();
+    let v: Vec<f64> = (0..3)
+        .map(|i| (0..3).map(|j| CM[3 * i + j] * w[j]).sum())
+        .collect();
     let mx = v.iter().cloned().fold(0.0, f64::max);
     [v[0] / mx, v[1] / mx, v[2] / mx]
 }
@@ -128,7 +151,9 @@ fn read_png16(p: &Path) -> (usize, usize, Vec<[f64; 3]>) {
         .chunks_exact(6)
         .map(|c| {
             [0, 1, 2].map(|k| {
-                camsim_isp::srgb_decode(u16::from_be_bytes([c[2 * k], c[2 * k + 1]]) as f64 / 65535.0)
+                camsim_isp::srgb_decode(
+                    u16::from_be_bytes([c[2 * k], c[2 * k + 1]]) as f64 / 65535.0,
+                )
             })
         })
         .collect();
@@ -164,13 +189,23 @@ fn develop_renders_a_neutral_dng_field_as_the_closed_form_grey() {
     let p = d.path().join("grey.dng");
     write_dng(&p, rows, cols, &data, colour_tags(black, white, n));
     let out = d.path().join("grey.png");
-    develop_ok(&[p.to_str().unwrap(), "--out", out.to_str().unwrap(), "--bits", "16"]);
+    develop_ok(&[
+        p.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--bits",
+        "16",
+    ]);
     let (r, c, px) = read_png16(&out);
     assert_eq!((r, c), (rows, cols));
     for (i, v) in px.iter().enumerate() {
         for k in 0..3 {
             // DN rounding (±0.5 DN of 4031) and 16-bit coding
-            assert!((v[k] - level).abs() < 5e-3, "pixel {i} channel {k}: {} vs {level}", v[k]);
+            assert!(
+                (v[k] - level).abs() < 5e-3,
+                "pixel {i} channel {k}: {} vs {level}",
+                v[k]
+            );
         }
     }
 }
@@ -212,14 +247,24 @@ fn develop_agrees_with_libraw_on_the_real_bayer_mosaic() {
         let o = std::process::Command::new(&python)
             .arg(repo().join("tools/libraw_develop.py"))
             .arg(real_mosaic())
-            .args([&REAL_ROWS.to_string(), &REAL_COLS.to_string(), "600", "15520", "RGGB"])
+            .args([
+                &REAL_ROWS.to_string(),
+                &REAL_COLS.to_string(),
+                "600",
+                "15520",
+                "RGGB",
+            ])
             .arg(cm.join(","))
             .arg(n.map(|x| format!("{x:.4}")).join(","))
             .arg(&dng)
             .arg(&lr)
             .output()
             .unwrap();
-        assert!(o.status.success(), "libraw_develop.py: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            o.status.success(),
+            "libraw_develop.py: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
         let png = d.path().join(format!("{name}.png"));
         develop_ok(&[
             dng.to_str().unwrap(),
@@ -237,7 +282,9 @@ fn develop_agrees_with_libraw_on_the_real_bayer_mosaic() {
         let bytes = std::fs::read(&lr).unwrap();
         let theirs: Vec<[f64; 3]> = bytes
             .chunks_exact(6)
-            .map(|b| [0, 1, 2].map(|k| u16::from_le_bytes([b[2 * k], b[2 * k + 1]]) as f64 / 65535.0))
+            .map(|b| {
+                [0, 1, 2].map(|k| u16::from_le_bytes([b[2 * k], b[2 * k + 1]]) as f64 / 65535.0)
+            })
             .collect();
         let (mut s, mut m, mut worst) = (0.0, 0usize, 0.0f64);
         let b = 4;
@@ -251,13 +298,21 @@ fn develop_agrees_with_libraw_on_the_real_bayer_mosaic() {
             }
         }
         let mean = s / m as f64;
-        report.push(format!("{name} ({adaptation}): mean ΔE2000 {mean:.3}, max {worst:.2}"));
+        report.push(format!(
+            "{name} ({adaptation}): mean ΔE2000 {mean:.3}, max {worst:.2}"
+        ));
         if name == "tungsten_bradford" {
             // the DNG specification's Bradford adaptation is not LibRaw's camera-space von
             // Kries: for a non-D65 neutral they differ measurably (reported, docs/isp.md)
-            assert!(mean > 0.3, "{name}: the two adaptations should differ, ΔE2000 {mean:.3}");
+            assert!(
+                mean > 0.3,
+                "{name}: the two adaptations should differ, ΔE2000 {mean:.3}"
+            );
         } else {
-            assert!(mean <= 1.0, "{name}: camsim vs LibRaw mean ΔE2000 = {mean:.3} (max {worst:.2})");
+            assert!(
+                mean <= 1.0,
+                "{name}: camsim vs LibRaw mean ΔE2000 = {mean:.3} (max {worst:.2})"
+            );
         }
     }
     eprintln!("camsim develop vs LibRaw: {}", report.join("; "));
@@ -288,7 +343,12 @@ fn develop_err(input: &Path, out: &Path, extra: &[&str]) -> String {
         .args(extra)
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let e = String::from_utf8_lossy(&o.stderr).to_string();
     assert_eq!(e.trim_end().lines().count(), 1, "one line: {e}");
     assert!(!out.exists(), "{} was written", out.display());
@@ -323,28 +383,46 @@ fn bad_raw_files_give_one_clear_error_and_write_nothing() {
     let mut t = base();
     t.retain(|x| x.0 != 259);
     t.push((259, V::Short(vec![7])));
-    cases.push((good(t, "ljpeg.dng"), vec!["ljpeg.dng", "Compression", "lossless JPEG"]));
+    cases.push((
+        good(t, "ljpeg.dng"),
+        vec!["ljpeg.dng", "Compression", "lossless JPEG"],
+    ));
     // wrong tags: AsShotNeutral with two values, ColorMatrix1 with six, a CFA colour code 9,
     // no AsShotNeutral, CalibrationIlluminant without a temperature
     let mut t = base();
     t.retain(|x| x.0 != 50728);
     t.push((50728, V::Rational(vec![(1, 2), (1, 1)])));
-    cases.push((good(t, "neutral2.dng"), vec!["neutral2.dng", "AsShotNeutral", "expected 3"]));
+    cases.push((
+        good(t, "neutral2.dng"),
+        vec!["neutral2.dng", "AsShotNeutral", "expected 3"],
+    ));
     let mut t = base();
     t.retain(|x| x.0 != 50721);
     t.push((50721, V::SRational(vec![(1, 1); 6])));
-    cases.push((good(t, "cm6.dng"), vec!["cm6.dng", "ColorMatrix1", "needs 9"]));
+    cases.push((
+        good(t, "cm6.dng"),
+        vec!["cm6.dng", "ColorMatrix1", "needs 9"],
+    ));
     let mut t = base();
     t.retain(|x| x.0 != 33422);
     t.push((33422, V::Byte(vec![0, 1, 9, 2])));
-    cases.push((good(t, "code9.dng"), vec!["code9.dng", "CFAPattern", "colour code 9"]));
+    cases.push((
+        good(t, "code9.dng"),
+        vec!["code9.dng", "CFAPattern", "colour code 9"],
+    ));
     let mut t = base();
     t.retain(|x| x.0 != 50728);
-    cases.push((good(t, "noneutral.dng"), vec!["noneutral.dng", "AsShotNeutral", "missing"]));
+    cases.push((
+        good(t, "noneutral.dng"),
+        vec!["noneutral.dng", "AsShotNeutral", "missing"],
+    ));
     let mut t = base();
     t.retain(|x| x.0 != 50778);
     t.push((50778, V::Short(vec![255])));
-    cases.push((good(t, "ill255.dng"), vec!["ill255.dng", "CalibrationIlluminant1", "255"]));
+    cases.push((
+        good(t, "ill255.dng"),
+        vec!["ill255.dng", "CalibrationIlluminant1", "255"],
+    ));
     for (p, needles) in &cases {
         let e = develop_err(p, &out, &[]);
         for n in needles {
@@ -354,11 +432,22 @@ fn bad_raw_files_give_one_clear_error_and_write_nothing() {
     // headerless raw: wrong size for the layout, missing layout, bad layout key
     let raw = d.path().join("short.raw");
     std::fs::write(&raw, vec![0u8; 100]).unwrap();
-    let e = develop_err(&raw, &out, &["--layout", "rows=8,cols=8,cfa=RGGB,black=0,white=1023"]);
+    let e = develop_err(
+        &raw,
+        &out,
+        &["--layout", "rows=8,cols=8,cfa=RGGB,black=0,white=1023"],
+    );
     assert!(e.contains("short.raw") && e.contains("100 bytes"), "{e}");
     let e = develop_err(&raw, &out, &[]);
     assert!(e.contains("--layout"), "{e}");
-    let e = develop_err(&raw, &out, &["--layout", "rows=8,cols=8,cfa=RGGB,black=0,white=1023,gain=2"]);
+    let e = develop_err(
+        &raw,
+        &out,
+        &[
+            "--layout",
+            "rows=8,cols=8,cfa=RGGB,black=0,white=1023,gain=2",
+        ],
+    );
     assert!(e.contains("unknown key 'gain'"), "{e}");
     // nothing else was left in the folder (no temporary files)
     let left: Vec<String> = std::fs::read_dir(d.path())

@@ -66,7 +66,11 @@ fn run(dir: &Path, name: &str, cfg: Value) -> Value {
         .args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()])
         .output()
         .unwrap();
-    assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{name}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
 }
 
@@ -79,10 +83,28 @@ fn run_demosaics_every_cfa() {
         ("rgbw", vec!["rg", "wb"], "rgbw", None, "lmmse"),
         ("rccb", vec!["rc", "cb"], "rcb", None, "lmmse"),
         ("rccc", vec!["rc", "cc"], "rc", None, "lmmse"),
-        ("quad", vec!["rrgg", "rrgg", "ggbb", "ggbb"], "rgb", None, "quad_remosaic"),
-        ("quad_bin", vec!["rrgg", "rrgg", "ggbb", "ggbb"], "rgb", Some("quad_binning"), "quad_binning"),
+        (
+            "quad",
+            vec!["rrgg", "rrgg", "ggbb", "ggbb"],
+            "rgb",
+            None,
+            "quad_remosaic",
+        ),
+        (
+            "quad_bin",
+            vec!["rrgg", "rrgg", "ggbb", "ggbb"],
+            "rgb",
+            Some("quad_binning"),
+            "quad_binning",
+        ),
         ("mono", vec!["m"], "m", None, "lmmse"),
-        ("ms16", vec!["abcd", "efgh", "ijkl", "mnop"], "abcdefghijklmnop", None, "lmmse"),
+        (
+            "ms16",
+            vec!["abcd", "efgh", "ijkl", "mnop"],
+            "abcdefghijklmnop",
+            None,
+            "lmmse",
+        ),
     ];
     let (rows, cols) = (48, 72);
     for (name, tile, letters, method, expect) in cases {
@@ -97,9 +119,19 @@ fn run_demosaics_every_cfa() {
         });
         let s = run(d.path(), name, cfg);
         assert_eq!(s["processor"]["demosaic"], json!(expect), "{name}");
-        let img = image::open(d.path().join(name).join("rendered.png")).unwrap().to_rgb8();
-        let want = if expect == "quad_binning" { (cols / 2, rows / 2) } else { (cols, rows) };
-        assert_eq!((img.width() as usize, img.height() as usize), want, "{name}");
+        let img = image::open(d.path().join(name).join("rendered.png"))
+            .unwrap()
+            .to_rgb8();
+        let want = if expect == "quad_binning" {
+            (cols / 2, rows / 2)
+        } else {
+            (cols, rows)
+        };
+        assert_eq!(
+            (img.width() as usize, img.height() as usize),
+            want,
+            "{name}"
+        );
         let de = s["delta_e_2000"]["mean"].as_f64().unwrap();
         assert!(de.is_finite() && de > 0.0, "{name}: ΔE {de}");
         eprintln!("run {name}: demosaic {expect}, held-out mean ΔE2000 {de:.2}");
@@ -125,10 +157,16 @@ fn held_out_delta_e_depends_on_white_balance() {
         let s = run(d.path(), light, cfg);
         let fitted = s["delta_e_2000_fitted"]["mean"].as_f64().unwrap();
         let held = s["delta_e_2000"]["mean"].as_f64().unwrap();
-        assert!(s["delta_e_scored_on"].as_str().unwrap().contains("held out"));
+        assert!(s["delta_e_scored_on"]
+            .as_str()
+            .unwrap()
+            .contains("held out"));
         let rows = s["white_balance_comparison"].as_array().unwrap();
         let get = |m: &str| -> (f64, f64) {
-            let r = rows.iter().find(|r| r["white_balance"] == json!(m)).unwrap();
+            let r = rows
+                .iter()
+                .find(|r| r["white_balance"] == json!(m))
+                .unwrap();
             (
                 r["fitted_delta_e_2000_mean"].as_f64().unwrap(),
                 r["held_out_delta_e_2000_mean"].as_f64().unwrap(),
@@ -145,15 +183,26 @@ fn held_out_delta_e_depends_on_white_balance() {
         let (_, none) = get("none");
         let (f_known, known) = get("known_illuminant");
         // the run's own figures are the known-illuminant row
-        assert!((f_known - fitted).abs() < 1e-9 && (known - held).abs() < 0.5, "{light}: run {held:.3} vs table {known:.3}");
+        assert!(
+            (f_known - fitted).abs() < 1e-9 && (known - held).abs() < 0.5,
+            "{light}: run {held:.3} vs table {known:.3}"
+        );
         // measurable: no white balance is worse than the known illuminant by > 2 ΔE2000
-        assert!(none > known + 2.0, "{light}: none {none:.2} vs known {known:.2}");
+        assert!(
+            none > known + 2.0,
+            "{light}: none {none:.2} vs known {known:.2}"
+        );
         // held out is worse than fitted (the matrix did not see this light)
-        assert!(known > f_known, "{light}: held-out {known:.2} ≤ fitted {f_known:.2}");
+        assert!(
+            known > f_known,
+            "{light}: held-out {known:.2} ≤ fitted {f_known:.2}"
+        );
         let spread = rows
             .iter()
             .map(|r| r["held_out_delta_e_2000_mean"].as_f64().unwrap())
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), x| (lo.min(x), hi.max(x)));
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), x| {
+                (lo.min(x), hi.max(x))
+            });
         assert!(spread.1 - spread.0 > 2.0, "{light}: {table:?}");
         let html = std::fs::read_to_string(d.path().join(light).join("report.html")).unwrap();
         assert!(html.contains("held-out mean ΔE2000") && html.contains("grey_world"));
@@ -183,12 +232,20 @@ fn fixed_matrix_from_the_config() {
     let p = d.path().join("bad.json");
     std::fs::write(&p, bad.to_string()).unwrap();
     let o = camsim()
-        .args(["run", p.to_str().unwrap(), "--out", d.path().join("bad").to_str().unwrap()])
+        .args([
+            "run",
+            p.to_str().unwrap(),
+            "--out",
+            d.path().join("bad").to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
     assert_eq!(e.trim_end().lines().count(), 1, "{e}");
-    assert!(e.contains("processor.ccm") && e.contains("3 rows of 3"), "{e}");
+    assert!(
+        e.contains("processor.ccm") && e.contains("3 rows of 3"),
+        "{e}"
+    );
     assert!(!d.path().join("bad").exists());
 }

@@ -231,8 +231,7 @@ fn weights(
             for i in 0..n {
                 for j in 0..n {
                     let (di, dj) = (offsets[i], offsets[j]);
-                    a[(i, j)] = cov[ch[i]][ch[j]]
-                        * s((di.0 - dj.0) as f64, (di.1 - dj.1) as f64)
+                    a[(i, j)] = cov[ch[i]][ch[j]] * s((di.0 - dj.0) as f64, (di.1 - dj.1) as f64)
                         + if i == j {
                             model.nugget * cov[ch[i]][ch[i]]
                         } else {
@@ -259,12 +258,10 @@ fn weights(
                 }
                 let kk = present.iter().position(|&c| c == k).expect("present");
                 b[n + kk] = 1.0;
-                let x = lu.solve(&b).ok_or_else(|| {
-                    IspError::InvalidParameter {
-                        name: "co-kriging system".into(),
-                        value: format!("tile phase ({pr}, {pc}), channel {k}"),
-                        reason: "singular (is the channel covariance positive definite?)".into(),
-                    }
+                let x = lu.solve(&b).ok_or_else(|| IspError::InvalidParameter {
+                    name: "co-kriging system".into(),
+                    value: format!("tile phase ({pr}, {pc}), channel {k}"),
+                    reason: "singular (is the channel covariance positive definite?)".into(),
                 })?;
                 per_k.push((0..n).map(|i| x[i]).collect());
             }

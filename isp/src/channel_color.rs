@@ -14,10 +14,9 @@ use rayon::prelude::*;
 /// (clear/white/yellow pixels), else channel 0.
 pub fn reference_channel(names: &[String]) -> usize {
     for want in ["g", "w", "c", "y"] {
-        if let Some(k) = names
-            .iter()
-            .position(|n| n.trim().eq_ignore_ascii_case(want) || (want == "g" && rgb_index_of_name(n) == Some(1)))
-        {
+        if let Some(k) = names.iter().position(|n| {
+            n.trim().eq_ignore_ascii_case(want) || (want == "g" && rgb_index_of_name(n) == Some(1))
+        }) {
             return k;
         }
     }
@@ -78,7 +77,11 @@ impl ChannelBalance {
             ChannelBalance::WhitePatch => from_stat(
                 img.planes
                     .iter()
-                    .map(|p| p.iter().map(|&x| x as f64).fold(f64::NEG_INFINITY, f64::max))
+                    .map(|p| {
+                        p.iter()
+                            .map(|&x| x as f64)
+                            .fold(f64::NEG_INFINITY, f64::max)
+                    })
                     .collect(),
                 "maximum",
             ),
@@ -251,7 +254,9 @@ pub fn fit_channel_matrix(
     let n = samples.len();
     let k = samples.first().map_or(0, |s| s.len());
     if k == 0 || samples.iter().any(|s| s.len() != k) {
-        return Err(IspError::Fit("samples have different or zero channel counts".into()));
+        return Err(IspError::Fit(
+            "samples have different or zero channel counts".into(),
+        ));
     }
     if n < k {
         return Err(IspError::Fit(format!(

@@ -74,22 +74,22 @@ pub fn mccamy_cct_k(xy: [f64; 2]) -> f64 {
 /// None for codes without a defined temperature.
 pub fn calibration_illuminant_cct_k(code: u32) -> Option<f64> {
     Some(match code {
-        17 | 3 => 2856.0,  // standard light A, tungsten
-        24 => 3200.0,      // ISO studio tungsten
-        18 => 4874.0,      // standard light B
-        19 => 6774.0,      // standard light C
-        20 => 5503.0,      // D55
+        17 | 3 => 2856.0,     // standard light A, tungsten
+        24 => 3200.0,         // ISO studio tungsten
+        18 => 4874.0,         // standard light B
+        19 => 6774.0,         // standard light C
+        20 => 5503.0,         // D55
         21 | 1 | 9 => 6504.0, // D65, daylight, fine weather
-        22 => 7504.0,      // D75
-        23 => 5003.0,      // D50
-        10 => 6500.0,      // cloudy
-        11 => 7500.0,      // shade
-        12 => 6430.0,      // daylight fluorescent (F1)
-        13 => 5000.0,      // day white fluorescent
-        14 => 4150.0,      // cool white fluorescent (F2)
-        15 => 3450.0,      // white fluorescent
-        16 => 2940.0,      // warm white fluorescent
-        2 => 4150.0,       // fluorescent
+        22 => 7504.0,         // D75
+        23 => 5003.0,         // D50
+        10 => 6500.0,         // cloudy
+        11 => 7500.0,         // shade
+        12 => 6430.0,         // daylight fluorescent (F1)
+        13 => 5000.0,         // day white fluorescent
+        14 => 4150.0,         // cool white fluorescent (F2)
+        15 => 3450.0,         // white fluorescent
+        16 => 2940.0,         // warm white fluorescent
+        2 => 4150.0,          // fluorescent
         _ => return None,
     })
 }
@@ -182,7 +182,10 @@ pub fn dng_camera_to_srgb_with(
             "must be three positive numbers",
         ));
     }
-    if c.analog_balance.iter().any(|&x| !(x > 0.0 && x.is_finite())) {
+    if c.analog_balance
+        .iter()
+        .any(|&x| !(x > 0.0 && x.is_finite()))
+    {
         return Err(bad(
             "AnalogBalance",
             format!("{:?}", c.analog_balance),
@@ -210,7 +213,11 @@ pub fn dng_camera_to_srgb_with(
         if c.calibrations.len() == 1 {
             c.calibrations[0].color_matrix
         } else {
-            mix(&c.calibrations[0].color_matrix, &c.calibrations[1].color_matrix, g)
+            mix(
+                &c.calibrations[0].color_matrix,
+                &c.calibrations[1].color_matrix,
+                g,
+            )
         }
     };
     // white chromaticity by fixed-point iteration from D50
@@ -234,7 +241,12 @@ pub fn dng_camera_to_srgb_with(
     let use_fm = fms.iter().all(|f| f.is_some());
     let cam_to_xyz_d65 = if adaptation == WhiteAdaptation::CameraSpace {
         // dcraw: rows of CM · M_sRGB→XYZ normalised to sum 1, inverted; gains undone below
-        let srgb_to_xyz = inv(&ColorMatrix { m: XYZ_TO_LINEAR_SRGB }, "sRGB matrix")?;
+        let srgb_to_xyz = inv(
+            &ColorMatrix {
+                m: XYZ_TO_LINEAR_SRGB,
+            },
+            "sRGB matrix",
+        )?;
         let cam_rgb = ab.after(&cm_at(g)).after(&srgb_to_xyz);
         let srow = cam_rgb.apply([1.0, 1.0, 1.0]);
         if srow.iter().any(|&x| !(x > 0.0)) {

@@ -15,9 +15,17 @@ fn cfas() -> Vec<(&'static str, Vec<String>, Vec<&'static str>)> {
         ("RGBW", names("rgbw"), vec!["rg", "wb"]),
         ("RCCB", names("rcb"), vec!["rc", "cb"]),
         ("RCCC", names("rc"), vec!["rc", "cc"]),
-        ("quad Bayer", names("rgb"), vec!["rrgg", "rrgg", "ggbb", "ggbb"]),
+        (
+            "quad Bayer",
+            names("rgb"),
+            vec!["rrgg", "rrgg", "ggbb", "ggbb"],
+        ),
         ("mono", names("m"), vec!["m"]),
-        ("4×4 multispectral", names("abcdefghijklmnop"), vec!["abcd", "efgh", "ijkl", "mnop"]),
+        (
+            "4×4 multispectral",
+            names("abcdefghijklmnop"),
+            vec!["abcd", "efgh", "ijkl", "mnop"],
+        ),
     ]
 }
 
@@ -32,7 +40,13 @@ fn tile_of(ch: &[String], rows: &[&str]) -> Vec<Vec<usize>> {
 }
 
 /// Sample full planes through a tile.
-fn sample(planes: &[Vec<f32>], rows: usize, cols: usize, tile: &[Vec<usize>], ch: &[String]) -> Mosaic {
+fn sample(
+    planes: &[Vec<f32>],
+    rows: usize,
+    cols: usize,
+    tile: &[Vec<usize>],
+    ch: &[String],
+) -> Mosaic {
     let (tr, tc) = (tile.len(), tile[0].len());
     let data = (0..rows * cols)
         .map(|i| planes[tile[(i / cols) % tr][(i % cols) % tc]][i])
@@ -62,7 +76,9 @@ fn methods_for(label: &str) -> Vec<DemosaicMethod> {
 fn constant_colour_is_reproduced_exactly_for_every_cfa_and_method() {
     for (label, ch, rows_s) in cfas() {
         let tile = tile_of(&ch, &rows_s);
-        let colour: Vec<f32> = (0..ch.len()).map(|k| 0.1 + 0.8 * (k as f32 + 0.5) / ch.len() as f32).collect();
+        let colour: Vec<f32> = (0..ch.len())
+            .map(|k| 0.1 + 0.8 * (k as f32 + 0.5) / ch.len() as f32)
+            .collect();
         for (rows, cols) in [(8, 8), (9, 13), (17, 10)] {
             let planes: Vec<Vec<f32>> = colour.iter().map(|&v| vec![v; rows * cols]).collect();
             let m = sample(&planes, rows, cols, &tile, &ch);
@@ -87,7 +103,13 @@ fn constant_colour_is_reproduced_exactly_for_every_cfa_and_method() {
 #[test]
 fn non_quad_tiles_are_refused_by_the_quad_methods_with_the_reason() {
     let ch = names("rgb");
-    let m = sample(&vec![vec![0.5; 64]; 3], 8, 8, &tile_of(&ch, &["rg", "gb"]), &ch);
+    let m = sample(
+        &vec![vec![0.5; 64]; 3],
+        8,
+        8,
+        &tile_of(&ch, &["rg", "gb"]),
+        &ch,
+    );
     let e = bin_quad_bayer(&m).unwrap_err().to_string();
     assert!(e.contains("4×4 tile"), "{e}");
     let e = remosaic_quad_bayer(&m).unwrap_err().to_string();
@@ -166,13 +188,20 @@ fn dead_leaves(rows: usize, cols: usize, ch: &[String], multispectral: bool) -> 
         n += 1;
         // inverse CDF of p(r) ∝ r⁻³ on [rmin, rmax]
         let u = rng.next();
-        let r = 1.0 / (1.0 / (rmin * rmin) - u * (1.0 / (rmin * rmin) - 1.0 / (rmax * rmax))).sqrt();
+        let r =
+            1.0 / (1.0 / (rmin * rmin) - u * (1.0 / (rmin * rmin) - 1.0 / (rmax * rmax))).sqrt();
         let (cy, cx) = (rng.next() * rows as f64, rng.next() * cols as f64);
         let patch = (rng.next() * 24.0) as usize % 24;
         let b = 0.25 + 0.75 * rng.next();
         // later leaves fall *under* earlier ones: fill only uncovered pixels
-        let (r0, r1) = ((cy - r).floor().max(0.0) as usize, ((cy + r).ceil() as usize).min(rows));
-        let (c0, c1) = ((cx - r).floor().max(0.0) as usize, ((cx + r).ceil() as usize).min(cols));
+        let (r0, r1) = (
+            (cy - r).floor().max(0.0) as usize,
+            ((cy + r).ceil() as usize).min(rows),
+        );
+        let (c0, c1) = (
+            (cx - r).floor().max(0.0) as usize,
+            ((cx + r).ceil() as usize).min(cols),
+        );
         for y in r0..r1 {
             for x in c0..c1 {
                 let i = y * cols + x;
@@ -189,18 +218,30 @@ fn dead_leaves(rows: usize, cols: usize, ch: &[String], multispectral: bool) -> 
     let planes: Vec<Vec<f64>> = (0..ch.len())
         .map(|k| {
             (0..rows * cols)
-                .map(|i| if label[i] == usize::MAX { 0.0 } else { bright[i] * resp[label[i]][k] })
+                .map(|i| {
+                    if label[i] == usize::MAX {
+                        0.0
+                    } else {
+                        bright[i] * resp[label[i]][k]
+                    }
+                })
                 .collect()
         })
         .collect();
     // separable Gaussian blur, σ = 0.7 px, mirrored borders
     let s = 0.7f64;
-    let taps: Vec<f64> = (-3..=3).map(|d: i32| (-(d * d) as f64 / (2.0 * s * s)).exp()).collect();
+    let taps: Vec<f64> = (-3..=3)
+        .map(|d: i32| (-(d * d) as f64 / (2.0 * s * s)).exp())
+        .collect();
     let tsum: f64 = taps.iter().sum();
     let mir = |i: isize, n: usize| -> usize {
         let p = 2 * (n as isize - 1);
         let m = i.rem_euclid(p);
-        if m < n as isize { m as usize } else { (p - m) as usize }
+        if m < n as isize {
+            m as usize
+        } else {
+            (p - m) as usize
+        }
     };
     let blurred: Vec<Vec<f64>> = planes
         .iter()
@@ -256,7 +297,10 @@ fn bin_truth(p: &[Vec<f32>], rows: usize, cols: usize) -> Vec<Vec<f32>> {
             (0..r2 * c2)
                 .map(|i| {
                     let (y, x) = (2 * (i / c2), 2 * (i % c2));
-                    0.25 * (v[y * cols + x] + v[y * cols + x + 1] + v[(y + 1) * cols + x] + v[(y + 1) * cols + x + 1])
+                    0.25 * (v[y * cols + x]
+                        + v[y * cols + x + 1]
+                        + v[(y + 1) * cols + x]
+                        + v[(y + 1) * cols + x + 1])
                 })
                 .collect()
         })
@@ -278,7 +322,13 @@ fn psnr_on_dead_leaves_generic_against_bilinear_and_bayer_methods() {
         for method in methods_for(label) {
             let out = demosaic_planes(&m, method).unwrap();
             let p = if method == DemosaicMethod::QuadBinning {
-                psnr(&bin_truth(&truth, rows, cols), &out.planes, rows / 2, cols / 2, 4)
+                psnr(
+                    &bin_truth(&truth, rows, cols),
+                    &out.planes,
+                    rows / 2,
+                    cols / 2,
+                    4,
+                )
             } else {
                 psnr(&truth, &out.planes, rows, cols, 8)
             };
@@ -299,6 +349,9 @@ fn psnr_on_dead_leaves_generic_against_bilinear_and_bayer_methods() {
             continue;
         }
         let (b, l) = (get("bilinear").unwrap(), get("lmmse").unwrap());
-        assert!(l > b + 0.5, "{label}: lmmse {l:.2} dB is not above bilinear {b:.2} dB");
+        assert!(
+            l > b + 0.5,
+            "{label}: lmmse {l:.2} dB is not above bilinear {b:.2} dB"
+        );
     }
 }

@@ -164,28 +164,25 @@ impl Bilateral {
         };
         for plane in img.planes.iter_mut() {
             let src = plane.clone();
-            plane
-                .par_chunks_mut(cols)
-                .enumerate()
-                .for_each(|(r, row)| {
-                    for (c, o) in row.iter_mut().enumerate() {
-                        let x0 = src[r * cols + c] as f64;
-                        let (mut num, mut den) = (0.0, 0.0);
-                        let mut t = 0;
-                        for dr in -rad..=rad {
-                            let rr = mirror(r as isize + dr, rows);
-                            for dc in -rad..=rad {
-                                let cc = mirror(c as isize + dc, cols);
-                                let x = src[rr * cols + cc] as f64;
-                                let w = ws[t] * (-(x - x0) * (x - x0) * inv2r).exp();
-                                t += 1;
-                                num += w * x;
-                                den += w;
-                            }
+            plane.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
+                for (c, o) in row.iter_mut().enumerate() {
+                    let x0 = src[r * cols + c] as f64;
+                    let (mut num, mut den) = (0.0, 0.0);
+                    let mut t = 0;
+                    for dr in -rad..=rad {
+                        let rr = mirror(r as isize + dr, rows);
+                        for dc in -rad..=rad {
+                            let cc = mirror(c as isize + dc, cols);
+                            let x = src[rr * cols + cc] as f64;
+                            let w = ws[t] * (-(x - x0) * (x - x0) * inv2r).exp();
+                            t += 1;
+                            num += w * x;
+                            den += w;
                         }
-                        *o = (num / den) as f32;
                     }
-                });
+                    *o = (num / den) as f32;
+                }
+            });
         }
     }
 }

@@ -143,7 +143,11 @@ fn parse_layout(path: &Path, s: &str) -> Result<(RawFormat, Vec<String>, f64, f6
             .transpose()
     };
     for k in kv.keys() {
-        if !["rows", "cols", "cfa", "black", "white", "bits", "endian", "header"].contains(&k.as_str()) {
+        if ![
+            "rows", "cols", "cfa", "black", "white", "bits", "endian", "header",
+        ]
+        .contains(&k.as_str())
+        {
             return Err(bad(format!(
                 "unknown key '{k}' (expected rows, cols, cfa, black, white, bits, endian, header)"
             )));
@@ -217,19 +221,33 @@ fn mosaic_of(
     }
     let tile: Vec<Vec<usize>> = cfa
         .iter()
-        .map(|r| r.chars().map(|ch| names.iter().position(|&n| n == ch).expect("added")).collect())
+        .map(|r| {
+            r.chars()
+                .map(|ch| names.iter().position(|&n| n == ch).expect("added"))
+                .collect()
+        })
         .collect();
     // drop plane letters that the tile never uses (a tile must use every channel it names)
-    let used: Vec<usize> = (0..names.len()).filter(|k| tile.iter().flatten().any(|t| t == k)).collect();
+    let used: Vec<usize> = (0..names.len())
+        .filter(|k| tile.iter().flatten().any(|t| t == k))
+        .collect();
     let remap: Vec<usize> = (0..names.len())
         .map(|k| used.iter().position(|&u| u == k).unwrap_or(usize::MAX))
         .collect();
-    let tile = tile.iter().map(|r| r.iter().map(|&k| remap[k]).collect()).collect();
+    let tile = tile
+        .iter()
+        .map(|r| r.iter().map(|&k| remap[k]).collect())
+        .collect();
     let names: Vec<String> = used.iter().map(|&k| names[k].to_string()).collect();
     Mosaic::new(rows, cols, data, tile, names).map_err(|e| CliError::input(path, e))
 }
 
-fn tag3(tags: &std::collections::BTreeMap<u16, Vec<f64>>, t: u16, name: &str, path: &Path) -> Result<Option<ColorMatrix>, CliError> {
+fn tag3(
+    tags: &std::collections::BTreeMap<u16, Vec<f64>>,
+    t: u16,
+    name: &str,
+    path: &Path,
+) -> Result<Option<ColorMatrix>, CliError> {
     match tags.get(&t) {
         None => Ok(None),
         Some(v) if v.len() == 9 && v.iter().all(|x| x.is_finite()) => Ok(Some(ColorMatrix {
@@ -237,7 +255,10 @@ fn tag3(tags: &std::collections::BTreeMap<u16, Vec<f64>>, t: u16, name: &str, pa
         })),
         Some(v) => Err(CliError::input(
             path,
-            format!("{name} ({t}) has {} values; a 3-colour DNG needs 9 (3 × 3)", v.len()),
+            format!(
+                "{name} ({t}) has {} values; a 3-colour DNG needs 9 (3 × 3)",
+                v.len()
+            ),
         )),
     }
 }
@@ -250,126 +271,188 @@ pub fn develop(input: &Path, out: &Path, o: &DevelopOptions) -> Result<DevelopSu
         .unwrap_or("")
         .to_ascii_lowercase();
     if o.output_bits != 8 && o.output_bits != 16 {
-        return Err(CliError::Other(format!("--bits {}: expected 8 or 16", o.output_bits)));
+        return Err(CliError::Other(format!(
+            "--bits {}: expected 8 or 16",
+            o.output_bits
+        )));
     }
-    if out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() != Some("png") {
+    if out
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .as_deref()
+        != Some("png")
+    {
         return Err(CliError::output(out, "the output must be a .png file"));
     }
     // 1. read + linearise → normalised mosaic, colour metadata
-    let (mosaic, cfa, black_dn, white_dn, color): (Mosaic, Vec<String>, f64, f64, Option<DngColor>) =
-        if ext == "dng" {
-            if o.layout.is_some() {
-                return Err(CliError::input(input, "--layout is for headerless raw files; a DNG describes itself"));
+    let (mosaic, cfa, black_dn, white_dn, color): (
+        Mosaic,
+        Vec<String>,
+        f64,
+        f64,
+        Option<DngColor>,
+    ) = if ext == "dng" {
+        if o.layout.is_some() {
+            return Err(CliError::input(
+                input,
+                "--layout is for headerless raw files; a DNG describes itself",
+            ));
+        }
+        let d = read_dng(input)?;
+        let tags = &d.tags;
+        let bad = |m: String| CliError::input(input, m);
+        let lin = tags.get(&50712);
+        if let Some(t) = lin {
+            if t.is_empty() {
+                return Err(bad("LinearizationTable (50712) is empty".into()));
             }
-            let d = read_dng(input)?;
-            let tags = &d.tags;
-            let bad = |m: String| CliError::input(input, m);
-            let lin = tags.get(&50712);
-            if let Some(t) = lin {
-                if t.is_empty() {
-                    return Err(bad("LinearizationTable (50712) is empty".into()));
-                }
+        }
+        let white = d.info.white_level as f64;
+        let (rows, cols) = (d.frame.rows, d.frame.cols);
+        let mut data = Vec::with_capacity(rows * cols);
+        for r in 0..rows {
+            for c in 0..cols {
+                let dn = d.frame.dn[r * cols + c] as usize;
+                let v = match lin {
+                    Some(t) => t[dn.min(t.len() - 1)],
+                    None => dn as f64,
+                };
+                let b = d.info.black_level_at(r, c);
+                data.push(((v - b) / (white - b)) as f32);
             }
-            let white = d.info.white_level as f64;
-            let (rows, cols) = (d.frame.rows, d.frame.cols);
-            let mut data = Vec::with_capacity(rows * cols);
-            for r in 0..rows {
-                for c in 0..cols {
-                    let dn = d.frame.dn[r * cols + c] as usize;
-                    let v = match lin {
-                        Some(t) => t[dn.min(t.len() - 1)],
-                        None => dn as f64,
-                    };
-                    let b = d.info.black_level_at(r, c);
-                    data.push(((v - b) / (white - b)) as f32);
-                }
-            }
-            if !(white > d.info.mean_black_level_dn()) {
-                return Err(bad(format!(
-                    "WhiteLevel (50717) = {white} is not above the black level {}",
-                    d.info.mean_black_level_dn()
-                )));
-            }
-            let planes: Vec<char> = match tags.get(&50710) {
-                None => vec!['r', 'g', 'b'],
-                Some(v) => v
-                    .iter()
-                    .map(|&x| {
-                        crate::raw_input::dng::cfa_letter(x as u8).ok_or_else(|| {
-                            bad(format!("CFAPlaneColor (50710) has colour code {x} (known: 0–6)"))
-                        })
+        }
+        if !(white > d.info.mean_black_level_dn()) {
+            return Err(bad(format!(
+                "WhiteLevel (50717) = {white} is not above the black level {}",
+                d.info.mean_black_level_dn()
+            )));
+        }
+        let planes: Vec<char> = match tags.get(&50710) {
+            None => vec!['r', 'g', 'b'],
+            Some(v) => v
+                .iter()
+                .map(|&x| {
+                    crate::raw_input::dng::cfa_letter(x as u8).ok_or_else(|| {
+                        bad(format!(
+                            "CFAPlaneColor (50710) has colour code {x} (known: 0–6)"
+                        ))
                     })
-                    .collect::<Result<_, _>>()?,
-            };
-            let m = mosaic_of(input, data, rows, cols, &d.info.cfa, &planes)?;
-            // colour tags
-            let mut cals = vec![];
-            for (cm_t, fm_t, ill_t, k) in [(50721u16, 50964u16, 50778u16, 1), (50722, 50965, 50779, 2)] {
-                let cm = tag3(tags, cm_t, &format!("ColorMatrix{k}"), input)?;
-                let fm = tag3(tags, fm_t, &format!("ForwardMatrix{k}"), input)?;
-                if let Some(cm) = cm {
-                    let code = tags.get(&ill_t).and_then(|v| v.first().copied()).unwrap_or(21.0) as u32;
-                    let cct = calibration_illuminant_cct_k(code).ok_or_else(|| {
+                })
+                .collect::<Result<_, _>>()?,
+        };
+        let m = mosaic_of(input, data, rows, cols, &d.info.cfa, &planes)?;
+        // colour tags
+        let mut cals = vec![];
+        for (cm_t, fm_t, ill_t, k) in [(50721u16, 50964u16, 50778u16, 1), (50722, 50965, 50779, 2)]
+        {
+            let cm = tag3(tags, cm_t, &format!("ColorMatrix{k}"), input)?;
+            let fm = tag3(tags, fm_t, &format!("ForwardMatrix{k}"), input)?;
+            if let Some(cm) = cm {
+                let code = tags
+                    .get(&ill_t)
+                    .and_then(|v| v.first().copied())
+                    .unwrap_or(21.0) as u32;
+                let cct = calibration_illuminant_cct_k(code).ok_or_else(|| {
                         bad(format!(
                             "CalibrationIlluminant{k} ({ill_t}) = {code} has no colour temperature (supported: EXIF light sources 1–3, 9–24)"
                         ))
                     })?;
-                    cals.push(DngCalibration { color_matrix: cm, forward_matrix: fm, cct_k: cct });
-                }
+                cals.push(DngCalibration {
+                    color_matrix: cm,
+                    forward_matrix: fm,
+                    cct_k: cct,
+                });
             }
-            let color = if cals.is_empty() {
-                None
-            } else {
-                if m.channel_names.len() != 3 {
-                    return Err(bad(format!(
+        }
+        let color = if cals.is_empty() {
+            None
+        } else {
+            if m.channel_names.len() != 3 {
+                return Err(bad(format!(
                         "ColorMatrix1 is given for {} colour planes ({}); camsim develops 3-colour DNGs colorimetrically",
                         m.channel_names.len(),
                         m.channel_names.join("")
                     )));
+            }
+            let neutral = match tags.get(&50728) {
+                Some(v) if v.len() == 3 => [v[0], v[1], v[2]],
+                Some(v) => {
+                    return Err(bad(format!(
+                        "AsShotNeutral (50728) has {} values; expected 3",
+                        v.len()
+                    )))
                 }
-                let neutral = match tags.get(&50728) {
-                    Some(v) if v.len() == 3 => [v[0], v[1], v[2]],
-                    Some(v) => return Err(bad(format!("AsShotNeutral (50728) has {} values; expected 3", v.len()))),
-                    None => {
-                        return Err(bad(
-                            "AsShotNeutral (50728) is missing (AsShotWhiteXY is not supported)".into(),
-                        ))
-                    }
-                };
-                let ab = match tags.get(&50727) {
-                    Some(v) if v.len() == 3 => [v[0], v[1], v[2]],
-                    Some(v) => return Err(bad(format!("AnalogBalance (50727) has {} values; expected 3", v.len()))),
-                    None => [1.0; 3],
-                };
-                Some(DngColor { calibrations: cals, analog_balance: ab, neutral })
+                None => {
+                    return Err(bad(
+                        "AsShotNeutral (50728) is missing (AsShotWhiteXY is not supported)".into(),
+                    ))
+                }
             };
-            (m, d.info.cfa.clone(), d.info.mean_black_level_dn(), white, color)
-        } else {
-            let layout = o.layout.as_deref().ok_or_else(|| {
+            let ab = match tags.get(&50727) {
+                Some(v) if v.len() == 3 => [v[0], v[1], v[2]],
+                Some(v) => {
+                    return Err(bad(format!(
+                        "AnalogBalance (50727) has {} values; expected 3",
+                        v.len()
+                    )))
+                }
+                None => [1.0; 3],
+            };
+            Some(DngColor {
+                calibrations: cals,
+                analog_balance: ab,
+                neutral,
+            })
+        };
+        (
+            m,
+            d.info.cfa.clone(),
+            d.info.mean_black_level_dn(),
+            white,
+            color,
+        )
+    } else {
+        let layout = o.layout.as_deref().ok_or_else(|| {
                 CliError::input(
                     input,
                     "not a DNG: a headerless raw needs --layout rows=R,cols=C,cfa=RGGB,black=B,white=W[,bits=16,endian=little,header=0]",
                 )
             })?;
-            let (fmt, cfa, black, white) = parse_layout(input, layout)?;
-            let frame: RawFrame = read_raw(input, &fmt)?;
-            let data = frame.dn.iter().map(|&d| ((d as f64 - black) / (white - black)) as f32).collect();
-            let m = mosaic_of(input, data, fmt.rows, fmt.cols, &cfa, &['r', 'g', 'b'])?;
-            let color = match (o.color_matrix, o.neutral) {
-                (Some(cm), Some(n)) => Some(DngColor {
-                    calibrations: vec![DngCalibration {
-                        color_matrix: ColorMatrix { m: [[cm[0], cm[1], cm[2]], [cm[3], cm[4], cm[5]], [cm[6], cm[7], cm[8]]] },
-                        forward_matrix: None,
-                        cct_k: 6504.0,
-                    }],
-                    analog_balance: [1.0; 3],
-                    neutral: n,
-                }),
-                (None, None) => None,
-                _ => return Err(CliError::input(input, "--color-matrix and --neutral go together")),
-            };
-            (m, cfa, black, white, color)
+        let (fmt, cfa, black, white) = parse_layout(input, layout)?;
+        let frame: RawFrame = read_raw(input, &fmt)?;
+        let data = frame
+            .dn
+            .iter()
+            .map(|&d| ((d as f64 - black) / (white - black)) as f32)
+            .collect();
+        let m = mosaic_of(input, data, fmt.rows, fmt.cols, &cfa, &['r', 'g', 'b'])?;
+        let color = match (o.color_matrix, o.neutral) {
+            (Some(cm), Some(n)) => Some(DngColor {
+                calibrations: vec![DngCalibration {
+                    color_matrix: ColorMatrix {
+                        m: [
+                            [cm[0], cm[1], cm[2]],
+                            [cm[3], cm[4], cm[5]],
+                            [cm[6], cm[7], cm[8]],
+                        ],
+                    },
+                    forward_matrix: None,
+                    cct_k: 6504.0,
+                }],
+                analog_balance: [1.0; 3],
+                neutral: n,
+            }),
+            (None, None) => None,
+            _ => {
+                return Err(CliError::input(
+                    input,
+                    "--color-matrix and --neutral go together",
+                ))
+            }
         };
+        (m, cfa, black, white, color)
+    };
     // 2. demosaic (+ optional denoise)
     let mut planes = demosaic_planes(&mosaic, o.demosaic)
         .map_err(|e| CliError::input(input, format!("demosaic {}: {e}", o.demosaic.name())))?;
@@ -379,14 +462,17 @@ pub fn develop(input: &Path, out: &Path, o: &DevelopOptions) -> Result<DevelopSu
     let mut rgb: RgbImage = planes.rgb().ok_or_else(|| {
         CliError::input(
             input,
-            format!("the CFA has channels {:?}; develop renders r, g, b mosaics", planes.names),
+            format!(
+                "the CFA has channels {:?}; develop renders r, g, b mosaics",
+                planes.names
+            ),
         )
     })?;
     // 3. white balance + colour
     let rendering = match &color {
-        Some(c) => Some(
-            dng_camera_to_srgb_with(c, o.adaptation).map_err(|e| CliError::input(input, e))?,
-        ),
+        Some(c) => {
+            Some(dng_camera_to_srgb_with(c, o.adaptation).map_err(|e| CliError::input(input, e))?)
+        }
         None => None,
     };
     let gains: [f64; 3] = match (o.balance, &rendering, o.neutral) {
@@ -396,12 +482,16 @@ pub fn develop(input: &Path, out: &Path, o: &DevelopOptions) -> Result<DevelopSu
             n.map(|x| mx / x)
         }
         (DevelopBalance::AsShot, None, None) | (DevelopBalance::GreyWorld, _, _) => {
-            let g = ChannelBalance::GreyWorld.gains(&planes).map_err(|e| CliError::input(input, e))?;
+            let g = ChannelBalance::GreyWorld
+                .gains(&planes)
+                .map_err(|e| CliError::input(input, e))?;
             let idx = rgb_order(&planes.names);
             idx.map(|k| g[k])
         }
         (DevelopBalance::WhitePatch, _, _) => {
-            let g = ChannelBalance::WhitePatch.gains(&planes).map_err(|e| CliError::input(input, e))?;
+            let g = ChannelBalance::WhitePatch
+                .gains(&planes)
+                .map_err(|e| CliError::input(input, e))?;
             let idx = rgb_order(&planes.names);
             idx.map(|k| g[k])
         }
@@ -417,7 +507,10 @@ pub fn develop(input: &Path, out: &Path, o: &DevelopOptions) -> Result<DevelopSu
             p[k] = if clip { v.min(1.0) as f32 } else { v as f32 };
         }
     });
-    let matrix = rendering.as_ref().map(|r| r.matrix).unwrap_or_else(ColorMatrix::identity);
+    let matrix = rendering
+        .as_ref()
+        .map(|r| r.matrix)
+        .unwrap_or_else(ColorMatrix::identity);
     if matrix != ColorMatrix::identity() {
         matrix.apply_image(&mut rgb);
     }
@@ -429,9 +522,15 @@ pub fn develop(input: &Path, out: &Path, o: &DevelopOptions) -> Result<DevelopSu
         encode_png8(&to_srgb8(&rgb), rgb.rows, rgb.cols)
     }
     .map_err(|e| CliError::output(out, e))?;
-    let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     if !dir.is_dir() {
-        return Err(CliError::output(out, format!("folder {} does not exist", dir.display())));
+        return Err(CliError::output(
+            out,
+            format!("folder {} does not exist", dir.display()),
+        ));
     }
     let tmp: PathBuf = dir.join(format!(
         ".{}.camsim-tmp-{}",
@@ -501,7 +600,11 @@ fn numbers<const N: usize>(what: &str, s: &str) -> Result<[f64; N], CliError> {
         .split(',')
         .map(|x| x.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|_| CliError::Other(format!("{what} \"{s}\": expected {N} comma-separated numbers")))?;
+        .map_err(|_| {
+            CliError::Other(format!(
+                "{what} \"{s}\": expected {N} comma-separated numbers"
+            ))
+        })?;
     if v.len() != N || v.iter().any(|x| !x.is_finite()) {
         return Err(CliError::Other(format!(
             "{what} \"{s}\": expected {N} finite comma-separated numbers, got {}",
@@ -546,13 +649,22 @@ pub fn options_from_args(
     let denoise = match denoise {
         None => None,
         Some(d) => {
-            let [s, r] = numbers::<2>("--denoise", &d.replace("inf", "Infinity"))
-                .or_else(|_| {
+            let [s, r] =
+                numbers::<2>("--denoise", &d.replace("inf", "Infinity")).or_else(|_| {
                     let p: Vec<&str> = d.split(',').collect();
                     if p.len() == 2 && p[1].trim() == "inf" {
-                        Ok([p[0].trim().parse().map_err(|_| CliError::Other(format!("--denoise \"{d}\": expected SIGMA_PX,SIGMA_RANGE")))?, f64::INFINITY])
+                        Ok([
+                            p[0].trim().parse().map_err(|_| {
+                                CliError::Other(format!(
+                                    "--denoise \"{d}\": expected SIGMA_PX,SIGMA_RANGE"
+                                ))
+                            })?,
+                            f64::INFINITY,
+                        ])
                     } else {
-                        Err(CliError::Other(format!("--denoise \"{d}\": expected SIGMA_PX,SIGMA_RANGE")))
+                        Err(CliError::Other(format!(
+                            "--denoise \"{d}\": expected SIGMA_PX,SIGMA_RANGE"
+                        )))
                     }
                 })?;
             Some(Bilateral::new(s, r).map_err(|e| CliError::Other(format!("--denoise: {e}")))?)
@@ -567,7 +679,9 @@ pub fn options_from_args(
         highlight_clip,
         adaptation,
         layout,
-        color_matrix: color_matrix.map(|s| numbers::<9>("--color-matrix", s)).transpose()?,
+        color_matrix: color_matrix
+            .map(|s| numbers::<9>("--color-matrix", s))
+            .transpose()?,
         neutral: neutral.map(|s| numbers::<3>("--neutral", s)).transpose()?,
     })
 }

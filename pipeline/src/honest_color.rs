@@ -67,14 +67,26 @@ pub struct CaptureStats {
 
 impl CaptureStats {
     /// Statistics of demosaicked planes with the chart's patch means.
-    pub fn of_planes(p: &ChannelPlanes, patches: Vec<Vec<f64>>, illuminant_photons: Spectrum) -> Self {
+    pub fn of_planes(
+        p: &ChannelPlanes,
+        patches: Vec<Vec<f64>>,
+        illuminant_photons: Spectrum,
+    ) -> Self {
         let n = (p.rows * p.cols).max(1) as f64;
         CaptureStats {
-            channel_mean: p.planes.iter().map(|v| v.iter().map(|&x| x as f64).sum::<f64>() / n).collect(),
+            channel_mean: p
+                .planes
+                .iter()
+                .map(|v| v.iter().map(|&x| x as f64).sum::<f64>() / n)
+                .collect(),
             channel_max: p
                 .planes
                 .iter()
-                .map(|v| v.iter().map(|&x| x as f64).fold(f64::NEG_INFINITY, f64::max))
+                .map(|v| {
+                    v.iter()
+                        .map(|&x| x as f64)
+                        .fold(f64::NEG_INFINITY, f64::max)
+                })
                 .collect(),
             patches,
             illuminant_photons,
@@ -84,19 +96,28 @@ impl CaptureStats {
     /// The noise-free calibration capture: the chart's channel responses under `illuminant`,
     /// scaled so the largest value is 0.9 (an auto-exposed capture); grey world and white
     /// patch see only the 24 patches.
-    pub fn calibration(channel_qe: &[Spectrum], illuminant_photons: &Spectrum) -> Result<Self, CliError> {
+    pub fn calibration(
+        channel_qe: &[Spectrum],
+        illuminant_photons: &Spectrum,
+    ) -> Result<Self, CliError> {
         let mut v = macbeth_channel_responses(channel_qe, illuminant_photons)
             .map_err(|e| CliError::Other(format!("calibration capture: {e}")))?;
         let mx = v.iter().flatten().cloned().fold(0.0, f64::max);
         if !(mx > 0.0) {
-            return Err(CliError::Other("calibration capture: the camera sees nothing of the chart".into()));
+            return Err(CliError::Other(
+                "calibration capture: the camera sees nothing of the chart".into(),
+            ));
         }
         for p in v.iter_mut() {
             p.iter_mut().for_each(|x| *x *= 0.9 / mx);
         }
         let k = channel_qe.len();
-        let channel_mean = (0..k).map(|c| v.iter().map(|p| p[c]).sum::<f64>() / v.len() as f64).collect();
-        let channel_max = (0..k).map(|c| v.iter().map(|p| p[c]).fold(0.0, f64::max)).collect();
+        let channel_mean = (0..k)
+            .map(|c| v.iter().map(|p| p[c]).sum::<f64>() / v.len() as f64)
+            .collect();
+        let channel_max = (0..k)
+            .map(|c| v.iter().map(|p| p[c]).fold(0.0, f64::max))
+            .collect();
         Ok(CaptureStats {
             channel_mean,
             channel_max,
@@ -107,7 +128,12 @@ impl CaptureStats {
 }
 
 /// Gains of `method` for a capture (reference channel = 1).
-pub fn gains(method: WbMethod, c: &CaptureStats, qe: &[Spectrum], names: &[String]) -> Result<Vec<f64>, CliError> {
+pub fn gains(
+    method: WbMethod,
+    c: &CaptureStats,
+    qe: &[Spectrum],
+    names: &[String],
+) -> Result<Vec<f64>, CliError> {
     let r = reference_channel(names);
     let from = |s: &[f64], what: &str| -> Result<Vec<f64>, CliError> {
         if let Some(k) = (0..s.len()).find(|&k| !(s[k] > 0.0 && s[k].is_finite())) {
@@ -143,7 +169,12 @@ pub fn exposure_scale(rendered_patches: &[[f64; 3]], white_level: f64) -> f64 {
 }
 
 /// Render the chart patches of a capture: gains, matrix, exposure normalisation, 8-bit coding.
-pub fn render_patches(c: &CaptureStats, g: &[f64], m: &ChannelMatrix, white_level: f64) -> (Vec<[f64; 3]>, f64) {
+pub fn render_patches(
+    c: &CaptureStats,
+    g: &[f64],
+    m: &ChannelMatrix,
+    white_level: f64,
+) -> (Vec<[f64; 3]>, f64) {
     let lin: Vec<[f64; 3]> = c
         .patches
         .iter()
@@ -153,7 +184,12 @@ pub fn render_patches(c: &CaptureStats, g: &[f64], m: &ChannelMatrix, white_leve
         })
         .collect();
     let k = exposure_scale(&lin, white_level);
-    (lin.iter().map(|v| through_srgb8(v.map(|x| x * k))).collect(), k)
+    (
+        lin.iter()
+            .map(|v| through_srgb8(v.map(|x| x * k)))
+            .collect(),
+        k,
+    )
 }
 
 /// The matrix fitted on the calibration capture (white-balanced by `method`), its gains there,
