@@ -31,6 +31,45 @@ enum Command {
         #[arg(long, default_value = "out/run")]
         out: PathBuf,
     },
+    /// Develop a real raw file (uncompressed DNG, or headerless raw with --layout) to an sRGB
+    /// PNG through the same image processor as simulated frames (docs/isp.md).
+    Develop {
+        /// The raw file (.dng, or .raw/.bin with --layout).
+        input: PathBuf,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// bilinear | malvar | edge_adaptive | lmmse | quad_binning | quad_remosaic.
+        #[arg(long, default_value = "malvar")]
+        demosaic: String,
+        /// as_shot | grey_world | white_patch | none.
+        #[arg(long, default_value = "as_shot")]
+        white_balance: String,
+        /// 8 or 16.
+        #[arg(long, default_value_t = 8)]
+        bits: u32,
+        /// none | reinhard | filmic.
+        #[arg(long, default_value = "none")]
+        tone: String,
+        /// Bilateral denoiser: SIGMA_PX,SIGMA_RANGE (range in linear units; inf = Gaussian).
+        #[arg(long)]
+        denoise: Option<String>,
+        /// Keep white-balanced values above the white level (no highlight clip).
+        #[arg(long)]
+        no_highlight_clip: bool,
+        /// Headerless raw layout: rows=R,cols=C,cfa=RGGB,black=B,white=W[,bits=16,endian=little,header=0].
+        #[arg(long)]
+        layout: Option<String>,
+        /// Headerless raw: XYZ→camera matrix, nine comma-separated numbers (D65 calibration).
+        #[arg(long)]
+        color_matrix: Option<String>,
+        /// Headerless raw: camera neutral R,G,B.
+        #[arg(long)]
+        neutral: Option<String>,
+        /// White adaptation: bradford (DNG specification) | camera (dcraw/LibRaw convention).
+        #[arg(long, default_value = "bradford")]
+        adaptation: String,
+    },
     /// Simulate every frame of a capture set (or, with --expected, each shot's expected image).
     Simulate {
         /// captures.json
@@ -199,6 +238,46 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 "camsim: wrote {} file(s) to {}",
                 summary.files.len(),
                 opts.out_dir.display()
+            );
+            Ok(())
+        }
+        Command::Develop {
+            input,
+            out,
+            demosaic,
+            white_balance,
+            bits,
+            tone,
+            denoise,
+            no_highlight_clip,
+            layout,
+            color_matrix,
+            neutral,
+            adaptation,
+        } => {
+            let opts = camsim_pipeline::develop_cmd::options_from_args(
+                &demosaic,
+                &white_balance,
+                bits,
+                &tone,
+                denoise.as_deref(),
+                !no_highlight_clip,
+                layout,
+                color_matrix.as_deref(),
+                neutral.as_deref(),
+                &adaptation,
+            )?;
+            let s = camsim_pipeline::develop_cmd::develop(&input, &out, &opts)?;
+            eprintln!(
+                "camsim: developed {}×{} (CFA {}, black {:.1}, white {:.0} DN, gains {:.3?}, colour: {}) → {}",
+                s.rows,
+                s.cols,
+                s.cfa.join("/"),
+                s.black_dn,
+                s.white_dn,
+                s.gains,
+                s.color_source,
+                out.display()
             );
             Ok(())
         }

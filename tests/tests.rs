@@ -1,6 +1,7 @@
 //! camsim's integration tests: one test binary (ripgrep style), one module per concern.
 mod calibrate;
 mod cli;
+mod develop;
 mod diagnose;
 mod effects;
 mod lens_blur;
@@ -10,6 +11,7 @@ mod raw_formats;
 mod real_data;
 mod render;
 mod run;
+mod run_cfa;
 mod statistics;
 mod study;
 mod util;

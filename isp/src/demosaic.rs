@@ -24,6 +24,13 @@ pub enum DemosaicMethod {
     /// green plus second difference of the centre colour) with Laplacian correction, then
     /// red/blue by interpolating colour differences (R − G, B − G). Bayer only.
     EdgeAdaptive,
+    /// Linear minimum-mean-square-error demosaicking for any tile by ordinary co-kriging
+    /// (see [`crate::cfa_generic`]); the channel covariance is estimated from the image.
+    Lmmse,
+    /// Quad Bayer: 2×2 same-colour binning to a half-resolution Bayer mosaic, then Malvar.
+    QuadBinning,
+    /// Quad Bayer: remosaic to a full-resolution Bayer mosaic by co-kriging, then Malvar.
+    QuadRemosaic,
 }
 
 impl DemosaicMethod {
@@ -33,6 +40,9 @@ impl DemosaicMethod {
             DemosaicMethod::Bilinear => "bilinear",
             DemosaicMethod::Malvar => "malvar",
             DemosaicMethod::EdgeAdaptive => "edge_adaptive",
+            DemosaicMethod::Lmmse => "lmmse",
+            DemosaicMethod::QuadBinning => "quad_binning",
+            DemosaicMethod::QuadRemosaic => "quad_remosaic",
         }
     }
 }
@@ -44,6 +54,9 @@ impl FromStr for DemosaicMethod {
             "bilinear" => Ok(DemosaicMethod::Bilinear),
             "malvar" => Ok(DemosaicMethod::Malvar),
             "edge_adaptive" => Ok(DemosaicMethod::EdgeAdaptive),
+            "lmmse" => Ok(DemosaicMethod::Lmmse),
+            "quad_binning" => Ok(DemosaicMethod::QuadBinning),
+            "quad_remosaic" => Ok(DemosaicMethod::QuadRemosaic),
             _ => Err(IspError::UnknownDemosaic {
                 name: s.to_string(),
             }),
@@ -84,10 +97,14 @@ impl Mirror<'_> {
 }
 
 /// Demosaic to full planes, one per mosaic channel (in channel order). Bilinear accepts any
-/// tile; Malvar and edge-adaptive need a 2×2 RGB Bayer tile.
+/// tile; Malvar and edge-adaptive need a 2×2 RGB Bayer tile; lmmse accepts any tile; the quad
+/// methods need a quad-Bayer tile and `quad_binning` returns half-resolution planes.
 pub fn demosaic_channels(m: &Mosaic, method: DemosaicMethod) -> Result<Vec<Vec<f32>>, IspError> {
     match method {
         DemosaicMethod::Bilinear => Ok(bilinear_channels(m)),
+        DemosaicMethod::Lmmse | DemosaicMethod::QuadBinning | DemosaicMethod::QuadRemosaic => {
+            Ok(crate::cfa_generic::demosaic_planes(m, method)?.planes)
+        }
         _ => {
             let layout = m.bayer_layout().map_err(|reason| IspError::NotBayer {
                 method: method.name().into(),
@@ -106,6 +123,11 @@ pub fn demosaic_channels(m: &Mosaic, method: DemosaicMethod) -> Result<Vec<Vec<f
 /// Demosaic an RGB mosaic (channels named r/g/b) to a linear RGB image.
 pub fn demosaic(m: &Mosaic, method: DemosaicMethod) -> Result<RgbImage, IspError> {
     match method {
+        DemosaicMethod::Lmmse | DemosaicMethod::QuadBinning | DemosaicMethod::QuadRemosaic => {
+            m.rgb_channels().map_err(IspError::InvalidMosaic)?;
+            let p = crate::cfa_generic::demosaic_planes(m, method)?;
+            Ok(p.rgb().expect("r, g, b checked"))
+        }
         DemosaicMethod::Bilinear => {
             let ch = m.rgb_channels().map_err(IspError::InvalidMosaic)?;
             let planes = bilinear_channels(m);
@@ -366,7 +388,7 @@ fn bayer_rgb(m: &Mosaic, layout: &BayerLayout, method: DemosaicMethod) -> RgbIma
                     }
                 });
         }
-        DemosaicMethod::Bilinear => unreachable!("bilinear is handled per channel"),
+        _ => unreachable!("only Malvar and edge-adaptive reach bayer_rgb"),
     }
     RgbImage {
         rows: m.rows,

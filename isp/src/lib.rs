@@ -20,17 +20,27 @@
 //! Images are linear `f32` values; channel order of [`RgbImage`] is always (R, G, B).
 #![deny(missing_docs)]
 
+pub mod cfa_generic;
+mod channel_color;
 mod color;
+mod tone;
 mod demosaic;
+pub mod dng_color;
 pub mod isetcam;
 mod mosaic;
 mod pipeline;
 mod srgb;
 
+pub use channel_color::{
+    fit_channel_matrix, illuminant_channel_gains, macbeth_channel_responses, reference_channel,
+    ChannelBalance, ChannelMatrix, FIT_RELATIVE_TOLERANCE,
+};
+pub use tone::{Bilateral, ToneCurve};
 pub use color::{
     fit_color_correction, illuminant_gains, macbeth_sensor_rgb, macbeth_target_linear_srgb,
     macbeth_xyz, ColorMatrix, WhiteBalance, MACBETH_WHITE_INDEX, XYZ_TO_LINEAR_SRGB,
 };
+pub use cfa_generic::{demosaic_cokriging, demosaic_planes, ChannelPlanes, CoKrigingModel};
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
 pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};
@@ -45,7 +55,7 @@ pub enum IspError {
     #[error("mosaic: {0}")]
     InvalidMosaic(String),
     /// A demosaic method name that is not known.
-    #[error("unknown demosaic method '{name}'; expected one of: bilinear, malvar, edge_adaptive")]
+    #[error("unknown demosaic method '{name}'; expected one of: bilinear, malvar, edge_adaptive, lmmse, quad_binning, quad_remosaic")]
     UnknownDemosaic {
         /// The name that was given.
         name: String,
@@ -84,3 +94,9 @@ impl From<camsim_core::CoreError> for IspError {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod tests_cfa;
+
+#[cfg(test)]
+mod tests_color;

@@ -90,7 +90,32 @@ pub fn run_report_html(summary: &Value, figures: &[(&str, &str)]) -> String {
                 num(d, "max")
             ));
         }
+        if let Some(f) = summary.get("delta_e_2000_fitted") {
+            h.push_str(&format!(
+                "<tr><th>ΔE2000 fitted (calibration capture)</th><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                num(f, "mean"),
+                num(f, "median"),
+                num(f, "p95"),
+                num(f, "max")
+            ));
+        }
         h.push_str("</table>");
+        if let Some(w) = summary.get("delta_e_scored_on").and_then(|v| v.as_str()) {
+            h.push_str(&format!("<p>ΔE scored on {}.</p>", esc(w)));
+        }
+        if let Some(rows) = summary.get("white_balance_comparison").and_then(|v| v.as_array()) {
+            h.push_str("<h3>White balance (matrix fitted on the calibration capture, scored on this scene)</h3><table><tr><th>white balance</th><th>fitted mean ΔE2000</th><th>held-out mean ΔE2000</th><th>held-out max ΔE2000</th></tr>");
+            for r in rows {
+                h.push_str(&format!(
+                    "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                    esc(r["white_balance"].as_str().unwrap_or("")),
+                    num(r, "fitted_delta_e_2000_mean"),
+                    num(r, "held_out_delta_e_2000_mean"),
+                    num(r, "held_out_delta_e_2000_max")
+                ));
+            }
+            h.push_str("</table>");
+        }
     }
     h.push_str("<h2>Figures</h2>");
     for (file, caption) in figures {

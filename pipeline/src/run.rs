@@ -20,10 +20,11 @@ use camsim_core::image::SpectralImage;
 use camsim_core::scene::{mean_luminance, Target};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_display::{show, DigitalImage, DisplayModel};
+use crate::honest_color::{self, CaptureStats, WbMethod};
 use camsim_isp::{
-    demosaic, fit_color_correction, macbeth_sensor_rgb, macbeth_target_linear_srgb, srgb_decode,
-    to_srgb16, to_srgb8, ColorMatrix, DemosaicMethod, Mosaic, RgbImage, WhiteBalance,
-    XYZ_TO_LINEAR_SRGB,
+    demosaic_planes, fit_channel_matrix, macbeth_target_linear_srgb, srgb_decode, to_srgb16,
+    to_srgb8, Bilateral, ChannelBalance, ChannelMatrix, ChannelPlanes, DemosaicMethod, Mosaic,
+    RgbImage, ToneCurve, XYZ_TO_LINEAR_SRGB,
 };
 use camsim_metrics::{patch_stats, ChartLayout};
 use camsim_sensor::{electron_rate, fixed_pattern};
@@ -93,22 +94,52 @@ pub struct RenderRunFile {
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProcessorFile {
-    /// bilinear | malvar | edge_adaptive (default malvar).
+    /// bilinear | malvar | edge_adaptive | lmmse | quad_binning | quad_remosaic (default
+    /// malvar on RGB Bayer tiles, quad_remosaic on quad Bayer, lmmse on any other tile).
     #[serde(default)]
     pub demosaic: Option<String>,
     /// none | grey_world | white_patch | known_illuminant (default known_illuminant).
     #[serde(default)]
     pub white_balance: Option<String>,
-    /// macbeth_d65 (default: fitted on the chart in the image, or spectrally for other
-    /// targets) | none.
+    /// calibrated (default: fitted on a calibration capture of the Macbeth chart under
+    /// `calibration_illuminant`, applied to this scene, scored held out) | chart_in_image
+    /// (refitted on the chart being scored: flattering) | macbeth_d65 (chart_in_image when the
+    /// scene is a chart, else calibrated under the scene's light) | fixed (`ccm`) | none.
     #[serde(default)]
     pub color_correction: Option<String>,
+    /// Illuminant of the calibration capture (default D65).
+    #[serde(default)]
+    pub calibration_illuminant: Option<String>,
+    /// Fixed 3 × K matrix (one column per sensor channel, channel order of sensor.channels),
+    /// applied after white balance; with color_correction "fixed".
+    #[serde(default)]
+    pub ccm: Option<Vec<Vec<f64>>>,
+    /// none (default) | reinhard | filmic.
+    #[serde(default)]
+    pub tone_curve: Option<String>,
+    /// Reinhard white luminance (default 4).
+    #[serde(default)]
+    pub tone_white: Option<f64>,
+    /// Bilateral denoiser on the demosaicked channels (default off).
+    #[serde(default)]
+    pub denoise: Option<DenoiseFile>,
     /// Linear sRGB level of the Macbeth white patch's Y in the targets (default 0.9).
     #[serde(default)]
     pub white_level: Option<f64>,
     /// 8 or 16 (default 8).
     #[serde(default)]
     pub output_bits: Option<u32>,
+}
+
+/// `processor.denoise`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DenoiseFile {
+    /// Spatial σ (pixels).
+    pub sigma_px: f64,
+    /// Range σ (linear signal, 1 = white); absent = Gaussian blur.
+    #[serde(default)]
+    pub sigma_range: Option<f64>,
 }
 
 /// `display` section.
@@ -139,6 +170,10 @@ struct Run {
     white_balance: String,
     color_correction: String,
     white_level: f64,
+    calibration_illuminant: String,
+    ccm: Option<ChannelMatrix>,
+    tone: ToneCurve,
+    denoise: Option<Bilateral>,
     output_bits: u32,
     display: DisplayModel,
     samples_per_pixel: usize,
@@ -216,21 +251,71 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         (Some(t), None) => return Err(bad(&path, format!("exposure_s: must be ≥ 0, got {t}"))),
     };
     let p = raw.processor.unwrap_or_default();
-    let demosaic: DemosaicMethod = p
-        .demosaic
-        .as_deref()
-        .unwrap_or("malvar")
-        .parse()
-        .map_err(|e| bad(&path, format!("processor.demosaic: {e}")))?;
+    let demosaic: DemosaicMethod = match p.demosaic.as_deref() {
+        Some(d) => d
+            .parse()
+            .map_err(|e| bad(&path, format!("processor.demosaic: {e}")))?,
+        None => {
+            let probe = Mosaic::new(
+                1,
+                1,
+                vec![0.0],
+                camera.sensor.cfa.tile.clone(),
+                camera.sensor.channel_names.clone(),
+            );
+            match probe {
+                Ok(m) if m.bayer_layout().is_ok() => DemosaicMethod::Malvar,
+                Ok(m) if camsim_isp::cfa_generic::quad_bayer_blocks(&m).is_ok() => {
+                    DemosaicMethod::QuadRemosaic
+                }
+                _ => DemosaicMethod::Lmmse,
+            }
+        }
+    };
     let white_balance = p.white_balance.unwrap_or_else(|| "known_illuminant".into());
     if !["none", "grey_world", "white_patch", "known_illuminant"].contains(&white_balance.as_str())
     {
         return Err(bad(&path, format!("processor.white_balance: unknown value \"{white_balance}\" (expected none, grey_world, white_patch or known_illuminant)")));
     }
-    let color_correction = p.color_correction.unwrap_or_else(|| "macbeth_d65".into());
-    if !["none", "macbeth_d65"].contains(&color_correction.as_str()) {
-        return Err(bad(&path, format!("processor.color_correction: unknown value \"{color_correction}\" (expected macbeth_d65 or none)")));
+    let color_correction = p.color_correction.unwrap_or_else(|| {
+        if p.ccm.is_some() { "fixed" } else { "calibrated" }.into()
+    });
+    if !["none", "macbeth_d65", "calibrated", "chart_in_image", "fixed"].contains(&color_correction.as_str()) {
+        return Err(bad(&path, format!("processor.color_correction: unknown value \"{color_correction}\" (expected calibrated, chart_in_image, macbeth_d65, fixed or none)")));
     }
+    let k_channels = camera.sensor.channel_names.len();
+    let ccm = match (&p.ccm, color_correction.as_str()) {
+        (Some(m), "fixed") => {
+            if m.len() != 3 || m.iter().any(|r| r.len() != k_channels || r.iter().any(|x| !x.is_finite())) {
+                return Err(bad(&path, format!(
+                    "processor.ccm: must be 3 rows of {k_channels} finite numbers (one column per sensor channel: {})",
+                    camera.sensor.channel_names.join(", ")
+                )));
+            }
+            Some(ChannelMatrix { m: [m[0].clone(), m[1].clone(), m[2].clone()] })
+        }
+        (None, "fixed") => return Err(bad(&path, "processor.color_correction \"fixed\" needs processor.ccm (3 rows, one column per sensor channel)")),
+        (Some(_), c) => return Err(bad(&path, format!("processor.ccm is only used with color_correction \"fixed\" (have \"{c}\")"))),
+        (None, _) => None,
+    };
+    if color_correction == "none" && ChannelMatrix::select_rgb(&camera.sensor.channel_names).is_none() {
+        return Err(bad(&path, format!(
+            "processor.color_correction \"none\" shows channels r, g, b as they are, but the sensor has {}; use calibrated or fixed",
+            camera.sensor.channel_names.join(", ")
+        )));
+    }
+    let calibration_illuminant = p.calibration_illuminant.clone().unwrap_or_else(|| "D65".into());
+    camsim_core::data::illuminant(&calibration_illuminant)
+        .map_err(|e| bad(&path, format!("processor.calibration_illuminant: {e}")))?;
+    let tone = ToneCurve::parse(p.tone_curve.as_deref().unwrap_or("none"), p.tone_white)
+        .map_err(|e| bad(&path, format!("processor.{e}")))?;
+    let denoise = match &p.denoise {
+        None => None,
+        Some(d) => Some(
+            Bilateral::new(d.sigma_px, d.sigma_range.unwrap_or(f64::INFINITY))
+                .map_err(|e| bad(&path, format!("processor.{e}")))?,
+        ),
+    };
     let white_level = p.white_level.unwrap_or(0.9);
     if !(white_level > 0.0 && white_level <= 1.0) {
         return Err(bad(
@@ -254,18 +339,6 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
             &path,
             format!("display.samples_per_pixel: must be 1–32, got {samples_per_pixel}"),
         ));
-    }
-    let names = &camera.sensor.channel_names;
-    for ch in ["r", "g", "b"] {
-        if !names.iter().any(|n| n == ch) {
-            return Err(bad(
-                &camera_path,
-                format!(
-                    "sensor.channels: `camsim run` needs channels r, g and b (have {})",
-                    names.join(", ")
-                ),
-            ));
-        }
     }
     let shot = crate::config::Shot {
         id: "scene".into(),
@@ -292,6 +365,10 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         white_balance,
         color_correction,
         white_level,
+        calibration_illuminant,
+        ccm,
+        tone,
+        denoise,
         output_bits,
         display,
         samples_per_pixel,
@@ -379,9 +456,21 @@ fn to_sensor_pixels(
     }
 }
 
-fn rgb_index(names: &[String]) -> [usize; 3] {
-    let f = |n: &str| names.iter().position(|x| x == n).expect("checked r/g/b");
-    [f("r"), f("g"), f("b")]
+/// Mean channel values of every chart patch (row-major).
+fn planes_patch_means(p: &ChannelPlanes, layout: &ChartLayout) -> Vec<Vec<f64>> {
+    let n = layout.chart_rows * layout.chart_cols;
+    (0..n)
+        .map(|i| {
+            let r = camsim_metrics::patch_sample_rect(
+                p.rows,
+                p.cols,
+                layout,
+                i / layout.chart_cols,
+                i % layout.chart_cols,
+            );
+            p.mean_in(r.row0, r.row1, r.col0, r.col1)
+        })
+        .collect()
 }
 
 /// Run the pipeline and write everything into `out`.
@@ -487,27 +576,19 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         max_dn as f64,
     )
     .map_err(|e| CliError::Other(format!("processor: {e}")))?;
-    let mut rgb = demosaic(&mosaic, r.demosaic)
+    let mut planes = demosaic_planes(&mosaic, r.demosaic)
         .map_err(|e| CliError::input(&set.path, format!("processor.demosaic: {e}")))?;
-    let idx = rgb_index(&sensor.channel_names);
-    let qe_rgb: Vec<Spectrum> = idx.iter().map(|&i| sensor.channel_qe[i].clone()).collect();
+    if let Some(b) = &r.denoise {
+        b.apply(&mut planes);
+    }
+    let names = planes.names.clone();
+    let qe_all: Vec<Spectrum> = sensor.channel_qe.clone();
     let scene_illuminant = set.shots[0].target.illuminant.clone().unwrap_or_else(|| {
         camsim_core::data::illuminant("D65")
             .expect("D65")
             .energy_to_photons(&SI)
     });
-    let wb = match r.white_balance.as_str() {
-        "grey_world" => WhiteBalance::GreyWorld,
-        "white_patch" => WhiteBalance::WhitePatch,
-        "known_illuminant" => WhiteBalance::Gains(
-            camsim_isp::illuminant_gains(&qe_rgb, &scene_illuminant)
-                .map_err(|e| CliError::Other(format!("white balance: {e}")))?,
-        ),
-        _ => WhiteBalance::None,
-    };
-    let wb_gains = wb
-        .apply(&mut rgb)
-        .map_err(|e| CliError::Other(format!("white balance: {e}")))?;
+    let wb_method = WbMethod::parse(&r.white_balance).expect("validated white_balance");
     // The chart geometry when the target is a 4 × 6 chart (macbeth or patches).
     let chart = match &set.shots[0].target.target {
         Target::Patches {
@@ -526,40 +607,101 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     let d65 = camsim_core::data::illuminant("D65").expect("D65");
     let targets = macbeth_target_linear_srgb(&d65, r.white_level)
         .map_err(|e| CliError::Other(format!("colour targets: {e}")))?;
-    // Paper §3: 3×3 matrix by least squares from the sensor's Macbeth values to the D65 sRGB targets.
-    let (ccm, ccm_source) = if r.color_correction == "none" {
-        (ColorMatrix::identity(), "none")
-    } else if let Some(layout) = &chart {
-        let sensor_vals = patch_means(&rgb, layout);
-        (
-            fit_color_correction(&sensor_vals, &targets)
-                .map_err(|e| CliError::Other(format!("colour correction: {e}")))?,
-            "chart in the image",
-        )
-    } else {
-        // no chart in the image: fit on the camera's noise-free spectral responses to the chart
-        let mut v = macbeth_sensor_rgb(&qe_rgb, &scene_illuminant)
-            .map_err(|e| CliError::Other(format!("colour correction: {e}")))?;
-        let g: Vec<f64> = v.iter().map(|p| p.map(|x| x)).map(|p| p[1]).collect();
-        let white_g = g[camsim_isp::MACBETH_WHITE_INDEX].max(1e-30);
-        let img_white = rgb
-            .data
-            .iter()
-            .map(|p| p[1] as f64)
-            .fold(0.0, f64::max)
-            .max(1e-30);
-        for p in v.iter_mut() {
-            for c in 0..3 {
-                p[c] *= wb_gains[c] * img_white / white_g;
-            }
-        }
-        (
-            fit_color_correction(&v, &targets)
-                .map_err(|e| CliError::Other(format!("colour correction: {e}")))?,
-            "camera's spectral responses",
-        )
+    let scored = CaptureStats::of_planes(
+        &planes,
+        chart.as_ref().map(|l| planes_patch_means(&planes, l)).unwrap_or_default(),
+        scene_illuminant.clone(),
+    );
+    let wb_gains = honest_color::gains(wb_method, &scored, &qe_all, &names)?;
+    let cal_illum = camsim_core::data::illuminant(&r.calibration_illuminant)
+        .map_err(|e| CliError::input(&set.path, format!("processor.calibration_illuminant: {e}")))?
+        .energy_to_photons(&SI);
+    let calibration = CaptureStats::calibration(&qe_all, &cal_illum)?;
+    let mode = match (r.color_correction.as_str(), chart.is_some()) {
+        ("macbeth_d65", true) => "chart_in_image",
+        ("macbeth_d65", false) => "calibrated_scene_light",
+        (m, _) => m,
     };
-    ccm.apply_image(&mut rgb);
+    let mut fitted: Option<crate::color_eval::PatchDeltaE> = None;
+    let (ccm, ccm_source): (ChannelMatrix, String) = match mode {
+        "none" => (
+            ChannelMatrix::select_rgb(&names).expect("validated r, g, b"),
+            "none".into(),
+        ),
+        "fixed" => (r.ccm.clone().expect("validated ccm"), "fixed matrix from the config".into()),
+        "chart_in_image" => {
+            let samples: Vec<Vec<f64>> = scored
+                .patches
+                .iter()
+                .map(|p| p.iter().zip(&wb_gains).map(|(a, b)| a * b).collect())
+                .collect();
+            (
+                fit_channel_matrix(&samples, &targets)
+                    .map_err(|e| CliError::Other(format!("colour correction: {e}")))?,
+                "chart in the image (refitted on the scored chart: not held out)".into(),
+            )
+        }
+        "calibrated_scene_light" => {
+            let cal_scene = CaptureStats::calibration(&qe_all, &scene_illuminant)?;
+            let c = honest_color::calibrate(wb_method, &cal_scene, &qe_all, &names, &targets, r.white_level)?;
+            fitted = Some(c.fitted);
+            (c.matrix, "camera's spectral responses to the chart under the scene light".into())
+        }
+        _ => {
+            let c = honest_color::calibrate(wb_method, &calibration, &qe_all, &names, &targets, r.white_level)?;
+            fitted = Some(c.fitted);
+            (
+                c.matrix,
+                format!("calibration capture: Macbeth chart under {} (noise-free camera responses)", r.calibration_illuminant),
+            )
+        }
+    };
+    ChannelBalance::Gains(wb_gains.clone())
+        .apply(&mut planes)
+        .map_err(|e| CliError::Other(format!("white balance: {e}")))?;
+    let mut rgb = ccm
+        .apply_planes(&planes)
+        .map_err(|e| CliError::Other(format!("colour correction: {e}")))?;
+    // Exposure normalisation (calibrated and fixed matrices): the brightest chart patch (or the
+    // 99th percentile of luminance without a chart) is brought to the target white.
+    let exposure_scale = if matches!(mode, "calibrated" | "calibrated_scene_light" | "fixed") {
+        let k = match &chart {
+            Some(l) => {
+                let means: Vec<[f64; 3]> = planes_patch_means(&planes, l)
+                    .iter()
+                    .map(|p| ccm.apply(p))
+                    .collect();
+                honest_color::exposure_scale(&means, r.white_level)
+            }
+            None => {
+                let mut ys: Vec<f64> = rgb
+                    .data
+                    .iter()
+                    .map(|p| crate::color_eval::srgb_to_xyz(p.map(|x| x as f64))[1])
+                    .collect();
+                ys.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+                let y = ys[((ys.len() as f64 * 0.99) as usize).min(ys.len() - 1)];
+                if y > 0.0 { r.white_level / y } else { 1.0 }
+            }
+        };
+        let k32 = k as f32;
+        rgb.data.iter_mut().for_each(|p| p.iter_mut().for_each(|x| *x *= k32));
+        k
+    } else {
+        1.0
+    };
+    r.tone.apply(&mut rgb);
+    let wb_comparison = match (&chart, mode) {
+        (Some(_), "calibrated") => Some(honest_color::compare_white_balance(
+            &calibration,
+            &scored,
+            &qe_all,
+            &names,
+            &targets,
+            r.white_level,
+        )?),
+        _ => None,
+    };
     let rendered8 = to_srgb8(&rgb);
     let p = put("rendered.png");
     if r.output_bits == 16 {
@@ -595,8 +737,11 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         "scene_mean_luminance_cd_m2": scene_luminance,
         "exposure_s": exposure_s,
         "raw_mean_dn": raw.dn.iter().map(|&d| d as f64).sum::<f64>() / raw.dn.len() as f64,
-        "processor": {"demosaic": r.demosaic.name(), "white_balance": r.white_balance, "white_balance_gains": wb_gains,
-                       "color_correction": r.color_correction, "ccm_fitted_on": ccm_source, "ccm": ccm.m, "output_bits": r.output_bits},
+        "processor": {"demosaic": r.demosaic.name(), "channels": names, "white_balance": r.white_balance, "white_balance_gains": wb_gains,
+                       "color_correction": r.color_correction, "ccm_fitted_on": ccm_source, "ccm": ccm.m,
+                       "calibration_illuminant": r.calibration_illuminant, "exposure_scale": exposure_scale,
+                       "tone_curve": r.tone.name(), "denoise": r.denoise.map(|b| json!({"sigma_px": b.sigma_px, "sigma_range": if b.sigma_range.is_finite() { json!(b.sigma_range) } else { json!("inf") }})),
+                       "output_bits": r.output_bits},
         "display": {"name": r.display.name, "samples_per_pixel": r.samples_per_pixel},
     });
     let mut figures: Vec<(&str, &str)> = vec![
@@ -626,14 +771,15 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
             .collect();
         let mut snr = serde_json::Map::new();
         let mut g_snr = Vec::new();
-        for ch in ["r", "g", "b"] {
+        let ref_name = names[camsim_isp::reference_channel(&names)].clone();
+        for ch in sensor.channel_names.iter().map(|s| s.as_str()) {
             let t: Vec<&str> = tile_strings.iter().map(|s| s.as_str()).collect();
             let mask = camsim_metrics::cfa_channel_mask(&t, ch.chars().next().unwrap())
                 .map_err(|e| CliError::Other(e.to_string()))?;
             let stats = patch_stats(&data, raw.rows, raw.cols, layout, mask)
                 .map_err(|e| CliError::Other(format!("patch statistics: {e}")))?;
             let v: Vec<Value> = stats.iter().map(|s| json!({"mean_dn": s.mean, "std_dn": s.std, "snr_db": s.snr_db, "pixels": s.count})).collect();
-            if ch == "g" {
+            if ch == ref_name {
                 g_snr = stats.iter().map(|s| s.snr_db).collect();
             }
             snr.insert(ch.into(), Value::Array(v));
@@ -665,6 +811,22 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         let (de2000, s2000) = (&de.de2000, &de.stats2000);
         report["delta_e_2000"] = de.json_2000();
         report["delta_e_76"] = de.json_76();
+        report["delta_e_scored_on"] = json!(if mode == "chart_in_image" {
+            "the chart the matrix was fitted on (not held out)"
+        } else {
+            "this scene's chart (held out: the matrix was not fitted on it)"
+        });
+        if let Some(f) = &fitted {
+            report["delta_e_2000_fitted"] = f.json_2000();
+        }
+        if let Some(rows) = &wb_comparison {
+            report["white_balance_comparison"] = json!(rows.iter().map(|w| json!({
+                "white_balance": w.method.name(), "gains": w.gains,
+                "fitted_delta_e_2000_mean": w.fitted_mean,
+                "held_out_delta_e_2000_mean": w.held_out_mean,
+                "held_out_delta_e_2000_max": w.held_out_max,
+            })).collect::<Vec<_>>());
+        }
         plots::histogram(
             &put("delta_e_histogram.png"),
             &format!("ΔE2000, desired vs rendered (mean {:.2})", s2000.mean),

@@ -105,6 +105,9 @@ pub struct DngFrame {
     pub frame: RawFrame,
     /// Metadata.
     pub info: DngInfo,
+    /// Every numeric tag of IFD0 and of the raw image's directory (the latter wins), e.g. the
+    /// colour tags ColorMatrix1 (50721) or AsShotNeutral (50728), for `camsim develop`.
+    pub tags: std::collections::BTreeMap<u16, Vec<f64>>,
 }
 
 /// camsim letter of a DNG CFA colour code.
@@ -583,7 +586,10 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
         dn.extend_from_slice(&stored[r * cols + aa[1]..r * cols + aa[3]]);
     }
     let adc_bits = (64 - (white as u64).leading_zeros()).max(1);
+    let mut all_tags = dirs[0].values.clone();
+    all_tags.extend(d.values.iter().map(|(k, v)| (*k, v.clone())));
     Ok(DngFrame {
+        tags: all_tags,
         frame: RawFrame {
             rows: ar,
             cols: ac,
