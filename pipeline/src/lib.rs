@@ -11,6 +11,7 @@ pub mod config;
 pub mod datasets;
 pub mod demo;
 pub mod diagnose_cmd;
+pub mod emva1288_cmd;
 pub mod error;
 pub mod frames;
 pub mod lens_cmd;
