@@ -5,7 +5,7 @@
 # reference implementation emva1288 1.0.2 (tools/emva1288_ref.py analyse: parse + load +
 # Data1288 + Results1288), timed in the same run on the same images. The series is written
 # once by `camsim emva1288` (Table 1 camera). Result rows go to docs/benchmarks.md.
-# Env: ROWS, COLS (default 1024), L (default 100), THREADS (default 2),
+# Env: ROWS, COLS (default 1024), L (default 100), THREADS (default 2), BIN (a prebuilt camsim),
 #      OUT (default target/bench-emva1288), CARGO_TARGET_DIR.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -14,8 +14,10 @@ COLS=${COLS:-1024}
 L=${L:-100}
 THREADS=${THREADS:-2}
 OUT=${OUT:-target/bench-emva1288}
-cargo build --release -q --bin camsim
-BIN=${CARGO_TARGET_DIR:-target}/release/camsim
+if [ -z "${BIN:-}" ]; then
+    cargo build --release -q --bin camsim
+    BIN=${CARGO_TARGET_DIR:-target}/release/camsim
+fi
 tools/emva1288_setup.sh >/dev/null
 PY=${CAMSIM_EMVA1288_VENV:-.venv-emva1288}/bin/python
 rm -rf "$OUT"

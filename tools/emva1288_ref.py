@@ -113,7 +113,7 @@ def main():
     si.add_argument("--wavelength-nm", type=float, default=550.0)
     si.add_argument("--u-esat", type=float, default=15000.0)
     si.add_argument("--dark-current", type=float, default=3000.0)
-    si.add_argument("--dark-signal-e", type=float, default=10.0)
+    si.add_argument("--dark-signal-e", type=float, default=60.0)  # no clipping at 0 e⁻
     si.add_argument("--sigma2-dark-e2", type=float, default=30.0)
     si.add_argument("--blackoffset", type=float, default=50.0)
     si.add_argument("--dsnu-e", type=float, default=5.0)
