@@ -208,7 +208,15 @@ fn emva1288_matches_the_reference_implementation_on_three_cameras() {
             .output()
             .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        assert_eq!(datasheet(&out2)["values"], ds["values"], "{label}");
+        // same numbers up to the descriptor's 0.1 ns rounding of the exposure times
+        let again = datasheet(&out2);
+        for (name, v) in ds["values"].as_object().unwrap() {
+            let (a, b) = (value(&again, name).0, v["value"].as_f64().unwrap_or(f64::NAN));
+            assert!(
+                (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9 * b.abs(),
+                "{label}: {name}: calibrate --emva1288 {a} vs emva1288 {b}"
+            );
+        }
     }
 }
 
