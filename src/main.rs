@@ -90,14 +90,52 @@ enum Command {
     /// Estimate the sensor's parameters from a capture set (Appendix A/B, photon transfer);
     /// writes DIR/fitted_camera.json, calibration.json and report.html.
     Calibrate {
-        /// captures.json
+        /// captures.json (with --emva1288: an EMVA 1288 descriptor file)
         captures: PathBuf,
+        /// Analyse CAPTURES as an EMVA 1288 series (the descriptor file of the reference
+        /// implementation `emva1288`); writes DIR/datasheet.json, results.xml, report.html.
+        #[arg(long)]
+        emva1288: bool,
         /// Replace the camera named in the capture set (the believed camera).
         #[arg(long)]
         camera: Option<PathBuf>,
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
+    },
+    /// EMVA 1288 (Release 4.0 Linear) characterisation of a camera: simulate the standard's
+    /// series (DIR/EMVA1288descriptor.txt + images), analyse it, write DIR/datasheet.json,
+    /// results.xml and report.html (docs/emva1288.md).
+    Emva1288 {
+        /// camera.json
+        camera: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed of every random term.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Wavelength of the light (nm; default: the channel's QE peak).
+        #[arg(long)]
+        wavelength_nm: Option<f64>,
+        /// Channel to characterise (default: highest QE at the wavelength).
+        #[arg(long)]
+        channel: Option<String>,
+        /// Rows of the simulated region (default: the sensor's).
+        #[arg(long)]
+        rows: Option<usize>,
+        /// Columns of the simulated region (default: the sensor's).
+        #[arg(long)]
+        cols: Option<usize>,
+        /// Photon-transfer points from dark to saturation.
+        #[arg(long, default_value_t = 50)]
+        steps: usize,
+        /// Frames per spatial stack (L).
+        #[arg(long, default_value_t = 100)]
+        spatial_frames: usize,
+        /// Exposure time at which the signal saturates (s).
+        #[arg(long, default_value_t = 0.01)]
+        saturation_exposure_s: f64,
     },
     /// Simulate every shot with the camera and compare with the recording (paper Figs. 3–6):
     /// per-shot and per-patch means and SNR, colour accuracy, residual images.
@@ -294,8 +332,46 @@ fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::Calibrate {
             captures,
+            emva1288: true,
+            out,
+            ..
+        } => {
+            let r = camsim_pipeline::emva1288_cmd::run_descriptor(&captures, &out)?;
+            print_emva1288(&r);
+            eprintln!("camsim: wrote {} (open report.html)", out.display());
+            Ok(())
+        }
+        Command::Emva1288 {
             camera,
             out,
+            seed,
+            wavelength_nm,
+            channel,
+            rows,
+            cols,
+            steps,
+            spatial_frames,
+            saturation_exposure_s,
+        } => {
+            let mut o = camsim_pipeline::emva1288_cmd::Emva1288Options::new(out.clone());
+            o.seed = seed;
+            o.wavelength_nm = wavelength_nm;
+            o.channel = channel;
+            o.rows = rows;
+            o.cols = cols;
+            o.steps_to_saturation = steps;
+            o.spatial_frames = spatial_frames;
+            o.saturation_exposure_s = saturation_exposure_s;
+            let r = camsim_pipeline::emva1288_cmd::run_emva1288(&camera, &o)?;
+            print_emva1288(&r);
+            eprintln!("camsim: wrote {} (open report.html)", out.display());
+            Ok(())
+        }
+        Command::Calibrate {
+            captures,
+            camera,
+            out,
+            ..
         } => {
             let set = load_captures(&captures, camera.as_deref())?;
             let summary = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, true)?;
@@ -436,5 +512,12 @@ fn main() -> ExitCode {
             eprintln!("camsim: error: {}", e.one_line());
             ExitCode::from(2)
         }
+    }
+}
+
+/// One line per datasheet number of an EMVA 1288 analysis.
+fn print_emva1288(r: &camsim_pipeline::emva1288_cmd::Emva1288Report) {
+    for (k, v) in &r.values {
+        eprintln!("camsim: {k} = {:.6e} ± {:.2e}", v.value, v.uncertainty);
     }
 }

@@ -4,6 +4,7 @@ mod cli;
 mod develop;
 mod diagnose;
 mod effects;
+mod emva1288;
 mod lens_blur;
 mod lens_cli;
 mod oracles;

@@ -23,6 +23,7 @@
 #![deny(missing_docs)]
 
 mod dark;
+pub mod emva1288;
 pub mod fit;
 pub mod mismatch;
 pub mod noise_profiles;

@@ -13,6 +13,7 @@ pub mod datasets;
 pub mod demo;
 pub mod develop_cmd;
 pub mod diagnose_cmd;
+pub mod emva1288_cmd;
 pub mod error;
 pub mod frames;
 pub mod honest_color;
