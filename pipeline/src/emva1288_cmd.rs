@@ -12,6 +12,7 @@
 //! implementation's result format) and `report.html` with the standard's plots.
 //!
 //! `calibrate --emva1288` analyses any series given by such a descriptor file.
+use rayon::prelude::*;
 use crate::error::CliError;
 use crate::frames::write_png16;
 use crate::plots;
@@ -21,7 +22,7 @@ use camsim_diagnose::emva1288::spatial::{analyse_spatial, SpatialResult, StackAc
 use camsim_diagnose::emva1288::{
     analyse_temporal, pair_stats, snr_model, Measured, PairStats, TemporalPoint, TemporalResult,
 };
-use camsim_sensor::{expose_with, fixed_pattern, Cfa, ElectronRate, PatternSource, SensorModel, Shot};
+use camsim_sensor::{fixed_pattern, Cfa, ElectronRate, PatternSource, SensorModel, Shot};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -320,7 +321,7 @@ pub fn run_emva1288(camera_path: &Path, opts: &Emva1288Options) -> Result<Emva12
     };
     let mut image_no = 0usize;
     let mut frame = |rate: &ElectronRate, t: f64, ids: &[u64]| -> Result<(RawFrame, String), CliError> {
-        let f = expose_with(
+        let f = crate::chain::simulate_frame(
             &sensor,
             rate,
             &Shot::new(&sensor, t),
@@ -869,20 +870,37 @@ fn read_gray(path: &Path, d: &Descriptor) -> Result<Vec<u16>, CliError> {
 pub fn run_descriptor(path: &Path, out: &Path) -> Result<Emva1288Report, CliError> {
     let d = parse_descriptor(path)?;
     let mut b = SeriesBuilder { bright: Vec::new(), dark: Vec::new(), stack_bright: None, stack_dark: None };
-    for blk in &d.blocks {
-        if blk.images.len() == 2 {
-            let a = read_gray(&blk.images[0], &d)?;
-            let c = read_gray(&blk.images[1], &d)?;
-            let s = pair_stats(&a, &c);
+    // The temporal pairs, read and reduced in parallel (each pair's statistics are computed
+    // alone, so the result does not depend on the thread count).
+    let pair_stats_by_block: Vec<Option<_>> = d
+        .blocks
+        .par_iter()
+        .map(|blk| -> Result<Option<_>, CliError> {
+            if blk.images.len() != 2 {
+                return Ok(None);
+            }
+            let (a, c) = rayon::join(|| read_gray(&blk.images[0], &d), || read_gray(&blk.images[1], &d));
+            Ok(Some(pair_stats(&a?, &c?)))
+        })
+        .collect::<Result<_, CliError>>()?;
+    for (blk, stats) in d.blocks.iter().zip(pair_stats_by_block) {
+        if let Some(s) = stats {
             if blk.photons_per_pixel == 0.0 {
                 b.dark.push((blk.exposure_s, s));
             } else {
                 b.bright.push((blk.exposure_s, blk.photons_per_pixel, s));
             }
         } else {
+            // Frames are read in parallel a chunk at a time and added in file order.
             let mut acc = StackAccumulator::new(d.height, d.width);
-            for p in &blk.images {
-                acc.add(&read_gray(p, &d)?).map_err(|e| CliError::input(p, e))?;
+            for chunk in blk.images.chunks(8) {
+                let frames: Vec<Vec<u16>> = chunk
+                    .par_iter()
+                    .map(|p| read_gray(p, &d))
+                    .collect::<Result<_, CliError>>()?;
+                for (p, f) in chunk.iter().zip(&frames) {
+                    acc.add(f).map_err(|e| CliError::input(p, e))?;
+                }
             }
             let slot = if blk.photons_per_pixel == 0.0 { &mut b.stack_dark } else { &mut b.stack_bright };
             if slot.is_some() {
