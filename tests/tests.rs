@@ -3,6 +3,7 @@ mod calibrate;
 mod cli;
 mod diagnose;
 mod effects;
+mod hostile;
 mod lens_blur;
 mod lens_cli;
 mod oracles;

@@ -21,6 +21,7 @@
 //! Units live in names: `_nm`, `_m`, `_um`, `_s`, `_v`, `_e` (electrons), `_dn`.
 #![deny(missing_docs)]
 
+pub mod cleanup;
 pub mod colorimetry;
 pub mod constants;
 pub mod data;

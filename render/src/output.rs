@@ -13,7 +13,7 @@ use camsim_core::image::{Plane, SpectralBasis, SpectralImage};
 use camsim_core::spectrum::WavelengthGrid;
 use camsim_core::SceneRadiance;
 use exr::prelude::{
-    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer, LayerAttributes,
+    AnyChannel, AnyChannels, AttributeValue, FlatSamples, Image, Layer, LayerAttributes,
     Text, WritableImage,
 };
 use std::path::Path;
@@ -112,7 +112,7 @@ pub fn write_exr(path: &Path, out: &RenderOutput, ch: ExrChannels) -> Result<(),
     let layer = Layer::new(
         (out.width, out.height),
         attrs,
-        Encoding::FAST_LOSSLESS,
+        camsim_core::exr_io::DETERMINISTIC_ENCODING,
         AnyChannels::sort(channels.into_iter().collect()),
     );
     let img = Image::from_layer(layer);
@@ -188,7 +188,7 @@ pub fn write_planes_exr(
     let layer = Layer::new(
         (width, height),
         attrs,
-        Encoding::FAST_LOSSLESS,
+        camsim_core::exr_io::DETERMINISTIC_ENCODING,
         AnyChannels::sort(channels.into_iter().collect()),
     );
     let img = Image::from_layer(layer);

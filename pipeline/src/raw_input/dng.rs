@@ -286,6 +286,7 @@ impl Tiff<'_> {
 /// Read the raw CFA image of a DNG (see the module documentation for what is supported).
 /// Errors name the file, the directory and the tag.
 pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
+    crate::staging::protect_input(path);
     let err = |m: String| CliError::input(path, m);
     let bytes = std::fs::read(path).map_err(|e| err(format!("cannot open frame: {e}")))?;
     let little = match bytes.get(0..4) {
