@@ -54,10 +54,10 @@ fn debris(dir: &Path) -> Vec<String> {
     v
 }
 
-/// A capture set slow enough to interrupt: `shots` blurred flat fields of 192×192 pixels,
+/// A capture set slow enough to interrupt: `shots` blurred slanted edges of 256×256 pixels,
 /// four frames each.
 fn slow_set(dir: &Path, shots: usize) {
-    let mut cam = camera(192, 192);
+    let mut cam = camera(256, 256);
     cam["optics"]["blur"] = json!({"kind": "gaussian", "sigma_um": 3.0});
     let shots: Vec<Value> = (0..shots)
         .map(|i| {
@@ -101,7 +101,7 @@ fn interrupt_simulate(dir: &Path, out: &str, signal: &str) -> Option<i32> {
 #[test]
 fn sigint_part_way_leaves_no_debris_and_no_partial_set() {
     let d = tempfile::tempdir().unwrap();
-    slow_set(d.path(), 40);
+    slow_set(d.path(), 150);
     // 1. A new output folder: after SIGINT it does not exist.
     assert_eq!(interrupt_simulate(d.path(), "new", "-INT"), Some(130));
     assert!(!d.path().join("new").exists(), "{:?}", snapshot(&d.path().join("new")).keys());
