@@ -131,11 +131,9 @@ pub fn write_spectral_exr(
         }
         channels.push(AnyChannel::new("Z", FlatSamples::F32(d.data.clone())));
     }
+    // One custom attribute per attribute map: the `exr` crate keeps them in a HashMap, whose
+    // iteration (and so the header's byte order) changes from process to process.
     let mut attrs = LayerAttributes::default();
-    attrs.other.insert(
-        Text::from("spectralLayoutVersion"),
-        AttributeValue::Text(Text::from("1.0")),
-    );
     attrs.other.insert(
         Text::from("emissiveUnits"),
         AttributeValue::Text(Text::from(emissive_units)),
@@ -146,7 +144,11 @@ pub fn write_spectral_exr(
         DETERMINISTIC_ENCODING,
         AnyChannels::sort(channels.into_iter().collect()),
     );
-    let img = Image::from_layer(layer);
+    let mut img = Image::from_layer(layer);
+    img.attributes.other.insert(
+        Text::from("spectralLayoutVersion"),
+        AttributeValue::Text(Text::from("1.0")),
+    );
     write_atomically(path, |tmp| {
         img.write()
             .to_file(tmp)

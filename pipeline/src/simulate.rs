@@ -319,9 +319,12 @@ fn uniform_electron_rate(
         };
         let glare = match fx.veiling_glare {
             Some(g) if g > 0.0 => {
+                // Row sums collected, then added in order: the same bits at any thread count.
                 let sum: f64 = (0..s.rows)
                     .into_par_iter()
                     .map(|r| (0..s.cols).map(|c| factor(r, c)).sum::<f64>())
+                    .collect::<Vec<f64>>()
+                    .iter()
                     .sum();
                 g * sum / (s.rows * s.cols) as f64
             }

@@ -83,11 +83,10 @@ pub fn write_exr(path: &Path, out: &RenderOutput, ch: ExrChannels) -> Result<(),
             ));
         }
     }
+    // One custom attribute per attribute map (the `exr` crate keeps them in a HashMap whose
+    // iteration order, and so the header's bytes, changes from process to process); the
+    // render settings go into the standard `comments` attribute.
     let mut attrs = LayerAttributes::default();
-    attrs.other.insert(
-        Text::from("spectralLayoutVersion"),
-        AttributeValue::Text(Text::from("1.0")),
-    );
     let units = match out.quantity {
         OutputQuantity::Radiance => RADIANCE_UNITS,
         OutputQuantity::SensorIrradiance => IRRADIANCE_UNITS,
@@ -96,26 +95,27 @@ pub fn write_exr(path: &Path, out: &RenderOutput, ch: ExrChannels) -> Result<(),
         Text::from("emissiveUnits"),
         AttributeValue::Text(Text::from(units)),
     );
-    attrs.other.insert(
-        Text::from("camsimRender"),
-        AttributeValue::Text(Text::from(
-            format!(
-                "spp={} bands={}:{}:{} band-averaged",
-                out.spp,
-                out.bands.lo_nm,
-                out.bands.hi_nm(),
-                out.bands.step_nm
-            )
-            .as_str(),
-        )),
-    );
+    attrs.comments = Some(Text::from(
+        format!(
+            "camsimRender spp={} bands={}:{}:{} band-averaged",
+            out.spp,
+            out.bands.lo_nm,
+            out.bands.hi_nm(),
+            out.bands.step_nm
+        )
+        .as_str(),
+    ));
     let layer = Layer::new(
         (out.width, out.height),
         attrs,
         camsim_core::exr_io::DETERMINISTIC_ENCODING,
         AnyChannels::sort(channels.into_iter().collect()),
     );
-    let img = Image::from_layer(layer);
+    let mut img = Image::from_layer(layer);
+    img.attributes.other.insert(
+        Text::from("spectralLayoutVersion"),
+        AttributeValue::Text(Text::from("1.0")),
+    );
     write_atomically(path, |tmp| {
         img.write()
             .to_file(tmp)

@@ -221,7 +221,11 @@ fn outputs_are_byte_identical_across_runs_and_thread_counts() {
     let mut cam: Value = serde_json::from_str(camsim_pipeline::run::TABLE1_CAMERA).unwrap();
     cam["sensor"]["rows"] = json!(24);
     cam["sensor"]["cols"] = json!(32);
-    std::fs::write(p.join("run.json"), json!({"camera": cam, "exposure_s": 0.01}).to_string()).unwrap();
+    std::fs::write(
+        p.join("run.json"),
+        json!({"camera": cam, "target": {"kind": "macbeth"}, "exposure_s": 0.01}).to_string(),
+    )
+    .unwrap();
     let mut scam: Value = serde_json::from_str(
         &std::fs::read_to_string(repo().join("examples/study_codesign/camera.json")).unwrap(),
     )
@@ -246,7 +250,7 @@ fn outputs_are_byte_identical_across_runs_and_thread_counts() {
         (vec!["study", "study.json", "--out", "st"], "st"),
         (vec!["calibrate", "set/captures.json", "--out", "cal"], "cal"),
         (vec!["validate", "set/captures.json", "--out", "val"], "val"),
-        (vec!["diagnose", "set/captures.json", "--out", "dia"], "dia"),
+        (vec!["diagnose", "set/captures.json", "--out", "dia", "--effects", "prnu"], "dia"),
     ];
     for (args, out) in cases {
         let a = outputs_of(p, "1", &args, out);
