@@ -276,6 +276,10 @@ pub fn load_lens(path: &Path) -> Result<LensPrescription, CliError> {
 
 /// [`load_lens`] with explicit Zemax options (glass substitutions).
 pub fn load_lens_with(path: &Path, zmx: &ZmxOptions) -> Result<LensPrescription, CliError> {
+    crate::guard::guarded(path, || load_lens_unguarded(path, zmx))
+}
+
+fn load_lens_unguarded(path: &Path, zmx: &ZmxOptions) -> Result<LensPrescription, CliError> {
     crate::staging::protect_input(path);
     let bad = |e: &dyn std::fmt::Display| CliError::input(path, e);
     let bytes = std::fs::read(path).map_err(|e| bad(&e))?;

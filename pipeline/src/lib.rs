@@ -14,6 +14,7 @@ pub mod demo;
 pub mod diagnose_cmd;
 pub mod error;
 pub mod frames;
+pub mod guard;
 pub mod lens_cmd;
 pub mod noise_profiles_cmd;
 pub mod plots;

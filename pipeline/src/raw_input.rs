@@ -81,18 +81,29 @@ pub fn read_raw(path: &Path, fmt: &RawFormat) -> Result<RawFrame, CliError> {
 
 /// Read one recorded frame; `.raw`/`.bin` files need the capture set's `raw_format`.
 pub fn read_frame_with(path: &Path, raw_format: Option<&RawFormat>) -> Result<RawFrame, CliError> {
+    crate::guard::guarded(path, || read_frame_with_unguarded(path, raw_format))
+}
+
+fn read_frame_with_unguarded(
+    path: &Path,
+    raw_format: Option<&RawFormat>,
+) -> Result<RawFrame, CliError> {
     if is_raw(path) {
         let fmt = raw_format.ok_or_else(|| {
             CliError::input(path, "a headerless raw frame needs \"raw_format\" in captures.json (rows, cols, bits_per_sample, endianness)")
         })?;
         return read_raw(path, fmt);
     }
-    read_frame(path)
+    read_frame_unguarded(path)
 }
 
 /// Read one recorded frame (PNG: 16-bit greyscale; TIFF: 8- or 16-bit greyscale; DNG: the
 /// active area of the CFA image, see [`dng::read_dng`]).
 pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
+    crate::guard::guarded(path, || read_frame_unguarded(path))
+}
+
+fn read_frame_unguarded(path: &Path) -> Result<RawFrame, CliError> {
     crate::staging::protect_input(path);
     let ext = path
         .extension()

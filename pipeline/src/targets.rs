@@ -236,8 +236,7 @@ pub fn target_from_value(
             let p = dir.join(f);
             let limit = crate::budget::memory_limit().bytes as f64;
             // Over the memory budget: refused from the header, before the pixels are read.
-            let exr = camsim_core::exr_io::read_spectral_exr_within(&p, limit)
-                .map_err(|e| format!(".file: {e}"))?;
+            let exr = read_exr_target(&p, limit).map_err(|e| format!(".file: {}", e.one_line()))?;
             let mut img = exr.image;
             let photon_file = photons || exr.emissive_units.to_lowercase().contains("photon");
             let max = if photon_file { MAX_RADIANCE_W * 5.03e18 } else { MAX_RADIANCE_W };
@@ -367,4 +366,17 @@ fn is_black(t: &Target) -> bool {
         },
         _ => false,
     }
+}
+
+/// Read a spectral EXR target: refused from its header when its pixels need more than
+/// `max_decoded_bytes`, and a panic inside the `exr` crate on a malformed file is one error.
+pub fn read_exr_target(
+    path: &Path,
+    max_decoded_bytes: f64,
+) -> Result<exr_io::SpectralExr, crate::error::CliError> {
+    crate::staging::protect_input(path);
+    crate::guard::guarded(path, || {
+        exr_io::read_spectral_exr_within(path, max_decoded_bytes)
+            .map_err(|e| crate::error::CliError::Other(e.to_string()))
+    })
 }

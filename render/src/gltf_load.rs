@@ -90,10 +90,23 @@ fn extras_json(e: &gltf::json::Extras) -> Option<Value> {
 /// A glTF whose indices point outside their arrays can make the `gltf` crate's own validation
 /// panic (gltf-json 1.4); that panic is caught (silently) and reported as one error line.
 pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
-    let prev = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    thread_local! {
+        static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    }
+    // A panic hook installed once that stays silent only on a thread inside this call (other
+    // threads' panics still reach the previous hook).
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let prev = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(|q| q.get()) {
+                prev(info)
+            }
+        }));
+    });
+    QUIET.with(|q| q.set(true));
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_gltf_unguarded(path)));
-    std::panic::set_hook(prev);
+    QUIET.with(|q| q.set(false));
     match r {
         Ok(r) => r,
         Err(p) => {

@@ -284,8 +284,6 @@ pub fn fuzz(
     let mut rng = Rng::new(0xC0FF_EE00 ^ name.len() as u64 ^ (name.as_bytes()[0] as u64) << 8);
     let start = Instant::now();
     let (mut ok, mut refused) = (0usize, 0usize);
-    let prev = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
     let mut failure = None;
     for i in 0..MUTATIONS {
         let bytes = make(&mut rng);
@@ -319,7 +317,6 @@ pub fn fuzz(
             }
         }
     }
-    std::panic::set_hook(prev);
     if let Some(f) = failure {
         panic!("{f}");
     }
@@ -656,9 +653,9 @@ fn exr() {
     exr_io::write_spectral_exr(&p, &img, exr_io::RADIANCE_UNITS, None).unwrap();
     let seed = std::fs::read(&p).unwrap();
     let s = bytes_fuzz("exr", &p, &seed, |p| {
-        exr_io::read_spectral_exr_within(p, 256e6)
+        camsim_pipeline::targets::read_exr_target(p, 256e6)
             .map(|_| ())
-            .map_err(|e| e.to_string())
+            .map_err(|e| e.one_line())
     });
     assert_mixed(&s, "exr");
 }
