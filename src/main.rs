@@ -356,6 +356,7 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            camsim_pipeline::staging::wait_if_interrupted();
             eprintln!("camsim: error: {}", e.one_line());
             ExitCode::from(2)
         }

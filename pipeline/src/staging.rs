@@ -30,6 +30,20 @@ static CLEANUP: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// Held while a set is being moved into place; the signal handler takes it before cleaning
 /// up, so an interrupt never lands in the middle of a commit.
 static COMMIT: Mutex<()> = Mutex::new(());
+/// Set by the signal thread when an interrupt arrives.
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// When an interrupt is being handled, never return: the signal thread is removing the
+/// staging folders and will end the process with 128 + signal. Called on error paths, so that
+/// an error caused by the cleanup (a vanished staging folder) does not race the exit status.
+pub fn wait_if_interrupted() {
+    if INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) {
+        loop {
+            std::thread::park();
+        }
+    }
+}
+
 /// Canonical paths of the command's input files.
 static INPUTS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
@@ -96,6 +110,7 @@ pub fn install_signal_cleanup() {
                 if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
                     continue;
                 }
+                INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
                 let _commit = lock(&COMMIT);
                 cleanup_all();
                 eprintln!("camsim: interrupted (signal {sig}); no output was written");
@@ -165,7 +180,13 @@ pub fn with_staging(
     }
     register(&staging);
     std::fs::create_dir_all(&staging).map_err(|e| CliError::output(&staging, e))?;
-    let files = work(&staging)?;
+    let files = match work(&staging) {
+        Ok(f) => f,
+        Err(e) => {
+            wait_if_interrupted();
+            return Err(e);
+        }
+    };
     let _commit = lock(&COMMIT);
     commit(out, &staging, &files)?;
     guard.committed = true;
