@@ -454,6 +454,12 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
             ))
         }
     };
+    if br > rows || bc > cols {
+        return Err(bad(
+            tags::BLACK_LEVEL_REPEAT_DIM,
+            format!("= {br}×{bc} is larger than the {rows}×{cols} image"),
+        ));
+    }
     let black = match d.get(tags::BLACK_LEVEL) {
         None => vec![0.0; br * bc],
         Some(v) if v.len() == br * bc => v.clone(),
@@ -490,8 +496,15 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
     }
     // sample data: strips or tiles, uncompressed
     let bps = (bits / 8) as usize;
-    let mut stored = vec![0u16; rows * cols];
     let file_len = bytes.len() as u64;
+    // Checked before allocating: the samples must fit in the file (uncompressed).
+    if rows as f64 * cols as f64 * bps.max(1) as f64 > file_len as f64 {
+        return Err(bad(
+            257,
+            format!("= {rows} rows × {cols} columns of {bits}-bit samples do not fit in the {file_len}-byte file"),
+        ));
+    }
+    let mut stored = vec![0u16; rows * cols];
     let read_at = |off: f64, n: usize, t: u16| -> Result<&[u8], CliError> {
         let off = off as u64;
         match off.checked_add(n as u64) {
