@@ -417,8 +417,7 @@ fn run_json() {
     cam["sensor"]["cols"] = json!(16);
     let seed = json!({
         "camera": cam,
-        "target": {"kind": "macbeth", "illuminant": "D65"},
-        "mean_luminance_cd_m2": 61,
+        "target": {"kind": "macbeth", "illuminant": "D65", "mean_luminance_cd_m2": 61},
         "exposure_s": 0.01,
         "seed": 1,
         "processor": {"demosaic": "malvar", "white_balance": "grey_world", "output_bits": 8},
