@@ -16,6 +16,12 @@ struct Cli {
     /// Worker threads (default: all cores).
     #[arg(long, global = true)]
     threads: Option<usize>,
+    /// Memory limit, e.g. 8G or 512M (default: 3/4 of the available memory; docs/limits.md).
+    #[arg(long, global = true, value_name = "SIZE")]
+    max_memory: Option<String>,
+    /// Work limit in samples (rays, path samples, PSF samples; default 1e11; docs/limits.md).
+    #[arg(long, global = true, value_name = "SAMPLES")]
+    max_work: Option<f64>,
     #[command(subcommand)]
     command: Command,
 }
@@ -249,12 +255,7 @@ enum Command {
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
-    if let Some(n) = cli.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build_global()
-            .map_err(|e| CliError::Other(e.to_string()))?;
-    }
+    camsim_pipeline::budget::configure(cli.threads, cli.max_memory.as_deref(), cli.max_work)?;
     match cli.command {
         Command::Simulate {
             captures,
@@ -506,9 +507,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
 }
 
 fn main() -> ExitCode {
+    camsim_pipeline::staging::install_signal_cleanup();
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            camsim_pipeline::staging::wait_if_interrupted();
             eprintln!("camsim: error: {}", e.one_line());
             ExitCode::from(2)
         }

@@ -614,15 +614,18 @@ fn calibrate_reads_dng_frames_end_to_end() {
     // and the estimates are of this camera (black level 64 DN, gain 5e-5 V/e⁻)
     let bl = b["black_level_dn"]["value"].as_f64().unwrap();
     assert!((bl - 64.0).abs() < 2.0, "black level {bl}");
-    // a DNG frame of the wrong size is rejected by name, the rest still calibrate
+    // a DNG frame of the wrong size is one error naming the frame and both sizes (issue 16:
+    // calibrate used to exit 0 and mention it only in its report), and nothing is written
     let mut bad = dng_caps.clone();
     let mut s = bayer_spec(10, 10, 16);
     s.dn = pattern(10, 10, 12);
     write_dng_tiff(&dir.join("raw/small.dng"), &s, &[]);
     bad["shots"][2]["frames"][0] = json!("raw/small.dng");
     std::fs::write(dir.join("captures_bad.json"), bad.to_string()).unwrap();
-    let c = run("captures_bad.json", "cal_bad");
-    let rej = c["rejected_shots"].to_string();
-    assert!(rej.contains("flat-0.004") && rej.contains("10×10"), "{rej}");
-    assert_eq!(c["black_level_dn"], a["black_level_dn"], "darks unaffected");
+    let set = camsim_pipeline::config::load_captures(&dir.join("captures_bad.json"), None).unwrap();
+    let e = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &dir.join("cal_bad"), false)
+        .unwrap_err()
+        .one_line();
+    assert!(e.contains("small.dng") && e.contains("10×10"), "{e}");
+    assert!(!dir.join("cal_bad").exists());
 }

@@ -5,6 +5,7 @@ mod develop;
 mod diagnose;
 mod effects;
 mod emva1288;
+mod hostile;
 mod lens_blur;
 mod lens_cli;
 mod oracles;

@@ -11,8 +11,9 @@ use crate::error::CoreError;
 use crate::image::{Plane, SpectralBasis, SpectralImage};
 use crate::spectrum::WavelengthGrid;
 use exr::prelude::{
-    read, AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer,
-    LayerAttributes, ReadChannels, ReadLayers, Text, WritableImage,
+    read, AnyChannel, AnyChannels, AttributeValue, Blocks, Compression, Encoding, FlatSamples,
+    Image, Layer, LayerAttributes, LineOrder, ReadChannels, ReadLayers, Text, Vec2,
+    WritableImage,
 };
 use std::path::Path;
 
@@ -48,17 +49,27 @@ pub fn write_atomically<E: From<std::io::Error>>(
         .map(|n| n.to_string_lossy().to_string())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    match write(&tmp) {
-        Ok(()) => {
-            std::fs::rename(&tmp, path).map_err(E::from)?;
-            Ok(())
-        }
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
+    crate::cleanup::register(&tmp);
+    let r = match write(&tmp) {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(E::from),
+        Err(e) => Err(e),
+    };
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
     }
+    crate::cleanup::unregister(&tmp);
+    r
 }
+
+/// The encoding of every EXR camsim writes: RLE in 64×64 tiles (as `DETERMINISTIC_ENCODING`)
+/// but with the chunks in increasing line order. `FAST_LOSSLESS` leaves the order unspecified,
+/// so the parallel compressor writes chunks in completion order and two identical runs give
+/// files that differ byte for byte; `Increasing` makes the writer sort them.
+pub const DETERMINISTIC_ENCODING: Encoding = Encoding {
+    compression: Compression::RLE,
+    blocks: Blocks::Tiles(Vec2(64, 64)),
+    line_order: LineOrder::Increasing,
+};
 
 /// The channel name of a wavelength: `S0.550,000000nm`.
 pub fn channel_name(wavelength_nm: f64) -> String {
@@ -111,15 +122,29 @@ impl ExrChannel {
     }
 }
 
-/// The one EXR writer of the workspace: float32 `channels` of `width × height` with the given
-/// text header attributes, lossless, written atomically (temporary file + rename); errors as
-/// strings for the caller to wrap.
+/// The header of an EXR written by [`write_exr_channels`]. It holds at most one custom
+/// attribute per attribute table: the `exr` crate keeps custom attributes in a `HashMap`, whose
+/// iteration order (and so the header's bytes) changes from process to process.
+#[derive(Debug, Clone, Default)]
+pub struct ExrHeader {
+    /// The layer attribute `emissiveUnits` (Fichet et al.), when set.
+    pub emissive_units: Option<String>,
+    /// The image attribute `spectralLayoutVersion = "1.0"`.
+    pub spectral_layout: bool,
+    /// The standard `comments` attribute, when set.
+    pub comments: Option<String>,
+}
+
+/// The one EXR writer of the workspace: float32 `channels` of `width × height` with `header`,
+/// lossless ([`DETERMINISTIC_ENCODING`]: chunks in increasing line order, so the same pixels
+/// give the same bytes), written atomically (temporary file + rename); errors as strings for
+/// the caller to wrap.
 pub fn write_exr_channels(
     path: &Path,
     width: usize,
     height: usize,
     channels: Vec<ExrChannel>,
-    text_attributes: &[(&str, &str)],
+    header: &ExrHeader,
 ) -> Result<(), String> {
     let n = width.checked_mul(height).ok_or("image size overflows")?;
     if let Some(c) = channels.iter().find(|c| c.data.len() != n) {
@@ -134,18 +159,28 @@ pub fn write_exr_channels(
         .map(|c| AnyChannel::new(c.name.as_str(), FlatSamples::F32(c.data)))
         .collect();
     let mut attrs = LayerAttributes::default();
-    for (k, v) in text_attributes {
-        attrs
-            .other
-            .insert(Text::from(*k), AttributeValue::Text(Text::from(*v)));
+    if let Some(u) = &header.emissive_units {
+        attrs.other.insert(
+            Text::from("emissiveUnits"),
+            AttributeValue::Text(Text::from(u.as_str())),
+        );
+    }
+    if let Some(c) = &header.comments {
+        attrs.comments = Some(Text::from(c.as_str()));
     }
     let layer = Layer::new(
         (width, height),
         attrs,
-        Encoding::FAST_LOSSLESS,
+        DETERMINISTIC_ENCODING,
         AnyChannels::sort(channels.into_iter().collect()),
     );
-    let img = Image::from_layer(layer);
+    let mut img = Image::from_layer(layer);
+    if header.spectral_layout {
+        img.attributes.other.insert(
+            Text::from("spectralLayoutVersion"),
+            AttributeValue::Text(Text::from("1.0")),
+        );
+    }
     write_atomically(path, |tmp| {
         img.write()
             .to_file(tmp)
@@ -187,10 +222,11 @@ pub fn write_spectral_exr(
         image.cols,
         image.rows,
         channels,
-        &[
-            ("spectralLayoutVersion", "1.0"),
-            ("emissiveUnits", emissive_units),
-        ],
+        &ExrHeader {
+            emissive_units: Some(emissive_units.to_string()),
+            spectral_layout: true,
+            comments: None,
+        },
     )
     .map_err(|e| exr_err(path, e))
 }
@@ -206,15 +242,49 @@ pub fn write_single_channel_exr(
         plane.cols,
         plane.rows,
         vec![ExrChannel::new(channel, plane.data.clone())],
-        &[],
+        &ExrHeader::default(),
     )
     .map_err(|e| exr_err(path, e))
 }
 
-/// Read every channel of the first layer: (name, rows, cols, values).
+/// The most decoded pixel bytes [`read_channels`] and [`read_spectral_exr`] accept (8 GiB);
+/// callers with a memory budget check [`exr_decoded_bytes`] against it first.
+pub const MAX_DECODED_BYTES: f64 = 8.0 * (1u64 << 30) as f64;
+
+/// The bytes the pixel data of `path` takes once decoded (4 per sample: f32), from its header
+/// alone (nothing is allocated for the pixels): Σ over layers of width × height × channels × 4.
+pub fn exr_decoded_bytes(path: &Path) -> Result<f64, CoreError> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_err(path, e))?;
+    Ok(meta
+        .headers
+        .iter()
+        .map(|h| h.layer_size.0 as f64 * h.layer_size.1 as f64 * h.channels.list.len() as f64 * 4.0)
+        .sum())
+}
+
+/// Read every channel of the first layer: (name, rows, cols, values). A file whose header
+/// claims more than [`MAX_DECODED_BYTES`] of pixels is refused before any pixel is allocated.
 pub fn read_channels(
     path: &Path,
 ) -> Result<(usize, usize, Vec<(String, Vec<f32>)>, Vec<(String, String)>), CoreError> {
+    read_channels_within(path, MAX_DECODED_BYTES)
+}
+
+/// [`read_channels`] with an explicit limit on the decoded pixel bytes.
+pub fn read_channels_within(
+    path: &Path,
+    max_decoded_bytes: f64,
+) -> Result<(usize, usize, Vec<(String, Vec<f32>)>, Vec<(String, String)>), CoreError> {
+    let need = exr_decoded_bytes(path)?;
+    if !(need <= max_decoded_bytes) {
+        return Err(exr_err(
+            path,
+            format!(
+                "the header's data windows hold {:.3e} bytes of pixels, over the limit of {:.3e}",
+                need, max_decoded_bytes
+            ),
+        ));
+    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -255,7 +325,15 @@ pub fn read_channels(
 
 /// Read a spectral EXR (Fichet 2021 layout).
 pub fn read_spectral_exr(path: &Path) -> Result<SpectralExr, CoreError> {
-    let (rows, cols, chans, attrs) = read_channels(path)?;
+    read_spectral_exr_within(path, MAX_DECODED_BYTES)
+}
+
+/// [`read_spectral_exr`] with an explicit limit on the decoded pixel bytes.
+pub fn read_spectral_exr_within(
+    path: &Path,
+    max_decoded_bytes: f64,
+) -> Result<SpectralExr, CoreError> {
+    let (rows, cols, chans, attrs) = read_channels_within(path, max_decoded_bytes)?;
     let mut bands: Vec<(f64, Vec<f32>)> = Vec::new();
     let mut depth = None;
     for (name, data) in chans {

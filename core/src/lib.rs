@@ -22,6 +22,7 @@
 #![deny(missing_docs)]
 
 pub mod cieluv;
+pub mod cleanup;
 pub mod colorimetry;
 pub mod constants;
 pub mod data;

@@ -367,6 +367,9 @@ pub struct WavelengthGrid {
     pub wavelength_nm: Vec<f64>,
 }
 
+/// The most bands a regular grid may have (0.01 nm steps over 300–1300 nm).
+pub const MAX_GRID_BANDS: usize = 100_000;
+
 impl WavelengthGrid {
     /// A validated grid.
     pub fn new(wavelength_nm: Vec<f64>) -> Result<Self, CoreError> {
@@ -389,13 +392,21 @@ impl WavelengthGrid {
     }
 
     /// `start, start+step, …, stop` (inclusive, within a rounding tolerance).
+    /// At most [`MAX_GRID_BANDS`] bands (a finer grid is refused, never allocated).
     pub fn regular(start_nm: f64, stop_nm: f64, step_nm: f64) -> Result<Self, CoreError> {
         if !(step_nm > 0.0) || !(stop_nm >= start_nm) {
             return Err(CoreError::Grid(format!(
                 "need start ≤ stop and step > 0, got {start_nm}..{stop_nm} step {step_nm}"
             )));
         }
-        let n = ((stop_nm - start_nm) / step_nm + 1e-9).floor() as usize + 1;
+        let n_f = ((stop_nm - start_nm) / step_nm + 1e-9).floor() + 1.0;
+        if !(n_f <= MAX_GRID_BANDS as f64) {
+            return Err(CoreError::Grid(format!(
+                "{start_nm}..{stop_nm} step {step_nm} nm gives {n_f:.3e} bands; at most \
+                 {MAX_GRID_BANDS} are allowed (raise step_nm)"
+            )));
+        }
+        let n = n_f as usize;
         WavelengthGrid::new((0..n).map(|i| start_nm + step_nm * i as f64).collect())
     }
 

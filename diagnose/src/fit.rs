@@ -164,12 +164,15 @@ pub fn poly_surface(
             *o = x.powi(px) * y.powi(py);
         }
     };
+    // Normal equations from fixed chunks summed in order: the same bits at any thread count
+    // (a rayon fold/reduce splits by work stealing).
+    const CHUNK: usize = 4096;
     let (ata, atb) = pos
-        .par_iter()
-        .zip(v.par_iter())
-        .fold(
-            || (vec![0.0; nt * nt], vec![0.0; nt], vec![0.0; nt]),
-            |(mut a, mut b, mut phi), (&(r, c), &val)| {
+        .par_chunks(CHUNK)
+        .zip(v.par_chunks(CHUNK))
+        .map(|(pc, vc)| {
+            let (mut a, mut b, mut phi) = (vec![0.0; nt * nt], vec![0.0; nt], vec![0.0; nt]);
+            for (&(r, c), &val) in pc.iter().zip(vc) {
                 basis(r, c, &mut phi);
                 for i in 0..nt {
                     b[i] += phi[i] * val;
@@ -177,12 +180,13 @@ pub fn poly_surface(
                         a[i * nt + j] += phi[i] * phi[j];
                     }
                 }
-                (a, b, phi)
-            },
-        )
-        .map(|(a, b, _)| (a, b))
-        .reduce(
-            || (vec![0.0; nt * nt], vec![0.0; nt]),
+            }
+            (a, b)
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold(
+            (vec![0.0; nt * nt], vec![0.0; nt]),
             |(mut a, mut b), (a2, b2)| {
                 a.iter_mut().zip(a2).for_each(|(x, y)| *x += y);
                 b.iter_mut().zip(b2).for_each(|(x, y)| *x += y);

@@ -152,25 +152,26 @@ pub(crate) fn prnu(
     }
     for (f, &(t, k, i, j)) in fr.iter().enumerate() {
         let dn = &ctx.shots[i].frames[j].dn;
-        let sums = (0..n_pix)
+        // Fixed chunks summed in order: the same bits at any thread count.
+        const CHUNK: usize = 4096;
+        let sums = (0..n_pix.div_ceil(CHUNK))
             .into_par_iter()
-            .fold(
-                || vec![0f64; nch],
-                |mut acc, p| {
+            .map(|q| {
+                let mut acc = vec![0f64; nch];
+                for p in q * CHUNK..((q + 1) * CHUNK).min(n_pix) {
                     if !ex[p] {
                         let r = (dn[p] as f64 - pedestal) / k - a[p] * t - b[p];
                         acc[ch[p] as usize] += r * r;
                     }
-                    acc
-                },
-            )
-            .reduce(
-                || vec![0f64; nch],
-                |mut x, y| {
-                    x.iter_mut().zip(y).for_each(|(u, v)| *u += v);
-                    x
-                },
-            );
+                }
+                acc
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(vec![0f64; nch], |mut x, y| {
+                x.iter_mut().zip(y).for_each(|(u, v)| *u += v);
+                x
+            });
         for c in 0..nch {
             r2[c][f] = sums[c] / cnt[c].max(1) as f64;
         }

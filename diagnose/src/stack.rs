@@ -129,6 +129,9 @@ pub(crate) fn stack(frames: &[RawFrame], map: &ChannelMap, max_dn: u16) -> Stack
     }
 }
 
+/// Pixels per chunk of the deterministic parallel sums of [`moments`].
+const MOMENT_CHUNK: usize = 4096;
+
 /// Mean, sample variance and fourth central moment of the values `f(i)` over the pixel
 /// indices where `keep(i)` (parallel, two passes).
 pub(crate) fn moments(
@@ -136,24 +139,31 @@ pub(crate) fn moments(
     keep: impl Fn(usize) -> bool + Sync,
     f: impl Fn(usize) -> f64 + Sync,
 ) -> (usize, f64, f64, f64) {
-    let (cnt, s) = (0..n_pix)
-        .into_par_iter()
-        .filter(|&i| keep(i))
-        .map(|i| (1usize, f(i)))
-        .reduce(|| (0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    // Fixed chunks summed in order: the same bits at any thread count (a rayon `reduce`
+    // splits by work stealing, so its rounding depends on the schedule).
+    let chunks = |g: &(dyn Fn(usize) -> (usize, f64, f64) + Sync)| -> (usize, f64, f64) {
+        (0..n_pix.div_ceil(MOMENT_CHUNK))
+            .into_par_iter()
+            .map(|k| {
+                (k * MOMENT_CHUNK..((k + 1) * MOMENT_CHUNK).min(n_pix))
+                    .filter(|&i| keep(i))
+                    .map(g)
+                    .fold((0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold((0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
+    };
+    let (cnt, s, _) = chunks(&|i| (1usize, f(i), 0.0));
     if cnt < 2 {
         return (cnt, f64::NAN, f64::NAN, f64::NAN);
     }
     let m = s / cnt as f64;
-    let (s2, s4) = (0..n_pix)
-        .into_par_iter()
-        .filter(|&i| keep(i))
-        .map(|i| {
-            let d = f(i) - m;
-            let d2 = d * d;
-            (d2, d2 * d2)
-        })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let (_, s2, s4) = chunks(&|i| {
+        let d = f(i) - m;
+        let d2 = d * d;
+        (0, d2, d2 * d2)
+    });
     (cnt, m, s2 / (cnt - 1) as f64, s4 / cnt as f64)
 }
 

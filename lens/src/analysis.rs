@@ -483,10 +483,12 @@ impl LensPrescription {
         let sag: Vec<f64> = (0..m / 2).map(|k| otf[k].norm() / dc).collect();
         let at = |arr: &[f64], f: f64| {
             let x = f / dnu;
-            let i = x.floor() as usize;
-            if i + 1 >= arr.len() {
+            // Beyond the sampled band (and the cutoff) the MTF is 0; checked in f64 so that a
+            // huge frequency cannot overflow the index.
+            if !(x >= 0.0 && x + 1.0 < arr.len() as f64) {
                 return 0.0;
             }
+            let i = x.floor() as usize;
             let t = x - i as f64;
             arr[i] * (1.0 - t) + arr[i + 1] * t
         };

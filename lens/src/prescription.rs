@@ -410,6 +410,15 @@ impl LensPrescription {
                 msg: "primary_nm must be positive".into(),
             });
         }
+        if !wavelengths_nm
+            .iter()
+            .any(|w| (w - primary_nm).abs() <= 1e-6 * primary_nm)
+        {
+            return Err(LensError::Wavelength {
+                wavelength_nm: primary_nm,
+                msg: format!("primary_nm is not one of wavelengths_nm {wavelengths_nm:?}"),
+            });
+        }
         let fields_deg = if f.fields_deg.is_empty() {
             vec![0.0]
         } else {

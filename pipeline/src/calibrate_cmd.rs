@@ -88,8 +88,18 @@ pub fn load_shots(set: &CaptureSet, progress: bool) -> Result<LoadedShots, CliEr
         for f in &s.frames {
             let path = set.dir.join(f);
             let mut frame = read_frame_with(&path, set.raw_format.as_ref())?;
-            // a frame of the wrong size is left to the estimators, which reject that shot with
-            // a reason and run the rest
+            // a frame of the wrong size is one clear error (as in validate and diagnose): it
+            // is not a recording of this camera
+            let sensor = &set.camera.sensor;
+            if (frame.rows, frame.cols) != (sensor.rows, sensor.cols) {
+                return Err(CliError::input(
+                    &path,
+                    format!(
+                        "frame is {}×{} but the camera's sensor is {}×{} (shot {})",
+                        frame.rows, frame.cols, sensor.rows, sensor.cols, s.id
+                    ),
+                ));
+            }
             // PNG/TIFF containers hold DN as stored: check they fit the camera's ADC
             let max_dn = (1u32 << set.camera.sensor.adc_bits) - 1;
             if let Some(v) = frame.dn.iter().find(|&&v| v as u32 > max_dn) {

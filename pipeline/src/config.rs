@@ -646,6 +646,7 @@ pub struct CaptureSet {
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, CliError> {
+    crate::staging::protect_input(path);
     let text = std::fs::read_to_string(path)
         .map_err(|e| CliError::input(path, format!("cannot read: {e}")))?;
     serde_json::from_str(&text).map_err(|e| CliError::input(path, format!("invalid: {e}")))
@@ -883,6 +884,12 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
         s.rows > 0 && s.cols > 0,
         "sensor.rows/cols",
         format!("must be positive, got {}×{}", s.rows, s.cols),
+    )?;
+    crate::budget::check_memory(
+        Some(path),
+        "sensor.rows/cols",
+        s.rows as f64 * s.cols as f64 * 48.0,
+        &format!("{}×{} pixels × 48 bytes", s.rows, s.cols),
     )?;
     check(
         path,
@@ -1403,6 +1410,19 @@ pub fn captures_with_camera(
                 &format!("{key}.frames[{j}]"),
                 format!("\"{f}\" must be a relative path inside the capture folder"),
             )?;
+            let ext = Path::new(f)
+                .extension()
+                .and_then(|e| e.to_str())
+                .unwrap_or("")
+                .to_ascii_lowercase();
+            check(
+                path,
+                ["png", "tif", "tiff", "dng", "raw", "bin"].contains(&ext.as_str()),
+                &format!("{key}.frames[{j}]"),
+                format!(
+                    "\"{f}\": frames are .png, .tif/.tiff, .dng or (with raw_format) .raw/.bin"
+                ),
+            )?;
         }
         let target = crate::targets::target_from_value(&s.target, &dir, &camera.sensor)
             .map_err(|m| CliError::input(path, format!("{key}.target{m}")))?;
@@ -1417,8 +1437,18 @@ pub fn captures_with_camera(
     }
     let simulation = raw.simulation.unwrap_or_default();
     if let Some(g) = &simulation.wavelength_nm {
-        WavelengthGrid::regular(g.start_nm, g.stop_nm, g.step_nm)
+        let grid = WavelengthGrid::regular(g.start_nm, g.stop_nm, g.step_nm)
             .map_err(|e| CliError::input(path, format!("simulation.wavelength_nm: {e}")))?;
+        check(
+            path,
+            grid.len() >= 2,
+            "simulation.wavelength_nm",
+            format!(
+                "needs at least two wavelengths (a one-band grid has no width and loses all \
+                 the light), got start_nm = stop_nm = {}",
+                g.start_nm
+            ),
+        )?;
     }
     if let Some(o) = simulation.oversample {
         check(
@@ -1453,16 +1483,40 @@ pub fn captures_with_camera(
                     ))
                 }
             };
+            let (rows, cols) = (
+                r.rows.unwrap_or(camera.sensor.rows),
+                r.cols.unwrap_or(camera.sensor.cols),
+            );
+            check(
+                path,
+                rows == camera.sensor.rows && cols == camera.sensor.cols,
+                "raw_format.rows/cols",
+                format!(
+                    "{rows}×{cols} differs from the camera's sensor {}×{}",
+                    camera.sensor.rows, camera.sensor.cols
+                ),
+            )?;
+            let header_bytes = r.header_bytes.unwrap_or(0);
+            check(
+                path,
+                header_bytes <= 1 << 30,
+                "raw_format.header_bytes",
+                format!("must be at most 2^30 (1 GiB), got {header_bytes}"),
+            )?;
             Some(crate::raw_input::RawFormat {
-                rows: r.rows.unwrap_or(camera.sensor.rows),
-                cols: r.cols.unwrap_or(camera.sensor.cols),
+                rows,
+                cols,
                 bytes_per_sample: bytes,
                 little_endian,
-                header_bytes: r.header_bytes.unwrap_or(0),
+                header_bytes,
             })
         }
     };
-    Ok(CaptureSet {
+    // The recorded frames are inputs: no output set may replace them.
+    for fr in shots.iter().flat_map(|s| &s.frames) {
+        crate::staging::protect_input(&dir.join(fr));
+    }
+    let set = CaptureSet {
         path: path.to_path_buf(),
         dir,
         camera,
@@ -1470,6 +1524,8 @@ pub fn captures_with_camera(
         shots,
         simulation,
         raw_format,
-    })
+    };
+    crate::simulate::check_budget(&set)?;
+    Ok(set)
 }
 

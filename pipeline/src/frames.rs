@@ -23,6 +23,7 @@ pub struct FrameInfo {
 
 /// Read a PNG header.
 pub fn png_info(path: &Path) -> Result<FrameInfo, CliError> {
+    crate::staging::protect_input(path);
     let f =
         File::open(path).map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
     let dec = png::Decoder::new(BufReader::new(f));
@@ -353,6 +354,16 @@ pub fn write_frame(path: &Path, frame: &RawFrame) -> Result<(), CliError> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
+    if ext != "png" && ext != "tif" && ext != "tiff" {
+        return Err(CliError::output(
+            path,
+            format!(
+                "frames are written as .png, .tif/.tiff or (with raw_format) .raw/.bin; \
+                 \"{}\" is not one of them",
+                if ext.is_empty() { "no extension".to_string() } else { format!(".{ext}") }
+            ),
+        ));
+    }
     if ext == "tif" || ext == "tiff" {
         let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(
             frame.cols as u32,

@@ -294,6 +294,11 @@ pub fn load_lens(path: &Path) -> Result<LensPrescription, CliError> {
 
 /// [`load_lens`] with explicit Zemax options (glass substitutions).
 pub fn load_lens_with(path: &Path, zmx: &ZmxOptions) -> Result<LensPrescription, CliError> {
+    crate::guard::guarded(path, || load_lens_unguarded(path, zmx))
+}
+
+fn load_lens_unguarded(path: &Path, zmx: &ZmxOptions) -> Result<LensPrescription, CliError> {
+    crate::staging::protect_input(path);
     let bad = |e: &dyn std::fmt::Display| CliError::input(path, e);
     let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
     let ext = path
@@ -358,12 +363,69 @@ pub fn load_lens_with(path: &Path, zmx: &ZmxOptions) -> Result<LensPrescription,
             if is_iset {
                 read_iset_json(&text, &stem).map_err(|e| bad(&e))?
             } else {
+                check_lens_keys(&v).map_err(|e| bad(&e))?;
                 serde_json::from_value(v)
                     .map_err(|e| bad(&format!("not a lens prescription: {e}")))?
             }
         }
     };
     LensPrescription::from_file_form(&file, &catalog).map_err(|e| bad(&e))
+}
+
+/// Refuse unknown keys in a camsim lens JSON (a misspelt `conic` or `semi_diameter_mm` would
+/// otherwise be ignored silently). Free-text and reference keys that other tools write
+/// (`published`, `notes`, and optics_ref's `psf_fields_deg`, `mtf_freqs_lpmm`) are allowed.
+fn check_lens_keys(v: &Value) -> Result<(), String> {
+    const TOP: &[&str] = &[
+        "name",
+        "units",
+        "surfaces",
+        "object_distance_mm",
+        "fields_deg",
+        "wavelengths_nm",
+        "primary_nm",
+        "aperture",
+        "provenance",
+        "published",
+        "notes",
+        "psf_fields_deg",
+        "mtf_freqs_lpmm",
+    ];
+    const SURFACE: &[&str] = &[
+        "radius_mm",
+        "thickness_mm",
+        "material",
+        "semi_diameter_mm",
+        "conic",
+        "aspheric_coeffs",
+        "stop",
+    ];
+    if let Some(m) = v.as_object() {
+        if let Some(k) = m.keys().find(|k| !TOP.contains(&k.as_str())) {
+            return Err(format!(
+                "{k}: unknown key (expected one of {})",
+                TOP.join(", ")
+            ));
+        }
+    }
+    for (i, s) in v
+        .get("surfaces")
+        .and_then(Value::as_array)
+        .into_iter()
+        .flatten()
+        .enumerate()
+    {
+        if let Some(k) = s
+            .as_object()
+            .and_then(|m| m.keys().find(|k| !SURFACE.contains(&k.as_str())))
+        {
+            return Err(format!(
+                "surfaces[{i}].{k}: unknown key (expected one of {})",
+                SURFACE.join(", ")
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The lens refocused at the paraxial focus of its primary wavelength.
@@ -1211,6 +1273,27 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             if field_fraction.is_empty() {
                 return Err(CliError::Other("--field-fraction: no fields".into()));
             }
+            if let Some(f) = mtf_lp_mm.iter().find(|f| !(f.is_finite() && **f >= 0.0)) {
+                return Err(CliError::Other(format!(
+                    "--mtf-lp-mm {f}: must be a finite frequency ≥ 0 (cycles/mm)"
+                )));
+            }
+            // Ray grids: grid² rays per field and wavelength.
+            let traces = (grid as f64).powi(2)
+                * field_fraction.len() as f64
+                * wavelength_nm.len().max(3) as f64;
+            crate::budget::check_memory(
+                None,
+                "--grid",
+                (grid as f64).powi(2) * 64.0,
+                &format!("{grid}² pupil rays × 64 bytes"),
+            )?;
+            crate::budget::check_work(
+                None,
+                "--grid",
+                traces,
+                &format!("{grid}² rays × fields × wavelengths"),
+            )?;
             let opts = ReportOptions {
                 field_fractions: field_fraction,
                 wavelengths: wavelength_nm,
@@ -1254,6 +1337,13 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             if rays == 0 {
                 return Err(CliError::Other("--rays must be ≥ 1".into()));
             }
+            crate::budget::check_memory(
+                None,
+                "--rays",
+                rays as f64 * 96.0,
+                &format!("{rays} rays × 96 bytes (pupil point, spot point)"),
+            )?;
+            crate::budget::check_work(None, "--rays", rays as f64, "rays traced")?;
             if !defocus_mm.is_finite() {
                 return Err(CliError::Other("--defocus-mm must be finite".into()));
             }
@@ -1349,6 +1439,28 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             }
             if fields < 2 {
                 return Err(CliError::Other(format!("--fields {fields} must be ≥ 2")));
+            }
+            {
+                // One psf_n² f64 PSF (and its FFT working copy, complex) per field,
+                // wavelength and object distance.
+                let n_w = wavelengths_nm.as_ref().map_or(31, |w| w.len()) as f64;
+                let n_d = distances.len().max(1) as f64;
+                let psfs = fields as f64 * n_w * n_d;
+                let psf_side = psf_n.max(pupil_samples) as f64;
+                crate::budget::check_memory(
+                    None,
+                    "--psf-n",
+                    psfs * psf_side * psf_side * 8.0 + 16.0 * 4.0 * psf_side * psf_side,
+                    &format!("{psfs} PSFs of {psf_n}² samples"),
+                )?;
+                crate::budget::check_work(
+                    None,
+                    "--psf-n",
+                    psfs * (psf_side * psf_side).max(
+                        (pupil_samples as f64).powi(2) * psf_n as f64,
+                    ),
+                    &format!("{psfs} PSFs of {psf_n}² samples"),
+                )?;
             }
             let path = la.path.clone();
             let lens = la.load()?;

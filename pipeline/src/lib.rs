@@ -5,6 +5,7 @@
 //! (`camsim-core` → `camsim-optics` → `camsim-sensor`).
 #![deny(missing_docs)]
 
+pub mod budget;
 pub mod calibrate_cmd;
 pub mod chain;
 pub mod color_eval;
@@ -17,6 +18,7 @@ pub mod emva1288_cmd;
 pub mod error;
 pub mod frames;
 pub mod honest_color;
+pub mod guard;
 pub mod lens_cmd;
 pub mod noise_profiles_cmd;
 pub mod plots;

@@ -4,7 +4,6 @@
 //! with figures. docs/diagnose_real.md.
 use crate::error::CliError;
 use crate::plots::line_plot;
-use camsim_core::exr_io::write_atomically;
 use camsim_diagnose::noise_profiles::{
     camera, census, implication, read_noise_profiles, ProfileImplication,
 };
@@ -19,8 +18,32 @@ pub fn run_noise_profiles(
     camera_name: Option<&str>,
     out: &Path,
 ) -> Result<serde_json::Value, CliError> {
+    crate::staging::protect_input(file);
     let all = read_noise_profiles(file).map_err(|e| CliError::Other(e.to_string()))?;
-    std::fs::create_dir_all(out).map_err(|e| CliError::output(out, e))?;
+    let mut result = serde_json::Value::Null;
+    crate::staging::with_staging(out, |stage| {
+        result = analyse_into(file, &all, camera_name, stage)?;
+        let mut files = vec![
+            std::path::PathBuf::from("noise_negative_b_by_iso.png"),
+            "noise_profiles.json".into(),
+        ];
+        if camera_name.is_some() {
+            files.push("noise_camera_full_scale.png".into());
+            files.push("noise_camera_read_noise.png".into());
+        }
+        Ok(files)
+    })?;
+    Ok(result)
+}
+
+/// The analysis and its files, written into `out` (the staging folder).
+fn analyse_into(
+    file: &Path,
+    all: &[camsim_diagnose::noise_profiles::NoiseProfile],
+    camera_name: Option<&str>,
+    out: &Path,
+) -> Result<serde_json::Value, CliError> {
+    let all = all.to_vec();
     let c = census(&all);
     // Fraction of green-channel fits with b < 0 per ISO octave (all cameras).
     let mut bins: std::collections::BTreeMap<i32, (usize, usize)> = Default::default();
@@ -98,9 +121,7 @@ pub fn run_noise_profiles(
             .collect::<Vec<_>>());
     }
     let p = out.join("noise_profiles.json");
-    write_atomically(&p, |tmp| {
-        std::fs::write(tmp, serde_json::to_string_pretty(&summary).unwrap())
-    })
-    .map_err(|e| CliError::output(&p, e))?;
+    std::fs::write(&p, serde_json::to_string_pretty(&summary).unwrap_or_default())
+        .map_err(|e| CliError::output(&p, e))?;
     Ok(summary)
 }

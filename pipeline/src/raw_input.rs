@@ -11,6 +11,7 @@ use std::path::Path;
 
 /// Read a 16-bit greyscale PNG frame.
 pub fn read_png16(path: &Path) -> Result<RawFrame, CliError> {
+    crate::staging::protect_input(path);
     let f =
         File::open(path).map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
     let mut r = png::Decoder::new(BufReader::new(f))
@@ -65,11 +66,18 @@ fn is_raw(path: &Path) -> bool {
 
 /// Read a headerless raw mosaic laid out as `fmt` says (row 0 first).
 pub fn read_raw(path: &Path, fmt: &RawFormat) -> Result<RawFrame, CliError> {
+    crate::staging::protect_input(path);
     let bytes = std::fs::read(path)
         .map_err(|e| CliError::input(path, format!("cannot open frame: {e}")))?;
-    let n = fmt.rows * fmt.cols;
-    let need = fmt.header_bytes as usize + n * fmt.bytes_per_sample;
-    if bytes.len() != need {
+    // Checked: a header of 2^64 - 1 bytes or an absurd size is a size mismatch, not an
+    // overflow (the file's real length bounds everything read below).
+    let need = fmt
+        .rows
+        .checked_mul(fmt.cols)
+        .and_then(|n| n.checked_mul(fmt.bytes_per_sample))
+        .and_then(|n| usize::try_from(fmt.header_bytes).ok()?.checked_add(n));
+    if need != Some(bytes.len()) {
+        let need = need.map_or("more than 2^64".to_string(), |n| n.to_string());
         return Err(CliError::input(
             path,
             format!(
@@ -104,18 +112,30 @@ pub fn read_raw(path: &Path, fmt: &RawFormat) -> Result<RawFrame, CliError> {
 
 /// Read one recorded frame; `.raw`/`.bin` files need the capture set's `raw_format`.
 pub fn read_frame_with(path: &Path, raw_format: Option<&RawFormat>) -> Result<RawFrame, CliError> {
+    crate::guard::guarded(path, || read_frame_with_unguarded(path, raw_format))
+}
+
+fn read_frame_with_unguarded(
+    path: &Path,
+    raw_format: Option<&RawFormat>,
+) -> Result<RawFrame, CliError> {
     if is_raw(path) {
         let fmt = raw_format.ok_or_else(|| {
             CliError::input(path, "a headerless raw frame needs \"raw_format\" in captures.json (rows, cols, bits_per_sample, endianness)")
         })?;
         return read_raw(path, fmt);
     }
-    read_frame(path)
+    read_frame_unguarded(path)
 }
 
 /// Read one recorded frame (PNG: 16-bit greyscale; TIFF: 8- or 16-bit greyscale; DNG: the
 /// active area of the CFA image, see [`dng::read_dng`]).
 pub fn read_frame(path: &Path) -> Result<RawFrame, CliError> {
+    crate::guard::guarded(path, || read_frame_unguarded(path))
+}
+
+fn read_frame_unguarded(path: &Path) -> Result<RawFrame, CliError> {
+    crate::staging::protect_input(path);
     let ext = path
         .extension()
         .and_then(|e| e.to_str())

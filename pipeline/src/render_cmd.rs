@@ -115,6 +115,24 @@ pub fn run_render(a: &RenderArgs, progress: bool) -> Result<Value, CliError> {
         })?;
     }
     let (w, h) = prepared.camera.film_size_px();
+    {
+        // Band planes (+ variance), depth planes and the per-row accumulators, f32.
+        let px = w as f64 * h as f64;
+        let planes = job.settings.bands.count as f64 * (1.0 + a.variance as u8 as f64) * 2.0 + 4.0;
+        let what = format!("{w}×{h} pixels");
+        crate::budget::check_memory(
+            Some(&a.scene),
+            "--width/--height (or the camera's aspectRatio)",
+            crate::budget::f32_bytes(px * planes, 1.0),
+            &format!("{what} × {planes} f32 planes"),
+        )?;
+        crate::budget::check_work(
+            Some(&a.scene),
+            "--spp",
+            px * a.spp as f64,
+            &format!("{what} × {} samples", a.spp),
+        )?;
+    }
     let bar = crate::progress::bar(
         progress,
         h as u64,

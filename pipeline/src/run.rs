@@ -180,6 +180,9 @@ struct Run {
 }
 
 fn load(config: Option<&Path>) -> Result<Run, CliError> {
+    if let Some(p) = config {
+        crate::staging::protect_input(p);
+    }
     let (path, text) = match config {
         Some(p) => (
             p.to_path_buf(),
@@ -208,6 +211,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         ),
         Some(Value::String(p)) => {
             let cp = dir.join(p);
+            crate::staging::protect_input(&cp);
             let t =
                 std::fs::read_to_string(&cp).map_err(|e| bad(&cp, format!("cannot read: {e}")))?;
             let f = serde_json::from_str(&t).map_err(|e| bad(&cp, format!("invalid: {e}")))?;
@@ -357,6 +361,32 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         simulation: raw.simulation.unwrap_or_default(),
         raw_format: None,
     };
+    crate::simulate::check_budget(&set)?;
+    {
+        // Eq. 8 on the rendered image: rows·cols·n² samples per primary, then as bands.
+        let s = &set.camera.sensor;
+        let n = samples_per_pixel as f64;
+        let planes = (set.camera.sensor.channel_names.len().max(3)
+            + crate::simulate::wavelength_grid(&set).len()) as f64;
+        crate::budget::check_memory(
+            Some(&path),
+            "display.samples_per_pixel",
+            crate::budget::f32_bytes(s.rows as f64 * s.cols as f64 * n * n * planes, 1.0),
+            &format!(
+                "{}×{} pixels × {samples_per_pixel}² samples × {planes} planes of f32",
+                s.rows, s.cols
+            ),
+        )?;
+        if let Some(rf) = &render {
+            let spp = rf.spp.unwrap_or(16) as f64;
+            crate::budget::check_work(
+                Some(&path),
+                "render.spp",
+                s.rows as f64 * s.cols as f64 * spp,
+                &format!("{}×{} pixels × {spp} samples", s.rows, s.cols),
+            )?;
+        }
+    }
     Ok(Run {
         set,
         render,
@@ -471,6 +501,12 @@ fn planes_patch_means(p: &ChannelPlanes, layout: &ChartLayout) -> Vec<Vec<f64>> 
             p.mean_in(r.row0, r.row1, r.col0, r.col1)
         })
         .collect()
+}
+
+/// Read and validate a run configuration (camera, target, processor, display, render and the
+/// budget) without running it.
+pub fn check_config(config: Option<&Path>) -> Result<(), CliError> {
+    load(config).map(|_| ())
 }
 
 /// Run the pipeline and write everything into `out`.

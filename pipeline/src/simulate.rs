@@ -69,29 +69,31 @@ pub fn sampling_for(
     let lmax_um = grid.wavelength_nm[grid.len() - 1] * 1e-3;
     let n = optics.f_number;
     let diffraction_os = (p_um / (0.5 * lmin_um * n)).ceil() as usize;
-    let diffraction_margin = (5.0 * lmax_um * n / p_um).ceil() as usize + 2;
+    // Float-to-usize casts saturate and the sums below saturate: an absurd blur gives a huge
+    // margin that the budget (check_budget) refuses, never an overflow.
+    let diffraction_margin = ((5.0 * lmax_um * n / p_um).ceil() as usize).saturating_add(2);
     let (os, mut margin) = match &optics.blur {
         Blur::None => (1, 0),
         Blur::Gaussian { sigma_um } => (
             (p_um / sigma_um.max(1e-9)).ceil() as usize,
-            (4.0 * sigma_um / p_um).ceil() as usize + 1,
+            ((4.0 * sigma_um / p_um).ceil() as usize).saturating_add(1),
         ),
         Blur::Pillbox { width_um } => (
             (2.0 * p_um / width_um).ceil() as usize,
-            (0.5 * width_um / p_um).ceil() as usize + 1,
+            ((0.5 * width_um / p_um).ceil() as usize).saturating_add(1),
         ),
         Blur::Diffraction | Blur::Psf(_) => (diffraction_os, diffraction_margin),
         Blur::Wavefront { defocus_um, .. } => (
             diffraction_os,
-            diffraction_margin + (16.0 * defocus_um.abs() * n / p_um).ceil() as usize,
+            diffraction_margin.saturating_add((16.0 * defocus_um.abs() * n / p_um).ceil() as usize),
         ),
         // Resolve the field model's PSF detail; margin = PSF half-width + the inward shift of
         // the corner by (barrel) distortion, capped at the sensor's size.
         Blur::Lens(l) => {
             let half_diag_m = 0.5
                 * sensor.pixel_pitch_m
-                * ((sensor.rows * sensor.rows + sensor.cols * sensor.cols) as f64).sqrt();
-            let margin = (l.margin_m(half_diag_m) * 1e6 / p_um).ceil() as usize + 2;
+                * ((sensor.rows as f64).powi(2) + (sensor.cols as f64).powi(2)).sqrt();
+            let margin = ((l.margin_m(half_diag_m) * 1e6 / p_um).ceil() as usize).saturating_add(2);
             (
                 (p_um / l.detail_um(lmin_um * 1e3)).ceil() as usize,
                 margin.min(sensor.rows.max(sensor.cols)),
@@ -99,7 +101,7 @@ pub fn sampling_for(
         }
     };
     if let Some(d) = &optics.diffuser {
-        margin += (2.0 * d.fwhm_um / p_um).ceil() as usize + 1;
+        margin = margin.saturating_add(((2.0 * d.fwhm_um / p_um).ceil() as usize).saturating_add(1));
     }
     // Effect blocks: the defocus blur's detail and reach, and the scene the distortion /
     // lateral-colour warp samples beyond the blurred region (the target continues there).
@@ -115,6 +117,37 @@ pub fn sampling_for(
         );
     }
     (oversample.unwrap_or(os.clamp(1, 4)), margin)
+}
+
+/// The memory one shot of `set` needs (docs/limits.md), bytes: the scene and the sensor
+/// irradiance as f32 planes of `((rows + 2·margin)·os) × ((cols + 2·margin)·os)` samples ×
+/// bands, one more such plane set as the blur's working copy, and ~48 bytes per sensor pixel
+/// (electron rates, electrons and noise in f64, fixed patterns, DN).
+pub fn shot_memory_bytes(set: &CaptureSet, grid: &WavelengthGrid) -> f64 {
+    let s = &set.camera.sensor;
+    let (os, margin) = sampling_for(&set.camera.optics, s, grid, set.simulation.oversample);
+    let side = |n: usize| (n as f64 + 2.0 * margin as f64) * os as f64;
+    let samples = side(s.rows) * side(s.cols);
+    crate::budget::f32_bytes(samples * grid.len() as f64, 3.0) + s.rows as f64 * s.cols as f64 * 48.0
+}
+
+/// Refuse a capture set whose shots need more memory than the budget allows
+/// ([`shot_memory_bytes`], [`crate::budget::check_memory`]).
+pub fn check_budget(set: &CaptureSet) -> Result<(), CliError> {
+    let grid = wavelength_grid(set);
+    let s = &set.camera.sensor;
+    let (os, margin) = sampling_for(&set.camera.optics, s, &grid, set.simulation.oversample);
+    crate::budget::check_memory(
+        Some(&set.camera_path),
+        "sensor.rows/cols, optics.blur and simulation",
+        shot_memory_bytes(set, &grid),
+        &format!(
+            "{}×{} pixels + {margin} px blur margin, {os}×{os} samples per pixel, {} bands",
+            s.rows,
+            s.cols,
+            grid.len()
+        ),
+    )
 }
 
 /// A shot's target rendered on `g`, with its illuminant, scaled to its mean luminance over
@@ -285,9 +318,12 @@ fn uniform_electron_rate(
         };
         let glare = match fx.veiling_glare {
             Some(g) if g > 0.0 => {
+                // Row sums collected, then added in order: the same bits at any thread count.
                 let sum: f64 = (0..s.rows)
                     .into_par_iter()
                     .map(|r| (0..s.cols).map(|c| factor(r, c)).sum::<f64>())
+                    .collect::<Vec<f64>>()
+                    .iter()
                     .sum();
                 g * sum / (s.rows * s.cols) as f64
             }

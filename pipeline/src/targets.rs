@@ -4,7 +4,7 @@
 use crate::spectrum_file::to_photons;
 use camsim_core::constants::SI;
 use camsim_core::data;
-use camsim_core::exr_io::{self, read_spectral_exr};
+use camsim_core::exr_io;
 use camsim_core::scene::Target;
 use camsim_core::spectrum::Spectrum;
 use camsim_sensor::SensorModel;
@@ -75,9 +75,32 @@ impl<'a> Obj<'a> {
     }
 }
 
+/// The largest spectral radiance a target may give, W/(sr·m²·nm): 1e15, eight orders above
+/// the sun's disc (~2e7). Beyond ~1e20 the photon radiance no longer fits the f32 scene planes
+/// (it becomes +∞), so larger values are refused rather than silently turned into ∞ or NaN.
+pub const MAX_RADIANCE_W: f64 = 1e15;
+
+/// The largest `mean_luminance_cd_m2`: 1e12 cd/m², three orders above the sun's disc (1.6e9).
+pub const MAX_LUMINANCE_CD_M2: f64 = 1e12;
+
 fn radiance_checked(s: Spectrum, k: &str, photons: bool) -> Result<Spectrum, String> {
     if let Some((w, v)) = s.first_negative() {
         return Err(format!(".{k}: negative radiance {v} at {w} nm"));
+    }
+    // photons/(s·sr·m²·nm) at 1000 nm per W/(sr·m²·nm): λ/(hc) ≈ 5.03e18.
+    let max = if photons { MAX_RADIANCE_W * 5.03e18 } else { MAX_RADIANCE_W };
+    let peak = match &s {
+        Spectrum::Sampled { values, .. } => values.iter().fold(0.0f64, |a, &v| a.max(v.abs())),
+        Spectrum::Affine { .. } => (300..=1200)
+            .step_by(10)
+            .fold(0.0f64, |a, w| a.max(s.eval(w as f64).abs())),
+    };
+    if !(peak <= max) {
+        return Err(format!(
+            ".{k}: radiance {peak:e} is over the limit of {max:e} {} (no physical source is \
+             that bright; docs/limits.md)",
+            if photons { "photons/(s·sr·m²·nm)" } else { "W/(sr·m²·nm)" }
+        ));
     }
     Ok(if photons { s } else { to_photons(&s) })
 }
@@ -117,8 +140,10 @@ pub fn target_from_value(
         None => None,
         Some(_) => {
             let l = o.num("mean_luminance_cd_m2", None)?;
-            if l < 0.0 {
-                return Err(format!(".mean_luminance_cd_m2: must be ≥ 0, got {l}"));
+            if !(0.0..=MAX_LUMINANCE_CD_M2).contains(&l) {
+                return Err(format!(
+                    ".mean_luminance_cd_m2: must be in [0, {MAX_LUMINANCE_CD_M2:e}] cd/m², got {l}"
+                ));
             }
             Some(l)
         }
@@ -209,9 +234,24 @@ pub fn target_from_value(
                 .and_then(Value::as_str)
                 .ok_or(".file: required (a spectral EXR path)")?;
             let p = dir.join(f);
-            let exr = read_spectral_exr(&p).map_err(|e| format!(".file: {e}"))?;
+            let limit = crate::budget::memory_limit().bytes as f64;
+            // Over the memory budget: refused from the header, before the pixels are read.
+            let exr = read_exr_target(&p, limit).map_err(|e| format!(".file: {}", e.one_line()))?;
             let mut img = exr.image;
             let photon_file = photons || exr.emissive_units.to_lowercase().contains("photon");
+            let max = if photon_file { MAX_RADIANCE_W * 5.03e18 } else { MAX_RADIANCE_W };
+            let peak = img
+                .planes
+                .iter()
+                .flatten()
+                .fold(0.0f32, |a, &v| if v.is_nan() { f32::INFINITY } else { a.max(v.abs()) });
+            if !(peak as f64 <= max) {
+                return Err(format!(
+                    ".file: {}: a radiance of {peak:e} is over the limit of {max:e} (or not a \
+                     number); no physical source is that bright (docs/limits.md)",
+                    p.display()
+                ));
+            }
             if !photon_file {
                 exr_io::bands_energy_to_photons(&mut img, &SI, false);
             }
@@ -271,8 +311,8 @@ pub fn target_from_value(
             Target::PointArray {
                 radiance: o.radiance("radiance", None)?,
                 background: o.radiance("background", Some(0.0))?,
-                spacing_m: o.num("spacing_px", Some(16.0))?.max(1.0) * pitch,
-                point_size_m: o.num("point_size_px", Some(1.0))?.max(1e-3) * pitch,
+                spacing_m: at_least(o.num("spacing_px", Some(16.0))?, 1.0, "spacing_px")? * pitch,
+                point_size_m: at_least(o.num("point_size_px", Some(1.0))?, 1e-3, "point_size_px")? * pitch,
             }
         }
         "grid_lines" => {
@@ -280,8 +320,8 @@ pub fn target_from_value(
             Target::GridLines {
                 radiance: o.radiance("radiance", None)?,
                 background: o.radiance("background", Some(0.0))?,
-                spacing_m: o.num("spacing_px", Some(16.0))?.max(1.0) * pitch,
-                line_width_m: o.num("line_width_px", Some(1.0))?.max(1e-3) * pitch,
+                spacing_m: at_least(o.num("spacing_px", Some(16.0))?, 1.0, "spacing_px")? * pitch,
+                line_width_m: at_least(o.num("line_width_px", Some(1.0))?, 1e-3, "line_width_px")? * pitch,
             }
         }
         other => {
@@ -290,10 +330,53 @@ pub fn target_from_value(
             ))
         }
     };
+    if mean_luminance_cd_m2.is_some_and(|l| l > 0.0) && is_black(&target) {
+        return Err(format!(
+            ".mean_luminance_cd_m2: a {kind} target without light cannot be scaled to a \
+             luminance (give it a radiance, or drop mean_luminance_cd_m2)"
+        ));
+    }
     Ok(ParsedTarget {
         target,
         mean_luminance_cd_m2,
         illuminant,
         patch_labels,
+    })
+}
+
+/// A size in pixels that must be at least `min` (and finite): one error naming the key.
+fn at_least(v: f64, min: f64, key: &str) -> Result<f64, String> {
+    if v.is_finite() && v >= min {
+        Ok(v)
+    } else {
+        Err(format!(".{key}: must be at least {min} pixel(s), got {v}"))
+    }
+}
+
+/// A target that emits no light at all (dark, or a uniform radiance of zero everywhere).
+fn is_black(t: &Target) -> bool {
+    match t {
+        Target::Dark => true,
+        Target::Uniform { radiance } => match radiance {
+            Spectrum::Affine {
+                offset,
+                slope_per_nm,
+            } => *offset == 0.0 && *slope_per_nm == 0.0,
+            Spectrum::Sampled { values, .. } => values.iter().all(|&v| v == 0.0),
+        },
+        _ => false,
+    }
+}
+
+/// Read a spectral EXR target: refused from its header when its pixels need more than
+/// `max_decoded_bytes`, and a panic inside the `exr` crate on a malformed file is one error.
+pub fn read_exr_target(
+    path: &Path,
+    max_decoded_bytes: f64,
+) -> Result<exr_io::SpectralExr, crate::error::CliError> {
+    crate::staging::protect_input(path);
+    crate::guard::guarded(path, || {
+        exr_io::read_spectral_exr_within(path, max_decoded_bytes)
+            .map_err(|e| crate::error::CliError::Other(e.to_string()))
     })
 }

@@ -86,7 +86,47 @@ fn extras_json(e: &gltf::json::Extras) -> Option<Value> {
 }
 
 /// Load a glTF 2.0 file (.gltf or .glb) into a render scene.
+///
+/// A glTF whose indices point outside their arrays can make the `gltf` crate's own validation
+/// panic (gltf-json 1.4); that panic is caught (silently) and reported as one error line.
 pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
+    thread_local! {
+        static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    }
+    // A panic hook installed once that stays silent only on a thread inside this call (other
+    // threads' panics still reach the previous hook).
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let prev = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(|q| q.get()) {
+                prev(info)
+            }
+        }));
+    });
+    QUIET.with(|q| q.set(true));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_gltf_unguarded(path)));
+    QUIET.with(|q| q.set(false));
+    match r {
+        Ok(r) => r,
+        Err(p) => {
+            let why = p
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| p.downcast_ref::<&str>().copied())
+                .unwrap_or("malformed file");
+            Err(RenderError::Scene {
+                path: path.display().to_string(),
+                msg: format!(
+                    "invalid glTF 2.0 (an index or size is out of range: {})",
+                    why.split_whitespace().collect::<Vec<_>>().join(" ")
+                ),
+            })
+        }
+    }
+}
+
+fn load_gltf_unguarded(path: &Path) -> Result<Scene, RenderError> {
     let cx = Ctx { path };
     let bytes = std::fs::read(path).map_err(|e| cx.err(format!("cannot read: {e}")))?;
     // 1. required extensions, with a message naming them (before validation, which would
@@ -179,6 +219,17 @@ pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
         if depth > 256 {
             return Err(cx.err("node hierarchy deeper than 256 (a cycle?)"));
         }
+        if let gltf::scene::Transform::Decomposed { rotation: q, .. } = node.transform() {
+            // glTF requires a unit quaternion; a zero (or non-finite, or far from unit) one
+            // would silently collapse or shear the node.
+            let n2: f32 = q.iter().map(|v| v * v).sum();
+            if !(n2.is_finite() && (n2 - 1.0).abs() < 1e-3) {
+                return Err(cx.err(format!(
+                    "node {}: rotation {q:?} is not a unit quaternion",
+                    node_label(&node)
+                )));
+            }
+        }
         let local =
             DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|v| v as f64)));
         let world = parent * local;
@@ -241,6 +292,14 @@ fn convert_camera(
             )))
         }
     };
+    if let Some(a) = p.aspect_ratio() {
+        if !(a.is_finite() && (1e-4..=1e4).contains(&a)) {
+            return Err(cx.err(format!(
+                "camera {}: aspectRatio = {a}, expected a width/height ratio in [1e-4, 1e4]",
+                cam.index()
+            )));
+        }
+    }
     let yfov = p.yfov();
     if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
         return Err(cx.err(format!(
@@ -299,6 +358,10 @@ fn convert_camera(
     })
 }
 
+/// The largest spectral value (emission W m⁻² sr⁻¹ nm⁻¹, or reflectance) a glTF extra may
+/// give: f32 holds 3.4e38, and the path weights multiply it by up to ~1e8.
+const MAX_SPECTRAL_VALUE: f64 = 1e30;
+
 fn spectral_extra(cx: &Ctx, what: &str, v: &Value) -> Result<Spectrum, RenderError> {
     let arr =
         |k: &str| -> Option<Vec<f64>> { v.get(k)?.as_array()?.iter().map(Value::as_f64).collect() };
@@ -309,6 +372,19 @@ fn spectral_extra(cx: &Ctx, what: &str, v: &Value) -> Result<Spectrum, RenderErr
             let s = Spectrum::sampled(w, vals).map_err(|e| cx.err(format!("{what}: {e}")))?;
             if let Some((w, x)) = s.first_negative() {
                 return Err(cx.err(format!("{what}: negative value {x} at {w} nm")));
+            }
+            // The renderer works in f32: a larger value would become +∞ and its light NaN.
+            if let Spectrum::Sampled { wavelength_nm, values } = &s {
+                if let Some((w, x)) = wavelength_nm
+                    .iter()
+                    .zip(values)
+                    .find(|(_, x)| !(x.abs() <= MAX_SPECTRAL_VALUE))
+                {
+                    return Err(cx.err(format!(
+                        "{what}: value {x} at {w} nm is over {MAX_SPECTRAL_VALUE:e} (the \
+                         renderer's f32 range with headroom)"
+                    )));
+                }
             }
             Ok(s)
         }

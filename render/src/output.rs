@@ -9,7 +9,7 @@ use crate::error::RenderError;
 use crate::integrator::RenderOutput;
 use camsim_core::constants::SI;
 use camsim_core::exr_io::{
-    channel_name, write_exr_channels, ExrChannel, IRRADIANCE_UNITS, RADIANCE_UNITS,
+    channel_name, write_exr_channels, ExrChannel, ExrHeader, IRRADIANCE_UNITS, RADIANCE_UNITS,
 };
 use camsim_core::image::{Plane, SpectralBasis, SpectralImage};
 use camsim_core::spectrum::WavelengthGrid;
@@ -85,11 +85,11 @@ pub fn write_exr(path: &Path, out: &RenderOutput, ch: ExrChannels) -> Result<(),
         out.width,
         out.height,
         channels,
-        &[
-            ("spectralLayoutVersion", "1.0"),
-            ("emissiveUnits", units),
-            ("camsimRender", note.as_str()),
-        ],
+        &ExrHeader {
+            emissive_units: Some(units.to_string()),
+            spectral_layout: true,
+            comments: Some(format!("camsimRender {note}")),
+        },
     )
     .map_err(|msg| RenderError::Output {
         path: path.display().to_string(),
@@ -150,7 +150,10 @@ pub fn write_planes_exr(
         .into_iter()
         .map(|(n, p)| ExrChannel::new(n, p))
         .collect();
-    write_exr_channels(path, width, height, channels, &[("emissiveUnits", units)]).map_err(
+    write_exr_channels(path, width, height, channels, &ExrHeader {
+            emissive_units: Some(units.to_string()),
+            ..ExrHeader::default()
+        }).map_err(
         |msg| RenderError::Output {
             path: path.display().to_string(),
             msg,

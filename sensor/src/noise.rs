@@ -398,11 +398,11 @@ impl Kernel {
                 .iter_mut()
                 .zip(rates)
                 .zip(p)
-                .for_each(|((e, &r), &g)| *e = (r as f64 * ch.t * g as f64).max(0.0)),
+                .for_each(|((e, &r), &g)| *e = mean_electrons(r as f64 * ch.t * g as f64)),
             None => n
                 .iter_mut()
                 .zip(rates)
-                .for_each(|(e, &r)| *e = r as f64 * ch.t),
+                .for_each(|(e, &r)| *e = mean_electrons(r as f64 * ch.t)),
         }
         // (2) Step 4: n ~ Poisson(e(1+P) + d), a switched-off term at its mean; clipped at the
         // well capacity.
@@ -550,6 +550,19 @@ pub fn nonlinearity_magnitude(sensor: &SensorModel, analog_gain: f64) -> f64 {
     }
     let n80 = 0.8 * full_scale / slope;
     1.0 - (dn(n80) - dn0) / (0.8 * full_scale)
+}
+
+/// Mean photo-electrons of a pixel from its rate × time (× PRNU gain): never negative, and
+/// light that overflowed upstream (a rate of +∞, or NaN from ∞·0 or ∞ − ∞ in a blur) is
+/// saturating light, +∞ — which the shot-noise draw passes through and the full-well clip
+/// turns into a full well — never black.
+#[inline(always)]
+fn mean_electrons(x: f64) -> f64 {
+    if x.is_nan() {
+        f64::INFINITY
+    } else {
+        x.max(0.0)
+    }
 }
 
 #[cfg(test)]

@@ -67,6 +67,9 @@ fn fast_floor(x: f64) -> f64 {
     }
 }
 
+/// The largest mean drawn exactly, 2⁵²: above it f64 does not hold every integer.
+pub const EXACT_MEAN_MAX: f64 = 4_503_599_627_370_496.0;
+
 const INV_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
 
 /// k! for k < 10.
@@ -137,9 +140,21 @@ impl Hat {
 impl PoissonSampler {
     /// One exact Poisson(mean) draw, returned as f64 (0 for mean ≤ 0 or NaN).
     #[inline(always)]
+    ///
+    /// A mean of +∞ (light that overflowed) gives +∞, which the caller clips at the full well.
+    /// Above [`EXACT_MEAN_MAX`] f64 no longer holds consecutive integers, so no draw can be
+    /// exact; there the draw is the normal limit `⌊μ + √μ·T⌋` (the relative error of its
+    /// probabilities is O(1/√μ) < 2e-8), which also keeps the algorithm's integer arithmetic
+    /// (|K| < 2⁶³) in range.
     pub fn sample<R: Rng + Clone>(&mut self, rng: &mut R, mean: f64) -> f64 {
         if !(mean > 0.0) {
             return 0.0;
+        }
+        if !(mean < EXACT_MEAN_MAX) {
+            if mean == f64::INFINITY {
+                return f64::INFINITY;
+            }
+            return (mean + mean.sqrt() * self.normal.sample(rng)).floor().max(0.0);
         }
         if mean < 10.0 {
             if mean != self.mean {
@@ -278,6 +293,21 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn infinite_and_huge_means_return_at_once() {
+        let mut r = camsim_core::rng::stream(2, &[]);
+        assert_eq!(sample_poisson(&mut r, f64::INFINITY), f64::INFINITY);
+        assert_eq!(sample_poisson(&mut r, f64::MAX), f64::MAX);
+        // Above 2^52: the normal limit, z-test of the mean over 4000 draws (|z| < 4.5).
+        let mu = 1e18;
+        let n = 4000;
+        let mean = (0..n).map(|_| sample_poisson(&mut r, mu) - mu).sum::<f64>() / n as f64;
+        let z = mean / (mu.sqrt() / (n as f64).sqrt());
+        assert!(z.abs() < 4.5, "z = {z}");
+        let x = sample_poisson(&mut r, 1e300);
+        assert!(x.is_finite() && x > 0.99e300);
     }
 
     #[test]

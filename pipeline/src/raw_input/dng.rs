@@ -289,6 +289,7 @@ impl Tiff<'_> {
 /// Read the raw CFA image of a DNG (see the module documentation for what is supported).
 /// Errors name the file, the directory and the tag.
 pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
+    crate::staging::protect_input(path);
     let err = |m: String| CliError::input(path, m);
     let bytes = std::fs::read(path).map_err(|e| err(format!("cannot open frame: {e}")))?;
     let little = match bytes.get(0..4) {
@@ -456,6 +457,12 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
             ))
         }
     };
+    if br > rows || bc > cols {
+        return Err(bad(
+            tags::BLACK_LEVEL_REPEAT_DIM,
+            format!("= {br}×{bc} is larger than the {rows}×{cols} image"),
+        ));
+    }
     let black = match d.get(tags::BLACK_LEVEL) {
         None => vec![0.0; br * bc],
         Some(v) if v.len() == br * bc => v.clone(),
@@ -492,8 +499,15 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
     }
     // sample data: strips or tiles, uncompressed
     let bps = (bits / 8) as usize;
-    let mut stored = vec![0u16; rows * cols];
     let file_len = bytes.len() as u64;
+    // Checked before allocating: the samples must fit in the file (uncompressed).
+    if rows as f64 * cols as f64 * bps.max(1) as f64 > file_len as f64 {
+        return Err(bad(
+            257,
+            format!("= {rows} rows × {cols} columns of {bits}-bit samples do not fit in the {file_len}-byte file"),
+        ));
+    }
+    let mut stored = vec![0u16; rows * cols];
     let read_at = |off: f64, n: usize, t: u16| -> Result<&[u8], CliError> {
         let off = off as u64;
         match off.checked_add(n as u64) {

@@ -423,8 +423,9 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
         "mtf50_depth_path_cy_per_px": per.iter().map(|p| p.2).collect::<Vec<_>>(),
         "dof_lens_censored": dl.map(|x| x.censored),
         "dof_depth_path_censored": dd.map(|x| x.censored),
-        "render_times_s": out_r.times_s,
     });
+    // Wall times are not results: they would make two identical runs' files differ.
+    eprintln!("camsim: study point render times {:?} s", out_r.times_s);
     Ok(out)
 }
 
@@ -783,8 +784,13 @@ mod lightfield {
             "disparity_px_per_view": depths.iter().map(|z| s.cam.disparity_per_view(*z)).collect::<Vec<_>>(),
             "raw_px": [w, h],
             "views_px": [vw, vh],
-            "render_times_s": [(t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64()],
         });
+        // Wall times are not results (they would make identical runs' files differ).
+        eprintln!(
+            "camsim: light-field render times {:.2} s, {:.2} s",
+            (t1 - t0).as_secs_f64(),
+            (t2 - t1).as_secs_f64()
+        );
         Ok(out)
     }
 }

@@ -144,7 +144,23 @@ fn bad(path: &Path, msg: impl std::fmt::Display) -> CliError {
 /// Replace every `{"$file": "x.json"}` in `v` by the parsed contents of x.json (relative to
 /// `dir`; references inside it are relative to its own folder). `key` names the place in
 /// messages.
+/// An include cycle (a file that includes itself, directly or through others) and chains
+/// deeper than [`MAX_INCLUDE_DEPTH`] are refused.
 pub fn expand_files(v: &Value, dir: &Path, spec: &Path, key: &str) -> Result<Value, CliError> {
+    let mut chain: Vec<PathBuf> = std::fs::canonicalize(spec).into_iter().collect();
+    expand_files_in(v, dir, spec, key, &mut chain)
+}
+
+/// The deepest chain of `$file` references accepted.
+pub const MAX_INCLUDE_DEPTH: usize = 32;
+
+fn expand_files_in(
+    v: &Value,
+    dir: &Path,
+    spec: &Path,
+    key: &str,
+    chain: &mut Vec<PathBuf>,
+) -> Result<Value, CliError> {
     match v {
         Value::Object(m) if m.contains_key("$file") => {
             let f = match (m.len(), m.get("$file")) {
@@ -159,6 +175,21 @@ pub fn expand_files(v: &Value, dir: &Path, spec: &Path, key: &str) -> Result<Val
                 }
             };
             let p = dir.join(f);
+            crate::staging::protect_input(&p);
+            let canon = std::fs::canonicalize(&p)
+                .map_err(|e| bad(spec, format!("{key}: cannot read {}: {e}", p.display())))?;
+            if chain.contains(&canon) {
+                return Err(bad(
+                    spec,
+                    format!("{key}: {} includes itself (a $file cycle)", p.display()),
+                ));
+            }
+            if chain.len() > MAX_INCLUDE_DEPTH {
+                return Err(bad(
+                    spec,
+                    format!("{key}: $file references nested deeper than {MAX_INCLUDE_DEPTH}"),
+                ));
+            }
             let text = std::fs::read_to_string(&p)
                 .map_err(|e| bad(spec, format!("{key}: cannot read {}: {e}", p.display())))?;
             let inner: Value = serde_json::from_str(&text).map_err(|e| {
@@ -168,14 +199,17 @@ pub fn expand_files(v: &Value, dir: &Path, spec: &Path, key: &str) -> Result<Val
                 )
             })?;
             let sub = p.parent().unwrap_or(Path::new("."));
-            expand_files(&inner, sub, spec, key)
+            chain.push(canon);
+            let r = expand_files_in(&inner, sub, spec, key, chain);
+            chain.pop();
+            r
         }
         Value::Object(m) => {
             let mut out = Map::new();
             for (k, x) in m {
                 out.insert(
                     k.clone(),
-                    expand_files(x, dir, spec, &format!("{key}.{k}"))?,
+                    expand_files_in(x, dir, spec, &format!("{key}.{k}"), chain)?,
                 );
             }
             Ok(Value::Object(out))
@@ -183,7 +217,7 @@ pub fn expand_files(v: &Value, dir: &Path, spec: &Path, key: &str) -> Result<Val
         Value::Array(a) => Ok(Value::Array(
             a.iter()
                 .enumerate()
-                .map(|(i, x)| expand_files(x, dir, spec, &format!("{key}[{i}]")))
+                .map(|(i, x)| expand_files_in(x, dir, spec, &format!("{key}[{i}]"), chain))
                 .collect::<Result<_, _>>()?,
         )),
         other => Ok(other.clone()),
@@ -262,6 +296,7 @@ fn label_of(v: &Value, i: usize) -> String {
 
 /// Read, validate and expand a study file.
 pub fn load_study(path: &Path) -> Result<Study, CliError> {
+    crate::staging::protect_input(path);
     let text = std::fs::read_to_string(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
     let raw: SpecFile =
         serde_json::from_str(&text).map_err(|e| bad(path, format!("invalid: {e}")))?;
@@ -377,6 +412,19 @@ pub fn load_study(path: &Path) -> Result<Study, CliError> {
             numeric,
         });
     }
+    // The budget, before the points are enumerated: each planned point holds its own copy
+    // of the point document (and its hash and folder name).
+    let n_points: f64 = match sweep {
+        Sweep::Grid => parameters.iter().map(|p| p.values.len() as f64).product(),
+        Sweep::List => parameters.iter().map(|p| p.values.len()).max().unwrap_or(1) as f64,
+    };
+    let doc_bytes = serde_json::to_string(&base).map_or(1024, |t| t.len()) as f64;
+    crate::budget::check_memory(
+        Some(path),
+        "parameters (the sweep)",
+        n_points * (2.0 * doc_bytes + 512.0),
+        &format!("{n_points:.3e} points × {doc_bytes} bytes of point document"),
+    )?;
     // The points, in spec order.
     let coords: Vec<Vec<usize>> = match sweep {
         Sweep::Grid => {
