@@ -15,6 +15,8 @@ pub mod error;
 pub mod frames;
 pub mod lens_cmd;
 pub mod noise_profiles_cmd;
+#[doc = include_str!("../../docs/physics.md")]
+pub mod physics {}
 pub mod plots;
 pub mod progress;
 pub mod raw_input;
