@@ -89,7 +89,7 @@ enum Command {
         /// Seed of every random term (default: simulation.seed of the file, else 0).
         #[arg(long)]
         seed: Option<u64>,
-        /// Write one noise-free expected image per shot, DIR/<shot id>.exr (channel Y, DN).
+        /// Write one noise-free expected image per shot, DIR/SHOT_ID.exr (channel Y, DN).
         #[arg(long)]
         expected: bool,
     },

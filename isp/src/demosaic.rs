@@ -12,8 +12,8 @@ use std::str::FromStr;
 /// A demosaicking algorithm.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DemosaicMethod {
-    /// Normalised convolution with ISETCam's kernels: kG = [[0,1,0],[1,4,1],[0,1,0]]/4 for a
-    /// checkerboard channel (Bayer green), kRB = [[1,2,1],[2,4,2],[1,2,1]]/4 otherwise. Works on
+    /// Normalised convolution with ISETCam's kernels: `kG = [[0,1,0],[1,4,1],[0,1,0]]/4` for a
+    /// checkerboard channel (Bayer green), `kRB = [[1,2,1],[2,4,2],[1,2,1]]/4` otherwise. Works on
     /// any tile (sparser channels fall back to wider tent kernels where kRB finds no sample).
     Bilinear,
     /// Malvar, He & Cutler, "High-quality linear interpolation for demosaicing of

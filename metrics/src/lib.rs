@@ -6,7 +6,7 @@
 //! * [`color_difference`]: CIEDE2000 (Sharma, Wu & Dalal 2005) and CIE94; ΔE*ab and CIELAB
 //!   themselves are [`camsim_core::colorimetry::delta_e_76`] and
 //!   [`camsim_core::colorimetry::xyz_to_lab`];
-//! * [`scielab`]: S-CIELAB (Zhang & Wandell 1996);
+//! * [`scielab`](mod@scielab): S-CIELAB (Zhang & Wandell 1996);
 //! * [`sfr`]: ISO 12233 slanted-edge spatial frequency response (e-SFR) and MTF50;
 //! * [`patches`]: per-patch mean, noise and SNR of test charts laid out as in the capture-format
 //!   spec (target kind `patches`), per CFA channel;

@@ -21,6 +21,8 @@ pub mod honest_color;
 pub mod guard;
 pub mod lens_cmd;
 pub mod noise_profiles_cmd;
+#[doc = include_str!("../../docs/physics.md")]
+pub mod physics {}
 pub mod plots;
 pub mod progress;
 pub mod raw_input;

@@ -61,7 +61,7 @@ pub struct RenderArgs {
     /// Light field: depths (m) to refocus at, comma separated (default: the focus distance).
     #[arg(long, value_delimiter = ',')]
     pub refocus_m: Vec<f64>,
-    /// Output EXR (a light field also writes OUT_STEM.views.exr and OUT_STEM.refocus_<z>m.exr).
+    /// Output EXR (a light field also writes OUT_STEM.views.exr and OUT_STEM.refocus_Zm.exr, Z the refocus depth in m).
     #[arg(long)]
     pub out: PathBuf,
 }

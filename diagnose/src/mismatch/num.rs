@@ -18,9 +18,9 @@ pub fn norm_cdf(x: f64) -> f64 {
 /// the two clipped tails.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Censored {
-    /// E[Y].
+    /// `E[Y]`.
     pub mean: f64,
-    /// Var[Y].
+    /// `Var[Y]`.
     pub var: f64,
     /// P(X ≤ lo).
     pub p_lo: f64,

@@ -51,7 +51,7 @@ pub mod tags {
 /// What a DNG says about its mosaic.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DngInfo {
-    /// Which directory held the raw image ("IFD0" or "IFD0 SubIFD[k]").
+    /// Which directory held the raw image (`"IFD0"` or `"IFD0 SubIFD[k]"`).
     pub ifd: String,
     /// Stored image rows × columns (before the active-area crop).
     pub stored_rows: usize,
