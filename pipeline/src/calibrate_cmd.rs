@@ -211,7 +211,8 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
     let o = &set.camera.optics;
     let t550 = o.transmittance.eval(550.0);
     let opts = CalibrationOptions {
-        irradiance_per_radiance: std::f64::consts::PI * t550 / (4.0 * o.f_number * o.f_number),
+        // Camera equation (Eq. 1) on the axis, object at infinity, with T(550 nm).
+        irradiance_per_radiance: camsim_optics::camera_equation_factor(o.f_number, 0.0) * t550,
         ..CalibrationOptions::default()
     };
     let result = calibrate(sensor, &shots, &opts);

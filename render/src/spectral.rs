@@ -305,20 +305,16 @@ pub fn d65_normalized() -> &'static TabulatedSpectrum {
     &fit_tables().d65_norm
 }
 
+/// CIELAB of `xyz` under `white` ([`camsim_core::colorimetry::xyz_to_lab`]) as an array.
 fn lab(xyz: [f64; 3], white: [f64; 3]) -> [f64; 3] {
-    let f = |t: f64| {
-        if t > 0.008856 {
-            t.cbrt()
-        } else {
-            7.787 * t + 16.0 / 116.0
-        }
+    use camsim_core::colorimetry::{xyz_to_lab, Xyz};
+    let v = |a: [f64; 3]| Xyz {
+        x: a[0],
+        y: a[1],
+        z: a[2],
     };
-    let (fx, fy, fz) = (
-        f(xyz[0] / white[0]),
-        f(xyz[1] / white[1]),
-        f(xyz[2] / white[2]),
-    );
-    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
+    let l = xyz_to_lab(v(xyz), v(white));
+    [l.l, l.a, l.b]
 }
 
 fn poly_xyz(t: &FitTables, c: [f64; 3]) -> [f64; 3] {

@@ -372,8 +372,10 @@ pub fn patch_spectral(
         }
     }
     let (rows, cols) = (sensor.rows, sensor.cols);
-    let area_kappa = sensor.pixel_pitch_m.powi(2) * sensor.fill_factor * std::f64::consts::PI
-        / (4.0 * optics.f_number * optics.f_number);
+    // p² · FF times the camera equation (Eq. 1, object at infinity).
+    let area_kappa = sensor.pixel_pitch_m.powi(2)
+        * sensor.fill_factor
+        * camsim_optics::camera_equation_factor(optics.f_number, 0.0);
     let mut series_list = Vec::new();
     let mut lines = Vec::new();
     let mut obs = Vec::new();
