@@ -14,6 +14,7 @@
 //! `calibrate --emva1288` analyses any series given by such a descriptor file.
 use rayon::prelude::*;
 use crate::error::CliError;
+use crate::report::html_escape;
 use crate::frames::write_png16;
 use crate::plots;
 use camsim_core::constants::SI;
@@ -711,14 +712,14 @@ fn report_html(r: &Emva1288Report, figs: &[(String, String)]) -> String {
     let _ = write!(
         h,
         "<h1>EMVA 1288 datasheet</h1><p>Release 4.0 Linear, computed by camsim from {} ({} bit).</p>",
-        esc(&r.source),
+        html_escape(&r.source),
         r.bits
     );
     if let Some(s) = &r.setup {
         let _ = write!(
             h,
             "<p>Simulated series: channel {}, {:.1} nm, {:.4e} µW/cm², {}×{} pixels, pixel area {:.3} µm², spatial stacks of {} frames at {:.3} ms, seed {}.</p>",
-            esc(&s.channel), s.wavelength_nm, s.irradiance_uw_per_cm2, s.rows, s.cols, s.pixel_area_um2, s.spatial_frames, s.spatial_exposure_s * 1e3, s.seed
+            html_escape(&s.channel), s.wavelength_nm, s.irradiance_uw_per_cm2, s.rows, s.cols, s.pixel_area_um2, s.spatial_frames, s.spatial_exposure_s * 1e3, s.seed
         );
     }
     h.push_str("<table><tr><th>quantity</th><th>symbol (emva1288 name)</th><th>value</th><th>uncertainty</th><th>unit</th></tr>");
@@ -732,10 +733,10 @@ fn report_html(r: &Emva1288Report, figs: &[(String, String)]) -> String {
         let _ = write!(
             h,
             "<tr><td style=\"text-align:left\">{}</td><td>{}</td><td>{:.6e}</td><td>{u}</td><td>{}</td></tr>",
-            esc(short),
-            esc(k),
+            html_escape(short),
+            html_escape(k),
             v.value,
-            esc(unit)
+            html_escape(unit)
         );
     }
     h.push_str("</table>");
@@ -748,14 +749,10 @@ fn report_html(r: &Emva1288Report, figs: &[(String, String)]) -> String {
     }
     h.push_str("<h2>Plots</h2>");
     for (f, cap) in figs {
-        let _ = write!(h, "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>", esc(f), esc(cap), esc(cap));
+        let _ = write!(h, "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>", html_escape(f), html_escape(cap), html_escape(cap));
     }
     h.push_str("</body></html>\n");
     h
-}
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
 /// One block of a descriptor file: a bright (`b exposure_ns photons`) or dark

@@ -101,14 +101,14 @@ pub fn run_report_html(summary: &Value, figures: &[(&str, &str)]) -> String {
         }
         h.push_str("</table>");
         if let Some(w) = summary.get("delta_e_scored_on").and_then(|v| v.as_str()) {
-            h.push_str(&format!("<p>ΔE scored on {}.</p>", esc(w)));
+            h.push_str(&format!("<p>ΔE scored on {}.</p>", html_escape(w)));
         }
         if let Some(rows) = summary.get("white_balance_comparison").and_then(|v| v.as_array()) {
             h.push_str("<h3>White balance (matrix fitted on the calibration capture, scored on this scene)</h3><table><tr><th>white balance</th><th>fitted mean ΔE2000</th><th>held-out mean ΔE2000</th><th>held-out max ΔE2000</th></tr>");
             for r in rows {
                 h.push_str(&format!(
                     "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-                    esc(r["white_balance"].as_str().unwrap_or("")),
+                    html_escape(r["white_balance"].as_str().unwrap_or("")),
                     num(r, "fitted_delta_e_2000_mean"),
                     num(r, "held_out_delta_e_2000_mean"),
                     num(r, "held_out_delta_e_2000_max")

@@ -6,7 +6,7 @@ use crate::error::CliError;
 use crate::frames;
 use camsim_core::constants::SI;
 use camsim_core::exr_io::write_single_channel_exr;
-use camsim_core::image::{SceneRadiance, SensorIrradiance};
+use camsim_core::image::{Plane, SceneRadiance, SensorIrradiance};
 use camsim_core::scene::{render_target, scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};

@@ -38,18 +38,26 @@ fn scenes_dir() -> PathBuf {
 /// Per-pixel band means and variances of the mean (row-major planes).
 #[derive(Debug, Clone)]
 pub struct BandStack {
+    /// Image width (pixels).
     pub width: usize,
+    /// Image height (pixels).
     pub height: usize,
+    /// Band channel names.
     pub names: Vec<String>,
+    /// Per band, the per-pixel mean.
     pub mean: Vec<Vec<f64>>,
+    /// Per band, the per-pixel variance of the mean.
     pub var: Vec<Vec<f64>>,
 }
 
 /// One band's comparison (the statistics of compare.py).
 #[derive(Debug, Clone)]
 pub struct ChannelStats {
+    /// Band channel name.
     pub name: String,
+    /// Image mean of the test render.
     pub mean_t: f64,
+    /// Image mean of the reference.
     pub mean_r: f64,
     /// (mean_t − mean_r)/mean_r.
     pub rel_mean: f64,
@@ -57,6 +65,7 @@ pub struct ChannelStats {
     pub frac_3sigma: f64,
     /// Blocks with |z| > 3, and blocks.
     pub blocks_flagged: usize,
+    /// Blocks compared.
     pub blocks: usize,
     /// z-score of the whole-image mean difference.
     pub z_global: f64,

@@ -290,8 +290,7 @@ pub(crate) fn crosstalk_image(ct: &Crosstalk, rows: usize, cols: usize, src: &[f
 #[cfg(test)]
 mod tests {
     use super::*;
-    use camsim_core::Spectrum;
-    use camsim_sensor::{Cfa, NoiseSwitches, SensorEffects};
+
 
     pub(crate) fn sensor() -> SensorModel {
         SensorModel::mono_test(4, 4)
