@@ -71,7 +71,10 @@ fn check_schema(r: &Value, wavelengths: &[&str]) {
             "f_number",
             "fields",
             "huygens_psf",
+            "mtf_alias_free",
+            "mtf_image_shift_mm",
             "mtf_on_axis",
+            "mtf_pupil_samples",
             "primary_wavelength_nm"
         ]
     );

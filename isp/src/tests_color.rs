@@ -70,8 +70,11 @@ fn dng_colour_with_a_d65_neutral_is_the_closed_form() {
     };
     let r = dng_camera_to_srgb(&c).unwrap();
     let white = r.matrix.apply([1.0; 3]);
+    // The sRGB matrix's white is D65 XYZ (0.95047, 1, 1.08883); D65 at the 4-decimal xy
+    // (0.3127, 0.3290) has Z = 1.089058, 2.1e-4 higher: that difference, and nothing else, can
+    // separate white from (1, 1, 1) here (bound 3e-4).
     for k in 0..3 {
-        assert!(close(white[k], 1.0, 2e-4), "{white:?}");
+        assert!(close(white[k], 1.0, 3e-4), "{white:?}");
     }
     assert!(close(r.white_xy[0], D65_XY[0], 1e-9) && close(r.white_xy[1], D65_XY[1], 1e-9));
     // closed form on an arbitrary camera value
