@@ -452,7 +452,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
             Ok(())
         }
         Command::NoiseProfiles { file, camera, out } => {
-            let s = camsim_pipeline::noise_profiles_cmd::run_noise_profiles(&file, camera.as_deref(), &out)?;
+            let s = camsim_pipeline::noise_profiles_cmd::run_noise_profiles(
+                &file,
+                camera.as_deref(),
+                &out,
+            )?;
             eprintln!(
                 "camsim: {} profiles, {} with b < 0; wrote {}",
                 s["census"]["profiles"],

@@ -229,7 +229,11 @@ fn appendix_b_through_diffraction(width_nm: f64) {
         vec!["calibrate", "captures.json", "--out", "cal"],
     ] {
         let st = camsim().args(&args).current_dir(d.path()).output().unwrap();
-        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
     }
     let c: Value = serde_json::from_str(
         &std::fs::read_to_string(d.path().join("cal/calibration.json")).unwrap(),
@@ -260,7 +264,10 @@ fn appendix_b_through_diffraction(width_nm: f64) {
                 }
             }
         }
-        eprintln!("{width_nm}-nm boxes, channel {name}: worst error {:.4} of peak at {} nm", worst.0, worst.1);
+        eprintln!(
+            "{width_nm}-nm boxes, channel {name}: worst error {:.4} of peak at {} nm",
+            worst.0, worst.1
+        );
         assert!(
             worst.0 < 0.02,
             "{width_nm}-nm boxes, channel {name}: QE off by {:.3} of peak at {} nm",

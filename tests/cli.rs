@@ -397,9 +397,11 @@ fn headerless_raw_frames_round_trip_and_real_raw_reads() {
     );
     let bytes = std::fs::read(dir.path().join("o/raw/flat-0.raw")).unwrap();
     assert_eq!(bytes.len(), 4 + 16 * 24 * 2);
-    let set = camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
+    let set =
+        camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
     let fmt = set.raw_format.unwrap();
-    let f = camsim_pipeline::raw_input::read_raw(&dir.path().join("o/raw/flat-0.raw"), &fmt).unwrap();
+    let f =
+        camsim_pipeline::raw_input::read_raw(&dir.path().join("o/raw/flat-0.raw"), &fmt).unwrap();
     assert_eq!(u16::from_be_bytes([bytes[4], bytes[5]]), f.dn[0]);
     assert!(f.dn.iter().any(|&v| v > 64), "a lit frame");
     // a raw file of the wrong length is one clear error

@@ -314,21 +314,41 @@ fn prnu_mimicking_shot_noise() {
     single("prnu", 2.0, Concealment::Mimicked, 0.0);
 }
 
-ci_and_full!(column_fpn_below_noise, column_fpn_below_noise_full, &[], |c| {
-    single_with("column_fpn", 1.0e-3, Concealment::BelowNoise, 0.0, c);
-});
+ci_and_full!(
+    column_fpn_below_noise,
+    column_fpn_below_noise_full,
+    &[],
+    |c| {
+        single_with("column_fpn", 1.0e-3, Concealment::BelowNoise, 0.0, c);
+    }
+);
 
-ci_and_full!(hot_pixels_under_scene, hot_pixels_under_scene_full, &[], |c| {
-    single_with("hot_pixels", 0.004, Concealment::UnderScene, 0.0, c);
-});
+ci_and_full!(
+    hot_pixels_under_scene,
+    hot_pixels_under_scene_full,
+    &[],
+    |c| {
+        single_with("hot_pixels", 0.004, Concealment::UnderScene, 0.0, c);
+    }
+);
 
-ci_and_full!(nonlinearity_under_scene, nonlinearity_under_scene_full, &[], |c| {
-    single_with("nonlinearity", 0.06, Concealment::UnderScene, 0.0, c);
-});
+ci_and_full!(
+    nonlinearity_under_scene,
+    nonlinearity_under_scene_full,
+    &[],
+    |c| {
+        single_with("nonlinearity", 0.06, Concealment::UnderScene, 0.0, c);
+    }
+);
 
-ci_and_full!(full_well_under_scene, full_well_under_scene_full, &[], |c| {
-    single_with("full_well", 7000.0, Concealment::UnderScene, 0.0, c);
-});
+ci_and_full!(
+    full_well_under_scene,
+    full_well_under_scene_full,
+    &[],
+    |c| {
+        single_with("full_well", 7000.0, Concealment::UnderScene, 0.0, c);
+    }
+);
 
 #[test]
 fn full_well_mimicking_prnu() {
@@ -351,13 +371,23 @@ fn relative_illumination_below_noise_with_flats() {
     single("relative_illumination", 0.05, Concealment::BelowNoise, 0.0);
 }
 
-ci_and_full!(veiling_glare_under_scene, veiling_glare_under_scene_full, &["veiling_glare"], |c| {
-    single_with("veiling_glare", 0.03, Concealment::UnderScene, 0.0, c);
-});
+ci_and_full!(
+    veiling_glare_under_scene,
+    veiling_glare_under_scene_full,
+    &["veiling_glare"],
+    |c| {
+        single_with("veiling_glare", 0.03, Concealment::UnderScene, 0.0, c);
+    }
+);
 
-ci_and_full!(defocus_under_scene, defocus_under_scene_full, &["defocus"], |c| {
-    single_with("defocus", 1.5, Concealment::UnderScene, 0.0, c);
-});
+ci_and_full!(
+    defocus_under_scene,
+    defocus_under_scene_full,
+    &["defocus"],
+    |c| {
+        single_with("defocus", 1.5, Concealment::UnderScene, 0.0, c);
+    }
+);
 
 #[test]
 fn crosstalk_mimicking_qe() {
@@ -374,13 +404,23 @@ fn qe_shift_mimicking_crosstalk() {
     single("qe_shift", -6.0, Concealment::Mimicked, 0.0);
 }
 
-ci_and_full!(distortion_under_scene, distortion_under_scene_full, &["distortion", "lateral_color"], |c| {
-    single_with("distortion", -0.04, Concealment::UnderScene, 0.0, c);
-});
+ci_and_full!(
+    distortion_under_scene,
+    distortion_under_scene_full,
+    &["distortion", "lateral_color"],
+    |c| {
+        single_with("distortion", -0.04, Concealment::UnderScene, 0.0, c);
+    }
+);
 
-ci_and_full!(lateral_color_under_scene, lateral_color_under_scene_full, &["lateral_color", "distortion"], |c| {
-    single_with("lateral_color", 2.5, Concealment::UnderScene, 0.0, c);
-});
+ci_and_full!(
+    lateral_color_under_scene,
+    lateral_color_under_scene_full,
+    &["lateral_color", "distortion"],
+    |c| {
+        single_with("lateral_color", 2.5, Concealment::UnderScene, 0.0, c);
+    }
+);
 
 // Null sets: the believed camera made the frames; the right answer is nothing.
 
@@ -636,7 +676,8 @@ fn every_output_of_the_spec_is_written() {
     // fitted_camera.json is a camera `camsim simulate` reads, with the finding in it.
     let out = o.dir.path().join("out");
     let cam = camsim_pipeline::config::load_camera(&out.join("fitted_camera.json")).unwrap();
-    let believed = camsim_pipeline::config::load_camera(&o.dir.path().join("set/camera.json")).unwrap();
+    let believed =
+        camsim_pipeline::config::load_camera(&o.dir.path().join("set/camera.json")).unwrap();
     let dbl = cam.sensor.black_level_dn - believed.sensor.black_level_dn;
     assert!(
         (dbl - 6.5).abs() < 0.3 * 6.5,

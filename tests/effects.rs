@@ -1,7 +1,9 @@
 //! The effect blocks of effects.md (docs/effects.md) end to end: camera.json parsing and the
 //! Serialize round trip, one-line errors, and every block's physics through `camsim simulate`'s
 //! library path (scene → optics → sensor), each against a closed form or a direct computation.
-use camsim_pipeline::config::{camera_file_json, load_camera, load_captures, read_camera_file, CaptureSet};
+use camsim_pipeline::config::{
+    camera_file_json, load_camera, load_captures, read_camera_file, CaptureSet,
+};
 use camsim_pipeline::simulate::{shot_electron_rate, shot_irradiance, wavelength_grid};
 use camsim_sensor::{electron_rate, expected_dn, ElectronRate, Shot};
 use serde_json::{json, Value};

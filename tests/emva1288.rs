@@ -171,7 +171,10 @@ fn emva1288_matches_the_reference_implementation_on_three_cameras() {
         let t_camsim = t0.elapsed();
         let r = reference(
             &python,
-            &["analyse", out.join("EMVA1288descriptor.txt").to_str().unwrap()],
+            &[
+                "analyse",
+                out.join("EMVA1288descriptor.txt").to_str().unwrap(),
+            ],
         );
         let n = compare_with_reference(&ds, &r, label);
         assert!(n >= 25, "{label}: only {n} numbers compared");
@@ -211,7 +214,10 @@ fn emva1288_matches_the_reference_implementation_on_three_cameras() {
         // same numbers up to the descriptor's 0.1 ns rounding of the exposure times
         let again = datasheet(&out2);
         for (name, v) in ds["values"].as_object().unwrap() {
-            let (a, b) = (value(&again, name).0, v["value"].as_f64().unwrap_or(f64::NAN));
+            let (a, b) = (
+                value(&again, name).0,
+                v["value"].as_f64().unwrap_or(f64::NAN),
+            );
             assert!(
                 (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9 * b.abs(),
                 "{label}: {name}: calibrate --emva1288 {a} vs emva1288 {b}"
@@ -339,7 +345,14 @@ fn emva1288_is_reproducible_and_rejects_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let cam = repo().join("examples/emva1288/high_gain_camera.json");
     let small = [
-        "--rows", "16", "--cols", "16", "--steps", "10", "--spatial-frames", "4",
+        "--rows",
+        "16",
+        "--cols",
+        "16",
+        "--steps",
+        "10",
+        "--spatial-frames",
+        "4",
     ];
     run_emva(&cam, &dir.path().join("a"), &small);
     run_emva(&cam, &dir.path().join("b"), &small);
@@ -349,7 +362,12 @@ fn emva1288_is_reproducible_and_rejects_bad_input() {
     let o = camsim()
         .arg("emva1288")
         .arg(&cam)
-        .args(["--out", dir.path().join("c").to_str().unwrap(), "--channel", "nir"])
+        .args([
+            "--out",
+            dir.path().join("c").to_str().unwrap(),
+            "--channel",
+            "nir",
+        ])
         .output()
         .unwrap();
     assert!(!o.status.success());
@@ -380,7 +398,10 @@ fn emva1288_full_size_matches_the_reference() {
     let ds = run_emva(&cameras()[0].1, &out, &[]);
     let r = reference(
         &python,
-        &["analyse", out.join("EMVA1288descriptor.txt").to_str().unwrap()],
+        &[
+            "analyse",
+            out.join("EMVA1288descriptor.txt").to_str().unwrap(),
+        ],
     );
     let n = compare_with_reference(&ds, &r, "table1 full size");
     assert!(n >= 25);

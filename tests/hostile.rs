@@ -27,7 +27,11 @@ impl Outcome {
     /// Exit 2 with one error line that contains every key; no panic or abort.
     #[track_caller]
     pub fn assert_refused(&self, keys: &[&str]) {
-        let lines: Vec<&str> = self.stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+        let lines: Vec<&str> = self
+            .stderr
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .collect();
         assert_eq!(
             self.code,
             Some(2),
@@ -37,10 +41,26 @@ impl Outcome {
             self.elapsed.as_secs_f64(),
             self.stderr
         );
-        assert_eq!(lines.len(), 1, "{:?}: not one line: {}", self.args, self.stderr);
-        assert!(lines[0].starts_with("camsim: error: "), "{:?}: {}", self.args, lines[0]);
+        assert_eq!(
+            lines.len(),
+            1,
+            "{:?}: not one line: {}",
+            self.args,
+            self.stderr
+        );
+        assert!(
+            lines[0].starts_with("camsim: error: "),
+            "{:?}: {}",
+            self.args,
+            lines[0]
+        );
         for k in keys {
-            assert!(lines[0].contains(k), "{:?}: {k:?} missing from: {}", self.args, lines[0]);
+            assert!(
+                lines[0].contains(k),
+                "{:?}: {k:?} missing from: {}",
+                self.args,
+                lines[0]
+            );
         }
     }
 

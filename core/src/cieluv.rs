@@ -72,8 +72,18 @@ mod tests {
         assert!((c.u - 4.0 * x / d).abs() < 1e-12, "{}", c.u);
         assert!((c.v - 9.0 * y / d).abs() < 1e-12, "{}", c.v);
         // D65's commonly tabulated u′v′: 0.1978, 0.4683
-        assert!((c.u - 0.1978).abs() < 1e-4 && (c.v - 0.4683).abs() < 1e-4, "{c:?}");
-        assert_eq!(xyz_to_uv_prime(Xyz { x: 0.0, y: 0.0, z: 0.0 }), UvPrime { u: 0.0, v: 0.0 });
+        assert!(
+            (c.u - 0.1978).abs() < 1e-4 && (c.v - 0.4683).abs() < 1e-4,
+            "{c:?}"
+        );
+        assert_eq!(
+            xyz_to_uv_prime(Xyz {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0
+            }),
+            UvPrime { u: 0.0, v: 0.0 }
+        );
     }
 
     /// The white maps to (100, 0, 0); a grey keeps u* = v* = 0; a hand-computed colour.
@@ -92,7 +102,14 @@ mod tests {
         assert!(g.u.abs() < 1e-9 && g.v.abs() < 1e-9, "{g:?}");
         // X, Y, Z = 20, 30, 15: d = 20 + 450 + 45 = 515; u′ = 80/515, v′ = 270/515;
         // L* = 116·0.3^(1/3) − 16 = 61.6542222 (the CIELAB oracle's value).
-        let c = xyz_to_luv(Xyz { x: 20.0, y: 30.0, z: 15.0 }, D65);
+        let c = xyz_to_luv(
+            Xyz {
+                x: 20.0,
+                y: 30.0,
+                z: 15.0,
+            },
+            D65,
+        );
         let n = xyz_to_uv_prime(D65);
         let l = 116.0 * 0.3f64.cbrt() - 16.0;
         assert!((c.l - l).abs() < 1e-9);

@@ -229,7 +229,10 @@ mod srgb_tests {
                 let e: f64 = (0..3)
                     .map(|k| XYZ_TO_LINEAR_SRGB[i][k] * LINEAR_SRGB_TO_XYZ[k][j])
                     .sum();
-                assert!((e - if i == j { 1.0 } else { 0.0 }).abs() < 2e-6, "{i}{j}: {e}");
+                assert!(
+                    (e - if i == j { 1.0 } else { 0.0 }).abs() < 2e-6,
+                    "{i}{j}: {e}"
+                );
             }
         }
         // D65 white (x, y) = (0.3127, 0.3290), Y = 1.

@@ -12,8 +12,7 @@ use crate::image::{Plane, SpectralBasis, SpectralImage};
 use crate::spectrum::WavelengthGrid;
 use exr::prelude::{
     read, AnyChannel, AnyChannels, AttributeValue, Blocks, Compression, Encoding, FlatSamples,
-    Image, Layer, LayerAttributes, LineOrder, ReadChannels, ReadLayers, Text, Vec2,
-    WritableImage,
+    Image, Layer, LayerAttributes, LineOrder, ReadChannels, ReadLayers, Text, Vec2, WritableImage,
 };
 use std::path::Path;
 

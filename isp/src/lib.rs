@@ -23,28 +23,28 @@
 pub mod cfa_generic;
 mod channel_color;
 mod color;
-mod tone;
 mod demosaic;
 pub mod dng_color;
 pub mod isetcam;
 mod mosaic;
 mod pipeline;
 mod srgb;
+mod tone;
 
+pub use cfa_generic::{demosaic_cokriging, demosaic_planes, ChannelPlanes, CoKrigingModel};
 pub use channel_color::{
     fit_channel_matrix, illuminant_channel_gains, macbeth_channel_responses, reference_channel,
     ChannelBalance, ChannelMatrix, FIT_RELATIVE_TOLERANCE,
 };
-pub use tone::{Bilateral, ToneCurve};
 pub use color::{
     fit_color_correction, illuminant_gains, macbeth_sensor_rgb, macbeth_target_linear_srgb,
     macbeth_xyz, ColorMatrix, WhiteBalance, MACBETH_WHITE_INDEX, XYZ_TO_LINEAR_SRGB,
 };
-pub use cfa_generic::{demosaic_cokriging, demosaic_planes, ChannelPlanes, CoKrigingModel};
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
 pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};
 pub use srgb::{srgb_decode, srgb_encode, to_srgb16, to_srgb8};
+pub use tone::{Bilateral, ToneCurve};
 
 use thiserror::Error;
 

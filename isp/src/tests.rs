@@ -773,5 +773,8 @@ fn clip_negative_option_zeroes_only_negative_values() {
     // G = −0.25 · 0.6 = −0.15 at every pixel of the uniform red field
     assert_eq!(negatives, 64, "{:?}", keep.linear.data[0]);
     assert!((keep.linear.data[27][1] + 0.15).abs() < 1e-6);
-    assert_eq!(keep.srgb8, clip.srgb8, "the sRGB codes are clipped either way");
+    assert_eq!(
+        keep.srgb8, clip.srgb8,
+        "the sRGB codes are clipped either way"
+    );
 }

@@ -104,7 +104,10 @@ pub fn read_agf(bytes: &[u8], catalog: &str) -> Result<Vec<Glass>, LensError> {
     }
     let finish = |p: Pending| -> Result<Glass, LensError> {
         let cd = p.cd.ok_or_else(|| {
-            err(p.line, format!("glass {}: no CD (coefficients) record", p.name))
+            err(
+                p.line,
+                format!("glass {}: no CD (coefficients) record", p.name),
+            )
         })?;
         let dispersion = zemax_dispersion(p.formula, &cd).ok_or_else(|| {
             err(

@@ -261,6 +261,9 @@ impl LensPrescription {
     ) -> Result<(f64, f64), LensError> {
         let nw = self.first_order(wavelength_nm)?.working_f_number;
         let d = 8.0 * wavelength_nm * 1e-6 * nw * nw;
-        Ok((rms_best_shift_mm.min(0.0) - d, rms_best_shift_mm.max(0.0) + d))
+        Ok((
+            rms_best_shift_mm.min(0.0) - d,
+            rms_best_shift_mm.max(0.0) + d,
+        ))
     }
 }

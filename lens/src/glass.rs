@@ -316,7 +316,9 @@ fn parse_nums(s: &str) -> Result<Vec<f64>, String> {
 }
 
 /// Vendors searched, in order, when a glass is named without a catalogue (the bundled tables).
-pub const VENDORS: [&str; 7] = ["schott", "ohara", "hoya", "cdgm", "sumita", "hikari", "misc"];
+pub const VENDORS: [&str; 7] = [
+    "schott", "ohara", "hoya", "cdgm", "sumita", "hikari", "misc",
+];
 
 include!(concat!(env!("OUT_DIR"), "/embedded_glass.rs"));
 

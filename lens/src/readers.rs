@@ -285,7 +285,8 @@ fn catalog_with_gcat(
             ps.sort();
             ps.into_iter().find(|p| {
                 p.extension().is_some_and(|x| x.eq_ignore_ascii_case("agf"))
-                    && p.file_stem().is_some_and(|s| s.eq_ignore_ascii_case(g.as_str()))
+                    && p.file_stem()
+                        .is_some_and(|s| s.eq_ignore_ascii_case(g.as_str()))
             })
         });
         match found {
@@ -554,10 +555,7 @@ pub fn read_zmx(
         // Zemax catalogues list precision-moulding glasses twice: NAME and NAME_MOLD, the
         // latter with the index after the moulding process (n_d lower by a few 1e-4 to 1e-3).
         // The refractiveindex.info data have only NAME; it is used, and a note says so.
-        if let Some(base) = g
-            .strip_suffix("_MOLD")
-            .or_else(|| g.strip_suffix("_mold"))
-        {
+        if let Some(base) = g.strip_suffix("_MOLD").or_else(|| g.strip_suffix("_mold")) {
             if let Some(found) = lookup(base)? {
                 notes.push(format!(
                     "surface {sn}: glass {g} read as {}/{} (no moulded-state data; n_d may \

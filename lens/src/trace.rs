@@ -315,7 +315,9 @@ impl LensPrescription {
                 .map(|p| p[1])
         };
         // Paraxial start (a = 0): the secant search converges in a few steps for most lenses.
-        if let Some(a) = f(0.0).and_then(|f0| aim_secant(&f, 0.0, f0, 1e-3 * aim.entrance_pupil_radius_mm.max(1e-3))) {
+        if let Some(a) = f(0.0)
+            .and_then(|f0| aim_secant(&f, 0.0, f0, 1e-3 * aim.entrance_pupil_radius_mm.max(1e-3)))
+        {
             aim.aim_y_mm = a;
             return Ok(aim);
         }
@@ -338,7 +340,11 @@ impl LensPrescription {
                 self.trace_to_stop(&u.ray(0.0, 0.0), wavelength_nm)
                     .map(|p| p[1])
             };
-            let guess = if prev.0 != 0.0 { prev.1 * t_next / prev.0 } else { 0.0 };
+            let guess = if prev.0 != 0.0 {
+                prev.1 * t_next / prev.0
+            } else {
+                0.0
+            };
             let solved = g(guess).and_then(|f0| {
                 aim_secant(&g, guess, f0, 1e-3 * aim.entrance_pupil_radius_mm.max(1e-3))
             });

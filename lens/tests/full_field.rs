@@ -10,7 +10,11 @@ use std::path::Path;
 fn every_shipped_lens_traces_at_its_full_field() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses");
     let mut n = 0;
-    let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.path()).collect();
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .collect();
     files.sort();
     for p in files {
         if p.extension().and_then(|x| x.to_str()) != Some("json") {
@@ -28,15 +32,31 @@ fn every_shipped_lens_traces_at_its_full_field() {
                 .unwrap_or_else(|e| panic!("{} at {th}°: {e}", p.display()));
             // the chief ray meets the stop centre
             let s = lens.trace_to_stop(&aim.ray(0.0, 0.0), wl).unwrap();
-            assert!(s[0].abs() < 1e-9 && s[1].abs() < 1e-8, "{} {th}°: stop {s:?}", p.display());
+            assert!(
+                s[0].abs() < 1e-9 && s[1].abs() < 1e-8,
+                "{} {th}°: stop {s:?}",
+                p.display()
+            );
             let chief = lens.trace(&aim.ray(0.0, 0.0), wl, Clipping::None).unwrap();
             // image on the side of the field's sign (no fold-over through the axis)
             if th != 0.0 && fo.efl_mm > 0.0 {
-                assert!(chief.image_mm[1] * th > 0.0, "{} {th}°: image y {}", p.display(), chief.image_mm[1]);
+                assert!(
+                    chief.image_mm[1] * th > 0.0,
+                    "{} {th}°: image y {}",
+                    p.display(),
+                    chief.image_mm[1]
+                );
             }
-            let fan = lens.ray_fan(th, wl, wl, &pupil_grid(9), Clipping::None).unwrap();
+            let fan = lens
+                .ray_fan(th, wl, wl, &pupil_grid(9), Clipping::None)
+                .unwrap();
             let ok = fan.rays.iter().filter(|r| r.is_some()).count();
-            assert!(ok * 2 > fan.rays.len(), "{} {th}°: {ok}/{} rays", p.display(), fan.rays.len());
+            assert!(
+                ok * 2 > fan.rays.len(),
+                "{} {th}°: {ok}/{} rays",
+                p.display(),
+                fan.rays.len()
+            );
         }
         n += 1;
     }
@@ -56,7 +76,11 @@ fn fisheye_image_height_rises_with_field_to_60_deg() {
     for k in 1..=12 {
         let th = 5.0 * k as f64;
         let a = lens.aim_field(th, wl, &fo).unwrap();
-        let y = lens.trace(&a.ray(0.0, 0.0), wl, Clipping::None).unwrap().image_mm[1].abs();
+        let y = lens
+            .trace(&a.ray(0.0, 0.0), wl, Clipping::None)
+            .unwrap()
+            .image_mm[1]
+            .abs();
         assert!(y > last, "{th}°: {y} after {last}");
         last = y;
     }

@@ -19,9 +19,11 @@ fn data(name: &str) -> (LensPrescription, Value, Value) {
         &std::fs::read_to_string(dir.join(format!("{name}.mtf.ref.json"))).unwrap(),
     )
     .unwrap();
-    let lens =
-        LensPrescription::from_json_file(dir.join(format!("{name}.json")), &GlassCatalog::bundled())
-            .unwrap();
+    let lens = LensPrescription::from_json_file(
+        dir.join(format!("{name}.json")),
+        &GlassCatalog::bundled(),
+    )
+    .unwrap();
     let lens = lens.focused(lens.primary_nm).unwrap();
     (lens, input, r["results"].clone())
 }
@@ -31,7 +33,10 @@ fn mtf_of(lens: &LensPrescription, freqs: &[f64], n_min: usize, n_max: usize) ->
         .wave_optics_sampled(0.0, lens.primary_nm, n_min, n_max, 2, freqs)
         .unwrap();
     (
-        wo.mtf.iter().map(|p| 0.5 * (p.tangential + p.sagittal)).collect(),
+        wo.mtf
+            .iter()
+            .map(|p| 0.5 * (p.tangential + p.sagittal))
+            .collect(),
         s.alias_free,
     )
 }
@@ -65,14 +70,20 @@ fn check(name: &str) {
     let pv = r["paraxial"]["opd_pv_waves"].as_f64().unwrap();
     let ours_pv = lens.opd_map(0.0, wl, 256).unwrap().pv_waves;
     assert!((5.0..=20.0).contains(&pv), "{name}: {pv} waves p-v");
-    assert!((ours_pv - pv).abs() < 0.01 * pv, "{name}: p-v {ours_pv} vs {pv}");
+    assert!(
+        (ours_pv - pv).abs() < 0.01 * pv,
+        "{name}: p-v {ours_pv} vs {pv}"
+    );
 
     // paraxial focus
     let (ours, ok) = mtf_of(&lens, &freqs, 64, 1024);
     assert!(ok, "{name}: sampling not alias free");
     let want = ref_mtf(&r["paraxial"], &freqs);
     for ((f, a), b) in freqs.iter().zip(&ours).zip(&want) {
-        assert!((a - b).abs() < 0.03, "{name} paraxial {f} lp/mm: {a} vs Optiland {b}");
+        assert!(
+            (a - b).abs() < 0.03,
+            "{name} paraxial {f} lp/mm: {a} vs Optiland {b}"
+        );
     }
     // a fixed 64² grid aliases here (what the sampling rule fixes)
     let (coarse, _) = mtf_of(&lens, &freqs, 64, 64);
@@ -88,13 +99,22 @@ fn check(name: &str) {
         .wavelengths_nm
         .iter()
         .map(|&w| {
-            lens.ray_fan(0.0, w, wl, &camsim_lens::analysis::pupil_grid(33), Clipping::None)
-                .unwrap()
+            lens.ray_fan(
+                0.0,
+                w,
+                wl,
+                &camsim_lens::analysis::pupil_grid(33),
+                Clipping::None,
+            )
+            .unwrap()
         })
         .collect();
     let dz_rms = lens.best_focus_shift_mm(&fans, 0.02 * lens.first_order(wl).unwrap().efl_mm);
     let want_rms = r["best_rms"]["image_shift_mm"].as_f64().unwrap();
-    assert!((dz_rms - want_rms).abs() < 1e-4, "{name}: RMS best focus {dz_rms} vs {want_rms}");
+    assert!(
+        (dz_rms - want_rms).abs() < 1e-4,
+        "{name}: RMS best focus {dz_rms} vs {want_rms}"
+    );
     let (lo, hi) = lens.focus_search_interval_mm(wl, dz_rms).unwrap();
     let merit = MtfMerit::on_axis(wl, &merit_f);
     let best = lens.best_focus_mtf(&merit, lo, hi).unwrap();
@@ -109,20 +129,35 @@ fn check(name: &str) {
     let at_ref = lens.with_image_distance(d0 + want_dz);
     let (ours, _) = mtf_of(&at_ref, &freqs, 64, 1024);
     for ((f, a), b) in freqs.iter().zip(&ours).zip(&want) {
-        assert!((a - b).abs() < 0.03, "{name} on Optiland's best focus, {f} lp/mm: {a} vs {b}");
+        assert!(
+            (a - b).abs() < 0.03,
+            "{name} on Optiland's best focus, {f} lp/mm: {a} vs {b}"
+        );
     }
     // our search finds a plane at least as good, within the depth of focus of Optiland's
     let (merit_at_ref, _) = at_ref.mtf_merit(&merit).unwrap();
-    assert!(best.merit >= merit_at_ref - 0.005, "{name}: merit {} vs {merit_at_ref}", best.merit);
+    assert!(
+        best.merit >= merit_at_ref - 0.005,
+        "{name}: merit {} vs {merit_at_ref}",
+        best.merit
+    );
     assert!(
         (best.image_shift_mm - want_dz).abs() < 1.5 * dof,
         "{name}: best focus {} vs Optiland {want_dz} (depth of focus {dof})",
         best.image_shift_mm
     );
     // and the best-focus MTF of each tool agrees
-    let (ours, _) = mtf_of(&lens.with_image_distance(d0 + best.image_shift_mm), &freqs, 64, 1024);
+    let (ours, _) = mtf_of(
+        &lens.with_image_distance(d0 + best.image_shift_mm),
+        &freqs,
+        64,
+        1024,
+    );
     for ((f, a), b) in freqs.iter().zip(&ours).zip(&want) {
-        assert!((a - b).abs() < 0.03, "{name} best focus {f} lp/mm: {a} vs Optiland {b}");
+        assert!(
+            (a - b).abs() < 0.03,
+            "{name} best focus {f} lp/mm: {a} vs Optiland {b}"
+        );
     }
 }
 

@@ -8,9 +8,14 @@ use std::path::Path;
 
 #[test]
 fn real_zmx_files_load_without_substitutions_and_trace() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real/lens/prescriptions");
+    let dir =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real/lens/prescriptions");
     assert!(dir.is_dir(), "{} missing (link ../shared)", dir.display());
-    let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.path()).collect();
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .collect();
     files.sort();
     let (mut traced, mut reflective) = (Vec::new(), Vec::new());
     for p in files {
@@ -40,15 +45,26 @@ fn real_zmx_files_load_without_substitutions_and_trace() {
         let fo = lens.first_order(wl).unwrap();
         let full = lens.fields_deg.iter().fold(0.0f64, |m, a| m.max(a.abs()));
         for th in [0.0, full] {
-            let aim = lens.aim_field(th, wl, &fo).unwrap_or_else(|e| panic!("{name} {th}°: {e}"));
+            let aim = lens
+                .aim_field(th, wl, &fo)
+                .unwrap_or_else(|e| panic!("{name} {th}°: {e}"));
             assert!(
                 lens.trace(&aim.ray(0.0, 0.0), wl, Clipping::None).is_some(),
                 "{name} {th}°: chief ray lost"
             );
             let fan = lens
-                .ray_fan(th, wl, wl, &camsim_lens::analysis::pupil_grid(9), Clipping::None)
+                .ray_fan(
+                    th,
+                    wl,
+                    wl,
+                    &camsim_lens::analysis::pupil_grid(9),
+                    Clipping::None,
+                )
                 .unwrap();
-            assert!(fan.rays.iter().all(Option::is_some), "{name} {th}°: rays lost");
+            assert!(
+                fan.rays.iter().all(Option::is_some),
+                "{name} {th}°: rays lost"
+            );
         }
         traced.push(name);
     }
@@ -63,7 +79,10 @@ fn mold_glass_reads_as_its_base_glass_with_a_note() {
         .join("../../shared/data/real/lens/prescriptions/rayoptics_US08427765-1.ZMX");
     let f = read_zmx_file(&p, &ZmxOptions::default()).unwrap();
     let note = f.provenance.unwrap_or_default();
-    assert!(note.contains("L-TIM28_MOLD read as ohara/L-TIM28"), "{note}");
+    assert!(
+        note.contains("L-TIM28_MOLD read as ohara/L-TIM28"),
+        "{note}"
+    );
 }
 
 fn tmp_dir(tag: &str) -> std::path::PathBuf {
@@ -81,7 +100,9 @@ fn unknown_glass_names_the_nearest_catalogue_glasses() {
     let d = tmp_dir("unknown");
     let p = d.join("lens.zmx");
     std::fs::write(&p, ZMX.replace("GLASSNAME", "MYSTERY7")).unwrap();
-    let e = read_zmx_file(&p, &ZmxOptions::default()).unwrap_err().to_string();
+    let e = read_zmx_file(&p, &ZmxOptions::default())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("MYSTERY7") && e.contains("surface 1"), "{e}");
     assert!(e.contains("nearest by (nd 1.5168, Vd 64.17)"), "{e}");
     assert!(e.contains("schott/N-BK7"), "{e}");
@@ -110,7 +131,15 @@ fn gcat_agf_beside_the_zmx_is_read() {
     std::fs::write(&p, ZMX.replace("GLASSNAME", "N-BK7")).unwrap();
     let f2 = read_zmx_file(&p, &opts).unwrap();
     let l2 = LensPrescription::from_file_form(&f2, &cat).unwrap();
-    let (a, b) = (lens.first_order(587.6).unwrap(), l2.first_order(587.6).unwrap());
-    assert!((a.efl_mm - b.efl_mm).abs() < 1e-12, "{} {}", a.efl_mm, b.efl_mm);
+    let (a, b) = (
+        lens.first_order(587.6).unwrap(),
+        l2.first_order(587.6).unwrap(),
+    );
+    assert!(
+        (a.efl_mm - b.efl_mm).abs() < 1e-12,
+        "{} {}",
+        a.efl_mm,
+        b.efl_mm
+    );
     std::fs::remove_dir_all(&d).ok();
 }

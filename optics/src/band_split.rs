@@ -128,7 +128,11 @@ fn cell_edges_nm(grid: &WavelengthGrid, terms: &[Spectrum]) -> Vec<(f64, f64)> {
     (0..n)
         .map(|b| {
             let e0 = if b == 0 { lo } else { 0.5 * (w[b - 1] + w[b]) };
-            let e1 = if b + 1 == n { hi } else { 0.5 * (w[b] + w[b + 1]) };
+            let e1 = if b + 1 == n {
+                hi
+            } else {
+                0.5 * (w[b] + w[b + 1])
+            };
             (e0, e1)
         })
         .collect()
@@ -175,7 +179,10 @@ fn mean_shape(terms: &[Spectrum], means: &[f64], lo: f64, hi: f64) -> Spectrum {
             .map(|(t, m)| m * one_sided(t, x, left))
             .sum()
     };
-    let (mut wl, mut v) = (Vec::with_capacity(pts.len() + 2), Vec::with_capacity(pts.len() + 2));
+    let (mut wl, mut v) = (
+        Vec::with_capacity(pts.len() + 2),
+        Vec::with_capacity(pts.len() + 2),
+    );
     let last = pts.len() - 1;
     for (i, &x) in pts.iter().enumerate() {
         if i == 0 {

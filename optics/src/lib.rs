@@ -45,8 +45,8 @@ pub use error::OpticsError;
 pub use formulas::{
     airy_first_zero_m, airy_first_zero_rad, airy_psf, bessel_j1, camera_equation_factor,
     camera_equation_factor_isetcam, diffraction_otf, magnification, relative_illumination_cos4,
-    relative_illumination_cos4_r2,
-    relative_illumination_isetcam, sigma_from_fwhm, thin_lens_image_distance_m,
+    relative_illumination_cos4_r2, relative_illumination_isetcam, sigma_from_fwhm,
+    thin_lens_image_distance_m,
 };
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
 pub use lens_blur::{LensBlur, LensBlurOptions, LensFocus};
@@ -366,7 +366,9 @@ pub fn form_image(
 
     // Distortion and lateral colour blocks: geometric warp of every wavelength plane.
     if optics.effects.has_warp() {
-        let wl = band_wl.as_deref().filter(|_| optics.effects.lateral_color.is_some());
+        let wl = band_wl
+            .as_deref()
+            .filter(|_| optics.effects.lateral_color.is_some());
         effects::warp_planes(&optics.effects, &mut img, dx, wl)?;
     }
     let band_wl = band_wl.unwrap_or_default();
@@ -383,16 +385,19 @@ pub fn form_image(
             // Airy tail: ~1 % of the energy lies beyond 20 λN.
             let margin = ((20.0 * lmax * n_eff / dx).ceil() as usize).clamp(2, 1024);
             let conv = FftConvolver::new(rows, cols, dx, optics.padding, margin, margin);
-            img.planes.par_iter_mut().zip(band_wl.par_iter()).for_each_init(
-                || (conv.workspace(), vec![0f32; rows * cols]),
-                |(ws, out), (p, &w)| {
-                    let t = Transfer::Diffraction {
-                        lambda_n_m: w * 1e-9 * n_eff,
-                    };
-                    conv.convolve(p, &t, band_finish, ws, out);
-                    p.copy_from_slice(out);
-                },
-            );
+            img.planes
+                .par_iter_mut()
+                .zip(band_wl.par_iter())
+                .for_each_init(
+                    || (conv.workspace(), vec![0f32; rows * cols]),
+                    |(ws, out), (p, &w)| {
+                        let t = Transfer::Diffraction {
+                            lambda_n_m: w * 1e-9 * n_eff,
+                        };
+                        conv.convolve(p, &t, band_finish, ws, out);
+                        p.copy_from_slice(out);
+                    },
+                );
         }
         Blur::Gaussian { sigma_um } => {
             let kern = gaussian_kernel_1d(sigma_um * 1e-6, dx);

@@ -54,11 +54,7 @@ fn boxed(lo: f64, hi: f64) -> Spectrum {
 
 /// A spectral line: a triangle of 0.1 nm full width at `at_nm`.
 fn line(at_nm: f64) -> Spectrum {
-    Spectrum::sampled(
-        vec![at_nm - 0.1, at_nm, at_nm + 0.1],
-        vec![0.0, 1.0, 0.0],
-    )
-    .unwrap()
+    Spectrum::sampled(vec![at_nm - 0.1, at_nm, at_nm + 0.1], vec![0.0, 1.0, 0.0]).unwrap()
 }
 
 fn uniform(s: Spectrum) -> SceneRadiance {
@@ -90,7 +86,12 @@ fn psf_set() -> PsfSet {
     PsfSet::new(vec![450.0, 650.0], 0.5, vec![tri(1.5), tri(4.5)]).unwrap()
 }
 
-fn mean_signals(o: &OpticsModel, sc: &SceneRadiance, g: &WavelengthGrid, r: &[Spectrum]) -> Vec<f64> {
+fn mean_signals(
+    o: &OpticsModel,
+    sc: &SceneRadiance,
+    g: &WavelengthGrid,
+    r: &[Spectrum],
+) -> Vec<f64> {
     let e = form_image(o, sc, g).unwrap().irradiance;
     r.iter()
         .map(|q| {

@@ -45,7 +45,12 @@ pub fn work_limit() -> f64 {
 /// Refuse a job of more than [`work_limit`] elementary samples (rays, path samples, PSF
 /// samples): `"{path}: {key}: needs about 1.2e15 samples (…), over the limit of 1e11;
 /// reduce {key} or raise the limit with --max-work"`.
-pub fn check_work(path: Option<&Path>, key: &str, samples: f64, what: &str) -> Result<(), CliError> {
+pub fn check_work(
+    path: Option<&Path>,
+    key: &str,
+    samples: f64,
+    what: &str,
+) -> Result<(), CliError> {
     let lim = work_limit();
     if samples.is_finite() && samples <= lim {
         return Ok(());
@@ -300,7 +305,10 @@ mod tests {
             let e = check_memory(Some(Path::new("cam.json")), "sensor.rows", 9.7e9, "pixels")
                 .unwrap_err()
                 .one_line();
-            assert!(e.starts_with("cam.json: sensor.rows: needs about 9.7 GB"), "{e}");
+            assert!(
+                e.starts_with("cam.json: sensor.rows: needs about 9.7 GB"),
+                "{e}"
+            );
             assert!(e.contains("--max-memory"), "{e}");
             assert!(check_memory(None, "k", f64::INFINITY, "x").is_err());
             assert!(check_memory(None, "k", f64::NAN, "x").is_err());

@@ -7,11 +7,11 @@
 //! filters, at several exposures) feed Appendix B per patch ([`patch_spectral`]).
 pub mod patch_spectral;
 
-use crate::report::html_escape;
 use crate::config::CaptureSet;
 use crate::error::CliError;
 use crate::plots;
 use crate::raw_input::read_frame_with;
+use crate::report::html_escape;
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_core::spectrum::Spectrum;
@@ -198,7 +198,6 @@ fn outcome_row(name: &str, o: &Outcome<camsim_diagnose::Estimate>) -> String {
         Outcome::NotEstimable { reason } => format!("<tr><th style=\"text-align:left\">{name}</th><td colspan=3>not estimable</td><td style=\"text-align:left\">{}</td></tr>", html_escape(reason)),
     }
 }
-
 
 /// Run the calibration and write its outputs into `out` (all or nothing).
 pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Value, CliError> {

@@ -1528,4 +1528,3 @@ pub fn captures_with_camera(
     crate::simulate::check_budget(&set)?;
     Ok(set)
 }
-

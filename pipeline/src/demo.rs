@@ -8,9 +8,9 @@
 //! pixels, NIR leakage spectra) and `truth.json` (`{"effects": [{"effect", "magnitude"}]}`,
 //! magnitudes in effects.md units computed from the true blocks with the crates' magnitude
 //! functions). Deterministic in the seed.
+use crate::chain::{shot_electron_rate, wavelength_grid};
 use crate::config::{load_camera, load_captures, CameraFile};
 use crate::error::CliError;
-use crate::chain::{shot_electron_rate, wavelength_grid};
 use crate::simulate::{simulate, SimulateOptions};
 use camsim_core::image::SpectralImage;
 use camsim_core::spectrum::WavelengthGrid;

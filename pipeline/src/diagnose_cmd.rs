@@ -9,10 +9,10 @@
 //! the recording with it) and `DIR/report.html` with its figures.
 mod figures;
 
+use crate::chain::{sampling_for, shot_irradiance, wavelength_grid};
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure};
 use crate::error::CliError;
 use crate::raw_input::read_frame_with;
-use crate::chain::{sampling_for, shot_irradiance, wavelength_grid};
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_diagnose::mismatch::{
@@ -745,8 +745,8 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::demo::{generate_capture_set, Concealment, DemoSpec};
     use crate::chain::shot_electron_rate;
+    use crate::demo::{generate_capture_set, Concealment, DemoSpec};
 
     /// The forward model through cached pixel planes equals `simulate`'s per-shot electron
     /// rates of the same camera (QE blocks and an optics block applied), also on a cache hit.

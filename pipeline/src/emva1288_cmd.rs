@@ -12,11 +12,10 @@
 //! implementation's result format) and `report.html` with the standard's plots.
 //!
 //! `calibrate --emva1288` analyses any series given by such a descriptor file.
-use rayon::prelude::*;
 use crate::error::CliError;
-use crate::report::html_escape;
 use crate::frames::write_png16;
 use crate::plots;
+use crate::report::html_escape;
 use camsim_core::constants::SI;
 use camsim_core::RawFrame;
 use camsim_diagnose::emva1288::spatial::{analyse_spatial, SpatialResult, StackAccumulator};
@@ -24,6 +23,7 @@ use camsim_diagnose::emva1288::{
     analyse_temporal, pair_stats, snr_model, Measured, PairStats, TemporalPoint, TemporalResult,
 };
 use camsim_sensor::{fixed_pattern, Cfa, ElectronRate, PatternSource, SensorModel, Shot};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -169,12 +169,7 @@ impl SeriesBuilder {
 
 /// The monochrome sensor of one channel: every pixel gets that channel's QE (the standard
 /// characterises each channel of a colour sensor on its own), rows/cols overridden.
-fn channel_sensor(
-    s: &SensorModel,
-    c: usize,
-    rows: usize,
-    cols: usize,
-) -> SensorModel {
+fn channel_sensor(s: &SensorModel, c: usize, rows: usize, cols: usize) -> SensorModel {
     let mut m = s.clone();
     m.rows = rows;
     m.cols = cols;
@@ -207,18 +202,28 @@ fn fmt_ns(t_s: f64) -> String {
 }
 
 /// Simulates and analyses the EMVA 1288 series of the camera in `camera_path`.
-pub fn run_emva1288(camera_path: &Path, opts: &Emva1288Options) -> Result<Emva1288Report, CliError> {
+pub fn run_emva1288(
+    camera_path: &Path,
+    opts: &Emva1288Options,
+) -> Result<Emva1288Report, CliError> {
     let cam = crate::config::load_camera(camera_path)?;
     let s = &cam.sensor;
     let bad = |key: &str, msg: String| CliError::input(camera_path, format!("{key}: {msg}"));
     // Channel and wavelength.
     let c = match &opts.channel {
-        Some(name) => s.channel_names.iter().position(|n| n == name).ok_or_else(|| {
-            bad(
-                "--channel",
-                format!("\"{name}\" is not a channel (have: {})", s.channel_names.join(", ")),
-            )
-        })?,
+        Some(name) => s
+            .channel_names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| {
+                bad(
+                    "--channel",
+                    format!(
+                        "\"{name}\" is not a channel (have: {})",
+                        s.channel_names.join(", ")
+                    ),
+                )
+            })?,
         None => {
             let l = opts.wavelength_nm.unwrap_or(550.0);
             (0..s.channel_qe.len())
@@ -248,7 +253,10 @@ pub fn run_emva1288(camera_path: &Path, opts: &Emva1288Options) -> Result<Emva12
     if !(eta > 0.0) {
         return Err(bad(
             "--wavelength-nm",
-            format!("channel {} has no QE at {wavelength_nm} nm", s.channel_names[c]),
+            format!(
+                "channel {} has no QE at {wavelength_nm} nm",
+                s.channel_names[c]
+            ),
         ));
     }
     if opts.spatial_frames < 3 {
@@ -321,20 +329,21 @@ pub fn run_emva1288(camera_path: &Path, opts: &Emva1288Options) -> Result<Emva12
         stack_dark: None,
     };
     let mut image_no = 0usize;
-    let mut frame = |rate: &ElectronRate, t: f64, ids: &[u64]| -> Result<(RawFrame, String), CliError> {
-        let f = crate::chain::simulate_frame(
-            &sensor,
-            rate,
-            &Shot::new(&sensor, t),
-            PatternSource::Maps(&fixed),
-            opts.seed,
-            ids,
-        );
-        let name = format!("image{image_no:05}.png");
-        image_no += 1;
-        write_png16(&img_dir.join(&name), &f)?;
-        Ok((f, name))
-    };
+    let mut frame =
+        |rate: &ElectronRate, t: f64, ids: &[u64]| -> Result<(RawFrame, String), CliError> {
+            let f = crate::chain::simulate_frame(
+                &sensor,
+                rate,
+                &Shot::new(&sensor, t),
+                PatternSource::Maps(&fixed),
+                opts.seed,
+                ids,
+            );
+            let name = format!("image{image_no:05}.png");
+            image_no += 1;
+            write_png16(&img_dir.join(&name), &f)?;
+            Ok((f, name))
+        };
     // Photon-transfer series: exposures t_i = i · t_sat / steps, i = 1 … 1.2 · steps.
     let n = opts.steps_to_saturation;
     let n_total = (n as f64 * 1.2).ceil() as usize;
@@ -344,7 +353,11 @@ pub fn run_emva1288(camera_path: &Path, opts: &Emva1288Options) -> Result<Emva12
         let photons: f64 = format!("{:.6}", photons_per_s * t).parse().unwrap_or(0.0);
         let (a, na) = frame(&rate, t, &[0, i as u64, 0])?;
         let (b, nb) = frame(&rate, t, &[0, i as u64, 1])?;
-        let _ = writeln!(desc, "b {} {photons:.6}\ni images/{na}\ni images/{nb}", fmt_ns(t));
+        let _ = writeln!(
+            desc,
+            "b {} {photons:.6}\ni images/{na}\ni images/{nb}",
+            fmt_ns(t)
+        );
         builder.bright.push((t, photons, pair_stats(&a.dn, &b.dn)));
         let (a, na) = frame(&dark_rate, t, &[1, i as u64, 0])?;
         let (b, nb) = frame(&dark_rate, t, &[1, i as u64, 1])?;
@@ -393,8 +406,12 @@ pub fn run_emva1288(camera_path: &Path, opts: &Emva1288Options) -> Result<Emva12
         spatial_frames: opts.spatial_frames,
         seed: opts.seed,
     };
-    let mut report = analyse(&builder, &camera_path.display().to_string(), sensor.adc_bits)
-        .map_err(|e| CliError::input(camera_path, e))?;
+    let mut report = analyse(
+        &builder,
+        &camera_path.display().to_string(),
+        sensor.adc_bits,
+    )
+    .map_err(|e| CliError::input(camera_path, e))?;
     report.setup = Some(setup);
     report.configured = Some(configured);
     write_outputs(&report, out)?;
@@ -434,7 +451,10 @@ fn reference_values(t: &TemporalResult, s: Option<&SpatialResult>) -> BTreeMap<S
     let m = |value: f64, uncertainty: f64| Measured { value, uncertainty };
     let k = &t.system_gain_dn_per_e;
     v.insert("K".into(), m(k.slope, k.slope_se));
-    v.insert("inverse_K".into(), m(1.0 / k.slope, k.slope_se / (k.slope * k.slope)));
+    v.insert(
+        "inverse_K".into(),
+        m(1.0 / k.slope, k.slope_se / (k.slope * k.slope)),
+    );
     let r = &t.responsivity_dn_per_photon;
     v.insert("R".into(), m(r.slope, r.slope_se));
     let q = &t.quantum_efficiency;
@@ -451,18 +471,33 @@ fn reference_values(t: &TemporalResult, s: Option<&SpatialResult>) -> BTreeMap<S
     let sm = t.snr_max;
     v.insert(
         "SNR_max_dB".into(),
-        m(20.0 * sm.value.log10(), 20.0 / std::f64::consts::LN_10 * sm.uncertainty / sm.value),
+        m(
+            20.0 * sm.value.log10(),
+            20.0 / std::f64::consts::LN_10 * sm.uncertainty / sm.value,
+        ),
     );
     v.insert(
         "SNR_max_bit".into(),
-        m(sm.value.log2(), sm.uncertainty / (sm.value * std::f64::consts::LN_2)),
+        m(
+            sm.value.log2(),
+            sm.uncertainty / (sm.value * std::f64::consts::LN_2),
+        ),
     );
-    v.insert("inverse_SNR_max".into(), m(100.0 / sm.value, 100.0 * sm.uncertainty / (sm.value * sm.value)));
+    v.insert(
+        "inverse_SNR_max".into(),
+        m(
+            100.0 / sm.value,
+            100.0 * sm.uncertainty / (sm.value * sm.value),
+        ),
+    );
     v.insert("DR".into(), t.dynamic_range);
     let dr = t.dynamic_range;
     v.insert(
         "DR_dB".into(),
-        m(20.0 * dr.value.log10(), 20.0 / std::f64::consts::LN_10 * dr.uncertainty / dr.value),
+        m(
+            20.0 * dr.value.log10(),
+            20.0 / std::f64::consts::LN_10 * dr.uncertainty / dr.value,
+        ),
     );
     if let Some(l) = &t.linearity {
         v.insert("LE_min".into(), m(l.le_min_percent, f64::NAN));
@@ -487,8 +522,14 @@ fn reference_values(t: &TemporalResult, s: Option<&SpatialResult>) -> BTreeMap<S
         v.insert("PRNU1288_row".into(), m(s.prnu_row_percent, f64::NAN));
         v.insert("PRNU1288_col".into(), m(s.prnu_col_percent, f64::NAN));
         v.insert("PRNU1288_pixel".into(), m(s.prnu_pixel_percent, f64::NAN));
-        v.insert("sigma_2_y_stack".into(), m(s.bright.var_stack_dn2, f64::NAN));
-        v.insert("sigma_2_y_stack_dark".into(), m(s.dark.var_stack_dn2, f64::NAN));
+        v.insert(
+            "sigma_2_y_stack".into(),
+            m(s.bright.var_stack_dn2, f64::NAN),
+        );
+        v.insert(
+            "sigma_2_y_stack_dark".into(),
+            m(s.dark.var_stack_dn2, f64::NAN),
+        );
         v.insert("s_2_y".into(), m(s.bright.s2_dn2, f64::NAN));
         v.insert("s_2_y_dark".into(), m(s.dark.s2_dn2, f64::NAN));
     }
@@ -510,7 +551,11 @@ fn reference_meta(name: &str) -> (&'static str, &'static str, &'static str) {
         "u_e_sat" => ("sensitivity", "e-", "Saturation Capacity"),
         "SNR_max" => ("sensitivity", "", "Signal-to-Noise Ratio"),
         "SNR_max_dB" => ("sensitivity", "dB", "Maximum Signal to Noise Ratio in Db"),
-        "SNR_max_bit" => ("sensitivity", "bit", "Maximum Signal to Noise Ratio in Bits"),
+        "SNR_max_bit" => (
+            "sensitivity",
+            "bit",
+            "Maximum Signal to Noise Ratio in Bits",
+        ),
         "inverse_SNR_max" => ("sensitivity", "%", "Inverse Maximum Signal to Noise Ratio"),
         "DR" => ("sensitivity", "", "Dynamic Range"),
         "DR_dB" => ("sensitivity", "dB", "Dynamic Range"),
@@ -519,9 +564,7 @@ fn reference_meta(name: &str) -> (&'static str, &'static str, &'static str) {
         "u_I_mean" => ("dark_current", "e-/s", "Dark Current from mean"),
         "u_I_var" => ("dark_current", "e-/s", "Dark Current from variance"),
         "DSNU1288_DN" => ("spatial", "DN", "DSNU in DN"),
-        "PRNU1288" | "PRNU1288_row" | "PRNU1288_col" | "PRNU1288_pixel" => {
-            ("spatial", "%", "PRNU")
-        }
+        "PRNU1288" | "PRNU1288_row" | "PRNU1288_col" | "PRNU1288_pixel" => ("spatial", "%", "PRNU"),
         "sigma_2_y_stack" | "sigma_2_y_stack_dark" => ("spatial", "DN2", "Temporal variance stack"),
         "s_2_y" | "s_2_y_dark" => ("spatial", "DN2", "Spatial variance from image"),
         _ => ("spatial", "e-", "DSNU"),
@@ -534,7 +577,10 @@ fn reference_meta(name: &str) -> (&'static str, &'static str, &'static str) {
 pub fn results_xml(values: &BTreeMap<String, Measured>) -> String {
     let mut sections: BTreeMap<&str, Vec<(&String, &Measured)>> = BTreeMap::new();
     for (k, v) in values {
-        sections.entry(reference_meta(k).0).or_default().push((k, v));
+        sections
+            .entry(reference_meta(k).0)
+            .or_default()
+            .push((k, v));
     }
     let mut x = String::from("<results>\n");
     for (sec, items) in sections {
@@ -583,7 +629,10 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
     let pts = &r.points;
     let k = t.system_gain_dn_per_e.slope;
     // Photon transfer.
-    let ptc: Vec<(f64, f64)> = pts.iter().map(|p| (p.signal_dn(), p.signal_var_dn2())).collect();
+    let ptc: Vec<(f64, f64)> = pts
+        .iter()
+        .map(|p| (p.signal_dn(), p.signal_var_dn2()))
+        .collect();
     let fit: Vec<(f64, f64)> = pts[..=t.fit_end_index]
         .iter()
         .map(|p| (p.signal_dn(), k * p.signal_dn()))
@@ -591,10 +640,16 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
     plots::line_plot(
         &out.join("photon_transfer.png"),
         "Photon transfer",
-        &[("σ²_y − σ²_y.dark".into(), ptc), (format!("fit K = {k:.4} DN/e⁻"), fit)],
+        &[
+            ("σ²_y − σ²_y.dark".into(), ptc),
+            (format!("fit K = {k:.4} DN/e⁻"), fit),
+        ],
         ("μ_y − μ_y.dark (DN)", "σ²_y − σ²_y.dark (DN²)"),
     )?;
-    figs.push(("photon_transfer.png".into(), "Photon transfer: the slope is K".into()));
+    figs.push((
+        "photon_transfer.png".into(),
+        "Photon transfer: the slope is K".into(),
+    ));
     // SNR against photons, with the model curve.
     let eta = t.quantum_efficiency.value;
     let sd = t.dark_noise_e.value;
@@ -602,7 +657,12 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
         .iter()
         .enumerate()
         .filter(|(i, p)| below(*i) && p.photons_per_pixel > 0.0)
-        .map(|(_, p)| (p.photons_per_pixel.log10(), (p.signal_dn() / p.bright.var_dn2.sqrt()).max(1e-3).log10()))
+        .map(|(_, p)| {
+            (
+                p.photons_per_pixel.log10(),
+                (p.signal_dn() / p.bright.var_dn2.sqrt()).max(1e-3).log10(),
+            )
+        })
         .collect();
     let model: Vec<(f64, f64)> = snr
         .iter()
@@ -614,9 +674,15 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
         &[("measured".into(), snr), ("model".into(), model)],
         ("log10 μ_p (photons)", "log10 SNR"),
     )?;
-    figs.push(("snr.png".into(), "SNR against irradiation, with the model curve".into()));
+    figs.push((
+        "snr.png".into(),
+        "SNR against irradiation, with the model curve".into(),
+    ));
     // Linearity and deviation.
-    let resp: Vec<(f64, f64)> = pts.iter().map(|p| (p.photons_per_pixel, p.signal_dn())).collect();
+    let resp: Vec<(f64, f64)> = pts
+        .iter()
+        .map(|p| (p.photons_per_pixel, p.signal_dn()))
+        .collect();
     plots::line_plot(
         &out.join("linearity.png"),
         "Linearity",
@@ -638,11 +704,20 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
             &[("δ_y".into(), dev)],
             ("μ_p (photons)", "deviation (%)"),
         )?;
-        figs.push(("deviation_linearity.png".into(), "Deviation from linearity (5–95 %)".into()));
+        figs.push((
+            "deviation_linearity.png".into(),
+            "Deviation from linearity (5–95 %)".into(),
+        ));
     }
     // Dark mean and variance against exposure time.
-    let dm: Vec<(f64, f64)> = pts.iter().map(|p| (p.exposure_s * 1e3, p.dark.mean_dn)).collect();
-    let dv: Vec<(f64, f64)> = pts.iter().map(|p| (p.exposure_s * 1e3, p.dark.var_dn2)).collect();
+    let dm: Vec<(f64, f64)> = pts
+        .iter()
+        .map(|p| (p.exposure_s * 1e3, p.dark.mean_dn))
+        .collect();
+    let dv: Vec<(f64, f64)> = pts
+        .iter()
+        .map(|p| (p.exposure_s * 1e3, p.dark.var_dn2))
+        .collect();
     plots::line_plot(
         &out.join("dark_mean.png"),
         "Dark signal against exposure time",
@@ -656,14 +731,37 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
         ("exposure (ms)", "σ²_y.dark (DN²)"),
     )?;
     figs.push(("dark_mean.png".into(), "Dark current from the mean".into()));
-    figs.push(("dark_variance.png".into(), "Dark current from the variance".into()));
+    figs.push((
+        "dark_variance.png".into(),
+        "Dark current from the variance".into(),
+    ));
     if let Some(s) = &r.spatial {
         let signal = s.bright.mean_dn - s.dark.mean_dn;
         for (name, title, dsnu, spec) in [
-            ("spectrogram_dsnu_h.png", "Horizontal spectrogram DSNU", true, &s.dsnu_spectrogram_h),
-            ("spectrogram_dsnu_v.png", "Vertical spectrogram DSNU", true, &s.dsnu_spectrogram_v),
-            ("spectrogram_prnu_h.png", "Horizontal spectrogram PRNU", false, &s.prnu_spectrogram_h),
-            ("spectrogram_prnu_v.png", "Vertical spectrogram PRNU", false, &s.prnu_spectrogram_v),
+            (
+                "spectrogram_dsnu_h.png",
+                "Horizontal spectrogram DSNU",
+                true,
+                &s.dsnu_spectrogram_h,
+            ),
+            (
+                "spectrogram_dsnu_v.png",
+                "Vertical spectrogram DSNU",
+                true,
+                &s.dsnu_spectrogram_v,
+            ),
+            (
+                "spectrogram_prnu_h.png",
+                "Horizontal spectrogram PRNU",
+                false,
+                &s.prnu_spectrogram_h,
+            ),
+            (
+                "spectrogram_prnu_v.png",
+                "Vertical spectrogram PRNU",
+                false,
+                &s.prnu_spectrogram_v,
+            ),
         ] {
             let dark_spec = if name.ends_with("_h.png") {
                 &s.dsnu_spectrogram_h
@@ -685,12 +783,27 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
                 })
                 .collect();
             let unit = if dsnu { "DSNU (e⁻)" } else { "PRNU (%)" };
-            plots::line_plot(&out.join(name), title, &[(unit.into(), ser)], ("frequency (cycles/pixel)", unit))?;
+            plots::line_plot(
+                &out.join(name),
+                title,
+                &[(unit.into(), ser)],
+                ("frequency (cycles/pixel)", unit),
+            )?;
             figs.push((name.into(), title.into()));
         }
         for (name, title, h, unit) in [
-            ("histogram_dsnu.png", "DSNU histogram", &s.dsnu_histogram_e, "dark signal − mean (e⁻)"),
-            ("histogram_prnu.png", "PRNU histogram (5×5 high-pass)", &s.prnu_histogram_percent, "deviation (%)"),
+            (
+                "histogram_dsnu.png",
+                "DSNU histogram",
+                &s.dsnu_histogram_e,
+                "dark signal − mean (e⁻)",
+            ),
+            (
+                "histogram_prnu.png",
+                "PRNU histogram (5×5 high-pass)",
+                &s.prnu_histogram_percent,
+                "deviation (%)",
+            ),
         ] {
             let ser: Vec<(f64, f64)> = h
                 .bin_lower
@@ -698,7 +811,12 @@ fn write_figures(r: &Emva1288Report, out: &Path) -> Result<Vec<(String, String)>
                 .zip(&h.counts)
                 .map(|(b, c)| (*b, (*c as f64 + 1.0).log10()))
                 .collect();
-            plots::line_plot(&out.join(name), title, &[("log10(1 + count)".into(), ser)], (unit, "log10(1 + pixels)"))?;
+            plots::line_plot(
+                &out.join(name),
+                title,
+                &[("log10(1 + count)".into(), ser)],
+                (unit, "log10(1 + pixels)"),
+            )?;
             figs.push((name.into(), title.into()));
         }
     }
@@ -749,7 +867,13 @@ fn report_html(r: &Emva1288Report, figs: &[(String, String)]) -> String {
     }
     h.push_str("<h2>Plots</h2>");
     for (f, cap) in figs {
-        let _ = write!(h, "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>", html_escape(f), html_escape(cap), html_escape(cap));
+        let _ = write!(
+            h,
+            "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
+            html_escape(f),
+            html_escape(cap),
+            html_escape(cap)
+        );
     }
     h.push_str("</body></html>\n");
     h
@@ -785,7 +909,8 @@ pub struct Descriptor {
 /// `i relative/path` lines (2 images = a photon-transfer pair, more = a spatial stack;
 /// `\` separators accepted).
 pub fn parse_descriptor(path: &Path) -> Result<Descriptor, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::input(path, format!("cannot read: {e}")))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| CliError::input(path, format!("cannot read: {e}")))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut fmt: Option<(u32, usize, usize)> = None;
     let mut blocks: Vec<DescriptorBlock> = Vec::new();
@@ -794,7 +919,12 @@ pub fn parse_descriptor(path: &Path) -> Result<Descriptor, CliError> {
             .parse::<f64>()
             .ok()
             .filter(|v| v.is_finite() && *v >= 0.0)
-            .ok_or_else(|| CliError::input(path, format!("line {line}: {what} \"{s}\" is not a number ≥ 0")))
+            .ok_or_else(|| {
+                CliError::input(
+                    path,
+                    format!("line {line}: {what} \"{s}\" is not a number ≥ 0"),
+                )
+            })
     };
     for (i, raw) in text.lines().enumerate() {
         let line = raw.trim();
@@ -807,57 +937,124 @@ pub fn parse_descriptor(path: &Path) -> Result<Descriptor, CliError> {
             "v" => {}
             "n" => {
                 if f.len() != 4 {
-                    return Err(CliError::input(path, format!("line {ln}: expected \"n bits width height\", got \"{line}\"")));
+                    return Err(CliError::input(
+                        path,
+                        format!("line {ln}: expected \"n bits width height\", got \"{line}\""),
+                    ));
                 }
                 let p = |s: &str| s.parse::<usize>().ok().filter(|&v| v > 0);
                 match (p(f[1]), p(f[2]), p(f[3])) {
                     (Some(b), Some(w), Some(h)) if b <= 16 => fmt = Some((b as u32, w, h)),
-                    _ => return Err(CliError::input(path, format!("line {ln}: \"{line}\": bits must be 1–16, width and height ≥ 1"))),
+                    _ => {
+                        return Err(CliError::input(
+                            path,
+                            format!(
+                                "line {ln}: \"{line}\": bits must be 1–16, width and height ≥ 1"
+                            ),
+                        ))
+                    }
                 }
             }
             "b" | "d" => {
                 let want = if f[0] == "b" { 3 } else { 2 };
                 if f.len() != want {
-                    return Err(CliError::input(path, format!("line {ln}: expected \"{}\", got \"{line}\"", if want == 3 { "b exposure_ns photons" } else { "d exposure_ns" })));
+                    return Err(CliError::input(
+                        path,
+                        format!(
+                            "line {ln}: expected \"{}\", got \"{line}\"",
+                            if want == 3 {
+                                "b exposure_ns photons"
+                            } else {
+                                "d exposure_ns"
+                            }
+                        ),
+                    ));
                 }
                 let t = num(f[1], ln, "exposure")? * 1e-9;
-                let p = if want == 3 { num(f[2], ln, "photon count")? } else { 0.0 };
-                blocks.push(DescriptorBlock { exposure_s: t, photons_per_pixel: p, images: Vec::new() });
+                let p = if want == 3 {
+                    num(f[2], ln, "photon count")?
+                } else {
+                    0.0
+                };
+                blocks.push(DescriptorBlock {
+                    exposure_s: t,
+                    photons_per_pixel: p,
+                    images: Vec::new(),
+                });
             }
             "i" => {
                 let Some(b) = blocks.last_mut() else {
-                    return Err(CliError::input(path, format!("line {ln}: image line before any \"b\" or \"d\" line")));
+                    return Err(CliError::input(
+                        path,
+                        format!("line {ln}: image line before any \"b\" or \"d\" line"),
+                    ));
                 };
                 if f.len() != 2 {
-                    return Err(CliError::input(path, format!("line {ln}: expected \"i path\", got \"{line}\"")));
+                    return Err(CliError::input(
+                        path,
+                        format!("line {ln}: expected \"i path\", got \"{line}\""),
+                    ));
                 }
                 b.images.push(dir.join(f[1].replace('\\', "/")));
             }
-            other => return Err(CliError::input(path, format!("line {ln}: unknown command \"{other}\""))),
+            other => {
+                return Err(CliError::input(
+                    path,
+                    format!("line {ln}: unknown command \"{other}\""),
+                ))
+            }
         }
     }
-    let (bits, width, height) = fmt.ok_or_else(|| CliError::input(path, "no \"n bits width height\" line"))?;
+    let (bits, width, height) =
+        fmt.ok_or_else(|| CliError::input(path, "no \"n bits width height\" line"))?;
     if let Some(b) = blocks.iter().find(|b| b.images.len() < 2) {
-        return Err(CliError::input(path, format!("the block at {} ns has {} image(s); at least 2 are needed", b.exposure_s * 1e9, b.images.len())));
+        return Err(CliError::input(
+            path,
+            format!(
+                "the block at {} ns has {} image(s); at least 2 are needed",
+                b.exposure_s * 1e9,
+                b.images.len()
+            ),
+        ));
     }
-    Ok(Descriptor { bits, width, height, blocks })
+    Ok(Descriptor {
+        bits,
+        width,
+        height,
+        blocks,
+    })
 }
 
 /// Reads an 8- or 16-bit greyscale image as DN (values as stored, not rescaled).
 fn read_gray(path: &Path, d: &Descriptor) -> Result<Vec<u16>, CliError> {
-    let img = image::open(path).map_err(|e| CliError::input(path, format!("cannot read image: {e}")))?;
+    let img =
+        image::open(path).map_err(|e| CliError::input(path, format!("cannot read image: {e}")))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     if (w, h) != (d.width, d.height) {
-        return Err(CliError::input(path, format!("image is {w}×{h}, the descriptor says {}×{}", d.width, d.height)));
+        return Err(CliError::input(
+            path,
+            format!(
+                "image is {w}×{h}, the descriptor says {}×{}",
+                d.width, d.height
+            ),
+        ));
     }
     let dn: Vec<u16> = match img {
         image::DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(u16::from).collect(),
         image::DynamicImage::ImageLuma16(b) => b.into_raw(),
-        _ => return Err(CliError::input(path, "expected a single-channel 8- or 16-bit image")),
+        _ => {
+            return Err(CliError::input(
+                path,
+                "expected a single-channel 8- or 16-bit image",
+            ))
+        }
     };
     let max = (1u32 << d.bits) - 1;
     if let Some(v) = dn.iter().find(|&&v| v as u32 > max) {
-        return Err(CliError::input(path, format!("value {v} DN exceeds the descriptor's {}-bit range", d.bits)));
+        return Err(CliError::input(
+            path,
+            format!("value {v} DN exceeds the descriptor's {}-bit range", d.bits),
+        ));
     }
     Ok(dn)
 }
@@ -866,7 +1063,12 @@ fn read_gray(path: &Path, d: &Descriptor) -> Result<Vec<u16>, CliError> {
 /// same outputs as `camsim emva1288` into `out`.
 pub fn run_descriptor(path: &Path, out: &Path) -> Result<Emva1288Report, CliError> {
     let d = parse_descriptor(path)?;
-    let mut b = SeriesBuilder { bright: Vec::new(), dark: Vec::new(), stack_bright: None, stack_dark: None };
+    let mut b = SeriesBuilder {
+        bright: Vec::new(),
+        dark: Vec::new(),
+        stack_bright: None,
+        stack_dark: None,
+    };
     // The temporal pairs, read and reduced in parallel (each pair's statistics are computed
     // alone, so the result does not depend on the thread count).
     let pair_stats_by_block: Vec<Option<_>> = d
@@ -876,7 +1078,10 @@ pub fn run_descriptor(path: &Path, out: &Path) -> Result<Emva1288Report, CliErro
             if blk.images.len() != 2 {
                 return Ok(None);
             }
-            let (a, c) = rayon::join(|| read_gray(&blk.images[0], &d), || read_gray(&blk.images[1], &d));
+            let (a, c) = rayon::join(
+                || read_gray(&blk.images[0], &d),
+                || read_gray(&blk.images[1], &d),
+            );
             Ok(Some(pair_stats(&a?, &c?)))
         })
         .collect::<Result<_, CliError>>()?;
@@ -899,15 +1104,23 @@ pub fn run_descriptor(path: &Path, out: &Path) -> Result<Emva1288Report, CliErro
                     acc.add(f).map_err(|e| CliError::input(p, e))?;
                 }
             }
-            let slot = if blk.photons_per_pixel == 0.0 { &mut b.stack_dark } else { &mut b.stack_bright };
+            let slot = if blk.photons_per_pixel == 0.0 {
+                &mut b.stack_dark
+            } else {
+                &mut b.stack_bright
+            };
             if slot.is_some() {
-                return Err(CliError::input(path, "more than one bright or dark spatial stack"));
+                return Err(CliError::input(
+                    path,
+                    "more than one bright or dark spatial stack",
+                ));
             }
             *slot = Some(acc);
         }
     }
     // With a single exposure time (irradiance series) every bright point uses that dark pair.
-    let report = analyse(&b, &path.display().to_string(), d.bits).map_err(|e| CliError::input(path, e))?;
+    let report =
+        analyse(&b, &path.display().to_string(), d.bits).map_err(|e| CliError::input(path, e))?;
     write_outputs(&report, out)?;
     Ok(report)
 }

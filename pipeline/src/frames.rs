@@ -360,7 +360,11 @@ pub fn write_frame(path: &Path, frame: &RawFrame) -> Result<(), CliError> {
             format!(
                 "frames are written as .png, .tif/.tiff or (with raw_format) .raw/.bin; \
                  \"{}\" is not one of them",
-                if ext.is_empty() { "no extension".to_string() } else { format!(".{ext}") }
+                if ext.is_empty() {
+                    "no extension".to_string()
+                } else {
+                    format!(".{ext}")
+                }
             ),
         ));
     }

@@ -54,7 +54,10 @@ mod tests {
         let e = guarded::<()>(Path::new("x.exr"), || panic!("index out of\nbounds"))
             .unwrap_err()
             .one_line();
-        assert_eq!(e, "x.exr: malformed file (the reader failed: index out of bounds)");
+        assert_eq!(
+            e,
+            "x.exr: malformed file (the reader failed: index out of bounds)"
+        );
         assert_eq!(guarded(Path::new("x"), || Ok(3)).unwrap(), 3);
     }
 }

@@ -33,9 +33,9 @@
 //!   the report wavelengths), as ref_lens.py's `mtf_best_focus_primary`; `--mtf-focus paraxial`
 //!   uses the paraxial image plane, `--mtf-focus best-mtf` the plane maximising the MTF.
 //!   On axis the tangential and sagittal MTFs coincide; their mean is reported.
-use crate::report::html_escape;
 use crate::error::CliError;
 use crate::plots;
+use crate::report::html_escape;
 use crate::staging::with_staging;
 use camsim_lens::analysis::pupil_grid;
 use camsim_lens::focus::MtfMerit;
@@ -44,8 +44,7 @@ use camsim_lens::readers::{
     decode_text, read_iset_dat, read_iset_json, read_zmx, zmx_glass_catalog, ZmxOptions,
 };
 use camsim_lens::{
-    Clipping, FieldModel, FieldModelOptions, LensPrescription, PrescriptionFile,
-    PsfKind,
+    Clipping, FieldModel, FieldModelOptions, LensPrescription, PrescriptionFile, PsfKind,
 };
 use clap::{Subcommand, ValueEnum};
 use serde_json::{json, Map, Value};
@@ -893,7 +892,6 @@ pub fn lens_report(
     })
 }
 
-
 /// Write report.json, report.html and the figures into `dir` (a staging folder); returns the
 /// relative file names.
 fn write_report_files(
@@ -1084,7 +1082,10 @@ fn write_report_files(
     h.push_str("</table>");
     h.push_str("<h2>Fields</h2><table><tr><th>fraction</th><th>angle (°)</th><th>chief-ray height (mm)</th><th>paraxial height (mm)</th><th>distortion (%)</th><th>lateral colour F−C (µm)</th>");
     for key in &opts.wavelengths {
-        h.push_str(&format!("<th>RMS spot {} nm (µm)</th>", html_escape(key.trim())));
+        h.push_str(&format!(
+            "<th>RMS spot {} nm (µm)</th>",
+            html_escape(key.trim())
+        ));
     }
     h.push_str("</tr>");
     for f in &fields {
@@ -1456,9 +1457,7 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                 crate::budget::check_work(
                     None,
                     "--psf-n",
-                    psfs * (psf_side * psf_side).max(
-                        (pupil_samples as f64).powi(2) * psf_n as f64,
-                    ),
+                    psfs * (psf_side * psf_side).max((pupil_samples as f64).powi(2) * psf_n as f64),
                     &format!("{psfs} PSFs of {psf_n}² samples"),
                 )?;
             }

@@ -17,8 +17,8 @@ pub mod diagnose_cmd;
 pub mod emva1288_cmd;
 pub mod error;
 pub mod frames;
-pub mod honest_color;
 pub mod guard;
+pub mod honest_color;
 pub mod lens_cmd;
 pub mod noise_profiles_cmd;
 #[doc = include_str!("../../docs/physics.md")]

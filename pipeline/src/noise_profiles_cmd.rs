@@ -121,7 +121,10 @@ fn analyse_into(
             .collect::<Vec<_>>());
     }
     let p = out.join("noise_profiles.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&summary).unwrap_or_default())
-        .map_err(|e| CliError::output(&p, e))?;
+    std::fs::write(
+        &p,
+        serde_json::to_string_pretty(&summary).unwrap_or_default(),
+    )
+    .map_err(|e| CliError::output(&p, e))?;
     Ok(summary)
 }

@@ -103,7 +103,10 @@ pub fn run_report_html(summary: &Value, figures: &[(&str, &str)]) -> String {
         if let Some(w) = summary.get("delta_e_scored_on").and_then(|v| v.as_str()) {
             h.push_str(&format!("<p>ΔE scored on {}.</p>", html_escape(w)));
         }
-        if let Some(rows) = summary.get("white_balance_comparison").and_then(|v| v.as_array()) {
+        if let Some(rows) = summary
+            .get("white_balance_comparison")
+            .and_then(|v| v.as_array())
+        {
             h.push_str("<h3>White balance (matrix fitted on the calibration capture, scored on this scene)</h3><table><tr><th>white balance</th><th>fitted mean ΔE2000</th><th>held-out mean ΔE2000</th><th>held-out max ΔE2000</th></tr>");
             for r in rows {
                 h.push_str(&format!(

@@ -5,11 +5,12 @@
 //! scene → optics → sensor (one noisy frame) → processor (demosaic, white balance, 3×3 colour
 //! correction fitted to the chart's D65 sRGB targets, sRGB) → display (Eq. 8), then metrics:
 //! per-patch SNR, ΔE76/ΔE2000 between desired and rendered sRGB, and figures.
+use crate::chain::{shot_scene, wavelength_grid};
 use crate::color_eval::{self, patch_means};
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure, SimulationFile};
 use crate::error::CliError;
+use crate::honest_color::{self, CaptureStats, WbMethod};
 use crate::plots;
-use crate::chain::{shot_scene, wavelength_grid};
 use crate::staging::with_staging;
 use crate::targets::target_from_value;
 use camsim_core::constants::SI;
@@ -20,7 +21,6 @@ use camsim_core::image::SpectralImage;
 use camsim_core::scene::{mean_luminance, Target};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_display::{show, DigitalImage, DisplayModel};
-use crate::honest_color::{self, CaptureStats, WbMethod};
 use camsim_isp::{
     demosaic_planes, fit_channel_matrix, macbeth_target_linear_srgb, srgb_decode, to_srgb16,
     to_srgb8, Bilateral, ChannelBalance, ChannelMatrix, ChannelPlanes, DemosaicMethod, Mosaic,
@@ -282,9 +282,22 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         return Err(bad(&path, format!("processor.white_balance: unknown value \"{white_balance}\" (expected none, grey_world, white_patch or known_illuminant)")));
     }
     let color_correction = p.color_correction.unwrap_or_else(|| {
-        if p.ccm.is_some() { "fixed" } else { "calibrated" }.into()
+        if p.ccm.is_some() {
+            "fixed"
+        } else {
+            "calibrated"
+        }
+        .into()
     });
-    if !["none", "macbeth_d65", "calibrated", "chart_in_image", "fixed"].contains(&color_correction.as_str()) {
+    if ![
+        "none",
+        "macbeth_d65",
+        "calibrated",
+        "chart_in_image",
+        "fixed",
+    ]
+    .contains(&color_correction.as_str())
+    {
         return Err(bad(&path, format!("processor.color_correction: unknown value \"{color_correction}\" (expected calibrated, chart_in_image, macbeth_d65, fixed or none)")));
     }
     let k_channels = camera.sensor.channel_names.len();
@@ -302,13 +315,18 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         (Some(_), c) => return Err(bad(&path, format!("processor.ccm is only used with color_correction \"fixed\" (have \"{c}\")"))),
         (None, _) => None,
     };
-    if color_correction == "none" && ChannelMatrix::select_rgb(&camera.sensor.channel_names).is_none() {
+    if color_correction == "none"
+        && ChannelMatrix::select_rgb(&camera.sensor.channel_names).is_none()
+    {
         return Err(bad(&path, format!(
             "processor.color_correction \"none\" shows channels r, g, b as they are, but the sensor has {}; use calibrated or fixed",
             camera.sensor.channel_names.join(", ")
         )));
     }
-    let calibration_illuminant = p.calibration_illuminant.clone().unwrap_or_else(|| "D65".into());
+    let calibration_illuminant = p
+        .calibration_illuminant
+        .clone()
+        .unwrap_or_else(|| "D65".into());
     camsim_core::data::illuminant(&calibration_illuminant)
         .map_err(|e| bad(&path, format!("processor.calibration_illuminant: {e}")))?;
     let tone = ToneCurve::parse(p.tone_curve.as_deref().unwrap_or("none"), p.tone_white)
@@ -645,7 +663,10 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         .map_err(|e| CliError::Other(format!("colour targets: {e}")))?;
     let scored = CaptureStats::of_planes(
         &planes,
-        chart.as_ref().map(|l| planes_patch_means(&planes, l)).unwrap_or_default(),
+        chart
+            .as_ref()
+            .map(|l| planes_patch_means(&planes, l))
+            .unwrap_or_default(),
         scene_illuminant.clone(),
     );
     let wb_gains = honest_color::gains(wb_method, &scored, &qe_all, &names)?;
@@ -664,7 +685,10 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
             ChannelMatrix::select_rgb(&names).expect("validated r, g, b"),
             "none".into(),
         ),
-        "fixed" => (r.ccm.clone().expect("validated ccm"), "fixed matrix from the config".into()),
+        "fixed" => (
+            r.ccm.clone().expect("validated ccm"),
+            "fixed matrix from the config".into(),
+        ),
         "chart_in_image" => {
             let samples: Vec<Vec<f64>> = scored
                 .patches
@@ -679,16 +703,36 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         }
         "calibrated_scene_light" => {
             let cal_scene = CaptureStats::calibration(&qe_all, &scene_illuminant)?;
-            let c = honest_color::calibrate(wb_method, &cal_scene, &qe_all, &names, &targets, r.white_level)?;
-            fitted = Some(c.fitted);
-            (c.matrix, "camera's spectral responses to the chart under the scene light".into())
-        }
-        _ => {
-            let c = honest_color::calibrate(wb_method, &calibration, &qe_all, &names, &targets, r.white_level)?;
+            let c = honest_color::calibrate(
+                wb_method,
+                &cal_scene,
+                &qe_all,
+                &names,
+                &targets,
+                r.white_level,
+            )?;
             fitted = Some(c.fitted);
             (
                 c.matrix,
-                format!("calibration capture: Macbeth chart under {} (noise-free camera responses)", r.calibration_illuminant),
+                "camera's spectral responses to the chart under the scene light".into(),
+            )
+        }
+        _ => {
+            let c = honest_color::calibrate(
+                wb_method,
+                &calibration,
+                &qe_all,
+                &names,
+                &targets,
+                r.white_level,
+            )?;
+            fitted = Some(c.fitted);
+            (
+                c.matrix,
+                format!(
+                    "calibration capture: Macbeth chart under {} (noise-free camera responses)",
+                    r.calibration_illuminant
+                ),
             )
         }
     };
@@ -717,11 +761,17 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                     .collect();
                 ys.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
                 let y = ys[((ys.len() as f64 * 0.99) as usize).min(ys.len() - 1)];
-                if y > 0.0 { r.white_level / y } else { 1.0 }
+                if y > 0.0 {
+                    r.white_level / y
+                } else {
+                    1.0
+                }
             }
         };
         let k32 = k as f32;
-        rgb.data.iter_mut().for_each(|p| p.iter_mut().for_each(|x| *x *= k32));
+        rgb.data
+            .iter_mut()
+            .for_each(|p| p.iter_mut().for_each(|x| *x *= k32));
         k
     } else {
         1.0
@@ -856,12 +906,15 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
             report["delta_e_2000_fitted"] = f.json_2000();
         }
         if let Some(rows) = &wb_comparison {
-            report["white_balance_comparison"] = json!(rows.iter().map(|w| json!({
-                "white_balance": w.method.name(), "gains": w.gains,
-                "fitted_delta_e_2000_mean": w.fitted_mean,
-                "held_out_delta_e_2000_mean": w.held_out_mean,
-                "held_out_delta_e_2000_max": w.held_out_max,
-            })).collect::<Vec<_>>());
+            report["white_balance_comparison"] = json!(rows
+                .iter()
+                .map(|w| json!({
+                    "white_balance": w.method.name(), "gains": w.gains,
+                    "fitted_delta_e_2000_mean": w.fitted_mean,
+                    "held_out_delta_e_2000_mean": w.held_out_mean,
+                    "held_out_delta_e_2000_max": w.held_out_max,
+                }))
+                .collect::<Vec<_>>());
         }
         plots::histogram(
             &put("delta_e_histogram.png"),

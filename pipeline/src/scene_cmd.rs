@@ -1,9 +1,9 @@
 //! `camsim scene`: write a shot's scene radiance and sensor irradiance as spectral OpenEXR
 //! (Fichet 2021 layout, W units), with its luminance and, optionally, the round-trip error of
 //! a k-term linear model (§2.A of the paper).
+use crate::chain::{shot_scene, wavelength_grid};
 use crate::config::CaptureSet;
 use crate::error::CliError;
-use crate::chain::{shot_scene, wavelength_grid};
 use camsim_core::constants::SI;
 use camsim_core::exr_io::{
     bands_energy_to_photons, write_atomically, write_spectral_exr, IRRADIANCE_UNITS, RADIANCE_UNITS,

@@ -11,8 +11,7 @@ use camsim_core::scene::{render_target, scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};
 use camsim_sensor::{
-    electron_rate, fixed_pattern, ElectronRate, FixedPattern,
-    PatternSource, SensorModel,
+    electron_rate, fixed_pattern, ElectronRate, FixedPattern, PatternSource, SensorModel,
 };
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -101,7 +100,8 @@ pub fn sampling_for(
         }
     };
     if let Some(d) = &optics.diffuser {
-        margin = margin.saturating_add(((2.0 * d.fwhm_um / p_um).ceil() as usize).saturating_add(1));
+        margin =
+            margin.saturating_add(((2.0 * d.fwhm_um / p_um).ceil() as usize).saturating_add(1));
     }
     // Effect blocks: the defocus blur's detail and reach, and the scene the distortion /
     // lateral-colour warp samples beyond the blurred region (the target continues there).
@@ -128,7 +128,8 @@ pub fn shot_memory_bytes(set: &CaptureSet, grid: &WavelengthGrid) -> f64 {
     let (os, margin) = sampling_for(&set.camera.optics, s, grid, set.simulation.oversample);
     let side = |n: usize| (n as f64 + 2.0 * margin as f64) * os as f64;
     let samples = side(s.rows) * side(s.cols);
-    crate::budget::f32_bytes(samples * grid.len() as f64, 3.0) + s.rows as f64 * s.cols as f64 * 48.0
+    crate::budget::f32_bytes(samples * grid.len() as f64, 3.0)
+        + s.rows as f64 * s.cols as f64 * 48.0
 }
 
 /// Refuse a capture set whose shots need more memory than the budget allows
@@ -306,11 +307,7 @@ fn uniform_electron_rate(
         let hd = fx.half_diagonal_m();
         let factor = |r: usize, c: usize| -> f64 {
             let (y, x) = ((r as f64 - yc) * dx, (c as f64 - xc) * dx);
-            let ri = if cos4 {
-                cos4_at(x * x + y * y)
-            } else {
-                1.0
-            };
+            let ri = if cos4 { cos4_at(x * x + y * y) } else { 1.0 };
             ri * fx
                 .falloff
                 .as_ref()

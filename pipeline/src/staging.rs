@@ -196,7 +196,9 @@ pub fn with_staging(
 /// Check that `rel` is a plain relative path (no root, no `..`, no `.` only).
 fn plain_relative(rel: &Path) -> bool {
     !rel.as_os_str().is_empty()
-        && rel.components().all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
+        && rel
+            .components()
+            .all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
         && rel.components().any(|c| matches!(c, Component::Normal(_)))
 }
 
@@ -231,7 +233,10 @@ fn commit(out: &Path, staging: &Path, files: &[PathBuf]) -> Result<(), CliError>
         }
         let dst = out.join(&rel);
         if dst.is_dir() {
-            return Err(CliError::output(&dst, "a folder is in the way of this file"));
+            return Err(CliError::output(
+                &dst,
+                "a folder is in the way of this file",
+            ));
         }
         let mut anc = rel.parent();
         while let Some(a) = anc.filter(|a| !a.as_os_str().is_empty()) {
@@ -326,8 +331,13 @@ mod tests {
     fn a_failed_set_leaves_the_old_files_untouched() {
         let t = tempfile::tempdir().unwrap();
         let out = t.path().join("out");
-        with_staging(&out, |s| Ok(vec![write(s, "a.txt", "old a"), write(s, "b/c.txt", "old c")]))
-            .unwrap();
+        with_staging(&out, |s| {
+            Ok(vec![
+                write(s, "a.txt", "old a"),
+                write(s, "b/c.txt", "old c"),
+            ])
+        })
+        .unwrap();
         let before = listing(&out);
         // A duplicate path, a folder in the way, a file in the way: nothing changes.
         let dup = with_staging(&out, |s| {
@@ -339,7 +349,10 @@ mod tests {
         let folder = with_staging(&out, |s| {
             Ok(vec![write(s, "a.txt", "new a"), write(s, "d.txt", "new d")])
         });
-        assert!(folder.unwrap_err().one_line().contains("folder is in the way"));
+        assert!(folder
+            .unwrap_err()
+            .one_line()
+            .contains("folder is in the way"));
         std::fs::remove_dir(out.join("d.txt")).unwrap();
         assert_eq!(listing(&out), before);
         let file = with_staging(&out, |s| {
@@ -362,7 +375,7 @@ mod tests {
         assert!(r.is_err());
         assert_eq!(listing(&out), before);
         assert_eq!(std::fs::read_dir(&out).unwrap().count(), 2); // a.txt, b/
-        // A good set replaces the old one.
+                                                                 // A good set replaces the old one.
         with_staging(&out, |s| Ok(vec![write(s, "a.txt", "new a")])).unwrap();
         assert_eq!(std::fs::read_to_string(out.join("a.txt")).unwrap(), "new a");
     }

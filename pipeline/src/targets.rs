@@ -88,7 +88,11 @@ fn radiance_checked(s: Spectrum, k: &str, photons: bool) -> Result<Spectrum, Str
         return Err(format!(".{k}: negative radiance {v} at {w} nm"));
     }
     // photons/(s·sr·m²·nm) at 1000 nm per W/(sr·m²·nm): λ/(hc) ≈ 5.03e18.
-    let max = if photons { MAX_RADIANCE_W * 5.03e18 } else { MAX_RADIANCE_W };
+    let max = if photons {
+        MAX_RADIANCE_W * 5.03e18
+    } else {
+        MAX_RADIANCE_W
+    };
     let peak = match &s {
         Spectrum::Sampled { values, .. } => values.iter().fold(0.0f64, |a, &v| a.max(v.abs())),
         Spectrum::Affine { .. } => (300..=1200)
@@ -99,7 +103,11 @@ fn radiance_checked(s: Spectrum, k: &str, photons: bool) -> Result<Spectrum, Str
         return Err(format!(
             ".{k}: radiance {peak:e} is over the limit of {max:e} {} (no physical source is \
              that bright; docs/limits.md)",
-            if photons { "photons/(s·sr·m²·nm)" } else { "W/(sr·m²·nm)" }
+            if photons {
+                "photons/(s·sr·m²·nm)"
+            } else {
+                "W/(sr·m²·nm)"
+            }
         ));
     }
     Ok(if photons { s } else { to_photons(&s) })
@@ -239,12 +247,18 @@ pub fn target_from_value(
             let exr = read_exr_target(&p, limit).map_err(|e| format!(".file: {}", e.one_line()))?;
             let mut img = exr.image;
             let photon_file = photons || exr.emissive_units.to_lowercase().contains("photon");
-            let max = if photon_file { MAX_RADIANCE_W * 5.03e18 } else { MAX_RADIANCE_W };
-            let peak = img
-                .planes
-                .iter()
-                .flatten()
-                .fold(0.0f32, |a, &v| if v.is_nan() { f32::INFINITY } else { a.max(v.abs()) });
+            let max = if photon_file {
+                MAX_RADIANCE_W * 5.03e18
+            } else {
+                MAX_RADIANCE_W
+            };
+            let peak = img.planes.iter().flatten().fold(0.0f32, |a, &v| {
+                if v.is_nan() {
+                    f32::INFINITY
+                } else {
+                    a.max(v.abs())
+                }
+            });
             if !(peak as f64 <= max) {
                 return Err(format!(
                     ".file: {}: a radiance of {peak:e} is over the limit of {max:e} (or not a \
@@ -312,7 +326,8 @@ pub fn target_from_value(
                 radiance: o.radiance("radiance", None)?,
                 background: o.radiance("background", Some(0.0))?,
                 spacing_m: at_least(o.num("spacing_px", Some(16.0))?, 1.0, "spacing_px")? * pitch,
-                point_size_m: at_least(o.num("point_size_px", Some(1.0))?, 1e-3, "point_size_px")? * pitch,
+                point_size_m: at_least(o.num("point_size_px", Some(1.0))?, 1e-3, "point_size_px")?
+                    * pitch,
             }
         }
         "grid_lines" => {
@@ -321,7 +336,8 @@ pub fn target_from_value(
                 radiance: o.radiance("radiance", None)?,
                 background: o.radiance("background", Some(0.0))?,
                 spacing_m: at_least(o.num("spacing_px", Some(16.0))?, 1.0, "spacing_px")? * pitch,
-                line_width_m: at_least(o.num("line_width_px", Some(1.0))?, 1e-3, "line_width_px")? * pitch,
+                line_width_m: at_least(o.num("line_width_px", Some(1.0))?, 1e-3, "line_width_px")?
+                    * pitch,
             }
         }
         other => {

@@ -16,21 +16,19 @@
 //! set that `camsim simulate --seed S` wrote, with seed S and the same camera, reproduces the
 //! recording exactly. Outputs: DIR/validation.json, DIR/report.html and the figures, all or
 //! nothing.
-use crate::report::html_escape;
+use crate::chain::{shot_electron_rate, wavelength_grid};
 use crate::color_eval::{patch_delta_e, through_srgb8};
 use crate::config::CaptureSet;
 use crate::error::CliError;
 use crate::plots;
 use crate::raw_input::read_frame_with;
-use crate::chain::{shot_electron_rate, wavelength_grid};
+use crate::report::html_escape;
 use crate::staging::with_staging;
 use camsim_core::scene::Target;
 use camsim_core::RawFrame;
 use camsim_isp::{fit_color_correction, macbeth_target_linear_srgb};
 use camsim_metrics::{patch_sample_rect, ChartLayout};
-use camsim_sensor::{
-    fixed_pattern, ElectronRate, FixedPattern, PatternSource, SensorModel, Shot,
-};
+use camsim_sensor::{fixed_pattern, ElectronRate, FixedPattern, PatternSource, SensorModel, Shot};
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -262,7 +260,6 @@ fn channel_colour(name: &str, k: usize) -> [u8; 3] {
         _ => [[120, 60, 160], [200, 140, 20], [20, 160, 160], [90, 90, 90]][k % 4],
     }
 }
-
 
 /// Checks every recorded frame (readable, the sensor's size, within the ADC range) before
 /// anything is simulated.

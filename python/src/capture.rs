@@ -8,9 +8,7 @@ use camsim_pipeline::config::{
     CameraFile, CaptureSet as PlCaptureSet, CapturesFile, ShotFile, SimulationFile,
 };
 use camsim_pipeline::error::CliError;
-use camsim_pipeline::simulate::{
-    shot_scene, simulate_each, wavelength_grid, SimOutput,
-};
+use camsim_pipeline::simulate::{shot_scene, simulate_each, wavelength_grid, SimOutput};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
@@ -97,16 +95,10 @@ fn run_each(
     let prog = Progress::new(progress);
     let res = py.detach(|| {
         let mut outs = Vec::new();
-        let ex = simulate_each(
-            set,
-            seed,
-            expected,
-            &mut |d, t| prog.tick(d, t),
-            &mut |o| {
-                outs.push(o);
-                Ok(())
-            },
-        )?;
+        let ex = simulate_each(set, seed, expected, &mut |d, t| prog.tick(d, t), &mut |o| {
+            outs.push(o);
+            Ok(())
+        })?;
         Ok::<_, CliError>((outs, ex))
     });
     prog.finish()?;
@@ -213,11 +205,26 @@ impl Camera {
             .collect();
         let d = PyDict::new(py);
         let n = c.len();
-        d.set_item("snr_db", arr(py, c.iter().map(|x| x.snr_db).collect(), &[n])?)?;
-        d.set_item("shot_db", arr(py, c.iter().map(|x| x.shot_db).collect(), &[n])?)?;
-        d.set_item("read_db", arr(py, c.iter().map(|x| x.read_db).collect(), &[n])?)?;
-        d.set_item("dsnu_db", arr(py, c.iter().map(|x| x.dsnu_db).collect(), &[n])?)?;
-        d.set_item("prnu_db", arr(py, c.iter().map(|x| x.prnu_db).collect(), &[n])?)?;
+        d.set_item(
+            "snr_db",
+            arr(py, c.iter().map(|x| x.snr_db).collect(), &[n])?,
+        )?;
+        d.set_item(
+            "shot_db",
+            arr(py, c.iter().map(|x| x.shot_db).collect(), &[n])?,
+        )?;
+        d.set_item(
+            "read_db",
+            arr(py, c.iter().map(|x| x.read_db).collect(), &[n])?,
+        )?;
+        d.set_item(
+            "dsnu_db",
+            arr(py, c.iter().map(|x| x.dsnu_db).collect(), &[n])?,
+        )?;
+        d.set_item(
+            "prnu_db",
+            arr(py, c.iter().map(|x| x.prnu_db).collect(), &[n])?,
+        )?;
         Ok(d)
     }
 
@@ -314,9 +321,7 @@ impl Camera {
             base_dir,
         )?;
         let grid = wavelength_grid(&set);
-        let scene = py
-            .detach(|| shot_scene(&set, 0, &grid))
-            .map_err(err)?;
+        let scene = py.detach(|| shot_scene(&set, 0, &grid)).map_err(err)?;
         Ok(Scene::from_radiance(scene, grid))
     }
 
@@ -638,11 +643,7 @@ impl CaptureSet {
 /// `out` (no config: the paper's §3 setup). Returns summary.json.
 #[pyfunction]
 #[pyo3(signature = (out, config=None))]
-fn run<'py>(
-    py: Python<'py>,
-    out: PathBuf,
-    config: Option<PathBuf>,
-) -> PyResult<Bound<'py, PyAny>> {
+fn run<'py>(py: Python<'py>, out: PathBuf, config: Option<PathBuf>) -> PyResult<Bound<'py, PyAny>> {
     let s = py
         .detach(|| camsim_pipeline::run::run(config.as_deref(), &out, false))
         .map_err(err)?;

@@ -2,7 +2,9 @@
 //! wave-optics PSF and MTF, the `lens report` numbers and the field model.
 use crate::{arr, err, err_msg, json_text, json_to_py, vec1};
 use camsim_lens::analysis::pupil_grid;
-use camsim_lens::{Clipping, FieldModel, FieldModelOptions, GlassCatalog, LensPrescription, PsfKind};
+use camsim_lens::{
+    Clipping, FieldModel, FieldModelOptions, GlassCatalog, LensPrescription, PsfKind,
+};
 use camsim_pipeline::error::CliError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -224,7 +226,10 @@ impl Lens {
         d.set_item("paraxial_height_mm", p.paraxial_height_mm)?;
         d.set_item("real_height_mm", p.real_height_mm)?;
         d.set_item("distortion_pct", p.distortion_pct)?;
-        d.set_item("chief_height_by_wavelength_mm", p.chief_height_by_wavelength_mm)?;
+        d.set_item(
+            "chief_height_by_wavelength_mm",
+            p.chief_height_by_wavelength_mm,
+        )?;
         d.set_item("lateral_colour_um", p.lateral_colour_um)?;
         Ok(d)
     }
@@ -270,13 +275,8 @@ impl Lens {
         }
         let w = py
             .detach(|| {
-                self.lens.wave_optics(
-                    field_deg,
-                    self.wl(wavelength_nm),
-                    n,
-                    pad,
-                    &freq_cyc_per_mm,
-                )
+                self.lens
+                    .wave_optics(field_deg, self.wl(wavelength_nm), n, pad, &freq_cyc_per_mm)
             })
             .map_err(|e| self.lerr(e))?;
         let d = PyDict::new(py);
@@ -327,8 +327,8 @@ impl Lens {
             grid,
             mtf_lp_mm: mtf_lp_mm.unwrap_or_else(|| {
                 vec![
-                    0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0, 120.0,
-                    140.0, 160.0, 180.0, 200.0,
+                    0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0, 120.0, 140.0,
+                    160.0, 180.0, 200.0,
                 ]
             }),
             mtf_focus,

@@ -53,8 +53,10 @@ pub(crate) fn json_to_py<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py,
         }
         Value::String(s) => s.into_pyobject(py)?.into_any(),
         Value::Array(a) => {
-            let items: Vec<Bound<'py, PyAny>> =
-                a.iter().map(|x| json_to_py(py, x)).collect::<PyResult<_>>()?;
+            let items: Vec<Bound<'py, PyAny>> = a
+                .iter()
+                .map(|x| json_to_py(py, x))
+                .collect::<PyResult<_>>()?;
             PyList::new(py, items)?.into_any()
         }
         Value::Object(m) => {
@@ -101,7 +103,9 @@ pub(crate) fn arr<'py, T: numpy::Element>(
     v: Vec<T>,
     shape: &[usize],
 ) -> PyResult<Bound<'py, PyAny>> {
-    Ok(PyArray1::from_vec(py, v).reshape(shape.to_vec())?.into_any())
+    Ok(PyArray1::from_vec(py, v)
+        .reshape(shape.to_vec())?
+        .into_any())
 }
 
 /// Call an optional Python progress callback `cb(done, total)` from a thread without the GIL;

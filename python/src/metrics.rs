@@ -184,7 +184,11 @@ fn pairwise<'py>(
             "lab1 and lab2 differ in shape: {sa:?} vs {sb:?}"
         )));
     }
-    let out: Vec<f64> = ta.iter().zip(&tb).map(|(x, y)| f(lab(*x), lab(*y))).collect();
+    let out: Vec<f64> = ta
+        .iter()
+        .zip(&tb)
+        .map(|(x, y)| f(lab(*x), lab(*y)))
+        .collect();
     arr(py, out, &sa)
 }
 
@@ -314,7 +318,9 @@ fn psnr_db(
     let (va, sa) = f64_values(&a);
     let (vb, sb) = f64_values(&b);
     if sa != sb {
-        return Err(err_msg(format!("a and b differ in shape: {sa:?} vs {sb:?}")));
+        return Err(err_msg(format!(
+            "a and b differ in shape: {sa:?} vs {sb:?}"
+        )));
     }
     let fa: Vec<f32> = va.iter().map(|&x| x as f32).collect();
     let fb: Vec<f32> = vb.iter().map(|&x| x as f32).collect();

@@ -59,7 +59,8 @@ fn image_from_array(
     if let Some(x) = v.iter().find(|x| !x.is_finite()) {
         return Err(err_msg(format!("radiance: non-finite value {x}")));
     }
-    let grid = WavelengthGrid::new(wavelength_nm).map_err(|e| err_msg(format!("wavelength_nm: {e}")))?;
+    let grid =
+        WavelengthGrid::new(wavelength_nm).map_err(|e| err_msg(format!("wavelength_nm: {e}")))?;
     let mut planes = vec![vec![0f32; r * c]; b];
     for i in 0..r * c {
         for (k, p) in planes.iter_mut().enumerate() {
@@ -441,8 +442,8 @@ fn read_exr_channels<'py>(
     py: Python<'py>,
     path: PathBuf,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-    let (rows, cols, chans, _) = camsim_core::exr_io::read_channels(&path)
-        .map_err(|e| err(CliError::input(&path, e)))?;
+    let (rows, cols, chans, _) =
+        camsim_core::exr_io::read_channels(&path).map_err(|e| err(CliError::input(&path, e)))?;
     let d = pyo3::types::PyDict::new(py);
     for (name, v) in chans {
         d.set_item(name, arr(py, v, &[rows, cols])?)?;

@@ -374,7 +374,11 @@ fn spectral_extra(cx: &Ctx, what: &str, v: &Value) -> Result<Spectrum, RenderErr
                 return Err(cx.err(format!("{what}: negative value {x} at {w} nm")));
             }
             // The renderer works in f32: a larger value would become +∞ and its light NaN.
-            if let Spectrum::Sampled { wavelength_nm, values } = &s {
+            if let Spectrum::Sampled {
+                wavelength_nm,
+                values,
+            } = &s
+            {
                 if let Some((w, x)) = wavelength_nm
                     .iter()
                     .zip(values)

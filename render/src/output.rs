@@ -64,7 +64,10 @@ pub fn write_exr(path: &Path, out: &RenderOutput, ch: ExrChannels) -> Result<(),
     }
     channels.push(ExrChannel::new("Z", out.depth_z_m.clone()));
     if ch.mitsuba {
-        channels.push(ExrChannel::new("depth_center.T", out.depth_center_m.clone()));
+        channels.push(ExrChannel::new(
+            "depth_center.T",
+            out.depth_center_m.clone(),
+        ));
         if !out.depth_mean_m.is_empty() {
             channels.push(ExrChannel::new("depth.T", out.depth_mean_m.clone()));
         }
@@ -150,13 +153,18 @@ pub fn write_planes_exr(
         .into_iter()
         .map(|(n, p)| ExrChannel::new(n, p))
         .collect();
-    write_exr_channels(path, width, height, channels, &ExrHeader {
+    write_exr_channels(
+        path,
+        width,
+        height,
+        channels,
+        &ExrHeader {
             emissive_units: Some(units.to_string()),
             ..ExrHeader::default()
-        }).map_err(
-        |msg| RenderError::Output {
-            path: path.display().to_string(),
-            msg,
         },
     )
+    .map_err(|msg| RenderError::Output {
+        path: path.display().to_string(),
+        msg,
+    })
 }

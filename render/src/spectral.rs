@@ -260,7 +260,9 @@ struct FitTables {
     d65_norm: TabulatedSpectrum,
 }
 
-pub use camsim_core::colorimetry::{LINEAR_SRGB_TO_XYZ as SRGB_TO_XYZ, XYZ_TO_LINEAR_SRGB as XYZ_TO_SRGB};
+pub use camsim_core::colorimetry::{
+    LINEAR_SRGB_TO_XYZ as SRGB_TO_XYZ, XYZ_TO_LINEAR_SRGB as XYZ_TO_SRGB,
+};
 
 fn fit_tables() -> &'static FitTables {
     static T: OnceLock<FitTables> = OnceLock::new();

@@ -399,7 +399,6 @@ pub(crate) fn hot_row(map: &[HotPixel], r: usize) -> &[HotPixel] {
     &map[a..b]
 }
 
-
 /// Checks the effect blocks against the sensor; errors name the block's key.
 pub(crate) fn validate(sensor: &SensorModel) -> Result<(), SensorError> {
     let bad = |field: &str, value: f64, reason: &str| SensorError::InvalidField {

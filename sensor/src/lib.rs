@@ -36,15 +36,13 @@ use thiserror::Error;
 
 pub use camsim_core::{RawFrame, SensorIrradiance};
 pub use effects::{
-    apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map,
-    Crosstalk, HotPixel, HotPixels, IrLeakage, Nonlinearity, QeShift,
-    SensorEffects,
+    apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map, Crosstalk, HotPixel,
+    HotPixels, IrLeakage, Nonlinearity, QeShift, SensorEffects,
 };
 pub use integrate::{box_weights, electron_rate};
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
-    nonlinearity_magnitude,
-    PatternSource, FIXED_PATTERN_TAG,
+    nonlinearity_magnitude, PatternSource, FIXED_PATTERN_TAG,
 };
 
 /// Errors of the sensor stage.

@@ -154,7 +154,9 @@ impl PoissonSampler {
             if mean == f64::INFINITY {
                 return f64::INFINITY;
             }
-            return (mean + mean.sqrt() * self.normal.sample(rng)).floor().max(0.0);
+            return (mean + mean.sqrt() * self.normal.sample(rng))
+                .floor()
+                .max(0.0);
         }
         if mean < 10.0 {
             if mean != self.mean {

@@ -42,7 +42,10 @@ fn huge_sensors_are_refused_by_the_budget() {
         cam["sensor"]["rows"] = rows;
         cam["sensor"]["cols"] = cols;
         let d = set(&cam, &caps);
-        refused(&simulate(d.path()), &["camera.json", "sensor.rows/cols", "memory", "--max-memory"]);
+        refused(
+            &simulate(d.path()),
+            &["camera.json", "sensor.rows/cols", "memory", "--max-memory"],
+        );
         assert!(!d.path().join("sim").exists());
     }
 }
@@ -68,13 +71,17 @@ fn huge_blurs_are_refused_by_the_budget() {
 #[test]
 fn bad_wavelength_grids_are_refused() {
     let (cam, mut caps) = base();
-    caps["simulation"] = json!({"wavelength_nm": {"start_nm": 400, "stop_nm": 700, "step_nm": 1e-9}});
+    caps["simulation"] =
+        json!({"wavelength_nm": {"start_nm": 400, "stop_nm": 700, "step_nm": 1e-9}});
     let d = set(&cam, &caps);
     refused(&simulate(d.path()), &["simulation.wavelength_nm", "bands"]);
     // one band (start = stop) has no width and would lose all the light
     caps["simulation"] = json!({"wavelength_nm": {"start_nm": 550, "stop_nm": 550, "step_nm": 10}});
     let d = set(&cam, &caps);
-    refused(&simulate(d.path()), &["simulation.wavelength_nm", "two wavelengths"]);
+    refused(
+        &simulate(d.path()),
+        &["simulation.wavelength_nm", "two wavelengths"],
+    );
 }
 
 fn run_config(d: &Path, cfg: &Value) -> Outcome {
@@ -95,7 +102,10 @@ fn run_display_and_render_budgets() {
     );
     let scene = repo().join("scenes/uniform_emitter.gltf");
     refused(
-        &run_config(d.path(), &json!({"render": {"scene": scene, "spp": 4_000_000_000u64}})),
+        &run_config(
+            d.path(),
+            &json!({"render": {"scene": scene, "spp": 4_000_000_000u64}}),
+        ),
         &["run.json", "render.spp", "samples", "--max-work"],
     );
     // radiance of 1e30 W/(sr·m²·nm) (the scene EXR used to be all +Inf)
@@ -125,7 +135,10 @@ fn huge_study_grids_are_refused_before_enumeration() {
                       "parameters": params});
     std::fs::write(d.path().join("s.json"), spec.to_string()).unwrap();
     refused(
-        &camsim_limited(&["study", "s.json", "--out", "o", "--max-points", "1"], d.path()),
+        &camsim_limited(
+            &["study", "s.json", "--out", "o", "--max-points", "1"],
+            d.path(),
+        ),
         &["s.json", "parameters", "1.000e10 points", "memory"],
     );
 }
@@ -135,13 +148,35 @@ fn study_include_cycles_are_refused() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path();
     // a file that includes itself
-    std::fs::write(p.join("self.json"), json!({"point": {"camera": {"$file": "self.json"}}}).to_string()).unwrap();
-    refused(&camsim_limited(&["study", "self.json", "--out", "o"], p), &["self.json", "cycle"]);
+    std::fs::write(
+        p.join("self.json"),
+        json!({"point": {"camera": {"$file": "self.json"}}}).to_string(),
+    )
+    .unwrap();
+    refused(
+        &camsim_limited(&["study", "self.json", "--out", "o"], p),
+        &["self.json", "cycle"],
+    );
     // a → b → a
-    std::fs::write(p.join("a.json"), json!({"x": {"$file": "b.json"}}).to_string()).unwrap();
-    std::fs::write(p.join("b.json"), json!({"y": {"$file": "a.json"}}).to_string()).unwrap();
-    std::fs::write(p.join("s.json"), json!({"point": {"camera": {"$file": "a.json"}}}).to_string()).unwrap();
-    refused(&camsim_limited(&["study", "s.json", "--out", "o"], p), &["s.json", "a.json", "cycle"]);
+    std::fs::write(
+        p.join("a.json"),
+        json!({"x": {"$file": "b.json"}}).to_string(),
+    )
+    .unwrap();
+    std::fs::write(
+        p.join("b.json"),
+        json!({"y": {"$file": "a.json"}}).to_string(),
+    )
+    .unwrap();
+    std::fs::write(
+        p.join("s.json"),
+        json!({"point": {"camera": {"$file": "a.json"}}}).to_string(),
+    )
+    .unwrap();
+    refused(
+        &camsim_limited(&["study", "s.json", "--out", "o"], p),
+        &["s.json", "a.json", "cycle"],
+    );
 }
 
 fn lens() -> String {
@@ -157,26 +192,56 @@ fn lens_commands_are_budgeted() {
     let l = lens();
     refused(
         &camsim_limited(
-            &["lens", "spot", &l, "--field-fraction", "0", "--wavelength-nm", "587.6", "--rays", "1000000000000"],
+            &[
+                "lens",
+                "spot",
+                &l,
+                "--field-fraction",
+                "0",
+                "--wavelength-nm",
+                "587.6",
+                "--rays",
+                "1000000000000",
+            ],
             d.path(),
         ),
         &["--rays"],
     );
     refused(
-        &camsim_limited(&["lens", "report", &l, "--grid", "100000", "--out", "o"], d.path()),
+        &camsim_limited(
+            &["lens", "report", &l, "--grid", "100000", "--out", "o"],
+            d.path(),
+        ),
         &["--grid"],
     );
     refused(
-        &camsim_limited(&["lens", "field-model", &l, "--psf-n", "100000", "--out", "fm.json"], d.path()),
+        &camsim_limited(
+            &[
+                "lens",
+                "field-model",
+                &l,
+                "--psf-n",
+                "100000",
+                "--out",
+                "fm.json",
+            ],
+            d.path(),
+        ),
         &["--psf-n", "memory"],
     );
     assert!(!d.path().join("o").exists());
     // an MTF frequency of 1e308 cycles/mm used to index out of bounds: far beyond the cutoff
     // the MTF is 0 (a physical result); a non-finite or negative one is refused
-    let o = camsim_limited(&["lens", "report", &l, "--mtf-lp-mm", "0,1e308", "--json"], d.path());
+    let o = camsim_limited(
+        &["lens", "report", &l, "--mtf-lp-mm", "0,1e308", "--json"],
+        d.path(),
+    );
     o.assert_ok();
     refused(
-        &camsim_limited(&["lens", "report", &l, "--mtf-lp-mm=-5", "--json"], d.path()),
+        &camsim_limited(
+            &["lens", "report", &l, "--mtf-lp-mm=-5", "--json"],
+            d.path(),
+        ),
         &["--mtf-lp-mm"],
     );
 }
@@ -214,7 +279,12 @@ fn scene(d: &Path, edit: impl FnOnce(&mut Value)) -> String {
 }
 
 fn render(d: &Path, scene: &str, spp: &str) -> Outcome {
-    camsim_limited(&["render", scene, "--width", "8", "--spp", spp, "--out", "r.exr"], d)
+    camsim_limited(
+        &[
+            "render", scene, "--width", "8", "--spp", spp, "--out", "r.exr",
+        ],
+        d,
+    )
 }
 
 #[test]
@@ -222,11 +292,18 @@ fn hostile_gltf_scenes() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path();
     for a in [1e-9, 0.0, -1.0] {
-        let s = scene(p, |v| v["cameras"][0]["perspective"]["aspectRatio"] = json!(a));
+        let s = scene(p, |v| {
+            v["cameras"][0]["perspective"]["aspectRatio"] = json!(a)
+        });
         refused(&render(p, &s, "1"), &["scene.gltf", "aspectRatio"]);
     }
-    let s = scene(p, |v| v["nodes"][2]["rotation"] = json!([0.0, 0.0, 0.0, 0.0]));
-    refused(&render(p, &s, "1"), &["scene.gltf", "rotation", "unit quaternion"]);
+    let s = scene(p, |v| {
+        v["nodes"][2]["rotation"] = json!([0.0, 0.0, 0.0, 0.0])
+    });
+    refused(
+        &render(p, &s, "1"),
+        &["scene.gltf", "rotation", "unit quaternion"],
+    );
     let s = scene(p, |v| {
         v["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(999)
     });
@@ -255,7 +332,12 @@ fn lying_exr(path: &Path) {
         .unwrap();
     let mut b = std::fs::read(path).unwrap();
     let key = b"dataWindow\0box2i\0";
-    let i = b.windows(key.len()).position(|w| w == key).expect("dataWindow") + key.len() + 4;
+    let i = b
+        .windows(key.len())
+        .position(|w| w == key)
+        .expect("dataWindow")
+        + key.len()
+        + 4;
     b[i + 8..i + 12].copy_from_slice(&99_999i32.to_le_bytes());
     b[i + 12..i + 16].copy_from_slice(&99_999i32.to_le_bytes());
     std::fs::write(path, b).unwrap();
@@ -281,7 +363,8 @@ fn raw_format_sizes_and_headers_are_checked() {
         &camsim_limited(&["validate", "captures.json", "--out", "v"], d.path()),
         &["raw_format.header_bytes"],
     );
-    caps["raw_format"] = json!({"bits_per_sample": 16, "rows": 1_000_000_000u64, "cols": 1_000_000_000u64});
+    caps["raw_format"] =
+        json!({"bits_per_sample": 16, "rows": 1_000_000_000u64, "cols": 1_000_000_000u64});
     let d = set(&cam, &caps);
     refused(&simulate(d.path()), &["raw_format.rows/cols"]);
 }
@@ -328,7 +411,18 @@ fn overflowing_light_saturates_and_never_hangs() {
 fn demo_with_an_absurd_prnu_finishes() {
     let d = tempfile::tempdir().unwrap();
     let o = camsim_limited(
-        &["demo", "diagnose", "--effect", "prnu=1e308", "--rows", "8", "--cols", "8", "--out", "set"],
+        &[
+            "demo",
+            "diagnose",
+            "--effect",
+            "prnu=1e308",
+            "--rows",
+            "8",
+            "--cols",
+            "8",
+            "--out",
+            "set",
+        ],
         d.path(),
     );
     // either refused in one line, or a set whose frames are valid
@@ -357,10 +451,22 @@ fn silent_wrong_results_are_now_errors() {
         c
     };
     for (t, key) in [
-        (json!({"kind": "point_array", "radiance": 1.0, "spacing_px": 0}), "spacing_px"),
-        (json!({"kind": "grid_lines", "radiance": 1.0, "spacing_px": -3}), "spacing_px"),
-        (json!({"kind": "dark", "mean_luminance_cd_m2": 10}), "mean_luminance_cd_m2"),
-        (json!({"kind": "uniform", "radiance": 0.0, "mean_luminance_cd_m2": 10}), "mean_luminance_cd_m2"),
+        (
+            json!({"kind": "point_array", "radiance": 1.0, "spacing_px": 0}),
+            "spacing_px",
+        ),
+        (
+            json!({"kind": "grid_lines", "radiance": 1.0, "spacing_px": -3}),
+            "spacing_px",
+        ),
+        (
+            json!({"kind": "dark", "mean_luminance_cd_m2": 10}),
+            "mean_luminance_cd_m2",
+        ),
+        (
+            json!({"kind": "uniform", "radiance": 0.0, "mean_luminance_cd_m2": 10}),
+            "mean_luminance_cd_m2",
+        ),
     ] {
         let d = set(&cam, &with_target(t));
         refused(&simulate(d.path()), &[key]);
@@ -407,10 +513,24 @@ fn calibrate_refuses_a_frame_of_the_wrong_size() {
 fn noise_profiles_leaves_nothing_after_an_error() {
     let d = tempfile::tempdir().unwrap();
     let file = repo().join("../shared/data/real/noise/darktable_noiseprofiles.json");
-    assert!(file.is_file(), "{} (ln -s /work/shared ../shared)", file.display());
+    assert!(
+        file.is_file(),
+        "{} (ln -s /work/shared ../shared)",
+        file.display()
+    );
     let f = file.display().to_string();
     refused(
-        &camsim_limited(&["noise-profiles", &f, "--camera", "no such camera", "--out", "np"], d.path()),
+        &camsim_limited(
+            &[
+                "noise-profiles",
+                &f,
+                "--camera",
+                "no such camera",
+                "--out",
+                "np",
+            ],
+            d.path(),
+        ),
         &["no such camera"],
     );
     assert!(!d.path().join("np").exists(), "a figure was left behind");

@@ -86,8 +86,9 @@ fn interesting_value(rng: &mut Rng) -> Value {
         0..=5 => serde_json::from_str(INTERESTING_NUMBERS[rng.below(INTERESTING_NUMBERS.len())])
             .unwrap_or(Value::Null),
         6 => Value::String(
-            ["", "x", "lens", "gaussian", "uniform", "..", "/", "a.png", "a.exr", "$file"]
-                [rng.below(10)]
+            [
+                "", "x", "lens", "gaussian", "uniform", "..", "/", "a.png", "a.exr", "$file",
+            ][rng.below(10)]
             .into(),
         ),
         7 => Value::Null,
@@ -218,8 +219,8 @@ pub fn mutate_bytes(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
             1 => b[i] = [0u8, 0xff, 0x7f, 0x80, 1][rng.below(5)],
             2 => {
                 // an interesting 32-bit integer, either byte order
-                let v: u32 = [0, 1, 0x7fff_ffff, 0xffff_ffff, 0x8000_0000, 65535, 100_000]
-                    [rng.below(7)];
+                let v: u32 =
+                    [0, 1, 0x7fff_ffff, 0xffff_ffff, 0x8000_0000, 65535, 100_000][rng.below(7)];
                 let bytes = if rng.below(2) == 0 {
                     v.to_le_bytes()
                 } else {
@@ -353,7 +354,12 @@ pub struct FuzzStats {
     pub elapsed: Duration,
 }
 
-fn json_fuzz(name: &str, file: &Path, seed: &Value, reader: impl Fn(&Path) -> Result<(), String>) -> FuzzStats {
+fn json_fuzz(
+    name: &str,
+    file: &Path,
+    seed: &Value,
+    reader: impl Fn(&Path) -> Result<(), String>,
+) -> FuzzStats {
     let text = serde_json::to_vec_pretty(seed).unwrap();
     fuzz(
         name,
@@ -369,7 +375,12 @@ fn json_fuzz(name: &str, file: &Path, seed: &Value, reader: impl Fn(&Path) -> Re
     )
 }
 
-fn bytes_fuzz(name: &str, file: &Path, seed: &[u8], reader: impl Fn(&Path) -> Result<(), String>) -> FuzzStats {
+fn bytes_fuzz(
+    name: &str,
+    file: &Path,
+    seed: &[u8],
+    reader: impl Fn(&Path) -> Result<(), String>,
+) -> FuzzStats {
     fuzz(name, file, |rng| mutate_bytes(seed, rng), reader)
 }
 
@@ -405,7 +416,8 @@ fn captures_json() {
     let d = tempfile::tempdir().unwrap();
     std::fs::write(d.path().join("camera.json"), camera(8, 8).to_string()).unwrap();
     let mut seed = captures(1.0, 0.01);
-    seed["simulation"] = json!({"wavelength_nm": {"start_nm": 400, "stop_nm": 700, "step_nm": 10}, "seed": 3});
+    seed["simulation"] =
+        json!({"wavelength_nm": {"start_nm": 400, "stop_nm": 700, "step_nm": 10}, "seed": 3});
     seed["raw_format"] = json!({"bits_per_sample": 16, "endianness": "big", "header_bytes": 4});
     seed["shots"].as_array_mut().unwrap().push(json!(
         {"id": "pts", "exposure_s": 0.01, "target": {"kind": "point_array", "radiance": 1.0, "spacing_px": 4, "mean_luminance_cd_m2": 10}, "frames": ["a.raw"]}));
@@ -440,7 +452,11 @@ fn run_json() {
 #[test]
 fn study_json() {
     let d = tempfile::tempdir().unwrap();
-    std::fs::write(d.path().join("inc.json"), json!({"kind": "none"}).to_string()).unwrap();
+    std::fs::write(
+        d.path().join("inc.json"),
+        json!({"kind": "none"}).to_string(),
+    )
+    .unwrap();
     let mut cam: Value = serde_json::from_str(
         &std::fs::read_to_string(repo().join("examples/study_codesign/camera.json")).unwrap(),
     )
@@ -457,7 +473,9 @@ fn study_json() {
         ]
     });
     let s = json_fuzz("study", &d.path().join("study.json"), &seed, |p| {
-        study::spec::load_study(p).map(|_| ()).map_err(|e| e.one_line())
+        study::spec::load_study(p)
+            .map(|_| ())
+            .map_err(|e| e.one_line())
     });
     assert_mixed(&s, "study");
 }
@@ -509,7 +527,11 @@ fn load_scene(p: &Path) -> Result<(), String> {
 fn gltf() {
     let d = tempfile::tempdir().unwrap();
     let scenes = repo().join("scenes");
-    std::fs::copy(scenes.join("uniform_emitter.bin"), d.path().join("uniform_emitter.bin")).unwrap();
+    std::fs::copy(
+        scenes.join("uniform_emitter.bin"),
+        d.path().join("uniform_emitter.bin"),
+    )
+    .unwrap();
     let seed: Value = serde_json::from_str(
         &std::fs::read_to_string(scenes.join("uniform_emitter.gltf")).unwrap(),
     )
@@ -571,7 +593,9 @@ fn frame(rows: usize, cols: usize) -> RawFrame {
 }
 
 fn read_frame(p: &Path) -> Result<(), String> {
-    raw_input::read_frame(p).map(|_| ()).map_err(|e| e.one_line())
+    raw_input::read_frame(p)
+        .map(|_| ())
+        .map_err(|e| e.one_line())
 }
 
 #[test]
@@ -637,7 +661,9 @@ fn raw_frames() {
             3 => f.bytes_per_sample = 1,
             _ => {}
         }
-        raw_input::read_raw(p, &f).map(|_| ()).map_err(|e| e.one_line())
+        raw_input::read_raw(p, &f)
+            .map(|_| ())
+            .map_err(|e| e.one_line())
     });
     assert_mixed(&s, "raw");
 }

@@ -78,7 +78,9 @@ fn interrupt_simulate(dir: &Path, out: &str, signal: &str) -> Option<i32> {
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    let staging = dir.join(out).join(format!(".camsim-staging-{}", child.id()));
+    let staging = dir
+        .join(out)
+        .join(format!(".camsim-staging-{}", child.id()));
     let start = Instant::now();
     loop {
         if !snapshot(&staging).is_empty() {
@@ -87,7 +89,10 @@ fn interrupt_simulate(dir: &Path, out: &str, signal: &str) -> Option<i32> {
         if let Some(st) = child.try_wait().unwrap() {
             panic!("simulate finished ({st}) before it could be interrupted; make slow_set slower");
         }
-        assert!(start.elapsed() < Duration::from_secs(120), "no staging folder appeared");
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no staging folder appeared"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     let st = std::process::Command::new("kill")
@@ -104,7 +109,11 @@ fn sigint_part_way_leaves_no_debris_and_no_partial_set() {
     slow_set(d.path(), 150);
     // 1. A new output folder: after SIGINT it does not exist.
     assert_eq!(interrupt_simulate(d.path(), "new", "-INT"), Some(130));
-    assert!(!d.path().join("new").exists(), "{:?}", snapshot(&d.path().join("new")).keys());
+    assert!(
+        !d.path().join("new").exists(),
+        "{:?}",
+        snapshot(&d.path().join("new")).keys()
+    );
     // 2. An existing output folder with an earlier set: after SIGINT (and SIGTERM) it holds
     //    exactly the earlier files, and no staging or backup folder.
     let old = d.path().join("old");
@@ -171,8 +180,15 @@ fn a_folder_in_the_way_leaves_the_earlier_set_whole() {
     let st = sim("2");
     let err = String::from_utf8_lossy(&st.stderr);
     assert_eq!(st.status.code(), Some(2), "{err}");
-    assert!(err.contains("flat-1.png") && err.contains("folder is in the way"), "{err}");
-    assert_eq!(snapshot(&d.path().join("o")), before, "old and new files mixed");
+    assert!(
+        err.contains("flat-1.png") && err.contains("folder is in the way"),
+        "{err}"
+    );
+    assert_eq!(
+        snapshot(&d.path().join("o")),
+        before,
+        "old and new files mixed"
+    );
     assert!(debris(d.path()).is_empty());
 }
 
@@ -213,11 +229,18 @@ fn outputs_are_byte_identical_across_runs_and_thread_counts() {
     let p = d.path();
     // Inputs: a generated capture set (with frames), a small run config, a two-point study.
     let st = camsim()
-        .args(["demo", "diagnose", "--effect", "prnu=1.5", "--rows", "16", "--cols", "24", "--out", "set"])
+        .args([
+            "demo", "diagnose", "--effect", "prnu=1.5", "--rows", "16", "--cols", "24", "--out",
+            "set",
+        ])
         .current_dir(p)
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let mut cam: Value = serde_json::from_str(camsim_pipeline::run::TABLE1_CAMERA).unwrap();
     cam["sensor"]["rows"] = json!(24);
     cam["sensor"]["cols"] = json!(32);
@@ -241,16 +264,56 @@ fn outputs_are_byte_identical_across_runs_and_thread_counts() {
         .to_string(),
     )
     .unwrap();
-    let scene = repo().join("scenes/uniform_emitter.gltf").display().to_string();
+    let scene = repo()
+        .join("scenes/uniform_emitter.gltf")
+        .display()
+        .to_string();
     let cases: Vec<(Vec<&str>, &str)> = vec![
-        (vec!["simulate", "set/captures.json", "--out", "sim", "--seed", "5"], "sim"),
-        (vec!["simulate", "set/captures.json", "--out", "exp", "--expected"], "exp"),
+        (
+            vec![
+                "simulate",
+                "set/captures.json",
+                "--out",
+                "sim",
+                "--seed",
+                "5",
+            ],
+            "sim",
+        ),
+        (
+            vec![
+                "simulate",
+                "set/captures.json",
+                "--out",
+                "exp",
+                "--expected",
+            ],
+            "exp",
+        ),
         (vec!["run", "run.json", "--out", "run"], "run"),
-        (vec!["render", &scene, "--width", "16", "--spp", "4", "--out", "r.exr"], "r.exr"),
+        (
+            vec![
+                "render", &scene, "--width", "16", "--spp", "4", "--out", "r.exr",
+            ],
+            "r.exr",
+        ),
         (vec!["study", "study.json", "--out", "st"], "st"),
-        (vec!["calibrate", "set/captures.json", "--out", "cal"], "cal"),
+        (
+            vec!["calibrate", "set/captures.json", "--out", "cal"],
+            "cal",
+        ),
         (vec!["validate", "set/captures.json", "--out", "val"], "val"),
-        (vec!["diagnose", "set/captures.json", "--out", "dia", "--effects", "prnu"], "dia"),
+        (
+            vec![
+                "diagnose",
+                "set/captures.json",
+                "--out",
+                "dia",
+                "--effects",
+                "prnu",
+            ],
+            "dia",
+        ),
     ];
     for (args, out) in cases {
         let a = outputs_of(p, "1", &args, out);
@@ -262,7 +325,10 @@ fn outputs_are_byte_identical_across_runs_and_thread_counts() {
             "{args:?}: different files"
         );
         for (k, v) in &a {
-            assert!(b[k] == *v, "{args:?}: {k} differs between --threads 1 and 2");
+            assert!(
+                b[k] == *v,
+                "{args:?}: {k} differs between --threads 1 and 2"
+            );
             assert!(c[k] == *v, "{args:?}: {k} differs between two runs");
         }
         eprintln!("deterministic: {args:?}: {} files", a.len());

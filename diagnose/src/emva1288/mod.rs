@@ -274,9 +274,7 @@ pub fn saturation_capacity(points: &[TemporalPoint], sat: usize) -> Measured {
     } else {
         p
     };
-    let hi = points
-        .get(sat + 1)
-        .map_or(p, |q| q.photons_per_pixel);
+    let hi = points.get(sat + 1).map_or(p, |q| q.photons_per_pixel);
     Measured::new(p, 0.5 * (hi - lo).abs())
 }
 

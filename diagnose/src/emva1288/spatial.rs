@@ -368,8 +368,9 @@ pub fn analyse_spatial(
     let prnu = prnu_percent(b.s2_dn2, d.s2_dn2, b.mean_dn, d.mean_dn);
     let u_prnu = {
         let diff = b.s2_dn2 - d.s2_dn2;
-        let u = (spatial_variance_uncertainty(&b).powi(2) + spatial_variance_uncertainty(&d).powi(2))
-            .sqrt();
+        let u = (spatial_variance_uncertainty(&b).powi(2)
+            + spatial_variance_uncertainty(&d).powi(2))
+        .sqrt();
         prnu * u / (2.0 * diff)
     };
     let (m, n) = (bright.rows, bright.cols);

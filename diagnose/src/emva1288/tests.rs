@@ -41,7 +41,13 @@ fn pair_variance_is_unbiased_for_gaussian_noise() {
 
 /// A noise-free series of an ideal linear camera: μ_y = K η μ_p + 10 DN, σ²_y = K² η μ_p +
 /// σ²_dark + K² μ_I t (dark current), clipped at μ_p.sat.
-fn ideal_series(k: f64, eta: f64, dark_var: f64, sat_photons: f64, dark_e_per_s: f64) -> Vec<TemporalPoint> {
+fn ideal_series(
+    k: f64,
+    eta: f64,
+    dark_var: f64,
+    sat_photons: f64,
+    dark_e_per_s: f64,
+) -> Vec<TemporalPoint> {
     (1..=60)
         .map(|i| {
             let t = i as f64 * 1e-3;
@@ -57,8 +63,14 @@ fn ideal_series(k: f64, eta: f64, dark_var: f64, sat_photons: f64, dark_e_per_s:
             TemporalPoint {
                 exposure_s: t,
                 photons_per_pixel: up,
-                bright: PairStats { mean_dn: mean, var_dn2: var },
-                dark: PairStats { mean_dn: dark_mean, var_dn2: dark_v },
+                bright: PairStats {
+                    mean_dn: mean,
+                    var_dn2: var,
+                },
+                dark: PairStats {
+                    mean_dn: dark_mean,
+                    var_dn2: dark_v,
+                },
             }
         })
         .collect()
@@ -81,7 +93,10 @@ fn ideal_series_gives_the_closed_form_datasheet() {
     assert!((r.snr_max.value - (eta * sat).sqrt()).abs() < 1e-9);
     assert!((r.dynamic_range.value - sat / up_min).abs() < 1e-6);
     let lin = r.linearity.unwrap();
-    assert!(lin.le_percent.abs() < 1e-9, "an exact line has no linearity error");
+    assert!(
+        lin.le_percent.abs() < 1e-9,
+        "an exact line has no linearity error"
+    );
     assert!((r.dark_current_mean_e_per_s.unwrap().value - idark).abs() < 1e-6);
     assert!((r.dark_current_var_e_per_s.unwrap().value - idark).abs() < 1e-6);
     // the 0.24 DN² floor of the dark variance
@@ -98,7 +113,11 @@ fn linearity_error_of_a_quadratic_response() {
         p.bright.mean_dn = p.dark.mean_dn + s * (1.0 - 0.02 * p.photons_per_pixel / 20_000.0);
     }
     let lin = linearity(&pts, 49).unwrap();
-    assert!(lin.le_percent > 0.1 && lin.le_percent < 2.0, "LE = {}", lin.le_percent);
+    assert!(
+        lin.le_percent > 0.1 && lin.le_percent < 2.0,
+        "LE = {}",
+        lin.le_percent
+    );
     assert!(lin.le_min_percent < 0.0 && lin.le_max_percent > 0.0);
 }
 
@@ -112,7 +131,9 @@ fn too_short_series_is_an_error() {
 fn spectrogram_of_a_cosine_peaks_at_its_frequency_and_obeys_parseval() {
     let (rows, cols) = (4, 64);
     let img: Vec<f64> = (0..rows * cols)
-        .map(|i| 5.0 + 3.0 * (2.0 * std::f64::consts::PI * 8.0 * (i % cols) as f64 / cols as f64).cos())
+        .map(|i| {
+            5.0 + 3.0 * (2.0 * std::f64::consts::PI * 8.0 * (i % cols) as f64 / cols as f64).cos()
+        })
         .collect();
     let s = spectrogram(&img, rows, cols, false);
     assert_eq!(s.power_dn2.len(), cols / 2 + 1);
@@ -125,7 +146,10 @@ fn spectrogram_of_a_cosine_peaks_at_its_frequency_and_obeys_parseval() {
     assert!((2.0 * half_sum / cols as f64 - var).abs() < 1e-9);
     let v = spectrogram(&img, rows, cols, true);
     // each column is constant: only the DC bin (the column's offset from the global mean)
-    assert!(v.power_dn2[1..].iter().all(|p| p.abs() < 1e-9), "columns are constant");
+    assert!(
+        v.power_dn2[1..].iter().all(|p| p.abs() < 1e-9),
+        "columns are constant"
+    );
     assert!((v.power_dn2[0] - rows as f64 * 4.5).abs() < 1e-9);
 }
 
@@ -135,9 +159,13 @@ fn nonuniformity_parts_and_dsnu_prnu_recover_the_patterns() {
     // Bright: dark + 1000 DN × (1 + 1 % gain pattern), temporal σ = 10 DN.
     let (m, n, l) = (64usize, 96usize, 8u32);
     let mut rng = stream(5, &[0]);
-    let pix: Vec<f64> = (0..m * n).map(|_| 3.0 * standard_normal(&mut rng)).collect();
+    let pix: Vec<f64> = (0..m * n)
+        .map(|_| 3.0 * standard_normal(&mut rng))
+        .collect();
     let row: Vec<f64> = (0..m).map(|_| 2.0 * standard_normal(&mut rng)).collect();
-    let gain: Vec<f64> = (0..m * n).map(|_| 0.01 * standard_normal(&mut rng)).collect();
+    let gain: Vec<f64> = (0..m * n)
+        .map(|_| 0.01 * standard_normal(&mut rng))
+        .collect();
     let mut dark = StackAccumulator::new(m, n);
     let mut bright = StackAccumulator::new(m, n);
     for f in 0..l {
@@ -147,15 +175,24 @@ fn nonuniformity_parts_and_dsnu_prnu_recover_the_patterns() {
             .collect();
         let b: Vec<u16> = (0..m * n)
             .map(|i| {
-                (200.0 + pix[i] + row[i / n] + 1000.0 * (1.0 + gain[i]) + 10.0 * standard_normal(&mut rng))
-                    .round() as u16
+                (200.0
+                    + pix[i]
+                    + row[i / n]
+                    + 1000.0 * (1.0 + gain[i])
+                    + 10.0 * standard_normal(&mut rng))
+                .round() as u16
             })
             .collect();
         dark.add(&d).unwrap();
         bright.add(&b).unwrap();
     }
     assert!(dark.add(&[0u16; 3]).is_err());
-    let k = LineFit { slope: 0.5, slope_se: 0.0, offset: 0.0, offset_se: 0.0 };
+    let k = LineFit {
+        slope: 0.5,
+        slope_se: 0.0,
+        offset: 0.0,
+        offset_se: 0.0,
+    };
     let r = analyse_spatial(&bright, &dark, &k).unwrap();
     // sample variances of the drawn patterns are the truth the estimator must find
     let svar = |v: &[f64]| {
@@ -164,17 +201,51 @@ fn nonuniformity_parts_and_dsnu_prnu_recover_the_patterns() {
     };
     let (vp, vr) = (svar(&pix), svar(&row));
     // temporal σ_stack: 1.5² + 1/12 quantisation
-    assert!((r.dark.var_stack_dn2 - (2.25 + 1.0 / 12.0)).abs() < 0.1, "σ²_stack {}", r.dark.var_stack_dn2);
+    assert!(
+        (r.dark.var_stack_dn2 - (2.25 + 1.0 / 12.0)).abs() < 0.1,
+        "σ²_stack {}",
+        r.dark.var_stack_dn2
+    );
     let se = spatial_variance_uncertainty(&r.dark);
-    assert!(z(r.dark.s2_dn2, vp + vr * (m as f64 - 1.0) / m as f64 * 1.0, se).abs() < 4.0);
-    assert!((r.dark_parts.row_dn2 - vr).abs() < 0.1 * vr + 0.3, "row {}", r.dark_parts.row_dn2);
-    assert!(r.dark_parts.col_dn2.abs() < 0.3, "col {}", r.dark_parts.col_dn2);
-    assert!((r.dark_parts.pixel_dn2 - vp).abs() < 0.05 * vp, "pixel {}", r.dark_parts.pixel_dn2);
+    assert!(
+        z(
+            r.dark.s2_dn2,
+            vp + vr * (m as f64 - 1.0) / m as f64 * 1.0,
+            se
+        )
+        .abs()
+            < 4.0
+    );
+    assert!(
+        (r.dark_parts.row_dn2 - vr).abs() < 0.1 * vr + 0.3,
+        "row {}",
+        r.dark_parts.row_dn2
+    );
+    assert!(
+        r.dark_parts.col_dn2.abs() < 0.3,
+        "col {}",
+        r.dark_parts.col_dn2
+    );
+    assert!(
+        (r.dark_parts.pixel_dn2 - vp).abs() < 0.05 * vp,
+        "pixel {}",
+        r.dark_parts.pixel_dn2
+    );
     assert!((r.dsnu_e.value - r.dark.s2_dn2.sqrt() / 0.5).abs() < 1e-12);
     // PRNU: 1 % of 1000 DN
     let vg = svar(&gain).sqrt() * 100.0;
-    assert!((r.prnu_percent.value - vg).abs() < 3.0 * r.prnu_percent.uncertainty + 0.02, "PRNU {} vs {vg}", r.prnu_percent.value);
+    assert!(
+        (r.prnu_percent.value - vg).abs() < 3.0 * r.prnu_percent.uncertainty + 0.02,
+        "PRNU {} vs {vg}",
+        r.prnu_percent.value
+    );
     assert!((r.prnu_pixel_percent - vg).abs() < 0.05 * vg);
-    assert_eq!(r.dsnu_histogram_e.counts.iter().sum::<u64>(), (m * n) as u64);
-    assert_eq!(r.prnu_histogram_percent.counts.iter().sum::<u64>(), ((m - 4) * (n - 4)) as u64);
+    assert_eq!(
+        r.dsnu_histogram_e.counts.iter().sum::<u64>(),
+        (m * n) as u64
+    );
+    assert_eq!(
+        r.prnu_histogram_percent.counts.iter().sum::<u64>(),
+        ((m - 4) * (n - 4)) as u64
+    );
 }

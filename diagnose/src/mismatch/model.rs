@@ -291,7 +291,6 @@ pub(crate) fn crosstalk_image(ct: &Crosstalk, rows: usize, cols: usize, src: &[f
 mod tests {
     use super::*;
 
-
     pub(crate) fn sensor() -> SensorModel {
         SensorModel::mono_test(4, 4)
     }

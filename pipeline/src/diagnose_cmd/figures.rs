@@ -1,7 +1,7 @@
 //! Figures and the HTML page of `camsim diagnose`.
-use crate::report::html_escape;
 use crate::error::CliError;
 use crate::plots;
+use crate::report::html_escape;
 use camsim_diagnose::mismatch::{DataSet, Diagnosis, Located, ShotMaps};
 use serde_json::Value;
 use std::path::Path;
@@ -16,7 +16,6 @@ pub struct Figure {
     /// Section of the report.
     pub section: &'static str,
 }
-
 
 /// Normalised residuals binned to at most 512 pixels a side (block sum / √n keeps unit
 /// variance), drawn blue (model too bright) – white – red (model too dark), ±4 σ.

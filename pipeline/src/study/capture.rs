@@ -980,7 +980,9 @@ fn delta_e(ctx: &Ctx, o: &DeltaEOpts) -> Result<DeltaEResult, CliError> {
         .apply_planes(&planes)
         .map_err(|e| CliError::Other(format!("colour correction: {e}")))?;
     let k = crate::honest_color::exposure_scale(&patch_means(&rgb, &layout), 0.9) as f32;
-    rgb.data.iter_mut().for_each(|p| p.iter_mut().for_each(|x| *x *= k));
+    rgb.data
+        .iter_mut()
+        .for_each(|p| p.iter_mut().for_each(|x| *x *= k));
     let rendered8 = to_srgb8(&rgb);
     ctx.png("chart.png", &rendered8, rgb.rows, rgb.cols)?;
     let rendered_lin = RgbImage {

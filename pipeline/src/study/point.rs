@@ -40,7 +40,6 @@ impl PointKind {
     }
 }
 
-
 /// Check a point document without evaluating it (cheap: no lens field model, no images).
 pub fn validate(doc: &Value) -> Result<(), String> {
     match PointKind::of(doc)? {

@@ -5,11 +5,11 @@
 //! y metric), and is repeated for every combination of the remaining parameters (facets).
 //! Without `plots` in the spec, every metric is plotted against the first numeric parameter
 //! with the next parameter as series.
-use crate::report::html_escape;
 use super::spec::{PlotSpec, Study};
 use super::table::{Cell, Table};
 use super::StudySummary;
 use crate::error::CliError;
+use crate::report::html_escape;
 use camsim_core::exr_io::write_atomically;
 use serde_json::Value;
 use std::path::Path;
@@ -18,7 +18,6 @@ use std::path::Path;
 const MAX_FACETS: usize = 12;
 /// Most rows of an image strip.
 const MAX_STRIP_ROWS: usize = 12;
-
 
 /// The plots to draw: the spec's, or the default ones.
 pub fn plot_specs(study: &Study, table: &Table) -> Vec<PlotSpec> {
