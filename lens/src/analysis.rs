@@ -20,6 +20,7 @@
 use crate::error::LensError;
 use crate::paraxial::FirstOrder;
 use crate::prescription::LensPrescription;
+use crate::trace::AimedChief;
 use crate::trace::{Clipping, FieldAim, TracedRay};
 use rustfft::{num_complex::Complex64, FftPlanner};
 
@@ -327,14 +328,7 @@ impl LensPrescription {
                 &grid,
                 Clipping::SemiDiameters,
             )?;
-            let fo = self.first_order(self.primary_nm)?;
-            let aim = self.aim_field(f, self.primary_nm, &fo)?;
-            let chief = self
-                .trace(&aim.ray(0.0, 0.0), self.primary_nm, Clipping::None)
-                .ok_or_else(|| LensError::Aiming {
-                    field_deg: f,
-                    msg: "chief ray lost".into(),
-                })?;
+            let chief = self.aimed_chief_ray(f, self.primary_nm)?.chief;
             Ok((fan.rays.iter().flatten().count(), chief.direction[2]))
         };
         let (n0, _) = count(0.0)?;
@@ -358,14 +352,11 @@ impl LensPrescription {
         wavelength_nm: f64,
         n: usize,
     ) -> Result<OpdMap, LensError> {
-        let fo = self.first_order(wavelength_nm)?;
-        let aim = self.aim_field(field_deg, wavelength_nm, &fo)?;
-        let chief = self
-            .trace(&aim.ray(0.0, 0.0), wavelength_nm, Clipping::None)
-            .ok_or_else(|| LensError::Aiming {
-                field_deg,
-                msg: "chief ray lost".into(),
-            })?;
+        let AimedChief {
+            first_order: fo,
+            aim,
+            chief,
+        } = self.aimed_chief_ray(field_deg, wavelength_nm)?;
         let n_img = self.surfaces.last().unwrap().medium.index(wavelength_nm);
         let p = chief.image_mm;
         let dc = chief.direction;

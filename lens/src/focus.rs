@@ -23,6 +23,7 @@
 use crate::analysis::WaveOptics;
 use crate::error::LensError;
 use crate::prescription::LensPrescription;
+use crate::trace::AimedChief;
 use crate::trace::Clipping;
 
 /// Diffraction units (λN_w) of margin around the traced spot in [`LensPrescription::pupil_sampling`].
@@ -101,14 +102,11 @@ impl LensPrescription {
         min_n: usize,
         max_n: usize,
     ) -> Result<PupilSampling, LensError> {
-        let fo = self.first_order(wavelength_nm)?;
-        let aim = self.aim_field(field_deg, wavelength_nm, &fo)?;
-        let chief = self
-            .trace(&aim.ray(0.0, 0.0), wavelength_nm, Clipping::None)
-            .ok_or_else(|| LensError::Aiming {
-                field_deg,
-                msg: "chief ray lost".into(),
-            })?;
+        let AimedChief {
+            first_order: fo,
+            aim,
+            chief,
+        } = self.aimed_chief_ray(field_deg, wavelength_nm)?;
         // A 33² grid plus the rim (where the aberrations are largest), as the OPD map traces.
         let mut pts = crate::analysis::pupil_grid(33);
         pts.extend((0..96).map(|k| {

@@ -30,6 +30,7 @@
 use crate::analysis::Psf;
 use crate::error::LensError;
 use crate::prescription::LensPrescription;
+use crate::trace::AimedChief;
 use crate::trace::Clipping;
 use rayon::prelude::*;
 
@@ -92,14 +93,11 @@ impl LensPrescription {
                 window.n, window.sample_mm
             )));
         }
-        let fo = self.first_order(wavelength_nm)?;
-        let aim = self.aim_field(field_deg, wavelength_nm, &fo)?;
-        let chief = self
-            .trace(&aim.ray(0.0, 0.0), wavelength_nm, Clipping::None)
-            .ok_or_else(|| LensError::Aiming {
-                field_deg,
-                msg: "chief ray lost".into(),
-            })?;
+        let AimedChief {
+            first_order: fo,
+            aim,
+            chief,
+        } = self.aimed_chief_ray(field_deg, wavelength_nm)?;
         let n_img = self.surfaces.last().unwrap().medium.index(wavelength_nm);
         let p = chief.image_mm;
         let radius = (p[2] - fo.exit_pupil_z_mm) / chief.direction[2];

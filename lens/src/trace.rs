@@ -223,6 +223,42 @@ impl LensPrescription {
     }
 }
 
+/// The first-order data, the ray aim and the traced chief ray of one field at one wavelength
+/// ([`LensPrescription::aimed_chief_ray`]).
+#[derive(Debug, Clone)]
+pub struct AimedChief {
+    /// Paraxial data at the wavelength.
+    pub first_order: FirstOrder,
+    /// The field's aim.
+    pub aim: FieldAim,
+    /// The chief ray traced to the image plane without clipping.
+    pub chief: TracedRay,
+}
+
+impl LensPrescription {
+    /// Aim field `field_deg` at `wavelength_nm` and trace its chief ray (no clipping): the start
+    /// of every per-field analysis (OPD map, Huygens PSF, pupil sampling, vignetting).
+    pub fn aimed_chief_ray(
+        &self,
+        field_deg: f64,
+        wavelength_nm: f64,
+    ) -> Result<AimedChief, LensError> {
+        let first_order = self.first_order(wavelength_nm)?;
+        let aim = self.aim_field(field_deg, wavelength_nm, &first_order)?;
+        let chief = self
+            .trace(&aim.ray(0.0, 0.0), wavelength_nm, Clipping::None)
+            .ok_or_else(|| LensError::Aiming {
+                field_deg,
+                msg: "chief ray lost".into(),
+            })?;
+        Ok(AimedChief {
+            first_order,
+            aim,
+            chief,
+        })
+    }
+}
+
 /// Where rays of one field enter: the entrance-pupil geometry plus the real-ray aim offset.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FieldAim {
