@@ -48,11 +48,13 @@ pub fn write_atomically<E: From<std::io::Error>>(
         .map(|n| n.to_string_lossy().to_string())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    crate::cleanup::register(&tmp);
-    let r = match write(&tmp) {
-        Ok(()) => std::fs::rename(&tmp, path).map_err(E::from),
-        Err(e) => Err(e),
-    };
+    let r = crate::cleanup::gated(|| {
+        crate::cleanup::register(&tmp);
+        match write(&tmp) {
+            Ok(()) => std::fs::rename(&tmp, path).map_err(E::from),
+            Err(e) => Err(e),
+        }
+    });
     if r.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }

@@ -1497,7 +1497,8 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                 );
             }
             if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-                std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
+                camsim_core::cleanup::create_dir_all(parent)
+                    .map_err(|e| CliError::output(parent, e))?;
             }
             camsim_core::exr_io::write_atomically(&out, |tmp| {
                 m.save(tmp).map_err(|e| CliError::output(&out, e))
@@ -1537,7 +1538,8 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             let svg = draw_svg(&lens, max_deg, rays.clamp(1, 101))
                 .map_err(|e| CliError::input(&path, e))?;
             if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-                std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
+                camsim_core::cleanup::create_dir_all(parent)
+                    .map_err(|e| CliError::output(parent, e))?;
             }
             camsim_core::exr_io::write_atomically(&out, |tmp| std::fs::write(tmp, &svg))
                 .map_err(|e| CliError::output(&out, e))?;
@@ -1649,7 +1651,8 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
             }
             v.iter_mut().for_each(|x| *x /= sum);
             if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-                std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
+                camsim_core::cleanup::create_dir_all(parent)
+                    .map_err(|e| CliError::output(parent, e))?;
             }
             let peak = v.iter().cloned().fold(0.0, f64::max);
             if ext == "exr" {

@@ -520,7 +520,8 @@ fn run_into(
                 let rel = PathBuf::from(&set.shots[shot].frames[frame]);
                 let dst = staging.join(&rel);
                 if let Some(parent) = dst.parent() {
-                    std::fs::create_dir_all(parent).map_err(|e| CliError::output(parent, e))?;
+                    camsim_core::cleanup::create_dir_all(parent)
+                        .map_err(|e| CliError::output(parent, e))?;
                 }
                 frames::write_frame_with(&dst, &raw, set.raw_format.as_ref())?;
                 files.push(rel);

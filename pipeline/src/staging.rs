@@ -111,6 +111,7 @@ pub fn install_signal_cleanup() {
                     continue;
                 }
                 INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
+                camsim_core::cleanup::stop_writes();
                 let _commit = lock(&COMMIT);
                 cleanup_all();
                 eprintln!("camsim: interrupted (signal {sig}); no output was written");
