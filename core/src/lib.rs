@@ -37,5 +37,7 @@ pub mod spectrum;
 pub mod stats;
 
 pub use error::CoreError;
-pub use image::{Plane, RawFrame, SceneRadiance, SensorIrradiance, SpectralBasis, SpectralImage};
+pub use image::{
+    Plane, RawFrame, RawLayout, SceneRadiance, SensorIrradiance, SpectralBasis, SpectralImage,
+};
 pub use spectrum::{Spectrum, WavelengthGrid};

@@ -61,7 +61,8 @@ struct SimForward {
     /// The capture set whose camera is replaced per call (behind a lock: calls are
     /// sequential, each internally parallel).
     set: Mutex<CaptureSet>,
-    camera_json: Value,
+    /// The believed camera, to which each call applies its [`RateSpec`].
+    believed: crate::config::Camera,
     camera_path: PathBuf,
     /// Indices in the capture set of the data set's shots.
     shots: Vec<usize>,
@@ -99,26 +100,15 @@ impl SimForward {
     /// The capture set's camera with `spec` applied (crosstalk removed: the diagnosis applies
     /// it).
     fn camera_for(&self, spec: &RateSpec) -> Result<crate::config::Camera, String> {
-        let mut v = self.camera_json.clone();
-        let names: Vec<String> = self
-            .set
-            .lock()
-            .map_err(|_| "forward model lock poisoned".to_string())?
-            .camera
-            .sensor
-            .channel_names
-            .clone();
-        apply_rate_spec(&mut v, spec, &names);
-        if let Some(s) = v.get_mut("sensor").and_then(Value::as_object_mut) {
-            s.remove("crosstalk");
-        }
-        let raw: CameraFile = serde_json::from_value(v).map_err(|e| {
+        let mut cam = self.believed.clone();
+        apply_rate_spec_typed(&mut cam, spec).map_err(|e| {
             format!(
                 "{}: the camera with the candidate effect is invalid: {e}",
                 self.camera_path.display()
             )
         })?;
-        camera_from_file(&self.camera_path, raw).map_err(|e| e.one_line())
+        cam.sensor.effects.crosstalk = None;
+        Ok(cam)
     }
 
     /// Key of everything but the QE blocks that shapes the pixel planes: the optics blocks,
@@ -299,6 +289,82 @@ impl Forward for SimForward {
         }
         Ok(out)
     }
+}
+
+/// Sets the blocks of `spec` on a validated camera, in their fitted forms (the typed twin of
+/// [`apply_rate_spec`], which writes them into the camera file; `camera_from_file` of that
+/// file gives the same camera). Values a camera file would refuse are refused.
+fn apply_rate_spec_typed(cam: &mut crate::config::Camera, spec: &RateSpec) -> Result<(), String> {
+    use camsim_optics::effects::{Defocus, Distortion, Falloff, LateralColor, LateralColorKind};
+    use camsim_sensor::effects::{IrLeakage, QeShift};
+    let fx = &mut cam.optics.effects;
+    let finite = |k: &str, v: f64| {
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(format!("{k} = {v} is not finite"))
+        }
+    };
+    let at_least_0 = |k: &str, v: f64| {
+        if v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(format!("{k} = {v}: must be ≥ 0"))
+        }
+    };
+    if let Some(c) = &spec.falloff {
+        for (i, a) in c.iter().enumerate() {
+            finite(
+                &format!("optics.relative_illumination.falloff.coefficients[{i}]"),
+                *a,
+            )?;
+        }
+        fx.falloff = Some(Falloff::Polynomial {
+            coefficients: c.clone(),
+        });
+    }
+    if let Some(f) = spec.glare_fraction {
+        fx.veiling_glare = Some(at_least_0("optics.veiling_glare.fraction", f)?);
+    }
+    if let Some(s) = spec.defocus_sigma_um {
+        fx.defocus = Some(Defocus::Gaussian {
+            sigma_um: at_least_0("optics.defocus.sigma_um", s)?,
+        });
+    }
+    if let Some([k1, k2]) = spec.distortion {
+        fx.distortion = Some(Distortion::Polynomial {
+            k1: finite("optics.distortion.k1", k1)?,
+            k2: finite("optics.distortion.k2", k2)?,
+        });
+    }
+    if let Some(d) = spec.lateral_color_um {
+        fx.lateral_color = Some(LateralColor {
+            kind: LateralColorKind::Linear,
+            displacement_um: finite("optics.lateral_color.displacement_um", d)?,
+        });
+    }
+    let sx = &mut cam.sensor.effects;
+    if let Some(v) = &spec.ir_leakage {
+        let mut channels = vec![None; v.len()];
+        for (c, q) in v.iter().enumerate() {
+            if *q != 0.0 {
+                channels[c] = Some(IrLeakage::band(at_least_0("sensor.ir_leakage", *q)?));
+            }
+        }
+        sx.ir_leakage = channels
+            .iter()
+            .any(Option::is_some)
+            .then_some(IrLeakage { channels });
+    }
+    if let Some(v) = &spec.qe_shift_nm {
+        for s in v {
+            finite("sensor.qe_shift.shift_nm", *s)?;
+        }
+        sx.qe_shift = v.iter().any(|s| *s != 0.0).then(|| QeShift {
+            shift_nm: v.clone(),
+        });
+    }
+    Ok(())
 }
 
 /// Writes the blocks of `spec` into a camera file (JSON), in their fitted forms.
@@ -551,7 +617,7 @@ pub fn run_diagnose(
     set: &CaptureSet,
     out: &Path,
     opts: &DiagnoseCmdOptions,
-) -> Result<Value, CliError> {
+) -> Result<DiagnoseSummary, CliError> {
     let camera_text = std::fs::read_to_string(&set.camera_path)
         .map_err(|e| CliError::input(&set.camera_path, format!("cannot read: {e}")))?;
     let camera_json: Value = serde_json::from_str(&camera_text)
@@ -574,7 +640,7 @@ pub fn run_diagnose(
     let (data, used, skipped) = load_data(set, opts.progress)?;
     let forward = SimForward {
         set: Mutex::new(set.clone()),
-        camera_json: camera_json.clone(),
+        believed: set.camera.clone(),
         camera_path: set.camera_path.clone(),
         shots: used,
         planes: Mutex::new(PlaneCache::default()),
@@ -620,7 +686,7 @@ pub fn run_diagnose(
         .map_err(|e| CliError::Other(format!("internal: the fitted camera does not parse: {e}")))?;
     camera_from_file(&fitted_path, raw)?;
     let report = report_json(&diag, &data, &skipped);
-    with_staging(out, |st| {
+    let files = with_staging(out, |st| {
         let mut files: Vec<PathBuf> = Vec::new();
         let p = st.join("fitted_camera.json");
         std::fs::write(&p, serde_json::to_string_pretty(&fitted).expect("json"))
@@ -640,7 +706,33 @@ pub fn run_diagnose(
         files.push("report.html".into());
         Ok(files)
     })?;
-    Ok(report)
+    Ok(DiagnoseSummary {
+        findings: diag
+            .findings
+            .iter()
+            .map(|f| f.effect.id().to_string())
+            .collect(),
+        chi2_per_dof_before: diag.before.chi2_per_dof,
+        chi2_per_dof_after: diag.after.chi2_per_dof,
+        files,
+        json: report,
+    })
+}
+
+/// What `diagnose` reports: the effects found and the fit before and after, and report.json
+/// as written.
+#[derive(Debug, Clone)]
+pub struct DiagnoseSummary {
+    /// Effect ids found (spec/effects.md), in the order of the report.
+    pub findings: Vec<String>,
+    /// χ²/dof of the believed camera.
+    pub chi2_per_dof_before: f64,
+    /// χ²/dof of the fitted camera.
+    pub chi2_per_dof_after: f64,
+    /// Files written into `--out` (relative paths).
+    pub files: Vec<PathBuf>,
+    /// report.json as written.
+    pub json: Value,
 }
 
 fn r4(x: f64) -> Value {
@@ -766,7 +858,7 @@ mod tests {
             serde_json::from_str(&std::fs::read_to_string(&set.camera_path).unwrap()).unwrap();
         let fw = SimForward {
             set: Mutex::new(set.clone()),
-            camera_json,
+            believed: set.camera.clone(),
             camera_path: set.camera_path.clone(),
             shots: (0..set.shots.len()).collect(),
             planes: Mutex::new(PlaneCache::default()),
@@ -791,6 +883,15 @@ mod tests {
             },
         ];
         for spec in &specs {
+            // The typed blocks are the ones the camera file with the blocks written in gives.
+            let mut v = camera_json.clone();
+            apply_rate_spec(&mut v, spec, &set.camera.sensor.channel_names);
+            let mut from_file =
+                camera_from_file(&set.camera_path, serde_json::from_value(v).unwrap()).unwrap();
+            from_file.sensor.effects.crosstalk = None;
+            let typed = fw.camera_for(spec).unwrap();
+            assert_eq!(typed.optics.effects, from_file.optics.effects, "{spec:?}");
+            assert_eq!(typed.sensor.effects, from_file.sensor.effects, "{spec:?}");
             for pass in 0..2 {
                 let got = fw.rates(spec).unwrap();
                 let mut s2 = set.clone();

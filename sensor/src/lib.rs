@@ -293,6 +293,17 @@ impl SensorModel {
         ((1u64 << self.adc_bits) - 1) as f64
     }
 
+    /// The layout of this sensor's raw frames: CFA tile, channel names, black level and
+    /// `2^bits − 1` as white.
+    pub fn raw_layout(&self) -> camsim_core::RawLayout {
+        camsim_core::RawLayout {
+            cfa_tile: self.cfa.tile.clone(),
+            channel_names: self.channel_names.clone(),
+            black_dn: self.black_level_dn,
+            white_dn: self.max_dn(),
+        }
+    }
+
     /// DN per volt of output voltage u: `(2^bits − 1) / swing` (step 7).
     pub fn dn_per_output_v(&self) -> f64 {
         self.max_dn() / self.voltage_swing_v

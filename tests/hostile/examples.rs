@@ -500,6 +500,7 @@ fn calibrate_refuses_a_frame_of_the_wrong_size() {
         cols: 4,
         adc_bits: 12,
         dn: vec![100; 16],
+        layout: None,
     };
     camsim_pipeline::frames::write_png16(&rec.join("raw/flat-1.png"), &small).unwrap();
     refused(

@@ -589,6 +589,7 @@ fn frame(rows: usize, cols: usize) -> RawFrame {
         cols,
         adc_bits: 12,
         dn: (0..rows * cols).map(|i| (i * 37 % 4096) as u16).collect(),
+        layout: None,
     }
 }
 

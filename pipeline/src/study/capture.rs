@@ -466,15 +466,7 @@ impl Ctx<'_> {
     }
 
     fn planes(&self, raw: &camsim_core::image::RawFrame) -> Result<ChannelPlanes, CliError> {
-        let s = self.sensor();
-        let m = Mosaic::from_raw(
-            raw,
-            s.cfa.tile.clone(),
-            s.channel_names.clone(),
-            s.black_level_dn,
-            s.max_dn(),
-        )
-        .map_err(|e| CliError::Other(format!("processor: {e}")))?;
+        let m = Mosaic::from_frame(raw).map_err(|e| CliError::Other(format!("processor: {e}")))?;
         demosaic_planes(&m, self.demosaic)
             .map_err(|e| CliError::Other(format!("processor.demosaic: {e}")))
     }
