@@ -19,6 +19,7 @@ use camsim_diagnose::mismatch::{
     diagnose, DataSet, DiagnoseOptions, Diagnosis, Effect, Forward, ModelState, RateSpec,
     ShotAccumulator, TargetClass,
 };
+use camsim_sensor::PixelTermPlanes;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 use std::collections::HashMap;
@@ -46,17 +47,16 @@ impl Default for DiagnoseCmdOptions {
     }
 }
 
-/// The forward model of the believed camera with a [`RateSpec`] applied: the camera file is
-/// edited as JSON (the effect blocks of the effects contract), parsed like any camera, and
-/// `simulate`'s scene → optics → pixel-integration stages give each shot's electron rates.
+/// The forward model of the believed camera with a [`RateSpec`] applied: the effect blocks
+/// are set on the typed camera (as the camera file with those blocks would give), and the
+/// one chain's scene → optics stages give each shot's irradiance.
 ///
 /// The QE blocks (`qe_shift`, `ir_leakage`) change only the spectral weights of pixel
 /// integration, not the irradiance, and the integration is linear in the irradiance's basis
-/// terms: rate_i = p²·FF·Σ_k (∫ QE_c(λ) B_k(λ) dλ) · Ā_k(i), with Ā_k the plane of term k
-/// averaged over pixel i (camsim_sensor::electron_rate in another order of summation). So
-/// the pixel-averaged planes Ā_k are kept per optics configuration ([`PlaneCache`]) and a
-/// candidate QE costs one weighted sum per pixel instead of a re-render of every target
-/// (issue 6, acceptance 4: the qe_shift candidate's re-renders were 40 % of the 1 MP bench).
+/// terms. So the pixel-averaged term planes of the sensor crate
+/// ([`camsim_sensor::pixel_term_planes`]) are kept per optics configuration ([`PlaneCache`])
+/// and a candidate QE costs one weighted sum per pixel
+/// ([`camsim_sensor::electron_rate_from_term_planes`]) instead of a re-render of every target.
 struct SimForward {
     /// The capture set whose camera is replaced per call (behind a lock: calls are
     /// sequential, each internally parallel).
@@ -70,19 +70,11 @@ struct SimForward {
     planes: Mutex<PlaneCache>,
 }
 
-/// The irradiance of one target averaged over every pixel, one plane per spectral basis term.
-struct PixelPlanes {
-    /// 1×1 image carrying the basis (for the spectral integrals of the channels).
-    basis: camsim_core::SpectralImage,
-    /// Row-major sensor-size planes, one per basis term.
-    planes: Vec<Vec<f32>>,
-}
-
 /// Pixel planes by optics key, then by target key; least recently used evicted first when
 /// the planes exceed [`PLANE_CACHE_BYTES`].
 #[derive(Default)]
 struct PlaneCache {
-    entries: HashMap<String, (u64, HashMap<String, Arc<PixelPlanes>>)>,
+    entries: HashMap<String, (u64, HashMap<String, Arc<PixelTermPlanes>>)>,
     bytes: usize,
     stamp: u64,
 }
@@ -90,7 +82,7 @@ struct PlaneCache {
 /// Memory for cached pixel planes.
 const PLANE_CACHE_BYTES: usize = 384 << 20;
 
-fn planes_bytes(m: &HashMap<String, Arc<PixelPlanes>>) -> usize {
+fn planes_bytes(m: &HashMap<String, Arc<PixelTermPlanes>>) -> usize {
     m.values()
         .map(|p| p.planes.iter().map(|x| x.len() * 4).sum::<usize>())
         .sum()
@@ -136,90 +128,6 @@ impl SimForward {
     }
 }
 
-/// Averages every plane of a sensor irradiance over every pixel (the pixel integration of
-/// `camsim_sensor::electron_rate`, per basis term).
-fn pixel_planes(
-    sensor: &camsim_sensor::SensorModel,
-    irr: &camsim_core::SensorIrradiance,
-) -> PixelPlanes {
-    let img = &irr.irradiance;
-    let wy = camsim_sensor::box_weights(
-        img.rows,
-        irr.sample_pitch_m,
-        sensor.rows,
-        sensor.pixel_pitch_m,
-    );
-    let wx = camsim_sensor::box_weights(
-        img.cols,
-        irr.sample_pitch_m,
-        sensor.cols,
-        sensor.pixel_pitch_m,
-    );
-    let ic = img.cols;
-    let planes = img
-        .planes
-        .iter()
-        .map(|p| {
-            let mut out = vec![0f32; sensor.rows * sensor.cols];
-            out.par_chunks_mut(sensor.cols).enumerate().for_each_init(
-                || vec![0f64; ic],
-                |line, (r, row)| {
-                    line.iter_mut().for_each(|l| *l = 0.0);
-                    for &(y, w) in &wy[r] {
-                        line.iter_mut()
-                            .zip(&p[y * ic..(y + 1) * ic])
-                            .for_each(|(l, s)| *l += w * *s as f64);
-                    }
-                    for (o, wc) in row.iter_mut().zip(&wx) {
-                        *o = wc.iter().map(|&(x, w)| w * line[x]).sum::<f64>() as f32;
-                    }
-                },
-            );
-            out
-        })
-        .collect();
-    let basis = camsim_core::SpectralImage::new(
-        1,
-        1,
-        img.basis.clone(),
-        vec![vec![0f32]; img.planes.len()],
-    )
-    .expect("one plane per term");
-    PixelPlanes { basis, planes }
-}
-
-/// Mean photo-electron rate of every pixel from its averaged planes: p²·FF·Σ_k w_ck Ā_k with
-/// w_ck the channel's (effective, QE blocks included) spectral integral of basis term k.
-fn rates_from_planes(sensor: &camsim_sensor::SensorModel, pp: &PixelPlanes) -> Vec<f32> {
-    let weights: Vec<Vec<(usize, f64)>> = (0..sensor.channel_qe.len())
-        .map(|c| {
-            let used = sensor.cfa.tile.iter().flatten().any(|&t| t == c);
-            if !used {
-                return Vec::new();
-            }
-            camsim_sensor::channel_term_integrals(sensor, &pp.basis, c)
-                .into_iter()
-                .enumerate()
-                .filter(|(_, w)| *w != 0.0)
-                .collect()
-        })
-        .collect();
-    let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
-    let cols = sensor.cols;
-    let mut out = vec![0f32; sensor.rows * cols];
-    out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
-        for (c, o) in row.iter_mut().enumerate() {
-            let i = r * cols + c;
-            let e: f64 = weights[sensor.cfa.channel_at(r, c)]
-                .iter()
-                .map(|&(t, w)| w * pp.planes[t][i] as f64)
-                .sum();
-            *o = (k * e) as f32;
-        }
-    });
-    out
-}
-
 impl Forward for SimForward {
     fn rates(&self, spec: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
         let cam = self.camera_for(spec)?;
@@ -242,7 +150,8 @@ impl Forward for SimForward {
                 e.1.clone()
             })
         };
-        let mut by_target: HashMap<String, Arc<PixelPlanes>> = cached.clone().unwrap_or_default();
+        let mut by_target: HashMap<String, Arc<PixelTermPlanes>> =
+            cached.clone().unwrap_or_default();
         let mut rate_by_target: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
         let mut out = Vec::with_capacity(self.shots.len());
         for &si in &self.shots {
@@ -255,12 +164,15 @@ impl Forward for SimForward {
                 Some(p) => p.clone(),
                 None => {
                     let irr = shot_irradiance(&set, si, &grid).map_err(|e| e.one_line())?;
-                    let p = Arc::new(pixel_planes(&set.camera.sensor, &irr));
+                    let p = Arc::new(camsim_sensor::pixel_term_planes(&set.camera.sensor, &irr));
                     by_target.insert(key.clone(), p.clone());
                     p
                 }
             };
-            let r = Arc::new(rates_from_planes(&set.camera.sensor, &pp));
+            let r = Arc::new(camsim_sensor::electron_rate_from_term_planes(
+                &set.camera.sensor,
+                &pp,
+            ));
             rate_by_target.insert(key, r.clone());
             out.push(r);
         }

@@ -39,7 +39,9 @@ pub use effects::{
     apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map, Crosstalk, HotPixel,
     HotPixels, IrLeakage, Nonlinearity, QeShift, SensorEffects,
 };
-pub use integrate::{box_weights, electron_rate};
+pub use integrate::{
+    box_weights, electron_rate, electron_rate_from_term_planes, pixel_term_planes, PixelTermPlanes,
+};
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
     nonlinearity_magnitude, PatternSource, FIXED_PATTERN_TAG,
