@@ -71,7 +71,7 @@ impl Spectrum {
         }
         if let Some(i) = wavelength_nm.iter().position(|w| *w > MAX_WAVELENGTH_NM) {
             return Err(CoreError::Spectrum(format!(
-                "wavelength_nm[{i}] = {} nm is beyond {MAX_WAVELENGTH_NM:e} nm (1 mm, the \
+                "wavelength_nm[{i}] = {:e} nm is beyond {MAX_WAVELENGTH_NM:e} nm (1 mm, the \
                  longest wavelength camsim accepts)",
                 wavelength_nm[i]
             )));
@@ -410,7 +410,7 @@ impl WavelengthGrid {
         }
         if let Some(w) = wavelength_nm.iter().find(|w| **w > MAX_WAVELENGTH_NM) {
             return Err(CoreError::Grid(format!(
-                "wavelength {w} nm is beyond {MAX_WAVELENGTH_NM:e} nm (1 mm, the longest \
+                "wavelength {w:e} nm is beyond {MAX_WAVELENGTH_NM:e} nm (1 mm, the longest \
                  wavelength camsim accepts)"
             )));
         }
