@@ -24,6 +24,7 @@ pub mod noise_profiles_cmd;
 #[doc = include_str!("../../docs/physics.md")]
 pub mod physics {}
 pub mod plots;
+pub mod png_stored;
 pub mod progress;
 pub mod raw_input;
 pub mod render_cmd;
