@@ -233,6 +233,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
             mean_luminance_cd_m2: None,
             illuminant: None,
             patch_labels: None,
+            world: Default::default(),
         },
         (Some(_), _) => return Err(bad(&path, "give either target or render, not both")),
         (None, Value::Null) => return Err(bad(&path, "target: required (or a render section)")),
