@@ -295,7 +295,7 @@ pub fn target_from_value(
             if !photon_file {
                 exr_io::bands_energy_to_photons(&mut img, &SI, false);
             }
-            world_illuminant = Some(crate::world_targets::file_illuminant(m, &img, photons)?);
+            world_illuminant = crate::world_targets::file_illuminant(m, &img, photons)?;
             Target::Image { radiance: img }
         }
         "macbeth" => {

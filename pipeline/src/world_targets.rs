@@ -202,17 +202,22 @@ pub fn rgb_image_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Re
 }
 
 /// The illuminant of a spectral image from a file (`image` EXR, `cube`): the stated one, or
-/// an estimate (grey world) when none is stated.
+/// an estimate (grey world) when none is stated — none for a black image (nothing to estimate
+/// from; an estimate asked for explicitly is then an error).
 pub fn file_illuminant(
     m: &Map<String, Value>,
     img: &SpectralImage,
     photons: bool,
-) -> Result<(Spectrum, String), String> {
-    let spec = match m.get("illuminant") {
-        None => IlluminantSpec::Estimate(EstimateMethod::GreyWorld),
-        Some(v) => illuminant_spec(v, "illuminant", photons)?,
-    };
-    resolve_illuminant(spec, img, None)
+) -> Result<Option<(Spectrum, String)>, String> {
+    match m.get("illuminant") {
+        None => Ok(resolve_illuminant(
+            IlluminantSpec::Estimate(EstimateMethod::GreyWorld),
+            img,
+            None,
+        )
+        .ok()),
+        Some(v) => resolve_illuminant(illuminant_spec(v, "illuminant", photons)?, img, None).map(Some),
+    }
 }
 
 /// `{"kind": "cube", "file": F, …}`: an ENVI header (`.hdr`), a `.npy` array or a spectral
@@ -313,7 +318,7 @@ pub fn cube_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Result<
         if !photon_file {
             camsim_core::exr_io::bands_energy_to_photons(&mut img, &SI, false);
         }
-        Some(file_illuminant(m, &img, photons)?)
+        file_illuminant(m, &img, photons)?
     };
     Ok(WorldTarget {
         target: Target::Image { radiance: img },
