@@ -174,7 +174,9 @@ fn random_cube_scene() -> SceneRadiance {
         .map(|&w| {
             (0..20)
                 .map(|_| {
-                    x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    x = x
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
                     let refl = 0.05 + 0.9 * ((x >> 33) as f64 / (1u64 << 31) as f64);
                     (refl * d65.eval(w)) as f32
                 })
@@ -218,7 +220,10 @@ fn illuminant_swap_round_trips_and_is_the_reflectance_formula() {
     swap_illuminant(&mut s, &tungsten, false, &SI).unwrap();
     for (b, &w) in grid.wavelength_nm.iter().enumerate() {
         let k = tungsten.eval(w) / d65.eval(w);
-        let (got, want) = (s.radiance.planes[b][7] as f64, orig.radiance.planes[b][7] as f64 * k);
+        let (got, want) = (
+            s.radiance.planes[b][7] as f64,
+            orig.radiance.planes[b][7] as f64 * k,
+        );
         assert!((got - want).abs() <= 1e-6 * want, "{w} nm: {got} vs {want}");
     }
     // round trip D65 → tungsten → D65, with the mean luminance kept (ISETCam's default)
@@ -278,8 +283,8 @@ fn swap_illuminant_key_relights_a_reflectance_scene() {
         {"id": "direct", "exposure_s": 0.01, "frames": ["b.png"],
          "target": {"kind": "macbeth", "illuminant": "A", "mean_luminance_cd_m2": 50}}]});
     write_set(dir.path(), &cam, &caps);
-    let set = camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None)
-        .unwrap();
+    let set =
+        camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
     let grid = WavelengthGrid::regular(400.0, 700.0, 10.0).unwrap();
     let a = camsim_pipeline::chain::shot_scene(&set, 0, &grid).unwrap();
     let b = camsim_pipeline::chain::shot_scene(&set, 1, &grid).unwrap();
@@ -300,7 +305,11 @@ fn illuminant_estimates_pick_the_right_family_and_temperature() {
         let planes: Vec<Vec<f32>> = grid
             .wavelength_nm
             .iter()
-            .map(|&w| refl.iter().map(|r| (r.eval(w) * ill.eval(w)) as f32).collect())
+            .map(|&w| {
+                refl.iter()
+                    .map(|r| (r.eval(w) * ill.eval(w)) as f32)
+                    .collect()
+            })
             .collect();
         SpectralImage::new(4, 6, SpectralBasis::Bands(grid.clone()), planes).unwrap()
     };
@@ -320,7 +329,11 @@ fn illuminant_estimates_pick_the_right_family_and_temperature() {
     let greys: Vec<Vec<f32>> = grid
         .wavelength_nm
         .iter()
-        .map(|&w| (1..=6).map(|k| (0.15 * k as f64 * bb3000.eval(w)) as f32).collect())
+        .map(|&w| {
+            (1..=6)
+                .map(|k| (0.15 * k as f64 * bb3000.eval(w)) as f32)
+                .collect()
+        })
         .collect();
     let greys = SpectralImage::new(2, 3, SpectralBasis::Bands(grid.clone()), greys).unwrap();
     let e = estimate_illuminant(&greys, &grid, EstimateMethod::GreyWorld, &SI).unwrap();
@@ -334,9 +347,15 @@ fn illuminant_estimates_pick_the_right_family_and_temperature() {
         (e.family, e.cct_k)
     };
     let (fam, t) = est(&bb3000, EstimateMethod::Brightest);
-    assert!(fam == IlluminantFamily::Blackbody && (t - 3000.0).abs() < 300.0, "{fam:?} {t}");
+    assert!(
+        fam == IlluminantFamily::Blackbody && (t - 3000.0).abs() < 300.0,
+        "{fam:?} {t}"
+    );
     let (fam, t) = est(&d65, EstimateMethod::Brightest);
-    assert!(fam == IlluminantFamily::Daylight && (t - 6504.0).abs() < 650.0, "{fam:?} {t}");
+    assert!(
+        fam == IlluminantFamily::Daylight && (t - 6504.0).abs() < 650.0,
+        "{fam:?} {t}"
+    );
     // grey world on the chart: warm by 15–30 % (measured: 2469 K for 3000 K, 4878 K for D65),
     // and farther off than the brightest pixels
     let (_, t) = est(&bb3000, EstimateMethod::GreyWorld);
@@ -442,7 +461,10 @@ fn envi_refuses_truncated_data_and_lying_headers() {
     // truncated by one byte
     std::fs::write(&raw, &good[..good.len() - 1]).unwrap();
     let e = read_envi(&hdr, None).unwrap_err();
-    assert!(e.contains("c.raw") && e.contains("239 bytes") && e.contains("240"), "{e}");
+    assert!(
+        e.contains("c.raw") && e.contains("239 bytes") && e.contains("240"),
+        "{e}"
+    );
     std::fs::write(&raw, &good).unwrap();
     let text = std::fs::read_to_string(&hdr).unwrap();
     let lie = |from: &str, to: &str| {
@@ -457,7 +479,10 @@ fn envi_refuses_truncated_data_and_lying_headers() {
     assert!(e.contains("320"), "{e}");
     // a wavelength missing
     let e = lie(" 0.55, 0.60, 0.65}", " 0.55, 0.60}");
-    assert!(e.contains("`wavelength` lists 4 wavelengths for 5 bands"), "{e}");
+    assert!(
+        e.contains("`wavelength` lists 4 wavelengths for 5 bands"),
+        "{e}"
+    );
     // decreasing wavelengths
     let e = lie("0.55, 0.60", "0.60, 0.55");
     assert!(e.contains("must increase"), "{e}");
@@ -471,7 +496,9 @@ fn envi_refuses_truncated_data_and_lying_headers() {
     assert!(e.contains("samples × lines × bands"), "{e}");
     // not an ENVI header at all
     std::fs::write(&hdr, "hello\n").unwrap();
-    assert!(read_envi(&hdr, None).unwrap_err().contains("not an ENVI header"));
+    assert!(read_envi(&hdr, None)
+        .unwrap_err()
+        .contains("not an ENVI header"));
 }
 
 /// An npy file of the test cube (rows × cols × bands).
@@ -488,7 +515,10 @@ fn write_npy(path: &Path, descr: &str, fortran: bool, shape: &str, skip_last: us
     let mut out = b"\x93NUMPY\x01\x00".to_vec();
     out.extend((h.len() as u16).to_le_bytes());
     out.extend(h);
-    let (big, ty) = (descr.starts_with('>'), if descr.ends_with('4') { 4 } else { 5 });
+    let (big, ty) = (
+        descr.starts_with('>'),
+        if descr.ends_with('4') { 4 } else { 5 },
+    );
     let order: Vec<(usize, usize, usize)> = if fortran {
         (0..5)
             .flat_map(|b| (0..4).flat_map(move |c| (0..3).map(move |r| (b, r, c))))
@@ -536,7 +566,9 @@ fn npy_cubes_round_trip_and_lying_headers_are_refused() {
     b[9] = 0xff;
     b.truncate(200);
     std::fs::write(&p, b).unwrap();
-    assert!(read_npy_cube(&p, &wl).unwrap_err().contains("header claims"));
+    assert!(read_npy_cube(&p, &wl)
+        .unwrap_err()
+        .contains("header claims"));
     // negative radiance
     let mut v = b"\x93NUMPY\x01\x00".to_vec();
     let h = b"{'descr': '<f4', 'fortran_order': False, 'shape': (1, 1, 1), }\n";
@@ -544,7 +576,9 @@ fn npy_cubes_round_trip_and_lying_headers_are_refused() {
     v.extend(h);
     v.extend((-1.0f32).to_le_bytes());
     std::fs::write(&p, v).unwrap();
-    assert!(read_npy_cube(&p, &[550.0]).unwrap_err().contains("value -1"));
+    assert!(read_npy_cube(&p, &[550.0])
+        .unwrap_err()
+        .contains("value -1"));
 }
 
 /// A cube target through the capture-set parser, and a broken one is one line naming the
@@ -562,12 +596,15 @@ fn cube_targets_parse_and_errors_name_the_key() {
         {"id": "envi", "exposure_s": 0.01, "frames": ["b.png"],
          "target": {"kind": "cube", "file": "e.hdr", "illuminant": "D65"}}]});
     write_set(dir.path(), &cam, &caps);
-    let set = camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None)
-        .unwrap();
+    let set =
+        camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
     let w = &set.shots[0].target.world;
     assert_eq!((w.fov_deg, w.distance_m), (Some(0.1), Some(2.0)));
     assert!(
-        w.illuminant_source.as_deref().unwrap().starts_with("estimated (grey world)"),
+        w.illuminant_source
+            .as_deref()
+            .unwrap()
+            .starts_with("estimated (grey world)"),
         "{w:?}"
     );
     assert!(set.shots[0].target.illuminant.is_some());
@@ -605,8 +642,8 @@ fn coverage_px(fov_deg: f64, distance_m: Option<f64>) -> (f64, usize) {
     let caps = json!({"camera": "camera.json", "shots": [
         {"id": "w", "exposure_s": 0.01, "frames": ["a.png"], "target": t}]});
     write_set(dir.path(), &cam, &caps);
-    let set = camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None)
-        .unwrap();
+    let set =
+        camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
     let grid = WavelengthGrid::regular(400.0, 700.0, 10.0).unwrap();
     let scene = camsim_pipeline::chain::shot_scene(&set, 0, &grid).unwrap();
     assert_eq!(

@@ -136,11 +136,7 @@ fn evidence(
     let mut all = vec![0.0; grid.len()];
     let mut br = vec![0.0; grid.len()];
     for (k, samples) in term_samples.iter().enumerate() {
-        let bm = bright
-            .iter()
-            .map(|&i| img.planes[k][i] as f64)
-            .sum::<f64>()
-            / top as f64;
+        let bm = bright.iter().map(|&i| img.planes[k][i] as f64).sum::<f64>() / top as f64;
         for (b, s) in samples.iter().enumerate() {
             all[b] += means[k] * s;
             br[b] += bm * s;

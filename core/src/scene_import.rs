@@ -206,7 +206,10 @@ fn sum_spectra(s: &[Spectrum]) -> Spectrum {
     }
     wl.sort_by(|a, b| a.total_cmp(b));
     wl.dedup();
-    let values = wl.iter().map(|&w| s.iter().map(|x| x.eval(w)).sum()).collect();
+    let values = wl
+        .iter()
+        .map(|&w| s.iter().map(|x| x.eval(w)).sum())
+        .collect();
     Spectrum::Sampled {
         wavelength_nm: wl,
         values,

@@ -149,7 +149,8 @@ mod tests {
         let img = SpectralImage::from_single_spectrum(3, 5, Spectrum::constant(1.0), vec![1.0; 15]);
         let g = SamplingGrid::for_sensor(20, 20, 1e-6, 1, 0);
         let (w, h) = (7.3e-6, 7.3e-6 * 3.0 / 5.0);
-        let out = render_target_in_view(&Target::Image { radiance: img }, &g, Some((w, h))).unwrap();
+        let out =
+            render_target_in_view(&Target::Image { radiance: img }, &g, Some((w, h))).unwrap();
         let total: f64 = out.planes[0].iter().map(|v| *v as f64).sum();
         assert!((total - w * h / 1e-12).abs() < 1e-4, "{total}");
         assert!(out.planes[0].iter().all(|v| (0.0..=1.0 + 1e-6).contains(v)));

@@ -184,7 +184,12 @@ fn envi_pairs(path: &Path, text: &str) -> Result<Vec<(String, String)>, String> 
     let mut lines = text.lines();
     match lines.next() {
         Some(l) if l.trim_start_matches('\u{feff}').trim().starts_with("ENVI") => {}
-        _ => return Err(err(path, "not an ENVI header (the first line must be `ENVI`)")),
+        _ => {
+            return Err(err(
+                path,
+                "not an ENVI header (the first line must be `ENVI`)",
+            ))
+        }
     }
     let mut out = Vec::new();
     let mut pending: Option<(String, String)> = None;
@@ -217,7 +222,10 @@ fn envi_pairs(path: &Path, text: &str) -> Result<Vec<(String, String)>, String> 
         }
     }
     if let Some((k, _)) = pending {
-        return Err(err(path, format!("{k}: `{{` value without its closing `}}`")));
+        return Err(err(
+            path,
+            format!("{k}: `{{` value without its closing `}}`"),
+        ));
     }
     Ok(out)
 }
@@ -236,7 +244,10 @@ fn envi_count(path: &Path, pairs: &[(String, String)], key: &str) -> Result<usiz
         Ok(n) if n >= 1 && n <= u32::MAX as u64 => Ok(n as usize),
         _ => Err(err(
             path,
-            format!("`{key}` = {v}: expected a whole number from 1 to {}", u32::MAX),
+            format!(
+                "`{key}` = {v}: expected a whole number from 1 to {}",
+                u32::MAX
+            ),
         )),
     }
 }
@@ -329,7 +340,12 @@ pub fn read_envi(hdr: &Path, data_file: Option<&Path>) -> Result<SpectralCube, S
         Some(s) if s == "bsq" => Layout::Bsq,
         Some(s) if s == "bil" => Layout::Bil,
         Some(s) if s == "bip" => Layout::Bip,
-        Some(s) => return Err(err(hdr, format!("`interleave` = {s}: expected bsq, bil or bip"))),
+        Some(s) => {
+            return Err(err(
+                hdr,
+                format!("`interleave` = {s}: expected bsq, bil or bip"),
+            ))
+        }
         None => return Err(err(hdr, "`interleave`: required (bsq, bil or bip)")),
     };
     let ty = match envi_get(&pairs, "data type") {
@@ -358,17 +374,21 @@ pub fn read_envi(hdr: &Path, data_file: Option<&Path>) -> Result<SpectralCube, S
     };
     let offset: u64 = match envi_get(&pairs, "header offset") {
         None => 0,
-        Some(v) => v
-            .parse()
-            .map_err(|_| err(hdr, format!("`header offset` = {v}: expected a byte count ≥ 0")))?,
+        Some(v) => v.parse().map_err(|_| {
+            err(
+                hdr,
+                format!("`header offset` = {v}: expected a byte count ≥ 0"),
+            )
+        })?,
     };
     let wl_text =
         envi_get(&pairs, "wavelength").ok_or_else(|| err(hdr, "`wavelength`: required"))?;
     let mut wl = number_list(hdr, "wavelength", wl_text)?;
     let scale = match envi_get(&pairs, "wavelength units").map(|s| s.to_ascii_lowercase()) {
         Some(u) if ["nanometers", "nanometer", "nm"].contains(&u.as_str()) => 1.0,
-        Some(u) if ["micrometers", "micrometer", "microns", "micron", "um", "µm"]
-            .contains(&u.as_str()) =>
+        Some(u)
+            if ["micrometers", "micrometer", "microns", "micron", "um", "µm"]
+                .contains(&u.as_str()) =>
         {
             1000.0
         }
@@ -391,12 +411,7 @@ pub fn read_envi(hdr: &Path, data_file: Option<&Path>) -> Result<SpectralCube, S
     check_wavelengths(hdr, "wavelength", &wl, bands)?;
     let n = rows as u128 * cols as u128 * bands as u128;
     let bytes = offset as u128 + n * ty.bytes() as u128;
-    check_cube_budget(
-        hdr,
-        "samples × lines × bands",
-        n as f64,
-        bytes as f64,
-    )?;
+    check_cube_budget(hdr, "samples × lines × bands", n as f64, bytes as f64)?;
     let data_path = envi_data_file(hdr, data_file)?;
     let data = read_exact_len(
         &data_path,
@@ -462,7 +477,12 @@ pub fn read_npy_cube(path: &Path, wavelength_nm: &[f64]) -> Result<SpectralCube,
             u32::from_le_bytes([pre[8], pre[9], pre[10], pre[11]]) as u128,
             12,
         ),
-        v => return Err(err(path, format!("npy format version {v} (expected 1, 2 or 3)"))),
+        v => {
+            return Err(err(
+                path,
+                format!("npy format version {v} (expected 1, 2 or 3)"),
+            ))
+        }
     };
     if hstart + hlen > len || hlen > 1 << 20 {
         return Err(err(
@@ -473,7 +493,8 @@ pub fn read_npy_cube(path: &Path, wavelength_nm: &[f64]) -> Result<SpectralCube,
     let mut head = vec![0u8; (hstart + hlen) as usize];
     drop(f);
     {
-        let mut f = std::fs::File::open(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
+        let mut f =
+            std::fs::File::open(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
         f.read_exact(&mut head)
             .map_err(|e| err(path, format!("cannot read the header: {e}")))?;
     }
@@ -496,7 +517,12 @@ pub fn read_npy_cube(path: &Path, wavelength_nm: &[f64]) -> Result<SpectralCube,
     let fortran = match npy_field(&header, "fortran_order") {
         Some("False") => false,
         Some("True") => true,
-        v => return Err(err(path, format!("npy 'fortran_order' = {v:?}: expected True or False"))),
+        v => {
+            return Err(err(
+                path,
+                format!("npy 'fortran_order' = {v:?}: expected True or False"),
+            ))
+        }
     };
     let shape_txt =
         npy_field(&header, "shape").ok_or_else(|| err(path, "npy header: no 'shape'"))?;
@@ -507,17 +533,29 @@ pub fn read_npy_cube(path: &Path, wavelength_nm: &[f64]) -> Result<SpectralCube,
         .filter(|t| !t.is_empty())
         .map(|t| t.parse::<u64>())
         .collect::<Result<_, _>>()
-        .map_err(|_| err(path, format!("npy 'shape' = {shape_txt}: not whole numbers")))?;
+        .map_err(|_| {
+            err(
+                path,
+                format!("npy 'shape' = {shape_txt}: not whole numbers"),
+            )
+        })?;
     let [rows, cols, bands] = dims[..] else {
         return Err(err(
             path,
             format!("npy 'shape' = {shape_txt}: expected 3 axes (rows, columns, bands)"),
         ));
     };
-    if rows == 0 || cols == 0 || bands == 0 || [rows, cols, bands].iter().any(|&d| d > u32::MAX as u64) {
+    if rows == 0
+        || cols == 0
+        || bands == 0
+        || [rows, cols, bands].iter().any(|&d| d > u32::MAX as u64)
+    {
         return Err(err(
             path,
-            format!("npy 'shape' = {shape_txt}: every axis must be 1 to {}", u32::MAX),
+            format!(
+                "npy 'shape' = {shape_txt}: every axis must be 1 to {}",
+                u32::MAX
+            ),
         ));
     }
     let (rows, cols, bands) = (rows as usize, cols as usize, bands as usize);
@@ -530,7 +568,11 @@ pub fn read_npy_cube(path: &Path, wavelength_nm: &[f64]) -> Result<SpectralCube,
         bytes,
         &format!("the npy header (shape {shape_txt}, {descr})"),
     )?;
-    let layout = if fortran { Layout::Fortran } else { Layout::Bip };
+    let layout = if fortran {
+        Layout::Fortran
+    } else {
+        Layout::Bip
+    };
     let planes = decode_planes(
         path,
         &data[(hstart + hlen) as usize..],
@@ -556,7 +598,10 @@ pub fn read_wavelength_file(path: &Path) -> Result<Vec<f64>, String> {
         .map_err(|e| err(path, format!("cannot read: {e}")))?
         .len();
     if len > 16 << 20 {
-        return Err(err(path, format!("{len} bytes is too large for a wavelength list")));
+        return Err(err(
+            path,
+            format!("{len} bytes is too large for a wavelength list"),
+        ));
     }
     let t = std::fs::read_to_string(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
     let t = t.trim();
@@ -611,7 +656,11 @@ pub fn read_rgb_picture(path: &Path) -> Result<RgbCodes, String> {
         D::ImageLuma16(b) => (1, 16, b.into_raw()),
         D::ImageLumaA16(b) => (1, 16, b.pixels().map(|p| p.0[0]).collect()),
         D::ImageRgb16(b) => (3, 16, b.into_raw()),
-        D::ImageRgba16(b) => (3, 16, b.pixels().flat_map(|p| [p.0[0], p.0[1], p.0[2]]).collect()),
+        D::ImageRgba16(b) => (
+            3,
+            16,
+            b.pixels().flat_map(|p| [p.0[0], p.0[1], p.0[2]]).collect(),
+        ),
         other => {
             return Err(err(
                 path,

@@ -140,8 +140,7 @@ pub fn shot_memory_bytes(set: &CaptureSet, grid: &WavelengthGrid) -> f64 {
         .max()
         .unwrap_or(0)
         .max(grid.len());
-    crate::budget::f32_bytes(samples * planes as f64, 3.0)
-        + s.rows as f64 * s.cols as f64 * 48.0
+    crate::budget::f32_bytes(samples * planes as f64, 3.0) + s.rows as f64 * s.cols as f64 * 48.0
 }
 
 /// Refuse a capture set whose shots need more memory than the budget allows
@@ -203,9 +202,8 @@ fn scene_on_grid(
         };
         camsim_core::scene_view::extent_in_image_plane_m(fov, aspect, image_distance_m)
     });
-    let radiance =
-        camsim_core::scene_view::render_target_in_view(&shot.target.target, g, extent)
-            .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
+    let radiance = camsim_core::scene_view::render_target_in_view(&shot.target.target, g, extent)
+        .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
     let mut scene = SceneRadiance {
         radiance,
         sample_pitch_m: g.pitch_m,

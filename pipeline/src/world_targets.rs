@@ -160,7 +160,11 @@ fn string_key<'a>(m: &'a Map<String, Value>, k: &str, what: &str) -> Result<&'a 
 /// `{"kind": "image", "file": PICTURE, "display": NAME_OR_JSON, "illuminant": …}`: an 8/16-bit
 /// PNG/TIFF through a display model (ISETCam `sceneFromFile`, see
 /// [`camsim_core::scene_import`]).
-pub fn rgb_image_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Result<WorldTarget, String> {
+pub fn rgb_image_target(
+    m: &Map<String, Value>,
+    dir: &Path,
+    photons: bool,
+) -> Result<WorldTarget, String> {
     let file = string_key(m, "file", "a PNG or TIFF picture")?;
     let dname = string_key(m, "display", "an ISET display name or a display JSON file")?;
     let display = if dname.ends_with(".json") {
@@ -185,7 +189,8 @@ pub fn rgb_image_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Re
     };
     let p = dir.join(file);
     let codes = scene_files::read_rgb_picture(&p).map_err(|e| format!(".file: {e}"))?;
-    let rgb = scene_from_rgb(&codes, &prim, &SI).map_err(|e| format!(".file: {}: {e}", p.display()))?;
+    let rgb =
+        scene_from_rgb(&codes, &prim, &SI).map_err(|e| format!(".file: {}: {e}", p.display()))?;
     let spec = match m.get("illuminant") {
         None => IlluminantSpec::DisplayWhite,
         Some(v) => illuminant_spec(v, "illuminant", photons)?,
@@ -216,14 +221,20 @@ pub fn file_illuminant(
             None,
         )
         .ok()),
-        Some(v) => resolve_illuminant(illuminant_spec(v, "illuminant", photons)?, img, None).map(Some),
+        Some(v) => {
+            resolve_illuminant(illuminant_spec(v, "illuminant", photons)?, img, None).map(Some)
+        }
     }
 }
 
 /// `{"kind": "cube", "file": F, …}`: an ENVI header (`.hdr`), a `.npy` array or a spectral
 /// EXR; `quantity` `"radiance"` (default; W unless `radiance_unit` = photons) or
 /// `"reflectance"` (times the stated `illuminant`).
-pub fn cube_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Result<WorldTarget, String> {
+pub fn cube_target(
+    m: &Map<String, Value>,
+    dir: &Path,
+    photons: bool,
+) -> Result<WorldTarget, String> {
     let file = string_key(m, "file", "an ENVI .hdr, a .npy or a spectral .exr")?;
     let p = dir.join(file);
     let ext = p
@@ -254,10 +265,8 @@ pub fn cube_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Result<
             let wl = match (m.get("wavelength_nm"), m.get("wavelength_file")) {
                 (Some(v), None) => serde_json::from_value::<Vec<f64>>(v.clone())
                     .map_err(|_| ".wavelength_nm: must be a list of numbers (nm)".to_string())?,
-                (None, Some(Value::String(f))) => {
-                    scene_files::read_wavelength_file(&dir.join(f))
-                        .map_err(|e| format!(".wavelength_file: {e}"))?
-                }
+                (None, Some(Value::String(f))) => scene_files::read_wavelength_file(&dir.join(f))
+                    .map_err(|e| format!(".wavelength_file: {e}"))?,
                 (None, Some(_)) => return Err(".wavelength_file: must be a path".into()),
                 (Some(_), Some(_)) => {
                     return Err("give wavelength_nm or wavelength_file, not both".into())
@@ -291,7 +300,8 @@ pub fn cube_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Result<
             ))
         }
     };
-    let grid = WavelengthGrid::new(cube.wavelength_nm.clone()).map_err(|e| format!(".file: {e}"))?;
+    let grid =
+        WavelengthGrid::new(cube.wavelength_nm.clone()).map_err(|e| format!(".file: {e}"))?;
     let mut img = SpectralImage::new(
         cube.rows,
         cube.cols,
@@ -303,13 +313,17 @@ pub fn cube_target(m: &Map<String, Value>, dir: &Path, photons: bool) -> Result<
         let spec = match m.get("illuminant") {
             Some(v) => illuminant_spec(v, "illuminant", photons)?,
             None => {
-                return Err(".illuminant: required for a reflectance cube (a name or a spectrum)".into())
+                return Err(
+                    ".illuminant: required for a reflectance cube (a name or a spectrum)".into(),
+                )
             }
         };
         let IlluminantSpec::Given(ill, note) = spec else {
-            return Err(".illuminant: a reflectance cube needs a stated illuminant (a name or a \
+            return Err(
+                ".illuminant: a reflectance cube needs a stated illuminant (a name or a \
                         spectrum), not an estimate"
-                .into());
+                    .into(),
+            );
         };
         // radiance = reflectance × illuminant, per band
         img.scale_spectrally(&ill);
@@ -354,7 +368,9 @@ pub fn distance_value(v: Option<&Value>, implied: Option<f64>) -> Result<Option<
         }),
         Some(v) => match v.as_f64() {
             Some(d) if d > 0.0 && d.is_finite() => Ok(Some(d)),
-            _ => Err(format!(".distance_m: expected metres > 0 (or \"display\"), got {v}")),
+            _ => Err(format!(
+                ".distance_m: expected metres > 0 (or \"display\"), got {v}"
+            )),
         },
     }
 }
