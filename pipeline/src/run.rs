@@ -251,6 +251,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
             mean_luminance_cd_m2: None,
             illuminant: None,
             patch_labels: None,
+            world: Default::default(),
         },
         (Some(_), _) => return Err(bad(&path, "give either target or render, not both")),
         (None, Value::Null) => return Err(bad(&path, "target: required (or a render section)")),
@@ -837,6 +838,14 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         "sensor": {"rows": sensor.rows, "cols": sensor.cols, "pixel_pitch_um": sensor.pixel_pitch_m * 1e6, "adc_bits": sensor.adc_bits},
         "optics": {"f_number": cam.optics.f_number, "focal_length_mm": cam.optics.focal_length_m * 1e3},
         "scene_mean_luminance_cd_m2": scene_luminance,
+        "scene_view": {
+            "fov_deg": set.shots[0].target.world.fov_deg,
+            "distance_m": set.shots[0].target.world.distance_m,
+            "sensor_fov_deg": camsim_core::scene_view::fov_deg_of_width(
+                sensor.cols as f64 * sensor.pixel_pitch_m,
+                camsim_optics::thin_lens_image_distance_m(cam.optics.focal_length_m, set.shots[0].target.world.distance_m)),
+            "illuminant": set.shots[0].target.world.illuminant_source,
+        },
         "exposure_s": exposure_s,
         "raw_mean_dn": raw_mean_dn,
         "processor": {"demosaic": r.demosaic.name(), "channels": names, "white_balance": r.white_balance, "white_balance_gains": wb_gains,

@@ -445,6 +445,7 @@ impl Ctx<'_> {
             mean_luminance_cd_m2: Some(REFERENCE_LUMINANCE_CD_M2),
             illuminant: Some(self.illuminant_photons.clone()),
             patch_labels: None,
+            world: Default::default(),
         }
     }
 
@@ -635,6 +636,7 @@ fn mtf50(ctx: &Ctx, o: &Mtf50Opts) -> Result<MtfResult, CliError> {
         mean_luminance_cd_m2: Some(REFERENCE_LUMINANCE_CD_M2),
         illuminant: Some(ill.clone()),
         patch_labels: None,
+        world: Default::default(),
     };
     let what = format!("slanted_edge:{angle}:{contrast}");
     let rate = ctx.rate(&what, edge, true)?;
