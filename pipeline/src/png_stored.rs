@@ -237,6 +237,7 @@ mod tests {
             dn: (0..rows * cols)
                 .map(|i| (i as u64 * 2_654_435_761 % 65_536) as u16)
                 .collect(),
+            layout: None,
         }
     }
 
