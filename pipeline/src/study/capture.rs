@@ -288,7 +288,7 @@ fn illuminant_energy(d: &CaptureDoc) -> Result<Spectrum, String> {
 /// What the points of one study share, keyed by content: validated cameras (with their lens
 /// field models), lens field models by prescription and covered field, and electron rates at
 /// the reference luminance. One value per study run, created by its caller and passed to
-/// every point; each map is cleared when it holds [`CACHE_LIMIT`] entries.
+/// every point; each map is cleared when it holds `CACHE_LIMIT` (64) entries.
 #[derive(Default)]
 pub struct StudyCaches {
     cameras: Mutex<HashMap<String, Arc<Camera>>>,
