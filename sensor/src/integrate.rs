@@ -46,6 +46,19 @@ pub fn box_weights(
         .collect()
 }
 
+/// The [`box_weights`] of the sensor's pixel rows and columns over the irradiance grid.
+fn pixel_box_weights(
+    sensor: &SensorModel,
+    irradiance: &SensorIrradiance,
+) -> (Vec<Vec<(usize, f64)>>, Vec<Vec<(usize, f64)>>) {
+    let img = &irradiance.irradiance;
+    let p = irradiance.sample_pitch_m;
+    (
+        box_weights(img.rows, p, sensor.rows, sensor.pixel_pitch_m),
+        box_weights(img.cols, p, sensor.cols, sensor.pixel_pitch_m),
+    )
+}
+
 /// Mean photo-electron rate per pixel (step 2 without t): `p² · FF · ∫ QE_c(λ) Ē(λ) dλ`,
 /// Ē the irradiance (photons/(s·m²·nm)) area-averaged over the pixel's p × p square; with
 /// the effect blocks, QE_c is the effective QE (QE shift, IR leakage) and the result is
@@ -70,18 +83,7 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
             })
         })
         .collect();
-    let wy = box_weights(
-        img.rows,
-        irradiance.sample_pitch_m,
-        sensor.rows,
-        sensor.pixel_pitch_m,
-    );
-    let wx = box_weights(
-        img.cols,
-        irradiance.sample_pitch_m,
-        sensor.cols,
-        sensor.pixel_pitch_m,
-    );
+    let (wy, wx) = pixel_box_weights(sensor, irradiance);
     let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
     let (oi_cols, n_ch) = (img.cols, weights.len());
     let mut out = vec![0f32; sensor.rows * sensor.cols];
@@ -146,18 +148,7 @@ pub struct PixelTermPlanes {
 /// (without crosstalk) is the same sum taken in another order.
 pub fn pixel_term_planes(sensor: &SensorModel, irradiance: &SensorIrradiance) -> PixelTermPlanes {
     let img = &irradiance.irradiance;
-    let wy = box_weights(
-        img.rows,
-        irradiance.sample_pitch_m,
-        sensor.rows,
-        sensor.pixel_pitch_m,
-    );
-    let wx = box_weights(
-        img.cols,
-        irradiance.sample_pitch_m,
-        sensor.cols,
-        sensor.pixel_pitch_m,
-    );
+    let (wy, wx) = pixel_box_weights(sensor, irradiance);
     let ic = img.cols;
     let planes = img
         .planes
