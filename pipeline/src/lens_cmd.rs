@@ -432,7 +432,7 @@ fn focused(lens: &LensPrescription, path: &Path) -> Result<LensPrescription, Cli
     let l = lens
         .focused(lens.primary_nm)
         .map_err(|e| CliError::input(path, e))?;
-    let d = l.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+    let d = l.image_distance_mm();
     if !d.is_finite() {
         return Err(CliError::input(
             path,
@@ -804,7 +804,7 @@ pub fn lens_report(
     } else {
         dz
     };
-    let img_d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+    let img_d = lens.image_distance_mm();
     let mtf_lens = lens.with_image_distance(img_d + dz);
     // Pupil grid set by the OPD slope (camsim_lens::focus), 64…1024 per side.
     let (wo, sampling) = mtf_lens
@@ -1601,7 +1601,7 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                 field_fraction,
                 max_field_deg(&lens, mfd, &path, field_fraction != 0.0)?,
             )?;
-            let d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+            let d = lens.image_distance_mm();
             let lens = lens.with_image_distance(d + defocus_mm);
             let (m, sample_mm, mut v, extra) = match method {
                 PsfMethod::Fft => {
@@ -1735,6 +1735,11 @@ pub fn draw_svg(
     max_field_deg: f64,
     rays: usize,
 ) -> Result<String, camsim_lens::LensError> {
+    if lens.has_folds() {
+        return Err(camsim_lens::LensError::Prescription(
+            "drawing a lens with mirrors or coordinate breaks is not supported".into(),
+        ));
+    }
     let primary = lens.primary_nm;
     let fo = lens.first_order(primary)?;
     let z = lens.vertex_z_mm();
