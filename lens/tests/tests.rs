@@ -10,6 +10,7 @@ mod fold;
 mod full_field;
 mod glass;
 mod glass_catalogs;
+mod glass_formulas;
 mod huygens;
 mod iset_json;
 mod lenses_dir;

@@ -81,6 +81,11 @@ pub struct LensArg {
     /// files named on a .zmx's GCAT line are also looked for beside the .zmx.
     #[arg(long = "glass-catalog", value_name = "FILE.agf")]
     pub glass_catalog: Vec<PathBuf>,
+    /// Sensor diagonal (mm): the maximum field becomes the field whose paraxial chief ray
+    /// reaches the sensor corner (tan θ = (d/2)/EFL at infinity), replacing the file's fields
+    /// (pbrt .dat and ISET lens files state none). --max-field-deg still overrides it.
+    #[arg(long = "sensor-diagonal-mm", value_name = "MM")]
+    pub sensor_diagonal_mm: Option<f64>,
 }
 
 impl LensArg {
@@ -107,7 +112,32 @@ impl LensArg {
             };
             opts = opts.substitute(from, glass, vendor);
         }
-        load_lens_with(&self.path, &opts)
+        let mut lens = load_lens_with(&self.path, &opts)?;
+        if let Some(d) = self.sensor_diagonal_mm {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(CliError::Other(format!(
+                    "--sensor-diagonal-mm {d} must be a positive number of mm"
+                )));
+            }
+            let half_fov = lens
+                .focused(lens.primary_nm)
+                .and_then(|f| f.paraxial_full_fov_deg(d / 2.0))
+                .map_err(|e| CliError::input(&self.path, e))?
+                / 2.0;
+            if !(half_fov > 0.0 && half_fov < 90.0) {
+                return Err(CliError::input(
+                    &self.path,
+                    format!("--sensor-diagonal-mm {d} gives a field of {half_fov}°"),
+                ));
+            }
+            eprintln!(
+                "camsim: {}: maximum field {half_fov:.4}° from the sensor diagonal {d} mm \
+                 (paraxial chief ray to the corner)",
+                self.path.display()
+            );
+            lens.fields_deg = vec![0.0, half_fov];
+        }
+        Ok(lens)
     }
 }
 
