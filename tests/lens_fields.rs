@@ -73,9 +73,9 @@ fn lens_cli_field_of_a_file_without_field_angles() {
     let th = v["field_deg"].as_f64().unwrap();
     let want = (d / 2.0 / efl).atan().to_degrees();
     assert!((th - want).abs() < 1e-6, "{th} vs {want} (EFL {efl})");
-    let (code, _, err) = spot(lens, &["--sensor-diagonal-mm", "-3"]);
+    let (code, _, err) = spot(lens, &["--sensor-diagonal-mm", "0"]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("--sensor-diagonal-mm -3"), "{err}");
+    assert!(err.contains("--sensor-diagonal-mm 0 must be"), "{err}");
     // a field stated in the file name (ISETCam naming): used, and said so
     let dir = tempfile::tempdir().unwrap();
     let named = dir.path().join("dgauss.22deg.50mm.dat");
@@ -85,4 +85,37 @@ fn lens_cli_field_of_a_file_without_field_angles() {
     assert!(err.contains("taken from its name"), "{err}");
     let v: Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["field_deg"].as_f64().unwrap(), 22.0);
+}
+
+/// A hostile `--glass-catalog` file: one error line naming the file, the line and the value.
+#[test]
+fn lens_cli_bad_glass_catalog_is_one_error_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let agf = dir.path().join("acme.agf");
+    std::fs::write(
+        &agf,
+        "NM MYGLASS 2 517642 1.5168 64.17 0 0 0\nCD 1.03 x 0.23 0.02 1.01 103.5\n",
+    )
+    .unwrap();
+    let lens = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("lenses/double_gauss_50mm_f2.json");
+    let (code, out, err) = run(&[
+        "lens",
+        "spot",
+        lens.to_str().unwrap(),
+        "--field-fraction",
+        "0",
+        "--wavelength-nm",
+        "587.6",
+        "--glass-catalog",
+        agf.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(out.trim().is_empty(), "{out}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].contains("acme.agf") && lines[0].contains("line 2") && lines[0].contains("'x'"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
 }
