@@ -8,6 +8,7 @@ mod emva1288;
 mod hostile;
 mod lens_blur;
 mod lens_cli;
+mod lens_fields;
 mod oracles;
 mod raw_formats;
 mod real_data;

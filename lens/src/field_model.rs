@@ -422,7 +422,7 @@ impl FieldModel {
             }
         }
         let focused = lens.focus_at(focus_distance_mm)?;
-        let image_distance_mm = focused.surfaces.last().unwrap().thickness_mm;
+        let image_distance_mm = focused.image_distance_mm();
         if !image_distance_mm.is_finite() {
             return Err(bad("the focus distance has no real paraxial image".into()));
         }
