@@ -9,6 +9,7 @@ mod hostile;
 mod lens_blur;
 mod lens_cli;
 mod oracles;
+mod pixel_area;
 mod raw_formats;
 mod real_data;
 mod render;
