@@ -215,7 +215,11 @@ mod tests {
             let mut want = 0.0;
             for &(x, wx) in &grid {
                 for &(y, wy) in &grid {
-                    if nx * x + ny * y > c {
+                    let v = nx * x + ny * y - c;
+                    // a grid point on the line counts half
+                    if v.abs() < 1e-12 {
+                        want += 0.5 * wx * wy;
+                    } else if v > 0.0 {
                         want += wx * wy;
                     }
                 }

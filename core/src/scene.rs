@@ -218,6 +218,29 @@ fn half_plane_area(x0: f64, x1: f64, y0: f64, y1: f64, nx: f64, ny: f64) -> f64 
     0.5 * a.abs()
 }
 
+/// `wx(x_c) · wy(y_r)` at every sample (x_c, y_r: the sample centres).
+fn separable_plane(
+    g: &SamplingGrid,
+    wx: impl Fn(f64) -> f64,
+    wy: impl Fn(f64) -> f64,
+) -> Vec<f32> {
+    let cx: Vec<f64> = (0..g.cols)
+        .map(|c| wx(0.5 * (g.x0(c) + g.x0(c + 1))))
+        .collect();
+    let ry: Vec<f64> = (0..g.rows)
+        .map(|r| wy(0.5 * (g.y0(r) + g.y0(r + 1))))
+        .collect();
+    let mut p = vec![0f32; g.rows * g.cols];
+    p.par_chunks_mut(g.cols)
+        .zip(ry.par_iter())
+        .for_each(|(row, &y)| {
+            for (v, &x) in row.iter_mut().zip(&cx) {
+                *v = (x * y) as f32;
+            }
+        });
+    p
+}
+
 fn plane_from_fn(g: &SamplingGrid, f: impl Fn(f64, f64, f64, f64) -> f32 + Sync) -> Vec<f32> {
     let mut p = vec![0f32; g.rows * g.cols];
     p.par_chunks_mut(g.cols).enumerate().for_each(|(r, row)| {
@@ -282,17 +305,17 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
                     let (px0, px1, py0, py1) =
                         (cx - pw / 2.0, cx + pw / 2.0, cy - ph / 2.0, cy + ph / 2.0);
                     let a = g.pitch_m * g.pitch_m;
-                    let plane = plane_from_fn(g, |x0, x1, y0, y1| match ap {
-                        SampleAperture::Cell => {
+                    let plane = match ap {
+                        SampleAperture::Cell => plane_from_fn(g, |x0, x1, y0, y1| {
                             (overlap(x0, x1, px0, px1) * overlap(y0, y1, py0, py1) / a) as f32
-                        }
-                        _ => {
-                            let (xc, yc) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
-                            (interval_weight(ap, (px0 - xc) / d, (px1 - xc) / d)
-                                * interval_weight(ap, (py0 - yc) / d, (py1 - yc) / d))
-                                as f32
-                        }
-                    });
+                        }),
+                        // Separable: one weight per column and one per row.
+                        _ => separable_plane(
+                            g,
+                            |xc| interval_weight(ap, (px0 - xc) / d, (px1 - xc) / d),
+                            |yc| interval_weight(ap, (py0 - yc) / d, (py1 - yc) / d),
+                        ),
+                    };
                     bg.iter_mut().zip(&plane).for_each(|(b, p)| *b -= p);
                     planes.push(plane);
                 }
