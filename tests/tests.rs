@@ -10,6 +10,7 @@ mod lens_blur;
 mod lens_cli;
 mod lens_fields;
 mod oracles;
+mod pixel_area;
 mod raw_formats;
 mod real_data;
 mod render;

@@ -575,6 +575,21 @@ pub struct SimulationFile {
     /// Default seed when --seed is not given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
+    /// What a scene sample stands for: `"auto"` (default: the cubic B-spline filter under a
+    /// band-limited blur, [`crate::simulate::sample_aperture_for`]) or `"cell"` (always the
+    /// cell average, as before issue 17 §5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sample_aperture: Option<SampleApertureChoice>,
+}
+
+/// `simulation.sample_aperture`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SampleApertureChoice {
+    /// The most exact aperture the optics allow.
+    Auto,
+    /// Cell averages.
+    Cell,
 }
 
 /// A regular wavelength grid as written.
