@@ -30,6 +30,7 @@ mod noise;
 pub mod normal;
 pub mod pixel_rng;
 pub mod poisson;
+pub mod temporal;
 
 use camsim_core::Spectrum;
 use thiserror::Error;
@@ -41,6 +42,10 @@ pub use effects::{
 };
 pub use integrate::{
     box_weights, electron_rate, electron_rate_from_term_planes, pixel_term_planes, PixelTermPlanes,
+};
+pub use temporal::{
+    dark_at_temperature, flicker_period_rows, time_averaged_rate, Motion, PwmLight, Readout,
+    ShutterMode, TimeModel,
 };
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
