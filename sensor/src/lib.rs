@@ -43,13 +43,13 @@ pub use effects::{
 pub use integrate::{
     box_weights, electron_rate, electron_rate_from_term_planes, pixel_term_planes, PixelTermPlanes,
 };
-pub use temporal::{
-    dark_at_temperature, flicker_period_rows, time_averaged_rate, Motion, PwmLight, Readout,
-    ShutterMode, TimeModel,
-};
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
     nonlinearity_magnitude, PatternSource, FIXED_PATTERN_TAG,
+};
+pub use temporal::{
+    dark_at_temperature, flicker_period_rows, time_averaged_rate, Motion, PwmLight, Readout,
+    ShutterMode, TimeModel,
 };
 
 /// Errors of the sensor stage.

@@ -14,7 +14,7 @@
 //! the default ([`TimeModel::is_static`]) changes nothing.
 //!
 //! Units live in names: `_s`, `_hz`, `_px`, `_c` (degrees Celsius).
-use crate::{ElectronRate, SensorError, SensorModel};
+use crate::{ElectronRate, SensorModel};
 
 /// When the rows of a frame start their exposure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -177,12 +177,9 @@ pub struct ShiftSample {
     pub weight: f64,
 }
 
-fn bad(field: &str, value: f64, reason: &str) -> SensorError {
-    SensorError::InvalidField {
-        field: field.into(),
-        value: value.to_string(),
-        reason: reason.into(),
-    }
+/// `key = value: reason` (the key as written in the JSON files).
+fn bad(field: &str, value: f64, reason: &str) -> String {
+    format!("{field} = {value}: {reason}")
 }
 
 impl TimeModel {
@@ -192,11 +189,16 @@ impl TimeModel {
         self.light.is_none() && self.motion.is_none()
     }
 
-    /// Checks every field; the error names the field and its value.
-    pub fn validate(&self) -> Result<(), SensorError> {
+    /// Checks every field; the error names the key (as in camera.json / captures.json) and
+    /// its value.
+    pub fn validate(&self) -> Result<(), String> {
         let rt = self.readout.row_time_s;
         if !(rt.is_finite() && rt >= 0.0) {
-            return Err(bad("readout.row_time_us", rt * 1e6, "must be a finite number ≥ 0"));
+            return Err(bad(
+                "sensor.readout.row_time_us",
+                rt * 1e6,
+                "must be a finite number ≥ 0",
+            ));
         }
         if let Some(l) = &self.light {
             if !(l.frequency_hz.is_finite() && l.frequency_hz > 0.0) {
@@ -243,7 +245,12 @@ impl TimeModel {
     /// bilinear interpolant along the straight path is a quadratic in t, so Simpson's rule
     /// (nodes at both ends and the middle, weights 1/6, 4/6, 1/6 of the piece) is exact.
     /// Weights include the normalised light level (`1/D` while on) and `1/T_exp`.
-    pub fn row_samples(&self, row: usize, exposure_s: f64, stride_px: [f64; 2]) -> Vec<ShiftSample> {
+    pub fn row_samples(
+        &self,
+        row: usize,
+        exposure_s: f64,
+        stride_px: [f64; 2],
+    ) -> Vec<ShiftSample> {
         let t0 = self.readout.row_start_s(row);
         let t1 = t0 + exposure_s;
         let v = self.motion.map_or([0.0, 0.0], |m| m.velocity_px_per_s);

@@ -10,10 +10,26 @@ use camsim_sensor::{ElectronRate, SensorModel};
 
 fn lights() -> Vec<PwmLight> {
     vec![
-        PwmLight { frequency_hz: 100.0, duty_cycle: 0.3, phase: 0.0 },
-        PwmLight { frequency_hz: 90.0, duty_cycle: 0.5, phase: 0.25 },
-        PwmLight { frequency_hz: 217.0, duty_cycle: 0.1, phase: 0.9 },
-        PwmLight { frequency_hz: 60.0, duty_cycle: 1.0, phase: 0.5 },
+        PwmLight {
+            frequency_hz: 100.0,
+            duty_cycle: 0.3,
+            phase: 0.0,
+        },
+        PwmLight {
+            frequency_hz: 90.0,
+            duty_cycle: 0.5,
+            phase: 0.25,
+        },
+        PwmLight {
+            frequency_hz: 217.0,
+            duty_cycle: 0.1,
+            phase: 0.9,
+        },
+        PwmLight {
+            frequency_hz: 60.0,
+            duty_cycle: 1.0,
+            phase: 0.5,
+        },
     ]
 }
 
@@ -53,7 +69,11 @@ fn overlap_fraction_matches_brute_force_integral() {
 }
 
 fn flat_rate(rows: usize, cols: usize) -> ElectronRate {
-    ElectronRate { rows, cols, electrons_per_s: vec![1000.0; rows * cols] }
+    ElectronRate {
+        rows,
+        cols,
+        electrons_per_s: vec![1000.0; rows * cols],
+    }
 }
 
 fn row_means(r: &ElectronRate) -> Vec<f64> {
@@ -67,11 +87,22 @@ fn row_means(r: &ElectronRate) -> Vec<f64> {
 fn flicker_bands_repeat_every_period_over_row_time() {
     let (rows, cols) = (400, 4);
     let sensor = SensorModel::mono_test(rows, cols);
-    let light = PwmLight { frequency_hz: 100.0, duty_cycle: 0.25, phase: 0.1 };
-    let readout = Readout { mode: ShutterMode::Rolling, row_time_s: 1.0 / (100.0 * 40.0) };
+    let light = PwmLight {
+        frequency_hz: 100.0,
+        duty_cycle: 0.25,
+        phase: 0.1,
+    };
+    let readout = Readout {
+        mode: ShutterMode::Rolling,
+        row_time_s: 1.0 / (100.0 * 40.0),
+    };
     let expected = flicker_period_rows(&light, &readout);
     assert!((expected - 40.0).abs() < 1e-9);
-    let model = TimeModel { readout, light: Some(light), motion: None };
+    let model = TimeModel {
+        readout,
+        light: Some(light),
+        motion: None,
+    };
     let out = time_averaged_rate(&sensor, &flat_rate(rows, cols), 0.0013, &model);
     let m = row_means(&out);
     // Exactly periodic with period 40 rows, and with no shorter period.
@@ -93,7 +124,9 @@ fn flicker_bands_repeat_every_period_over_row_time() {
         }
         re * re + im * im
     };
-    let best = (1..rows / 2).max_by(|&a, &b| power(a).total_cmp(&power(b))).unwrap();
+    let best = (1..rows / 2)
+        .max_by(|&a, &b| power(a).total_cmp(&power(b)))
+        .unwrap();
     assert_eq!(best, rows / 40);
 }
 
@@ -104,14 +137,27 @@ fn band_visibility_follows_duty_cycle_and_exposure() {
     let rows_per_period = 2000.0;
     let rows = 2 * rows_per_period as usize;
     let sensor = SensorModel::mono_test(rows, 1);
-    let readout = Readout { mode: ShutterMode::Rolling, row_time_s: 1.0 / (f * rows_per_period) };
+    let readout = Readout {
+        mode: ShutterMode::Rolling,
+        row_time_s: 1.0 / (f * rows_per_period),
+    };
     for &d in &[0.1, 0.3, 0.5, 0.8] {
         for &periods in &[0.2, 0.5, 0.9, 1.0, 1.37, 2.0, 3.6] {
-            let light = PwmLight { frequency_hz: f, duty_cycle: d, phase: 0.0 };
+            let light = PwmLight {
+                frequency_hz: f,
+                duty_cycle: d,
+                phase: 0.0,
+            };
             let t = periods / f;
-            let model = TimeModel { readout, light: Some(light), motion: None };
+            let model = TimeModel {
+                readout,
+                light: Some(light),
+                motion: None,
+            };
             let m = row_means(&time_averaged_rate(&sensor, &flat_rate(rows, 1), t, &model));
-            let (hi, lo) = m.iter().fold((f64::MIN, f64::MAX), |(h, l), &v| (h.max(v), l.min(v)));
+            let (hi, lo) = m
+                .iter()
+                .fold((f64::MIN, f64::MAX), |(h, l), &v| (h.max(v), l.min(v)));
             let measured = (hi - lo) / (hi + lo);
             let expected = light.band_visibility(t);
             // Sampling error: the on-time moves by at most one row time between rows.
@@ -138,7 +184,11 @@ fn bar_rate(rows: usize) -> ElectronRate {
             e[r * cols + c] = 1010.0;
         }
     }
-    ElectronRate { rows, cols, electrons_per_s: e }
+    ElectronRate {
+        rows,
+        cols,
+        electrons_per_s: e,
+    }
 }
 
 fn row_centroids(r: &ElectronRate, background: f64) -> Vec<f64> {
@@ -164,16 +214,25 @@ fn moving_bar_skews_by_velocity_times_row_time() {
     let static_c = row_centroids(&rate, 10.0);
     let (v, row_time, t) = (3000.0, 20e-6, 2e-3);
     let model = TimeModel {
-        readout: Readout { mode: ShutterMode::Rolling, row_time_s: row_time },
+        readout: Readout {
+            mode: ShutterMode::Rolling,
+            row_time_s: row_time,
+        },
         light: None,
-        motion: Some(Motion { velocity_px_per_s: [v, 0.0] }),
+        motion: Some(Motion {
+            velocity_px_per_s: [v, 0.0],
+        }),
     };
     let out = time_averaged_rate(&sensor, &rate, t, &model);
     let c = row_centroids(&out, 10.0);
     for r in 0..rows {
         // Centroid = static centroid + v·(t_r + T/2): skew v·row_time per row, blur v·T.
         let expected = static_c[r] + v * (r as f64 * row_time + t / 2.0);
-        assert!((c[r] - expected).abs() < 1e-3, "row {r}: {} vs {expected}", c[r]);
+        assert!(
+            (c[r] - expected).abs() < 1e-3,
+            "row {r}: {} vs {expected}",
+            c[r]
+        );
     }
     // The bar's signal is conserved (blur spreads it, the time average keeps it).
     let sum = |x: &ElectronRate| x.electrons_per_s.iter().map(|&v| v as f64).sum::<f64>();
@@ -186,12 +245,23 @@ fn global_shutter_is_the_special_case() {
     let sensor = SensorModel::mono_test(rows, 64);
     let rate = bar_rate(rows);
     let (v, t) = (2500.0, 1e-3);
-    let light = PwmLight { frequency_hz: 300.0, duty_cycle: 0.4, phase: 0.3 };
-    let model = TimeModel {
-        readout: Readout { mode: ShutterMode::Global, row_time_s: 20e-6 },
-        light: Some(light),
-        motion: Some(Motion { velocity_px_per_s: [v, 0.0] }),
+    let light = PwmLight {
+        frequency_hz: 300.0,
+        duty_cycle: 0.4,
+        phase: 0.8,
     };
+    let model = TimeModel {
+        readout: Readout {
+            mode: ShutterMode::Global,
+            row_time_s: 20e-6,
+        },
+        light: Some(light),
+        motion: Some(Motion {
+            velocity_px_per_s: [v, 0.0],
+        }),
+    };
+    // The window [0, 1 ms] is 0.3 light periods and catches 0.2 periods of light.
+    assert!((light.window_fraction(0.0, t) - 0.2 / (0.4 * 0.3)).abs() < 1e-12);
     let out = time_averaged_rate(&sensor, &rate, t, &model);
     let c = row_centroids(&out, 0.0);
     let sums: Vec<f64> = out
@@ -201,13 +271,20 @@ fn global_shutter_is_the_special_case() {
         .collect();
     let static_sum: f64 = rate.electrons_per_s[..64].iter().map(|&v| v as f64).sum();
     for r in 0..rows {
-        assert!((c[r] - c[0]).abs() < 1e-9, "row {r} skewed");
+        assert!((c[r] - c[0]).abs() < 1e-9, "row {r} skewed: {} vs {}", c[r], c[0]);
         let want = static_sum * light.window_fraction(0.0, t);
-        assert!((sums[r] - want).abs() < 1e-5 * want, "row {r}: {} vs {want}", sums[r]);
+        assert!(
+            (sums[r] - want).abs() < 1e-5 * want,
+            "row {r}: {} vs {want}",
+            sums[r]
+        );
     }
     // No modulation, no motion: the rate is unchanged whatever the readout.
     let still = TimeModel {
-        readout: Readout { mode: ShutterMode::Rolling, row_time_s: 20e-6 },
+        readout: Readout {
+            mode: ShutterMode::Rolling,
+            row_time_s: 20e-6,
+        },
         light: None,
         motion: None,
     };
@@ -217,15 +294,28 @@ fn global_shutter_is_the_special_case() {
 
 #[test]
 fn row_sample_weights_sum_to_the_window_fraction() {
-    let light = PwmLight { frequency_hz: 150.0, duty_cycle: 0.35, phase: 0.6 };
+    let light = PwmLight {
+        frequency_hz: 150.0,
+        duty_cycle: 0.35,
+        phase: 0.6,
+    };
     let model = TimeModel {
-        readout: Readout { mode: ShutterMode::Rolling, row_time_s: 37e-6 },
+        readout: Readout {
+            mode: ShutterMode::Rolling,
+            row_time_s: 37e-6,
+        },
         light: Some(light),
-        motion: Some(Motion { velocity_px_per_s: [1234.0, -321.0] }),
+        motion: Some(Motion {
+            velocity_px_per_s: [1234.0, -321.0],
+        }),
     };
     for row in [0, 7, 100] {
         let t = 0.0173;
-        let w: f64 = model.row_samples(row, t, [2.0, 2.0]).iter().map(|s| s.weight).sum();
+        let w: f64 = model
+            .row_samples(row, t, [2.0, 2.0])
+            .iter()
+            .map(|s| s.weight)
+            .sum();
         let want = light.window_fraction(model.readout.row_start_s(row), t);
         assert!((w - want).abs() < 1e-12, "row {row}: {w} vs {want}");
     }
