@@ -12,6 +12,7 @@ mod oracles;
 mod raw_formats;
 mod real_data;
 mod render;
+mod rolling_shutter;
 mod run;
 mod run_cfa;
 mod statistics;
