@@ -52,6 +52,14 @@ struct RollingDoc {
     reference_fraction: Option<f64>,
     #[serde(default)]
     simulation: Option<Value>,
+    /// Added by the study planner (hashed with the point).
+    #[allow(dead_code)]
+    #[serde(default)]
+    camsim_version: Option<String>,
+    /// Per-point seed override ([`super::point::seed_of`]).
+    #[allow(dead_code)]
+    #[serde(default)]
+    seed: Option<u64>,
 }
 
 /// The capture set of the point (one shot, one frame) from the document.
