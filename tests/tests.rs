@@ -14,6 +14,7 @@ mod pixel_area;
 mod raw_formats;
 mod real_data;
 mod render;
+mod rolling_shutter;
 mod run;
 mod run_cfa;
 mod statistics;

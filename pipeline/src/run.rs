@@ -388,6 +388,8 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         exposure,
         analog_gain: camera.sensor.analog_gain,
         frames: vec!["raw.png".into()],
+        light: None,
+        motion: None,
     };
     let set = CaptureSet {
         path: path.clone(),

@@ -537,6 +537,7 @@ pub fn simulate_each(
         }
         let rate = &cache[shot.target_key.as_str()];
         let sh = crate::chain::shot_exposure(set, si, rate);
+        let rate = &*crate::chain::shot_time_rate(set, si, rate, &sh);
         exposures_s.push((shot.id.clone(), sh.exposure_s));
         if expected {
             let plane = crate::chain::expected_frame(sensor, rate, &sh);

@@ -406,6 +406,7 @@ fn validate_into(
         }
         let rate = &cache[shot.target_key.as_str()];
         let sh = crate::chain::shot_exposure(set, si, rate);
+        let rate = &*crate::chain::shot_time_rate(set, si, rate, &sh);
         let exposure_s = sh.exposure_s;
         let expected = crate::chain::expected_frame(sensor, rate, &sh).data;
         let model = NoiseModel::new(sensor, &sh);

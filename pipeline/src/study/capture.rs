@@ -422,6 +422,8 @@ impl Ctx<'_> {
                     exposure: Exposure::Fixed(0.0),
                     analog_gain: self.cam.sensor.analog_gain,
                     frames: vec![],
+                    light: None,
+                    motion: None,
                 }],
                 simulation: self.sim.clone(),
                 raw_format: None,
