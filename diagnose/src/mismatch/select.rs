@@ -6,6 +6,7 @@
 //! diagnosis says it cannot tell them apart instead of guessing.
 use super::candidates::{fit_effect, magnitude, Evidence, FitOutcome};
 use super::effects::{alike, Effect};
+use super::identify::{identifiability, Identifiability};
 use super::like::{Ctx, Eval, RowSel};
 use super::model::ModelState;
 
@@ -114,6 +115,9 @@ pub struct Selection {
     pub state: ModelState,
     /// Observations behind the BIC penalty (fit rows).
     pub n_obs: f64,
+    /// The identifiability check of the candidates (Fisher information at the believed
+    /// model); those it marks `cannot_tell` were not fitted.
+    pub identifiability: Vec<Identifiability>,
 }
 
 fn neg_ll(ctx: &Ctx, st: &ModelState) -> Result<f64, String> {
@@ -265,6 +269,8 @@ pub(crate) fn select(
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Selection, String> {
     let ev = Evidence::new(ctx, believed);
+    progress("identifiability (Fisher information of the shots)");
+    let identifiability = identifiability(ctx, &ev, believed, &opts.effects)?;
     let mut state = believed.clone();
     let first = ctx.evaluate(&state, RowSel::Fit)?;
     let n_obs = first.dof.max(2.0);
@@ -284,6 +290,9 @@ pub(crate) fn select(
             if model.contains(&e)
                 || dropped_ever.contains(&e)
                 || not_testable.iter().any(|x| x.0 == e)
+                || identifiability
+                    .iter()
+                    .any(|x| x.effect == e && x.cannot_tell)
             {
                 continue;
             }
@@ -493,6 +502,7 @@ pub(crate) fn select(
         rounds,
         state,
         n_obs,
+        identifiability,
     })
 }
 
