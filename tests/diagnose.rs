@@ -476,7 +476,26 @@ fn nonlinearity_on_one_illuminant_flats_is_found_and_qe_shift_cannot_tell() {
         "{what}: the separating shot should name a second illuminant"
     );
     assert!(!ct.iter().any(|e| e == "nonlinearity"), "{what}: {ct:?}");
-    assert_found_exactly(&o, 0.0, what);
+    // The nonlinearity is found (within 30 %) and nothing else is reported as a finding.
+    // (An exposure/gain pair may be left undecided and kept in the fitted camera: the
+    // generator's tanh bends as −v³/3s², the fitted quadratic as −a·v², and the slope that
+    // the quadratic form cannot follow is a change of gain or exposure, which these flats
+    // cannot tell apart. Undecided groups are not findings.)
+    let found = findings(&o.report);
+    let ids: Vec<&str> = found.iter().map(|f| f.0.as_str()).collect();
+    assert_eq!(ids, ["nonlinearity"], "{what}: findings {found:?}");
+    let (truth, m) = (o.truth[0].1, found[0].1);
+    assert!(
+        (m - truth).abs() <= 0.3 * truth,
+        "{what}: magnitude {m} vs truth {truth}"
+    );
+    for u in undecided(&o.report) {
+        assert!(
+            u.iter().all(|e| e == "exposure_scale" || e == "conversion_gain"),
+            "{what}: undecided {u:?}"
+        );
+    }
+    assert_fit_after(&o, what);
 }
 
 #[test]
