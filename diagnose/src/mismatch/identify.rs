@@ -454,3 +454,42 @@ pub(crate) fn identifiability(
     prof::add(3, t0);
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 1 − ρ² against closed forms: a candidate column c = cos θ · b + sin θ · e (b, e
+    /// orthonormal) has canonical correlation cos θ with the baseline {b}, so 1 − ρ² = sin² θ;
+    /// a column inside the baseline's span gives 0, an orthogonal one 1; with two candidate
+    /// columns the most alike direction counts.
+    #[test]
+    fn one_minus_rho2_is_the_canonical_correlation_closed_form() {
+        let n = 64;
+        // orthogonal ±1 patterns (Walsh functions)
+        let walsh = |k: usize| -> Vec<f64> {
+            (0..n)
+                .map(|i| if (i & k).count_ones() % 2 == 0 { 1.0 } else { -1.0 })
+                .collect()
+        };
+        let (b, e, f) = (walsh(1), walsh(2), walsh(4));
+        for theta in [0.0f64, 0.1, 0.5, 1.0, 1.5707963267948966] {
+            let c: Vec<f64> = b
+                .iter()
+                .zip(&e)
+                .map(|(x, y)| theta.cos() * x + theta.sin() * y)
+                .collect();
+            let got = one_minus_rho2(&[c.clone()], &[b.clone()]);
+            let want = theta.sin().powi(2);
+            assert!((got - want).abs() < 1e-12, "θ {theta}: {got} vs {want}");
+            // scaling a column changes nothing
+            let c3: Vec<f64> = c.iter().map(|x| 3.0 * x).collect();
+            let got3 = one_minus_rho2(&[c3], &[b.clone(), f.clone()]);
+            assert!((got3 - want).abs() < 1e-12, "θ {theta}: {got3} vs {want}");
+        }
+        // two candidate columns, one inside the baseline's span: 0
+        let mixed: Vec<f64> = b.iter().zip(&f).map(|(x, y)| 2.0 * x - y).collect();
+        let got = one_minus_rho2(&[e.clone(), mixed], &[b.clone(), f.clone()]);
+        assert!(got.abs() < 1e-12, "{got}");
+    }
+}
