@@ -467,7 +467,10 @@ fn nonlinearity_on_one_illuminant_flats_is_found_and_qe_shift_cannot_tell() {
         variance_inflation(&o.report, "qe_shift"),
         variance_inflation(&o.report, "nonlinearity")
     );
-    assert!(ct.iter().any(|e| e == "qe_shift"), "{what}: qe_shift not in cannot_tell {ct:?}");
+    assert!(
+        ct.iter().any(|e| e == "qe_shift"),
+        "{what}: qe_shift not in cannot_tell {ct:?}"
+    );
     assert!(
         o.report["cannot_tell"][0]["would_separate"]
             .as_str()
@@ -491,7 +494,8 @@ fn nonlinearity_on_one_illuminant_flats_is_found_and_qe_shift_cannot_tell() {
     );
     for u in undecided(&o.report) {
         assert!(
-            u.iter().all(|e| e == "exposure_scale" || e == "conversion_gain"),
+            u.iter()
+                .all(|e| e == "exposure_scale" || e == "conversion_gain"),
             "{what}: undecided {u:?}"
         );
     }

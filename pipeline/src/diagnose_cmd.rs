@@ -611,8 +611,11 @@ pub fn run_diagnose(
             .map_err(|e| CliError::output(&p, e))?;
         files.push("report.json".into());
         let p = st.join("timing.json");
-        std::fs::write(&p, serde_json::to_string_pretty(&timing_json(&diag, &data, load_s)).expect("json"))
-            .map_err(|e| CliError::output(&p, e))?;
+        std::fs::write(
+            &p,
+            serde_json::to_string_pretty(&timing_json(&diag, &data, load_s)).expect("json"),
+        )
+        .map_err(|e| CliError::output(&p, e))?;
         files.push("timing.json".into());
         let figs = figures::write_figures(st, &diag, &data)?;
         for f in &figs {
@@ -729,7 +732,13 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
         .iter()
         .map(|(e, why)| json!({"effect": e.id(), "reason": why}))
         .collect();
-    let vif = |x: f64| if x.is_finite() { json!(x) } else { json!("infinite") };
+    let vif = |x: f64| {
+        if x.is_finite() {
+            json!(x)
+        } else {
+            json!("infinite")
+        }
+    };
     let cannot_tell: Vec<Value> = d
         .selection
         .identifiability

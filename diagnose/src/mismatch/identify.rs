@@ -469,7 +469,13 @@ mod tests {
         // orthogonal ±1 patterns (Walsh functions)
         let walsh = |k: usize| -> Vec<f64> {
             (0..n)
-                .map(|i| if (i & k).count_ones() % 2 == 0 { 1.0 } else { -1.0 })
+                .map(|i| {
+                    if (i & k).count_ones() % 2 == 0 {
+                        1.0
+                    } else {
+                        -1.0
+                    }
+                })
                 .collect()
         };
         let (b, e, f) = (walsh(1), walsh(2), walsh(4));

@@ -151,7 +151,10 @@ pub fn diagnose(
     let (before, ev_before) = ctx.locate(believed)?;
     lap("fit check and locate, believed camera", &mut timing);
     let selection = select::select(&ctx, believed, &opts.select, progress)?;
-    lap("candidates: identifiability, fits and selection", &mut timing);
+    lap(
+        "candidates: identifiability, fits and selection",
+        &mut timing,
+    );
     progress("fit check (fitted camera)");
     let (after, _) = ctx.locate(&selection.state)?;
     lap("fit check and locate, fitted camera", &mut timing);
