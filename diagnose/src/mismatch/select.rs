@@ -405,14 +405,13 @@ pub(crate) fn select(
             })
             .map(|x| (x.0, x.3, x.1.clone()))
             .collect();
-        // A baseline winner (exposure, gain, black level) whose look-alike partner the
-        // identifiability check marked cannot-tell: the shots cannot tell that partner from the
-        // baseline parameters, so they cannot tell it from this winner either. The partner was
-        // not fitted (no ΔBIC, no magnitude); the pair is undecided, never a finding.
-        let blind: Vec<Effect> = if matches!(
-            best,
-            Effect::ExposureScale | Effect::ConversionGain | Effect::BlackLevel
-        ) {
+        // An exposure-scale winner whose look-alike partner the identifiability check marked
+        // cannot-tell: that partner changes the frames only as light does (on flats veiling
+        // glare, QE shift, IR leakage are exposure scales), so the shots cannot tell it from this
+        // winner either. The partner was not fitted (no ΔBIC, no magnitude); the pair is
+        // undecided, never a finding. (Only exposure: a cannot-tell light effect is not
+        // degenerate with black level or gain when darks or photon transfer separate those.)
+        let blind: Vec<Effect> = if best == Effect::ExposureScale {
             identifiability
                 .iter()
                 .filter(|x| x.cannot_tell && alike(best, x.effect).is_some())
