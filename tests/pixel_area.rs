@@ -97,16 +97,25 @@ fn pixel_means_match_a_converged_reference_at_patch_borders_and_edges() {
         let (got, _) = electrons(&default, Some(t));
         let (rms, max) = stats(&reference, &got, &want, t);
         eprintln!("{kind}: B-spline samples, default sampling: rms {rms:.4} σ, max {max:.4} σ");
-        assert!(max < 0.05, "{kind}: max {max} σ from the converged reference");
+        assert!(
+            max < 0.05,
+            "{kind}: max {max} σ from the converged reference"
+        );
         let before = load_ap(dir.path(), &cam, target.clone(), None, "cell");
         let (old, _) = electrons(&before, Some(t));
         let (rms, max) = stats(&reference, &old, &want, t);
         eprintln!("{kind}: cell averages, default sampling: rms {rms:.4} σ, max {max:.4} σ");
-        assert!(max > 0.3, "{kind}: the cell-average route should alias ({max} σ)");
+        assert!(
+            max > 0.3,
+            "{kind}: the cell-average route should alias ({max} σ)"
+        );
         let fine_cells = load_ap(dir.path(), &cam, target.clone(), Some(12), "cell");
         let (fine, _) = electrons(&fine_cells, Some(t));
         let (_, max) = stats(&reference, &fine, &want, t);
-        assert!(max < 0.1, "{kind}: cell averages at 12 cells/pixel off by {max} σ");
+        assert!(
+            max < 0.1,
+            "{kind}: cell averages at 12 cells/pixel off by {max} σ"
+        );
     }
 }
 
@@ -125,13 +134,19 @@ fn pixel_area_experiment() {
         let cell16 = load_ap(dir.path(), &cam, target.clone(), Some(16), "cell");
         let (c16, _) = electrons(&cell16, Some(t));
         let (rms, max) = stats(&reference, &c16, &r16, t);
-        eprintln!("{} cell os 16 vs bspline os 16: rms {rms:.4} max {max:.4}", target["kind"]);
+        eprintln!(
+            "{} cell os 16 vs bspline os 16: rms {rms:.4} max {max:.4}",
+            target["kind"]
+        );
         for os in [2usize, 3, 4, 6] {
             for ap in ["cell", "auto"] {
                 let set = load_ap(dir.path(), &cam, target.clone(), Some(os), ap);
                 let (e, _) = electrons(&set, Some(t));
                 let (rms, max) = stats(&reference, &e, &r16, t);
-                eprintln!("{} {ap} os {os}: rms {rms:.4} sigma, max {max:.4} sigma", target["kind"]);
+                eprintln!(
+                    "{} {ap} os {os}: rms {rms:.4} sigma, max {max:.4} sigma",
+                    target["kind"]
+                );
             }
         }
     }
@@ -175,6 +190,8 @@ fn pixel_area_experiment() {
         let a: Vec<f64> = bc.iter().map(|&i| e[i]).collect();
         let b: Vec<f64> = bc.iter().map(|&i| refi[i]).collect();
         let (brms, bmax) = stats(&set, &a, &b, t);
-        eprintln!("margin +{k}: all rms {rms:.3} max {max:.3}; border cols rms {brms:.3} max {bmax:.3}");
+        eprintln!(
+            "margin +{k}: all rms {rms:.3} max {max:.3}; border cols rms {brms:.3} max {bmax:.3}"
+        );
     }
 }

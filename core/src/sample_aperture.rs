@@ -210,7 +210,14 @@ mod tests {
                 (u, bspline_pdf(4, u) * step)
             })
             .collect();
-        for (deg, c) in [(5.0f64, 0.3), (37.0, -0.8), (0.0, 0.45), (90.0, -1.2), (-20.0, 2.5), (135.0, 0.0)] {
+        for (deg, c) in [
+            (5.0f64, 0.3),
+            (37.0, -0.8),
+            (0.0, 0.45),
+            (90.0, -1.2),
+            (-20.0, 2.5),
+            (135.0, 0.0),
+        ] {
             let (nx, ny) = (deg.to_radians().cos(), deg.to_radians().sin());
             let mut want = 0.0;
             for &(x, wx) in &grid {

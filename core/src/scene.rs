@@ -219,11 +219,7 @@ fn half_plane_area(x0: f64, x1: f64, y0: f64, y1: f64, nx: f64, ny: f64) -> f64 
 }
 
 /// `wx(x_c) · wy(y_r)` at every sample (x_c, y_r: the sample centres).
-fn separable_plane(
-    g: &SamplingGrid,
-    wx: impl Fn(f64) -> f64,
-    wy: impl Fn(f64) -> f64,
-) -> Vec<f32> {
+fn separable_plane(g: &SamplingGrid, wx: impl Fn(f64) -> f64, wy: impl Fn(f64) -> f64) -> Vec<f32> {
     let cx: Vec<f64> = (0..g.cols)
         .map(|c| wx(0.5 * (g.x0(c) + g.x0(c + 1))))
         .collect();

@@ -599,7 +599,10 @@ pub fn run_diagnose(
     let raw: CameraFile = serde_json::from_value(fitted.clone())
         .map_err(|e| CliError::Other(format!("internal: the fitted camera does not parse: {e}")))?;
     camera_from_file(&fitted_path, raw)?;
-    let report = report_json(&diag, &data, &skipped);
+    let mut report = report_json(&diag, &data, &skipped);
+    if !profile {
+        report["timing"] = Value::Null;
+    }
     let files = with_staging(out, |st| {
         let mut files: Vec<PathBuf> = Vec::new();
         let p = st.join("fitted_camera.json");
@@ -610,13 +613,17 @@ pub fn run_diagnose(
         std::fs::write(&p, serde_json::to_string_pretty(&report).expect("json"))
             .map_err(|e| CliError::output(&p, e))?;
         files.push("report.json".into());
-        let p = st.join("timing.json");
-        std::fs::write(
-            &p,
-            serde_json::to_string_pretty(&timing_json(&diag, &data, load_s)).expect("json"),
-        )
-        .map_err(|e| CliError::output(&p, e))?;
-        files.push("timing.json".into());
+        // Wall times differ from run to run: written only on request (CAMSIM_PROFILE), so that
+        // the default outputs stay byte-identical for the same inputs and seed.
+        if profile {
+            let p = st.join("timing.json");
+            std::fs::write(
+                &p,
+                serde_json::to_string_pretty(&timing_json(&diag, &data, load_s)).expect("json"),
+            )
+            .map_err(|e| CliError::output(&p, e))?;
+            files.push("timing.json".into());
+        }
         let figs = figures::write_figures(st, &diag, &data)?;
         for f in &figs {
             files.push(PathBuf::from(&f.file));

@@ -271,7 +271,12 @@ fn global_shutter_is_the_special_case() {
         .collect();
     let static_sum: f64 = rate.electrons_per_s[..64].iter().map(|&v| v as f64).sum();
     for r in 0..rows {
-        assert!((c[r] - c[0]).abs() < 1e-9, "row {r} skewed: {} vs {}", c[r], c[0]);
+        assert!(
+            (c[r] - c[0]).abs() < 1e-9,
+            "row {r} skewed: {} vs {}",
+            c[r],
+            c[0]
+        );
         let want = static_sum * light.window_fraction(0.0, t);
         assert!(
             (sums[r] - want).abs() < 1e-5 * want,

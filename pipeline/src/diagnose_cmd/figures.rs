@@ -449,7 +449,9 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
         }
         h.push_str("</ul>");
     }
-    h.push_str("<p>Time per stage and what the fit subsampled: <a href=\"timing.json\">timing.json</a>.</p>");
+    if report["timing"].is_string() {
+        h.push_str("<p>Time per stage and what the fit subsampled: <a href=\"timing.json\">timing.json</a>.</p>");
+    }
     if let Some(u) = report["not_testable"].as_array().filter(|u| !u.is_empty()) {
         h.push_str("<h2>Not testable with this capture set</h2><ul>");
         for x in u {
