@@ -25,7 +25,7 @@
 //! (L, M, s·N), so light in image space always travels towards +z as in a refracting lens. A
 //! plane mirror therefore leaves every image-space quantity of the unfolded system unchanged.
 use crate::prescription::{LensPrescription, MaterialFile, Surface};
-use crate::trace::{intersect, normal, refract, Clipping, Ray, Vec3};
+use crate::trace::{intersect, surface_step, Clipping, Ray, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// A coordinate break at one surface (Zemax `TYPE COORDBRK`, `PARM 1`–`6`).
@@ -291,24 +291,9 @@ pub(crate) fn trace_folded(
         let f = &lay.surfaces[j];
         let (p, dl) = (f.to_local(o), f.dir_to_local(d));
         let (t, q) = intersect_local(s, p, dl)?;
-        if clipping == Clipping::SemiDiameters {
-            if t < -1e-9 && j > 0 {
-                return None;
-            }
-            if let Some(sd) = s.semi_diameter_mm {
-                if q[0] * q[0] + q[1] * q[1] > sd * sd * (1.0 + 1e-12) {
-                    return None;
-                }
-            }
-        }
         opl += n_prev * t;
-        let nrm = normal(s, q)?;
         let n2 = s.medium.index(wavelength_nm);
-        let d2 = if s.is_mirror() {
-            reflect(dl, nrm)
-        } else {
-            refract(dl, nrm, n_prev, n2)?
-        };
+        let d2 = surface_step(s, j, t, q, dl, n_prev, n2, clipping)?;
         if j == lens.stop_index {
             stop_pt = unfold(q, j, sign);
         }

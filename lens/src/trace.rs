@@ -123,6 +123,43 @@ pub fn normal(surf: &Surface, point: Vec3) -> Option<Vec3> {
     Some(normalize([-2.0 * point[0] * g, -2.0 * point[1] * g, 1.0]))
 }
 
+/// One surface of a sequential trace, after the intersection, in the surface's local frame
+/// (vertex at the origin, axis +z; `q_local` is the hit point, `t_mm` the step length to it,
+/// `d_local` the incoming direction): the aperture test, then the vector law at the surface,
+/// refraction from `n1` to `n2`, or reflection at a mirror. `None` if the ray is lost: outside
+/// the semi-diameter, a backwards step past the first surface (the ray crossed an element edge
+/// of negative edge thickness; without clipping such rays are traced on virtually, as Optiland
+/// and rayoptics do), or total internal reflection. Shared by the coaxial and the folded
+/// traces (`fold.rs`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn surface_step(
+    s: &Surface,
+    j: usize,
+    t_mm: f64,
+    q_local: Vec3,
+    d_local: Vec3,
+    n1: f64,
+    n2: f64,
+    clipping: Clipping,
+) -> Option<Vec3> {
+    if clipping == Clipping::SemiDiameters {
+        if t_mm < -1e-9 && j > 0 {
+            return None;
+        }
+        if let Some(sd) = s.semi_diameter_mm {
+            if q_local[0] * q_local[0] + q_local[1] * q_local[1] > sd * sd * (1.0 + 1e-12) {
+                return None;
+            }
+        }
+    }
+    let nrm = normal(s, q_local)?;
+    if s.is_mirror() {
+        Some(crate::fold::reflect(d_local, nrm))
+    } else {
+        refract(d_local, nrm, n1, n2)
+    }
+}
+
 /// Refract unit direction `d` at unit normal `nrm` from index `n1` to `n2` (vector Snell law).
 /// `None` on total internal reflection.
 pub fn refract(d: Vec3, nrm: Vec3, n1: f64, n2: f64) -> Option<Vec3> {
@@ -177,24 +214,10 @@ impl LensPrescription {
         let mut stop_pt = [f64::NAN; 3];
         for (j, s) in self.surfaces.iter().enumerate().take(upto) {
             let (t, q) = intersect(s, z[j], &r)?;
-            if clipping == Clipping::SemiDiameters {
-                // A backwards step means the ray crossed an element edge (negative edge
-                // thickness): physically lost. Without clipping such rays are traced on
-                // virtually, as Optiland and rayoptics do.
-                if t < -1e-9 && j > 0 {
-                    return None;
-                }
-                if let Some(sd) = s.semi_diameter_mm {
-                    if q[0] * q[0] + q[1] * q[1] > sd * sd * (1.0 + 1e-12) {
-                        return None;
-                    }
-                }
-            }
             let opl = r.opl_mm + n_prev * t;
             let n2 = s.medium.index(wavelength_nm);
             let qv = [q[0], q[1], q[2] - z[j]];
-            let nrm = normal(s, qv)?;
-            let d2 = refract(r.direction, nrm, n_prev, n2)?;
+            let d2 = surface_step(s, j, t, qv, r.direction, n_prev, n2, clipping)?;
             if j == self.stop_index {
                 stop_pt = q;
             }
