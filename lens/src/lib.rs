@@ -88,6 +88,7 @@ pub mod glass;
 pub mod huygens;
 pub mod paraxial;
 pub mod prescription;
+pub mod pupil;
 pub mod readers;
 pub mod trace;
 

@@ -18,6 +18,7 @@ mod mtf_sampling;
 mod optics_ref;
 mod optics_ref_finite;
 mod optics_ref_zmx;
+mod pupil;
 mod reader_robustness;
 mod readers;
 mod round_trip;

@@ -17,13 +17,10 @@
 //!   an object at the focus distance (measured from the entrance pupil) at the primary
 //!   wavelength. The aperture stop's clear radius is set to the paraxial stop radius that the
 //!   prescription's aperture (or an `f_number` override) implies.
-//! * **Exit-pupil bounds** (the idea of pbrt-v4's RealisticCamera, re-derived here): for film
-//!   radii in `pupil_bins` intervals of [0, half-diagonal], the axis-aligned box on the rear
-//!   vertex plane that holds every point through which a ray from the film point (on +x) gets
-//!   through the lens, found on a coarse-then-fine grid at the shortest, primary and longest
-//!   wavelength, at both ends and the middle of the interval, widened by one fine cell. A film
-//!   point at azimuth φ samples the box of its interval uniformly and rotates the point by φ
-//!   (rotational symmetry).
+//! * **Exit-pupil bounds, sensor-side trace and chief rays** come from the lens crate
+//!   (`camsim_lens::pupil`: [`SensorSideLens`], [`ExitPupilTable`], in the manner of pbrt-v4's
+//!   RealisticCamera and its `ExitPupilSample`); a film point samples the rear-plane box of its
+//!   film radius, rotated to its azimuth.
 //! * **Estimator.** Irradiance from radiance L through the rear plane at distance d from the
 //!   sensor, both planes perpendicular to the axis (cos θ_film = cos θ_plane = d/|q − p|):
 //!   E(p) = ∫ L cos⁴θ / d² dA_q. With q uniform on the box (pdf 1/A) the weight of one ray
@@ -32,14 +29,13 @@
 //! * **Dispersion.** The ray is traced at the hero wavelength only; `wavelength_dependent` is
 //!   true and the secondary weights are 0 (the integrator terminates the secondaries).
 //! * **Centre ray** (depth channel): the chief ray, through the centre of the stop at the
-//!   primary wavelength; its rear-plane aim point is solved by secant iteration at the interval
-//!   ends and interpolated.
+//!   primary wavelength ([`ExitPupilTable::chief_aim`]).
 use super::{Camera, CameraRay, OutputQuantity};
-use camsim_lens::prescription::{Aperture, Medium, Surface};
-use camsim_lens::trace::{intersect, normal, refract, Ray as LensRay};
-use camsim_lens::{GlassCatalog, LensError, LensPrescription};
+use camsim_lens::prescription::{Aperture, Medium};
+use camsim_lens::pupil::{ExitPupilOptions, ExitPupilTable, SensorSideLens};
+pub use camsim_lens::pupil::{PupilBounds, SensorExit as LensExit};
+use camsim_lens::{Clipping, GlassCatalog, LensError, LensPrescription};
 use glam::{Vec2, Vec3};
-use rayon::prelude::*;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -164,143 +160,18 @@ pub struct RealLensInfo {
     pub rear_plane_mm: f64,
 }
 
-/// Axis-aligned box on the rear plane (mm, film point on +x).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PupilBounds {
-    /// Lower x.
-    pub x0_mm: f64,
-    /// Upper x.
-    pub x1_mm: f64,
-    /// Lower y.
-    pub y0_mm: f64,
-    /// Upper y.
-    pub y1_mm: f64,
-}
-
-impl PupilBounds {
-    /// Area (mm²).
-    pub fn area_mm2(&self) -> f64 {
-        (self.x1_mm - self.x0_mm) * (self.y1_mm - self.y0_mm)
-    }
-    fn include(b: &mut Option<PupilBounds>, x: f64, y: f64) {
-        match b {
-            None => {
-                *b = Some(PupilBounds {
-                    x0_mm: x,
-                    x1_mm: x,
-                    y0_mm: y,
-                    y1_mm: y,
-                })
-            }
-            Some(b) => {
-                b.x0_mm = b.x0_mm.min(x);
-                b.x1_mm = b.x1_mm.max(x);
-                b.y0_mm = b.y0_mm.min(y);
-                b.y1_mm = b.y1_mm.max(y);
-            }
-        }
-    }
-    fn union(a: Option<PupilBounds>, b: Option<PupilBounds>) -> Option<PupilBounds> {
-        match (a, b) {
-            (None, x) | (x, None) => x,
-            (Some(a), Some(b)) => Some(PupilBounds {
-                x0_mm: a.x0_mm.min(b.x0_mm),
-                x1_mm: a.x1_mm.max(b.x1_mm),
-                y0_mm: a.y0_mm.min(b.y0_mm),
-                y1_mm: a.y1_mm.max(b.y1_mm),
-            }),
-        }
-    }
-    fn widened(self, d: f64) -> PupilBounds {
-        PupilBounds {
-            x0_mm: self.x0_mm - d,
-            x1_mm: self.x1_mm + d,
-            y0_mm: self.y0_mm - d,
-            y1_mm: self.y1_mm + d,
-        }
-    }
-}
-
-/// One surface of the mirrored lens.
-#[derive(Debug, Clone)]
-struct RevSurface {
-    surface: Surface,
-    /// Vertex z' (mm) in the mirrored frame.
-    z_mm: f64,
-    /// Squared clear radius (mm²), ∞ without a semi-diameter.
-    sd2_mm2: f64,
-    /// Row of the index table of the medium after this surface (towards the object).
-    medium_after: usize,
-}
-
-/// n(λ) of each medium on a 1 nm grid (linear interpolation, clamped at the ends).
-#[derive(Debug, Clone)]
-struct IndexTable {
-    lo_nm: f64,
-    n_per_row: usize,
-    values: Vec<f64>,
-}
-
-impl IndexTable {
-    const LO_NM: f64 = 250.0;
-    const HI_NM: f64 = 1300.0;
-
-    fn new(media: &[Medium]) -> Self {
-        let n_per_row = (Self::HI_NM - Self::LO_NM) as usize + 1;
-        let mut values = Vec::with_capacity(media.len() * n_per_row);
-        for m in media {
-            for i in 0..n_per_row {
-                values.push(m.index(Self::LO_NM + i as f64));
-            }
-        }
-        IndexTable {
-            lo_nm: Self::LO_NM,
-            n_per_row,
-            values,
-        }
-    }
-
-    #[inline]
-    fn index(&self, row: usize, wavelength_nm: f64) -> f64 {
-        let x = (wavelength_nm - self.lo_nm).clamp(0.0, (self.n_per_row - 1) as f64);
-        let i = (x as usize).min(self.n_per_row - 2);
-        let t = x - i as f64;
-        let r = &self.values[row * self.n_per_row..(row + 1) * self.n_per_row];
-        r[i] * (1.0 - t) + r[i + 1] * t
-    }
-}
-
-/// A ray that left the front of the lens (mirrored frame, mm).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LensExit {
-    /// Point on the front surface (mirrored frame: x, y, z').
-    pub origin_mm: [f64; 3],
-    /// Unit direction (mirrored frame, +z' = towards the object).
-    pub direction: [f64; 3],
-    /// Where the ray crossed the aperture stop (x, y mm).
-    pub stop_mm: [f64; 2],
-}
-
 /// The real-lens camera (see the module docs).
 #[derive(Debug, Clone)]
 pub struct RealLensCamera {
     width_px: u32,
     height_px: u32,
     pixel_pitch_mm: f64,
-    surfaces: Vec<RevSurface>,
-    stop_rev: usize,
-    index: IndexTable,
-    /// Rear-vertex plane z' (mm) = last thickness.
-    rear_z_mm: f64,
-    /// Image plane z in the lens frame (mm).
-    z_img_mm: f64,
+    /// The lens as traced from the sensor.
+    lens: SensorSideLens,
+    /// Exit-pupil bounds and chief rays by film radius.
+    pupil: ExitPupilTable,
     /// Entrance pupil z in the lens frame (mm).
     z_ep_mm: f64,
-    /// Film half-diagonal (mm) covered by the pupil table.
-    r_max_mm: f64,
-    bins: Vec<Option<PupilBounds>>,
-    /// Chief-ray rear-plane x (mm) at the interval ends k·Δ, k = 0..=bins.
-    chief_x_mm: Vec<Option<f64>>,
     info: RealLensInfo,
 }
 
@@ -392,36 +263,8 @@ impl RealLensCamera {
             }
         };
 
-        // Mirrored surfaces and media (medium 0 = image space, air).
-        let z = lens.vertex_z_mm();
-        let z_img_mm = z[ns];
-        let mut media = vec![Medium::Air];
-        let mut surfaces = Vec::with_capacity(ns);
-        for i in 0..ns {
-            let j = ns - 1 - i;
-            let s = &lens.surfaces[j];
-            let after = if j == 0 {
-                Medium::Air
-            } else {
-                lens.surfaces[j - 1].medium.clone()
-            };
-            media.push(after);
-            let mut m = s.clone();
-            m.curvature_per_mm = -s.curvature_per_mm;
-            m.aspheric_coeffs = s.aspheric_coeffs.iter().map(|a| -a).collect();
-            surfaces.push(RevSurface {
-                surface: m,
-                z_mm: z_img_mm - z[j],
-                sd2_mm2: s.semi_diameter_mm.map_or(f64::INFINITY, |v| v * v),
-                medium_after: i + 1,
-            });
-        }
-        let rear_z_mm = surfaces[0].z_mm;
-        if !(rear_z_mm > 0.0) {
-            return Err(cfg(format!(
-                "the sensor is not behind the last surface (distance {rear_z_mm} mm)"
-            )));
-        }
+        let side = SensorSideLens::new(&lens)?;
+        let rear_z_mm = side.rear_plane_mm();
         let half_w = 0.5 * width_px as f64 * pixel_pitch_mm;
         let half_h = 0.5 * height_px as f64 * pixel_pitch_mm;
         let r_max_mm = half_w.hypot(half_h) * (1.0 + 1e-9);
@@ -445,24 +288,30 @@ impl RealLensCamera {
             primary_nm: lens.primary_nm,
             rear_plane_mm: rear_z_mm,
         };
-        let mut cam = RealLensCamera {
+        let pupil = ExitPupilTable::new(
+            &side,
+            r_max_mm,
+            &ExitPupilOptions {
+                bins: opts.pupil_bins,
+                grid: opts.pupil_grid,
+                wavelengths_nm: [
+                    opts.wavelength_range_nm.0,
+                    lens.primary_nm,
+                    opts.wavelength_range_nm.1,
+                ],
+                search_half_width_mm: 1.5 * max_sd,
+                exit_pupil_to_image_mm: side.image_z_mm() - fo.exit_pupil_z_mm,
+            },
+        )?;
+        Ok(RealLensCamera {
             width_px,
             height_px,
             pixel_pitch_mm,
-            surfaces,
-            stop_rev: ns - 1 - lens.stop_index,
-            index: IndexTable::new(&media),
-            rear_z_mm,
-            z_img_mm,
+            lens: side,
+            pupil,
             z_ep_mm,
-            r_max_mm,
-            bins: Vec::new(),
-            chief_x_mm: Vec::new(),
             info,
-        };
-        cam.bins = cam.compute_pupil_bounds(opts, 1.5 * max_sd);
-        cam.chief_x_mm = cam.compute_chief_rays(lens.primary_nm);
-        Ok(cam)
+        })
     }
 
     /// Build from a `lens:FILE` argument: a [`RealLensConfig`] JSON or a plain prescription.
@@ -528,12 +377,12 @@ impl RealLensCamera {
 
     /// Paraxial exit pupil → sensor distance (mm).
     pub fn exit_pupil_to_sensor_mm(&self) -> f64 {
-        self.z_img_mm - self.info.exit_pupil_z_mm
+        self.lens.image_z_mm() - self.info.exit_pupil_z_mm
     }
 
     /// The exit-pupil table: film-radius interval width (mm) and the bounds per interval.
     pub fn pupil_table(&self) -> (f64, &[Option<PupilBounds>]) {
-        (self.r_max_mm / self.bins.len() as f64, &self.bins)
+        self.pupil.bounds()
     }
 
     /// Sensor point (x, y) mm (lens frame) of a continuous film position in pixels.
@@ -560,218 +409,20 @@ impl RealLensCamera {
         direction: [f64; 3],
         wavelength_nm: f64,
     ) -> Option<LensExit> {
-        self.trace_surfaces(origin_mm, direction, wavelength_nm, true)
-    }
-
-    /// The surface loop of every sensor-side trace: intersect, clip (with `clip`: at the clear
-    /// radii, and a backwards step), refract, and record the stop crossing.
-    fn trace_surfaces(
-        &self,
-        origin_mm: [f64; 3],
-        direction: [f64; 3],
-        wavelength_nm: f64,
-        clip: bool,
-    ) -> Option<LensExit> {
-        let mut r = LensRay {
-            origin_mm,
-            direction,
-            opl_mm: 0.0,
-        };
-        let mut n1 = 1.0;
-        let mut stop = [f64::NAN; 2];
-        for (i, s) in self.surfaces.iter().enumerate() {
-            let (t, q) = intersect(&s.surface, s.z_mm, &r)?;
-            if clip && (t < -1e-9 || q[0] * q[0] + q[1] * q[1] > s.sd2_mm2) {
-                return None;
-            }
-            let nrm = normal(&s.surface, [q[0], q[1], q[2] - s.z_mm])?;
-            let n2 = self.index.index(s.medium_after, wavelength_nm);
-            let d = refract(r.direction, nrm, n1, n2)?;
-            if i == self.stop_rev {
-                stop = [q[0], q[1]];
-            }
-            r = LensRay {
-                origin_mm: q,
-                direction: d,
-                opl_mm: 0.0,
-            };
-            n1 = n2;
-        }
-        Some(LensExit {
-            origin_mm: r.origin_mm,
-            direction: r.direction,
-            stop_mm: stop,
-        })
+        self.lens
+            .trace(origin_mm, direction, wavelength_nm, Clipping::SemiDiameters)
     }
 
     /// Trace from sensor point `p` (mm) towards rear-plane point `q` (mm).
     pub fn trace_through(&self, p: [f64; 2], q: [f64; 2], wavelength_nm: f64) -> Option<LensExit> {
-        let d = [q[0] - p[0], q[1] - p[1], self.rear_z_mm];
-        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        self.trace_from_sensor(
-            [p[0], p[1], 0.0],
-            [d[0] / l, d[1] / l, d[2] / l],
-            wavelength_nm,
-        )
-    }
-
-    /// Bounds of the rear-plane points through which rays from (r, 0) get through, at the
-    /// given wavelengths, on a `g`×`g` grid over `b`; `None` when none gets through.
-    fn scan(&self, r: f64, b: PupilBounds, g: usize, wls: &[f64]) -> Option<PupilBounds> {
-        let mut out = None;
-        for iy in 0..g {
-            let y = b.y0_mm + (b.y1_mm - b.y0_mm) * (iy as f64 + 0.5) / g as f64;
-            for ix in 0..g {
-                let x = b.x0_mm + (b.x1_mm - b.x0_mm) * (ix as f64 + 0.5) / g as f64;
-                if wls
-                    .iter()
-                    .any(|&w| self.trace_through([r, 0.0], [x, y], w).is_some())
-                {
-                    PupilBounds::include(&mut out, x, y);
-                }
-            }
-        }
-        out
-    }
-
-    fn compute_pupil_bounds(
-        &self,
-        opts: &RealLensOptions,
-        extent0_mm: f64,
-    ) -> Vec<Option<PupilBounds>> {
-        let nb = opts.pupil_bins;
-        let dr = self.r_max_mm / nb as f64;
-        let wls = [
-            opts.wavelength_range_nm.0,
-            self.info.primary_nm,
-            opts.wavelength_range_nm.1,
-        ];
-        let fine = opts.pupil_grid;
-        let coarse = (fine / 2).max(8);
-        // Bounds at the interval ends and middles r_i = i·Δ/2 (shared by neighbouring
-        // intervals), then interval k = union of r_2k, r_2k+1, r_2k+2.
-        let at_radius: Vec<Option<PupilBounds>> = (0..=2 * nb)
-            .into_par_iter()
-            .map(|i| {
-                let r = i as f64 * 0.5 * dr;
-                // Coarse scan over a square that grows until the pupil is inside it.
-                let mut e = extent0_mm;
-                let mut found = None;
-                for _ in 0..6 {
-                    let sq = PupilBounds {
-                        x0_mm: -e,
-                        x1_mm: e,
-                        y0_mm: -e,
-                        y1_mm: e,
-                    };
-                    found = self.scan(r, sq, coarse, &wls);
-                    let cell = 2.0 * e / coarse as f64;
-                    match found {
-                        Some(b)
-                            if b.x0_mm < -e + cell
-                                || b.x1_mm > e - cell
-                                || b.y0_mm < -e + cell
-                                || b.y1_mm > e - cell =>
-                        {
-                            e *= 2.0
-                        }
-                        _ => break,
-                    }
-                }
-                // Fine scan of the coarse box widened by one coarse cell, widened in turn by
-                // one fine cell.
-                let b = found?;
-                let wide = b.widened(2.0 * e / coarse as f64);
-                let c = (wide.x1_mm - wide.x0_mm).max(wide.y1_mm - wide.y0_mm) / fine as f64;
-                self.scan(r, wide, fine, &wls).map(|f| f.widened(c))
-            })
-            .collect();
-        (0..nb)
-            .map(|k| {
-                PupilBounds::union(
-                    PupilBounds::union(at_radius[2 * k], at_radius[2 * k + 1]),
-                    at_radius[2 * k + 2],
-                )
-            })
-            .collect()
-    }
-
-    /// Rear-plane x of the chief ray (through the stop centre) from (r, 0), by secant steps.
-    fn solve_chief(&self, r: f64, guess: f64, wavelength_nm: f64) -> Option<f64> {
-        let f = |a: f64| {
-            self.trace_from_sensor_unclipped([r, 0.0], [a, 0.0], wavelength_nm)
-                .map(|e| e.stop_mm[0])
-        };
-        let mut a0 = guess;
-        let mut f0 = f(a0)?;
-        if f0.abs() < 1e-10 {
-            return Some(a0);
-        }
-        let mut a1 = guess + 1e-3 * (1.0 + guess.abs());
-        let mut f1 = f(a1)?;
-        for _ in 0..60 {
-            if (f1 - f0).abs() < 1e-300 {
-                return None;
-            }
-            let a2 = a1 - f1 * (a1 - a0) / (f1 - f0);
-            a0 = a1;
-            f0 = f1;
-            a1 = a2;
-            f1 = f(a1)?;
-            if f1.abs() < 1e-10 {
-                return Some(a1);
-            }
-        }
-        None
-    }
-
-    /// Like [`Self::trace_through`] without clipping at the clear radii (chief-ray aiming:
-    /// the chief ray may be defined where the marginal rays are vignetted).
-    fn trace_from_sensor_unclipped(
-        &self,
-        p: [f64; 2],
-        q: [f64; 2],
-        wavelength_nm: f64,
-    ) -> Option<LensExit> {
-        let d = [q[0] - p[0], q[1] - p[1], self.rear_z_mm];
-        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        self.trace_surfaces(
-            [p[0], p[1], 0.0],
-            [d[0] / l, d[1] / l, d[2] / l],
-            wavelength_nm,
-            false,
-        )
-    }
-
-    fn compute_chief_rays(&self, primary_nm: f64) -> Vec<Option<f64>> {
-        let nb = self.bins.len();
-        let dr = self.r_max_mm / nb as f64;
-        // Paraxial guess: the line from the film point to the exit-pupil centre.
-        let xp_from_sensor = self.z_img_mm - self.info.exit_pupil_z_mm;
-        (0..=nb)
-            .into_par_iter()
-            .map(|k| {
-                let r = k as f64 * dr;
-                if k == 0 {
-                    return Some(0.0);
-                }
-                let guess = if xp_from_sensor.abs() > 1e-9 {
-                    r * (1.0 - self.rear_z_mm / xp_from_sensor)
-                } else {
-                    0.0
-                };
-                self.solve_chief(r, guess, primary_nm).or_else(|| {
-                    let b = self.bins[k.min(nb - 1)]?;
-                    Some(0.5 * (b.x0_mm + b.x1_mm))
-                })
-            })
-            .collect()
+        self.lens
+            .trace_through(p, q, wavelength_nm, Clipping::SemiDiameters)
     }
 
     /// Convert a lens exit (mirrored frame, mm) to a camera-space ray (origin m, unit direction).
     #[inline]
     pub fn to_camera(&self, e: &LensExit) -> (Vec3, Vec3) {
-        let z_lens = self.z_img_mm - e.origin_mm[2];
+        let z_lens = self.lens.image_z_mm() - e.origin_mm[2];
         let o = Vec3::new(
             (e.origin_mm[0] * 1e-3) as f32,
             (e.origin_mm[1] * 1e-3) as f32,
@@ -786,28 +437,12 @@ impl RealLensCamera {
         (o, d)
     }
 
-    /// Rotation (cos φ, sin φ) of a sensor point and its radius.
-    #[inline]
-    fn polar(p: [f64; 2]) -> (f64, f64, f64) {
-        let r = p[0].hypot(p[1]);
-        if r > 0.0 {
-            (r, p[0] / r, p[1] / r)
-        } else {
-            (0.0, 1.0, 0.0)
-        }
-    }
-
     /// Sample the exit pupil for sensor point `p` (mm) with `u` ∈ [0,1)²: the rear-plane
-    /// point (mm) and the area (mm²) of the box it was drawn from. `None` outside the table
-    /// or where the pupil is empty.
+    /// point (mm) and the area (mm²) of the box it was drawn from (1 / its pdf). `None`
+    /// outside the table or where the pupil is empty.
     pub fn sample_pupil(&self, p: [f64; 2], u: [f64; 2]) -> Option<([f64; 2], f64)> {
-        let (r, c, s) = Self::polar(p);
-        let nb = self.bins.len();
-        let k = ((r / self.r_max_mm) * nb as f64) as usize;
-        let b = (*self.bins.get(k)?)?;
-        let x = b.x0_mm + u[0] * (b.x1_mm - b.x0_mm);
-        let y = b.y0_mm + u[1] * (b.y1_mm - b.y0_mm);
-        Some(([c * x - s * y, s * x + c * y], b.area_mm2()))
+        let s = self.pupil.sample(p, u)?;
+        Some((s.rear_point_mm, s.box_area_mm2))
     }
 
     /// The irradiance weight and lens exit of one sample (see the module docs).
@@ -817,14 +452,12 @@ impl RealLensCamera {
         u: [f64; 2],
         wavelength_nm: f64,
     ) -> Option<(f64, LensExit)> {
-        let (q, area) = self.sample_pupil(p, u)?;
-        let d = [q[0] - p[0], q[1] - p[1], self.rear_z_mm];
-        let l2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        let l = l2.sqrt();
-        let dir = [d[0] / l, d[1] / l, d[2] / l];
+        let s = self.pupil.sample(p, u)?;
+        let dir = self.lens.direction_to(p, s.rear_point_mm);
         let exit = self.trace_from_sensor([p[0], p[1], 0.0], dir, wavelength_nm)?;
         let cos2 = dir[2] * dir[2];
-        let w = cos2 * cos2 * area / (self.rear_z_mm * self.rear_z_mm);
+        let d = self.lens.rear_plane_mm();
+        let w = cos2 * cos2 * s.box_area_mm2 / (d * d);
         Some((w, exit))
     }
 }
@@ -861,17 +494,10 @@ impl Camera for RealLensCamera {
 
     fn center_ray(&self, film_px: Vec2) -> Option<CameraRay> {
         let p = self.film_mm(film_px);
-        let (r, c, s) = Self::polar(p);
-        let nb = self.bins.len();
-        let x = r / self.r_max_mm * nb as f64;
-        let k = (x as usize).min(nb - 1);
-        let t = x - k as f64;
-        let a = match (self.chief_x_mm.get(k)?, self.chief_x_mm.get(k + 1)?) {
-            (Some(a0), Some(a1)) => a0 * (1.0 - t) + a1 * t,
-            (Some(a), None) | (None, Some(a)) => *a,
-            (None, None) => return None,
-        };
-        let exit = self.trace_from_sensor_unclipped(p, [c * a, s * a], self.info.primary_nm)?;
+        let q = self.pupil.chief_aim(p)?;
+        let exit = self
+            .lens
+            .trace_through(p, q, self.info.primary_nm, Clipping::None)?;
         let (origin_m, direction) = self.to_camera(&exit);
         Some(CameraRay {
             origin_m,

@@ -1,0 +1,203 @@
+//! The sensor-side trace and the exit-pupil sampler of `camsim_lens::pupil`.
+//!
+//! * The sensor-side trace is checked against the crate's forward trace: the ray that leaves
+//!   the front of the lens, reversed and traced from object space, lands on the sensor point it
+//!   started from and crosses the stop at the same point (at wavelengths on the 1-nm index
+//!   grid, where the interpolated index is exact, so the two traces differ only by rounding).
+//! * The sampler is uniform on its box (chi-square on 8×8 cells, after undoing the rotation to
+//!   the film point's azimuth), its pdf is 1 / box area, and every transmitted ray starts inside
+//!   its box (rays from a square 4× the largest box).
+//! * The chief-ray aim crosses the stop at its centre.
+use camsim_core::rng::stream;
+use camsim_lens::pupil::{ExitPupilOptions, ExitPupilTable, SensorSideLens};
+use camsim_lens::{Clipping, GlassCatalog, LensPrescription, Ray};
+use rand::RngExt;
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+/// The bundled f/2 double Gauss at its paraxial focus, with the stop's clear radius set to
+/// the paraxial value (as the path tracer's camera does).
+fn lens() -> LensPrescription {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../lenses/double_gauss_50mm_f2.json");
+    let l = LensPrescription::from_json_file(p, &GlassCatalog::bundled()).unwrap();
+    let mut l = l.focused(l.primary_nm).unwrap();
+    let fo = l.first_order(l.primary_nm).unwrap();
+    let s = &mut l.surfaces[l.stop_index];
+    s.semi_diameter_mm = Some(s.semi_diameter_mm.map_or(fo.stop_semi_diameter_mm, |v| {
+        v.min(fo.stop_semi_diameter_mm)
+    }));
+    l
+}
+
+/// Film radius of the table (mm): 15° of field of the 50-mm lens.
+const R_MAX_MM: f64 = 13.4;
+
+fn table(l: &LensPrescription, side: &SensorSideLens) -> ExitPupilTable {
+    let fo = l.first_order(l.primary_nm).unwrap();
+    ExitPupilTable::new(
+        side,
+        R_MAX_MM,
+        &ExitPupilOptions {
+            bins: 16,
+            grid: 48,
+            wavelengths_nm: [400.0, l.primary_nm, 700.0],
+            search_half_width_mm: 30.0,
+            exit_pupil_to_image_mm: side.image_z_mm() - fo.exit_pupil_z_mm,
+        },
+    )
+    .unwrap()
+}
+
+#[test]
+fn sensor_side_trace_reverses_the_forward_trace() {
+    let l = lens();
+    let side = SensorSideLens::new(&l).unwrap();
+    let tab = table(&l, &side);
+    let mut rng = stream(41, &[]);
+    let mut checked = 0;
+    for _ in 0..400 {
+        let r = rng.random::<f64>() * R_MAX_MM * 0.95;
+        let phi = rng.random::<f64>() * std::f64::consts::TAU;
+        let p = [r * phi.cos(), r * phi.sin()];
+        let wl = [450.0, 550.0, 650.0][checked % 3];
+        let s = tab.sample(p, [rng.random(), rng.random()]).unwrap();
+        let Some(e) = side.trace_through(p, s.rear_point_mm, wl, Clipping::SemiDiameters) else {
+            continue;
+        };
+        // Lens frame: z = z_img − z'; the light travels opposite to the sensor-side ray.
+        let d = [-e.direction[0], -e.direction[1], e.direction[2]];
+        let q = [
+            e.origin_mm[0],
+            e.origin_mm[1],
+            side.image_z_mm() - e.origin_mm[2],
+        ];
+        let back = 50.0;
+        let ray = Ray {
+            origin_mm: [q[0] - back * d[0], q[1] - back * d[1], q[2] - back * d[2]],
+            direction: d,
+            opl_mm: 0.0,
+        };
+        let t = l
+            .trace(&ray, wl, Clipping::SemiDiameters)
+            .expect("forward trace lost the ray");
+        let err = (t.image_mm[0] - p[0]).hypot(t.image_mm[1] - p[1]);
+        assert!(
+            err < 1e-8,
+            "film point {p:?} at {wl} nm: forward trace lands {err:.2e} mm away"
+        );
+        let stop_err = (t.stop_mm[0] - e.stop_mm[0]).hypot(t.stop_mm[1] - e.stop_mm[1]);
+        assert!(
+            stop_err < 1e-8,
+            "stop crossings differ by {stop_err:.2e} mm"
+        );
+        checked += 1;
+    }
+    // The box holds the vignetted pupil, a disc and lens-shaped cut-outs: more than half of
+    // its area transmits.
+    assert!(
+        checked > 200,
+        "only {checked} of 400 sampled rays got through"
+    );
+}
+
+#[test]
+fn exit_pupil_sampler_is_uniform_on_its_box_chi_square() {
+    let l = lens();
+    let side = SensorSideLens::new(&l).unwrap();
+    let tab = table(&l, &side);
+    let (dr, bins) = tab.bounds();
+    let mut rng = stream(42, &[]);
+    let cells = 8usize;
+    let n = 64_000;
+    let trials = 6;
+    for trial in 0..trials {
+        let r = rng.random::<f64>() * R_MAX_MM * 0.95;
+        let phi = rng.random::<f64>() * std::f64::consts::TAU;
+        let p = [r * phi.cos(), r * phi.sin()];
+        let b = bins[(r / dr) as usize].unwrap();
+        let mut hist = vec![0usize; cells * cells];
+        for _ in 0..n {
+            let s = tab.sample(p, [rng.random(), rng.random()]).unwrap();
+            assert!((s.pdf_per_mm2 * b.area_mm2() - 1.0).abs() < 1e-12);
+            assert_eq!(s.box_area_mm2, b.area_mm2());
+            let (c, sn) = (phi.cos(), phi.sin());
+            let q = s.rear_point_mm;
+            let (x, y) = (c * q[0] + sn * q[1], -sn * q[0] + c * q[1]);
+            let fx = (x - b.x0_mm) / (b.x1_mm - b.x0_mm);
+            let fy = (y - b.y0_mm) / (b.y1_mm - b.y0_mm);
+            assert!((-1e-9..=1.0 + 1e-9).contains(&fx) && (-1e-9..=1.0 + 1e-9).contains(&fy));
+            let i = ((fx * cells as f64) as usize).min(cells - 1);
+            let j = ((fy * cells as f64) as usize).min(cells - 1);
+            hist[j * cells + i] += 1;
+        }
+        let e = n as f64 / (cells * cells) as f64;
+        let chi2: f64 = hist.iter().map(|&o| (o as f64 - e).powi(2) / e).sum();
+        let p_value = 1.0
+            - ChiSquared::new((cells * cells - 1) as f64)
+                .unwrap()
+                .cdf(chi2);
+        // 6 trials at α = 1e-3 each: joint false-failure rate 0.6 %.
+        assert!(
+            p_value > 1e-3,
+            "trial {trial}: chi² {chi2:.1}, p = {p_value:.2e}"
+        );
+    }
+}
+
+#[test]
+fn exit_pupil_bounds_hold_every_transmitted_ray_and_the_chief_ray_hits_the_stop_centre() {
+    let l = lens();
+    let side = SensorSideLens::new(&l).unwrap();
+    let tab = table(&l, &side);
+    let (dr, bins) = tab.bounds();
+    assert!(
+        bins.iter().all(Option::is_some),
+        "an empty pupil box inside the image circle"
+    );
+    let e = bins
+        .iter()
+        .flatten()
+        .map(|b| b.x0_mm.abs().max(b.x1_mm.abs()).max(b.y1_mm.abs()))
+        .fold(0.0, f64::max)
+        * 2.0;
+    let mut rng = stream(43, &[]);
+    let (mut through, mut outside) = (0, 0);
+    for _ in 0..60_000 {
+        let r = rng.random::<f64>() * R_MAX_MM * 0.999;
+        let q = [
+            (2.0 * rng.random::<f64>() - 1.0) * e,
+            (2.0 * rng.random::<f64>() - 1.0) * e,
+        ];
+        let wl = 400.0 + 300.0 * rng.random::<f64>();
+        if side
+            .trace_through([r, 0.0], q, wl, Clipping::SemiDiameters)
+            .is_some()
+        {
+            through += 1;
+            match bins[(r / dr) as usize] {
+                Some(b)
+                    if (b.x0_mm..=b.x1_mm).contains(&q[0])
+                        && (b.y0_mm..=b.y1_mm).contains(&q[1]) => {}
+                _ => outside += 1,
+            }
+        }
+    }
+    assert!(through > 1000, "only {through} rays got through");
+    assert_eq!(
+        outside, 0,
+        "{outside} of {through} transmitted rays started outside their box"
+    );
+    // The chief ray at the interval ends (where it is solved) crosses the stop centre.
+    for k in 0..bins.len() {
+        let r = k as f64 * dr;
+        let a = tab.chief_aim([0.0, r]).unwrap();
+        let ex = side
+            .trace_through([0.0, r], a, l.primary_nm, Clipping::None)
+            .unwrap();
+        let off = ex.stop_mm[0].hypot(ex.stop_mm[1]);
+        assert!(
+            off < 1e-6,
+            "film radius {r} mm: chief ray misses the stop centre by {off:.2e} mm"
+        );
+    }
+}
