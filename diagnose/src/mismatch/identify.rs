@@ -27,7 +27,7 @@
 //! responsivity, e.g. the height of its QE curve or its filter's transmittance).
 use super::candidates::Evidence;
 use super::effects::Effect;
-use super::like::{prof, Ctx};
+use super::like::{prof, Ctx, FixedPattern};
 use super::model::{ModelState, ShotConst};
 use camsim_sensor::{Crosstalk, Nonlinearity};
 use nalgebra::{DMatrix, SymmetricEigen};
@@ -278,14 +278,7 @@ fn scores(ctx: &Ctx, st: &ModelState, params: &[Param]) -> Result<Vec<Vec<f64>>,
     let base = ctx.base_rates(&st.rates)?;
     let rates0 = ctx.transform_fit(&base, st);
     let consts0 = ctx.consts(st);
-    let s = &st.sensor;
-    let sig_d = if s.noise.dsnu { s.dsnu_sigma_v } else { 0.0 };
-    let sig_p = if s.noise.prnu {
-        s.prnu_sigma_percent / 100.0
-    } else {
-        0.0
-    };
-    let sig_c = s.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+    let fp = FixedPattern::of(st);
     // (pixel, shot) of the terms, with the base prediction's weights
     let mut terms: Vec<(usize, usize, f64, f64, f64, f64)> = Vec::new();
     for &r in &ctx.fit_rows {
@@ -298,9 +291,7 @@ fn scores(ctx: &Ctx, st: &ModelState, params: &[Param]) -> Result<Vec<Vec<f64>>,
                 }
                 let c = &consts0[sidx];
                 let p = c.predict(rates0[sidx][i] as f64 * c.t, 0.0);
-                let vm = c.var_mean(&p)
-                    + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
-                    + sig_p * sig_p * p.w * p.w;
+                let vm = fp.var_mean(c, &p);
                 let wv = if sh.has_variance() {
                     ((c.frames - 1.0) / 2.0).sqrt() / p.var_t
                 } else {

@@ -1,5 +1,5 @@
 //! Linear rate parameters: the weighted least-squares normal equations of the frame means.
-use super::{Ctx, Rates, RowSel, BLOCK_ROWS};
+use super::{Ctx, FixedPattern, Rates, RowSel, BLOCK_ROWS};
 use crate::mismatch::model::ModelState;
 use rayon::prelude::*;
 
@@ -18,14 +18,7 @@ impl Ctx<'_> {
         let (ns, cols) = (d.shots.len(), d.cols);
         let kk = basis.len();
         let consts = self.consts(state);
-        let s = &state.sensor;
-        let sig_d = if s.noise.dsnu { s.dsnu_sigma_v } else { 0.0 };
-        let sig_p = if s.noise.prnu {
-            s.prnu_sigma_percent / 100.0
-        } else {
-            0.0
-        };
-        let sig_c = s.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+        let fp = FixedPattern::of(state);
         let blocks: Vec<(Vec<f64>, Vec<f64>)> = self
             .rows(sel)
             .par_chunks(BLOCK_ROWS)
@@ -43,9 +36,7 @@ impl Ctx<'_> {
                             }
                             let c = &consts[sidx];
                             let p = c.predict(rates[sidx][i] as f64 * c.t, 0.0);
-                            let vm = c.var_mean(&p)
-                                + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
-                                + sig_p * sig_p * p.w * p.w;
+                            let vm = fp.var_mean(c, &p);
                             let w = 1.0 / vm;
                             let rr = sh.mean_dn[i] as f64 - p.mean;
                             for k in 0..kk {

@@ -49,6 +49,44 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
+/// The fixed-pattern spreads of a sensor state, as the likelihood uses them: σ_D (DSNU, volts),
+/// σ_P (PRNU, relative gain) and σ_c (column offsets, volts); zero where the block is off.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct FixedPattern {
+    /// DSNU σ_D (V).
+    pub dsnu_v: f64,
+    /// PRNU σ_P (relative gain, not percent).
+    pub prnu_rel: f64,
+    /// Column-offset σ_c (V).
+    pub column_v: f64,
+}
+
+impl FixedPattern {
+    /// The spreads of `state`'s sensor.
+    pub(crate) fn of(state: &ModelState) -> Self {
+        let s = &state.sensor;
+        FixedPattern {
+            dsnu_v: if s.noise.dsnu { s.dsnu_sigma_v } else { 0.0 },
+            prnu_rel: if s.noise.prnu {
+                s.prnu_sigma_percent / 100.0
+            } else {
+                0.0
+            },
+            column_v: s.column_fpn.map_or(0.0, |c| c.offset_sigma_v),
+        }
+    }
+
+    /// Marginal variance of a pixel's frame mean (DN²), every term of the module doc's
+    /// covariance on the diagonal: temporal/F + excess ([`ShotConst::var_mean`]) +
+    /// (σ_D² + σ_c²)·u² + σ_P²·w².
+    #[inline]
+    pub(crate) fn var_mean(&self, c: &ShotConst, p: &Pred) -> f64 {
+        c.var_mean(p)
+            + (self.dsnu_v * self.dsnu_v + self.column_v * self.column_v) * p.u * p.u
+            + self.prnu_rel * self.prnu_rel * p.w * p.w
+    }
+}
+
 /// Rows per work block (fixed, so sums do not depend on the thread count).
 const BLOCK_ROWS: usize = 8;
 /// Rows per work block of the pixel pass (fixed, as [`BLOCK_ROWS`]).
@@ -301,13 +339,8 @@ impl<'a> Ctx<'a> {
         let (ns, cols, nch) = (d.shots.len(), d.cols, d.channels());
         let consts = self.consts(state);
         let s = &state.sensor;
-        let sig_d = if s.noise.dsnu { s.dsnu_sigma_v } else { 0.0 };
-        let sig_p = if s.noise.prnu {
-            s.prnu_sigma_percent / 100.0
-        } else {
-            0.0
-        };
-        let sig_c = s.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+        let fp = FixedPattern::of(state);
+        let (sig_d, sig_p, sig_c) = (fp.dsnu_v, fp.prnu_rel, fp.column_v);
         let hot = s
             .effects
             .hot_pixels
@@ -478,9 +511,7 @@ impl<'a> Ctx<'a> {
                             }
                             let m = x.mean as f64;
                             let rr = m - p.mean;
-                            let vm = consts[sidx].var_mean(p)
-                                + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
-                                + sig_p * sig_p * p.w * p.w;
+                            let vm = fp.var_mean(&consts[sidx], p);
                             st.chi2 += rr * rr / vm;
                             st.dof += 1.0;
                             st.n += 1.0;
