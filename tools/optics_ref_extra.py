@@ -28,7 +28,13 @@ same packages (Optiland, rayoptics) through their public APIs. ref_lens.py is im
       list starts at r^2); optiland backend only (rayoptics is not patched). The output gains
       an "aspheres" entry listing what was applied.
 
-  optics_ref_extra.py mtf INPUT.json -o OUT.json [--opd-grid 512]
+  optics_ref_extra.py patched INPUT.json -o OUT.json [ref_lens.py arguments]
+      ref_lens.py itself, both backends, with even aspheres built in optiland AND rayoptics, and
+      the glasses listed in INPUT's "rayoptics_glass_from_optiland" (absent from opticalglass,
+      where rayoptics would silently build air) given to rayoptics as optiland's material of
+      that name. The output gains a "patches" entry listing what was applied.
+
+  optics_ref_extra.py mtf INPUT.json -o OUT.json [--opd-grid 512] [--optiland-aiming paraxial]
       On-axis diffraction MTF at the primary wavelength of a strongly aberrated lens from
       optiland's OPD map on an n x n pupil grid (default 512, fine enough for ~20 waves p-v),
       through ref_lens.py's mtf_from_opd, at three image planes: the paraxial focus, the RMS
@@ -288,8 +294,104 @@ def asphere(lens_json, out, extra_args):
         f.write(json.dumps(doc, indent=1) + "\n")
 
 
-def mtf_focus(lens, n):
-    be = R.OptilandBackend(lens)
+def patched(lens_json, out, extra_args):
+    """ref_lens.py's main on LENS_JSON, both backends, with what ref_lens.py cannot express
+    patched into the lenses it builds (after each backend's constructor, before any analysis):
+      * surfaces with "conic" / "aspheric_coeffs": optiland "even_asphere" surfaces (as
+        `asphere`) and rayoptics EvenPolynomial profiles (coefs [0, A4, A6, ...]: its list
+        starts at r^2, like optiland's);
+      * glasses named in the input's "rayoptics_glass_from_optiland" (absent from rayoptics'
+        opticalglass catalogue, which then silently builds AIR): rayoptics gets a medium whose
+        n(lambda) is optiland's material of that name (the refractiveindex.info data that camsim
+        embeds), so both backends trace the same glass.
+    Neither patch changes the paraxial data of a lens with no r^2 term, but each backend
+    re-solves its paraxial focus afterwards."""
+    with open(lens_json) as f:
+        lens = json.load(f)
+    asph = {}
+    for i, s in enumerate(lens["surfaces"], start=1):
+        k = float(s.get("conic", 0.0))
+        a = [float(x) for x in s.get("aspheric_coeffs", [])]
+        if k != 0.0 or any(x != 0.0 for x in a):
+            asph[i] = (k, a)
+    ro_glass = set(lens.get("rayoptics_glass_from_optiland", []))
+    import optiland.optic as optic_mod
+    base_optic = optic_mod.Optic
+    base_ro = R.RayopticsBackend
+
+    class AsphericOptic(base_optic):
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            add = self.surfaces.add
+
+            def add_asph(*a, index=None, **k):
+                if index in asph:
+                    conic, coeffs = asph[index]
+                    k.update(surface_type="even_asphere", conic=conic,
+                             coefficients=[0.0] + coeffs)
+                return add(*a, index=index, **k)
+            self.surfaces.add = add_asph
+
+    class OptilandMedium:
+        """A rayoptics medium with optiland's n(lambda) for glass NAME of CATALOG."""
+        def __init__(self, name, catalog):
+            from optiland.materials import Material
+            self.label = name
+            self.mat = Material(name, catalog)
+
+        def name(self):
+            return self.label
+
+        def catalog_name(self):
+            return "optiland"
+
+        def rindex(self, wv_nm):
+            return float(np.squeeze(self.mat.n(float(wv_nm) / 1000.0)))
+
+        def meas_rindex(self, wv_nm):
+            return self.rindex(wv_nm)
+
+    class PatchedRayoptics(base_ro):
+        def __init__(self, lens, clip=False):
+            super().__init__(lens, clip)
+            from rayoptics.elem.profiles import EvenPolynomial
+            sm = self.opm["seq_model"]
+            for i, s in enumerate(lens["surfaces"], start=1):
+                m = s.get("material", "air")
+                if isinstance(m, dict) and m.get("glass") in ro_glass:
+                    sm.gaps[i].medium = OptilandMedium(m["glass"],
+                                                       m.get("catalog", "schott").split("/")[0])
+            for i, (k, a) in asph.items():
+                ifc = sm.ifcs[i]
+                ifc.profile = EvenPolynomial(c=ifc.profile.cv, cc=k, coefs=[0.0] + a)
+            self.opm.update_model()
+            self.solve_paraxial_focus()
+
+    optic_mod.Optic = AsphericOptic
+    R.RayopticsBackend = PatchedRayoptics
+    try:
+        argv = sys.argv
+        sys.argv = ["ref_lens.py", lens_json, "-o", out] + extra_args
+        import contextlib
+        import io
+        with contextlib.redirect_stdout(io.StringIO()):
+            R.main()
+    finally:
+        sys.argv = argv
+        optic_mod.Optic = base_optic
+        R.RayopticsBackend = base_ro
+    with open(out) as f:
+        doc = json.load(f)
+    doc["patches"] = {"runner": "tools/optics_ref_extra.py patched",
+                      "aspheres": [{"surface": i, "conic": k, "aspheric_coeffs": a}
+                                   for i, (k, a) in sorted(asph.items())],
+                      "rayoptics_glass_from_optiland": sorted(ro_glass)}
+    with open(out, "w") as f:
+        f.write(json.dumps(doc, indent=1) + "\n")
+
+
+def mtf_focus(lens, n, aiming="iterative"):
+    be = R.OptilandBackend(lens, aiming=aiming)
     fo = be.first_order()
     wp = lens["primary_nm"]
     freqs = lens["mtf_freqs_lpmm"]
@@ -356,13 +458,19 @@ def mtf_focus(lens, n):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["field_curvature", "finite", "asphere", "mtf"])
+    ap.add_argument("what", choices=["field_curvature", "finite", "asphere", "patched", "mtf"])
     ap.add_argument("lens_json")
     ap.add_argument("-o", "--output", required=True)
     ap.add_argument("--opd-grid", type=int, default=512, help="mtf: OPD grid per side")
+    ap.add_argument("--optiland-aiming", default="iterative",
+                    help="mtf: optiland ray aiming, iterative (default; fills the real stop) or "
+                         "paraxial (fills the paraxial entrance pupil, as rayoptics and camsim)")
     a, rest = ap.parse_known_args()
     if a.what == "asphere":
         asphere(a.lens_json, a.output, rest)
+        return
+    if a.what == "patched":
+        patched(a.lens_json, a.output, rest)
         return
     if rest:
         ap.error(f"unrecognised arguments: {' '.join(rest)}")
@@ -371,7 +479,8 @@ def main():
         res = field_curvature(lens)
     elif a.what == "mtf":
         lens = R.load_lens(a.lens_json)
-        res = mtf_focus(lens, a.opd_grid)
+        res = mtf_focus(lens, a.opd_grid, a.optiland_aiming)
+        res["optiland_aiming"] = a.optiland_aiming
     else:
         with open(a.lens_json) as f:
             lens = json.load(f)

@@ -4,7 +4,7 @@
 # For each input prescription lens/tests/data/optics_ref/<name>.json this runs the shared
 # reference harness (../shared/tools/optics_ref/ref_lens.py, called in place, not copied)
 # and writes <name>.ref.json beside it. The Python packages live in a git-ignored venv,
-# .venv-optics, in the repository root (created on first use).
+# .venv-optics, in the repository root, made by tools/optics_ref_setup.sh (pinned versions).
 #
 # An input may carry a key "ref_lens_runs" (ignored by ref_lens.py): an object mapping a tag to
 # ref_lens.py arguments; tag "" writes <name>.ref.json, any other tag <name>.<tag>.ref.json.
@@ -18,7 +18,10 @@
 #
 # An input with "ref_lens_runner": "asphere" (surfaces with "conic" / "aspheric_coeffs") runs its
 # ref_lens runs through tools/optics_ref_extra.py asphere: ref_lens.py with those surfaces built
-# as optiland even aspheres (optiland only).
+# as optiland even aspheres (optiland only). "ref_lens_runner": "patched" runs both backends
+# through tools/optics_ref_extra.py patched: aspheres in both, and the glasses listed in
+# "rayoptics_glass_from_optiland" given to rayoptics as optiland's material (opticalglass 1.1.1
+# lacks e.g. Schott N-SK15 and rayoptics then silently builds air).
 #
 # Usage: tools/optics_ref_run.sh [name ...]     (default: every *.json that is not *.ref.json)
 # Env:   PYTHON (interpreter used to create the venv, default python3)
@@ -36,13 +39,8 @@ if [[ ! -f "$REF_LENS" ]]; then
     exit 1
 fi
 
-if [[ ! -x "$VENV/bin/python" ]]; then
-    "${PYTHON:-python3}" -m venv "$VENV"
-fi
-if ! "$VENV/bin/python" -c "import optiland, rayoptics" 2>/dev/null; then
-    "$VENV/bin/pip" install --quiet --upgrade pip
-    "$VENV/bin/pip" install --quiet optiland rayoptics
-fi
+# The pinned optiland / rayoptics / opticalglass (idempotent).
+"$ROOT/tools/optics_ref_setup.sh"
 "$VENV/bin/python" - <<'PY'
 from importlib.metadata import version
 print("optiland", version("optiland"), "| rayoptics", version("rayoptics"),
@@ -66,7 +64,7 @@ for f in "${inputs[@]}"; do
     runs="$("$VENV/bin/python" -c '
 import json, sys
 j = json.load(open(sys.argv[1]))
-kind = "asphere" if j.get("ref_lens_runner") == "asphere" else "ref_lens"
+kind = {"asphere": "asphere", "patched": "patched"}.get(j.get("ref_lens_runner"), "ref_lens")
 for tag, args in j.get("ref_lens_runs", {"": ""}).items():
     print(kind + "|" + tag + "|" + args)
 for tool, args in j.get("extra_runs", {}).items():
@@ -80,8 +78,8 @@ for tool, args in j.get("extra_runs", {}).items():
         if [[ "$kind" == extra ]]; then
             cmd=("$VENV/bin/python" "$EXTRA" "$tag" "$f" -o "$out")
             common=""
-        elif [[ "$kind" == asphere ]]; then
-            cmd=("$VENV/bin/python" "$EXTRA" asphere "$f" -o "$out")
+        elif [[ "$kind" == asphere || "$kind" == patched ]]; then
+            cmd=("$VENV/bin/python" "$EXTRA" "$kind" "$f" -o "$out")
             common="${REF_LENS_ARGS:-}"
         else
             cmd=("$VENV/bin/python" "$REF_LENS" "$f" -o "$out")

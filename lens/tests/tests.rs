@@ -17,6 +17,7 @@ mod lenses_dir;
 mod mtf_sampling;
 mod optics_ref;
 mod optics_ref_finite;
+mod optics_ref_literature;
 mod optics_ref_zmx;
 mod pupil;
 mod reader_robustness;
