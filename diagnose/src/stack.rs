@@ -66,32 +66,21 @@ pub(crate) fn stack(frames: &[RawFrame], map: &ChannelMap, max_dn: u16) -> Stack
         .map(|(r, (m_row, v_row))| {
             let mut sum = vec![0u64; cols];
             let mut sumsq = vec![0u64; cols];
-            // Rail counts per column first (branch-free, so the frame loop vectorises), then
-            // per channel.
-            let mut lo_col = vec![0u32; cols];
-            let mut hi_col = vec![0u32; cols];
-            for f in frames {
-                let src = &f.dn[r * cols..(r + 1) * cols];
-                for ((((&v, s), q), l), h) in src
-                    .iter()
-                    .zip(sum.iter_mut())
-                    .zip(sumsq.iter_mut())
-                    .zip(lo_col.iter_mut())
-                    .zip(hi_col.iter_mut())
-                {
-                    let x = v as u64;
-                    *s += x;
-                    *q += x * x;
-                    *l += (v == 0) as u32;
-                    *h += (v != 0 && v >= max_dn) as u32;
-                }
-            }
             let mut lo = vec![0usize; nch];
             let mut hi = vec![0usize; nch];
             let ch_row = &map.channel[r * cols..(r + 1) * cols];
-            for ((&ch, &l), &h) in ch_row.iter().zip(&lo_col).zip(&hi_col) {
-                lo[ch as usize] += l as usize;
-                hi[ch as usize] += h as usize;
+            for f in frames {
+                let src = &f.dn[r * cols..(r + 1) * cols];
+                for c in 0..cols {
+                    let x = src[c] as u64;
+                    sum[c] += x;
+                    sumsq[c] += x * x;
+                    if src[c] == 0 {
+                        lo[ch_row[c] as usize] += 1;
+                    } else if src[c] >= max_dn {
+                        hi[ch_row[c] as usize] += 1;
+                    }
+                }
             }
             let nf = n as f64;
             for c in 0..cols {
