@@ -24,7 +24,9 @@
 //! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers;
 //! * [`agf`]: Zemax `.agf` glass catalogues;
 //! * [`focus`]: pupil sampling set by the OPD slope for FFT PSFs and MTFs, and the MTF best
-//!   focus.
+//!   focus;
+//! * [`focus_model`]: the focus model every consumer uses: focus distance, criterion (best
+//!   polychromatic MTF or paraxial), unit or group motion ([`FocusSpec`] → [`FocusedLens`]).
 //!
 //! ## Prescription file format (`lenses/*.json`)
 //!
@@ -77,6 +79,7 @@ pub mod error;
 pub mod field_curvature;
 pub mod field_model;
 pub mod focus;
+pub mod focus_model;
 pub mod glass;
 pub mod huygens;
 pub mod paraxial;
@@ -86,6 +89,7 @@ pub mod trace;
 
 pub use batch::{RayBatch, TraceSystem};
 pub use error::LensError;
+pub use focus_model::{FocusCriterion, FocusMethod, FocusMotion, FocusSpec, FocusedLens};
 pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
 pub use glass::{Glass, GlassCatalog, NearGlass};
 pub use paraxial::FirstOrder;
