@@ -108,6 +108,50 @@ pub struct FocusMethod {
 }
 
 impl FocusMethod {
+    /// The method from the keys of a camera or lens configuration (docs/lens.md, "Focus"):
+    /// `focus_criterion` (`"best"` default, `"paraxial"`), `focus_frequency_cyc_per_mm`
+    /// (> 0; default: the caller's) and `focus_group_surfaces` (`[first, last]`, default unit
+    /// motion). The error names the key and the value.
+    pub fn from_keys(
+        criterion: Option<&str>,
+        frequency_cyc_per_mm: Option<f64>,
+        group_surfaces: Option<[usize; 2]>,
+    ) -> Result<Self, String> {
+        let criterion = match criterion {
+            None => FocusCriterion::Best,
+            Some(c) => FocusCriterion::parse(c).ok_or_else(|| {
+                format!("focus_criterion: unknown value \"{c}\" (expected \"best\" or \"paraxial\")")
+            })?,
+        };
+        if let Some(f) = frequency_cyc_per_mm {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(format!(
+                    "focus_frequency_cyc_per_mm: {f} must be a finite number > 0"
+                ));
+            }
+        }
+        let motion = match group_surfaces {
+            None => FocusMotion::Unit,
+            Some([a, b]) => {
+                if a == 0 || a > b {
+                    return Err(format!(
+                        "focus_group_surfaces: [{a}, {b}] must be [first, last] with 1 ≤ first ≤ last"
+                    ));
+                }
+                FocusMotion::Group {
+                    first_surface: a,
+                    last_surface: b,
+                }
+            }
+        };
+        Ok(FocusMethod {
+            criterion,
+            motion,
+            frequency_cyc_per_mm,
+            ..Default::default()
+        })
+    }
+
     /// The paraxial focus by unit motion (the lens's own image plane convention before the
     /// focus model existed).
     pub fn paraxial() -> Self {
@@ -138,6 +182,9 @@ pub struct FocusedLens {
     pub criterion: FocusCriterion,
     /// Motion used.
     pub motion: FocusMotion,
+    /// The method with every default resolved (frequency, maximum field, wavelengths): focusing
+    /// again with it gives the same lens.
+    pub method: FocusMethod,
     /// Last vertex → image plane (mm) at the focus setting.
     pub image_distance_mm: f64,
     /// Paraxial image distance of the focus distance by unit motion (mm).
@@ -384,6 +431,13 @@ impl LensPrescription {
                 focus_distance_mm: spec.focus_distance_mm,
                 criterion: m.criterion,
                 motion: m.motion,
+                method: FocusMethod {
+                    criterion: m.criterion,
+                    motion: m.motion,
+                    frequency_cyc_per_mm: Some(freq),
+                    max_field_deg: Some(max_field),
+                    wavelengths_nm: Some(wls.clone()),
+                },
                 image_distance_mm,
                 paraxial_image_distance_mm: s0,
                 group_shift_mm: shift,
@@ -450,6 +504,10 @@ impl LensPrescription {
                     })?;
                     return Ok(FocusedLens {
                         motion: m.motion,
+                        method: FocusMethod {
+                            motion: m.motion,
+                            ..u.method.clone()
+                        },
                         ..u
                     });
                 };

@@ -415,6 +415,7 @@ fn lens_depth_path_matches_the_real_lens_render() {
         focus_distance_m: 2.0,
         layers: 32,
         real_lens: true,
+        focus_method: Default::default(),
     };
     let r = render_dof(&tiles, &lens, &o).unwrap();
     eprintln!("times {:?}, pitch {:.4} mm", r.times_s, r.pixel_pitch_mm);
@@ -549,6 +550,8 @@ fn lens_defocus_psf_is_the_entrance_pupil_disc() {
             pixel_pitch_mm: pitch_mm,
             wavelengths_nm: vec![550.0],
             pupil_n: 256,
+            // the thin-lens identity below is paraxial
+            focus_method: camsim_lens::FocusMethod::paraxial(),
         },
         &invs,
     )
