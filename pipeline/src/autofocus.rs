@@ -58,20 +58,20 @@ pub struct Autofocus {
 
 /// The contrast metric of `region` in a row-major `cols`-wide frame, differences `period`
 /// pixels apart (module docs). `None` when the region holds no pair or is black.
-pub fn tenengrad_contrast(frame: &[f64], cols: usize, region: Rect, period: usize) -> Option<f64> {
+pub fn tenengrad_contrast(frame: &[f32], cols: usize, region: Rect, period: usize) -> Option<f64> {
     let p = period.max(1);
     let (mut s, mut n, mut sum, mut m) = (0.0, 0usize, 0.0, 0usize);
     for r in region.row0..region.row1 {
         for c in region.col0..region.col1 {
-            let v = frame[r * cols + c];
+            let v = frame[r * cols + c] as f64;
             sum += v;
             m += 1;
             if c + p < region.col1 {
-                s += (frame[r * cols + c + p] - v).powi(2);
+                s += (frame[r * cols + c + p] as f64 - v).powi(2);
                 n += 1;
             }
             if r + p < region.row1 {
-                s += (frame[(r + p) * cols + c] - v).powi(2);
+                s += (frame[(r + p) * cols + c] as f64 - v).powi(2);
                 n += 1;
             }
         }
