@@ -9,7 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 BUDGET_S=${BUDGET_S:-20}
 # --workspace: the same feature set as .ci/run, so the build cache is shared.
-out=$(cargo test --release -q --workspace --test spectral_and_sets \
+out=$(cargo test --release -q --workspace --test tests \
     sixty_megapixel_frames_calibrate_timing -- --ignored --nocapture 2>&1) \
     || { echo "$out"; exit 1; }
 line=$(grep -o -m1 'calibrate 60 × [0-9]*×[0-9]*: [0-9.]* s' <<<"$out") \

@@ -322,11 +322,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::Run { config, out } => {
             let summary = camsim_pipeline::run::run(config.as_deref(), &out, true)?;
-            if let Some(de) = summary.get("delta_e_2000") {
-                eprintln!(
-                    "camsim: mean ΔE2000 = {:.2}",
-                    de["mean"].as_f64().unwrap_or(f64::NAN)
-                );
+            if let Some(de) = &summary.delta_e_2000 {
+                eprintln!("camsim: mean ΔE2000 = {:.2}", de.mean);
             }
             eprintln!("camsim: wrote {} (open report.html)", out.display());
             Ok(())
@@ -376,26 +373,19 @@ fn run(cli: Cli) -> Result<(), CliError> {
         } => {
             let set = load_captures(&captures, camera.as_deref())?;
             let summary = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, true)?;
-            for k in [
-                "black_level_dn",
-                "dark_voltage_v_per_s",
-                "read_noise_v",
-                "dsnu_sigma_v",
-                "prnu_sigma_percent",
-                "conversion_gain_v_per_e",
-                "full_well_e",
+            let r = &summary.result;
+            for (k, v) in [
+                ("black_level_dn", &r.black_level_dn),
+                ("dark_voltage_v_per_s", &r.dark_voltage_v_per_s),
+                ("read_noise_v", &r.read_noise_v),
+                ("dsnu_sigma_v", &r.dsnu_sigma_v),
+                ("prnu_sigma_percent", &r.prnu_sigma_percent),
+                ("conversion_gain_v_per_e", &r.conversion_gain_v_per_e),
+                ("full_well_e", &r.full_well_e),
             ] {
-                let v = &summary[k];
-                match v["status"].as_str() {
-                    Some("estimated") => eprintln!(
-                        "camsim: {k} = {:.5e} ± {:.2e}",
-                        v["value"].as_f64().unwrap_or(f64::NAN),
-                        v["std_error"].as_f64().unwrap_or(f64::NAN)
-                    ),
-                    _ => eprintln!(
-                        "camsim: {k}: not estimable: {}",
-                        v["reason"].as_str().unwrap_or("")
-                    ),
+                match v.get() {
+                    Some(e) => eprintln!("camsim: {k} = {:.5e} ± {:.2e}", e.value, e.std_error),
+                    None => eprintln!("camsim: {k}: not estimable: {}", v.reason().unwrap_or("")),
                 }
             }
             eprintln!("camsim: wrote {} (open report.html)", out.display());
@@ -424,7 +414,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let report = camsim_pipeline::scene_cmd::write_scene(&set, &shot, &out, basis)?;
             println!(
                 "{}",
-                serde_json::to_string_pretty(&report).unwrap_or_default()
+                serde_json::to_string_pretty(&report.json).unwrap_or_default()
             );
             Ok(())
         }
@@ -442,11 +432,16 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 progress: true,
             };
             let report = camsim_pipeline::diagnose_cmd::run_diagnose(&set, &out, &opts)?;
-            let findings = report["findings"].as_array().map_or(0, |f| f.len());
             eprintln!(
-                "camsim: chi2/dof {:.3} -> {:.3}, {findings} finding(s); wrote {} (open report.html)",
-                report["fit_before"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
-                report["fit_after"]["chi2_per_dof"].as_f64().unwrap_or(f64::NAN),
+                "camsim: chi2/dof {:.3} -> {:.3}, {} finding(s){}; wrote {} (open report.html)",
+                report.chi2_per_dof_before,
+                report.chi2_per_dof_after,
+                report.findings.len(),
+                if report.findings.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", report.findings.join(", "))
+                },
                 out.display()
             );
             Ok(())
@@ -459,8 +454,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             )?;
             eprintln!(
                 "camsim: {} profiles, {} with b < 0; wrote {}",
-                s["census"]["profiles"],
-                s["census"]["negative_b_profiles"],
+                s.census.profiles,
+                s.census.negative_b_profiles,
                 out.display()
             );
             Ok(())

@@ -239,6 +239,7 @@ fn bad_input_gives_one_clear_line_and_writes_nothing() {
         cols: 8,
         adc_bits: 12,
         dn: vec![0; 32],
+        layout: None,
     };
     camsim_pipeline::frames::write_png16(&dir.join("raw/flat-0.png"), &wrong).unwrap();
     assert_bad(dir, &["flat-0.png", "4×8", "8×8"]);

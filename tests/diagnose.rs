@@ -102,6 +102,9 @@ fn diagnose_generated_with(
     let set = load_captures(&truth.captures_json, None).unwrap();
     let report = run_diagnose(&set, &dir.path().join("out"), &options_for(candidates))
         .unwrap_or_else(|e| panic!("{effects:?}: diagnose: {e}"));
+    // The typed summary agrees with its report.
+    assert_eq!(report.findings.len(), findings(&report.json).len());
+    let report = report.json;
     // The written report.json is the returned one.
     let written: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("out/report.json")).unwrap())

@@ -93,7 +93,9 @@ fn flea3_dark_series_dark_growth_and_hot_pixels() {
     assert!(cropped.iter().all(|id| id.starts_with("d2")));
     let mut set = set;
     set.shots.retain(|s| !cropped.contains(&s.id));
-    let c = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
+    let c = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, false)
+        .unwrap()
+        .json;
     eprintln!("flea3 calibration: {}", serde_json::to_string_pretty(&json!({
         "black_level_dn": c["black_level_dn"], "dark_voltage_v_per_s": c["dark_voltage_v_per_s"],
         "read_noise_v": c["read_noise_v"], "dsnu_sigma_v": c["dsnu_sigma_v"],
@@ -151,7 +153,9 @@ fn flea3_bandpass_recovers_channel_efficiencies() {
     let caps = camsim_pipeline::datasets::llanos_flea3_bandpass(&flea3_dir(), d.path()).unwrap();
     let set = camsim_pipeline::config::load_captures(&caps, None).unwrap();
     let out = d.path().join("cal");
-    let c = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, false).unwrap();
+    let c = camsim_pipeline::calibrate_cmd::run_calibrate(&set, &out, false)
+        .unwrap()
+        .json;
     let ch = &c["chart_channel_qe"];
     assert_eq!(ch["fit"]["status"], "estimated", "{}", ch["fit"]);
     let notes = ch["notes"].to_string();
@@ -255,7 +259,9 @@ fn flea3_dark_series_through_diagnose() {
         effects: Vec::new(),
         progress: false,
     };
-    let r = camsim_pipeline::diagnose_cmd::run_diagnose(&set, &out, &opts).unwrap();
+    let r = camsim_pipeline::diagnose_cmd::run_diagnose(&set, &out, &opts)
+        .unwrap()
+        .json;
     println!(
         "flea3 diagnose: {}",
         serde_json::to_string_pretty(&json!({

@@ -18,3 +18,4 @@ mod statistics;
 mod study;
 mod util;
 mod validate;
+mod world;

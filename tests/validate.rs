@@ -147,7 +147,7 @@ fn same_camera_agrees_and_figures_are_real() {
     recorded_set(d.path());
     let set = load_captures(&d.path().join("captures.json"), None).unwrap();
     let out = d.path().join("val");
-    let v = run_validate(&set, &out, VALIDATE_SEED, false).unwrap();
+    let v = run_validate(&set, &out, VALIDATE_SEED, false).unwrap().json;
     // what is returned is what is written (up to float printing)
     let written: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("validation.json")).unwrap())
@@ -298,7 +298,9 @@ fn same_camera_agrees_and_figures_are_real() {
     assert_eq!((res.width, res.height), (COLS as u32, ROWS as u32));
 
     // with the recording's own seed the simulation reproduces the recording exactly
-    let v3 = run_validate(&set, &d.path().join("val3"), RECORD_SEED, false).unwrap();
+    let v3 = run_validate(&set, &d.path().join("val3"), RECORD_SEED, false)
+        .unwrap()
+        .json;
     for id in ["macbeth", "dark", "flat"] {
         let a = &shot(&v3, id)["all_pixels"];
         assert_eq!(a["measured_mean_dn"], a["simulated_mean_dn"], "{id}");
@@ -321,7 +323,9 @@ fn conversion_gain_20_percent_off_is_detected() {
         Some(&d.path().join("camera_g12.json")),
     )
     .unwrap();
-    let v = run_validate(&set, &d.path().join("val"), VALIDATE_SEED, false).unwrap();
+    let v = run_validate(&set, &d.path().join("val"), VALIDATE_SEED, false)
+        .unwrap()
+        .json;
     // the believed camera gives 20 % more signal above black than was recorded
     for id in ["macbeth", "flat"] {
         let s = shot(&v, id);
@@ -365,6 +369,7 @@ fn recording_of_the_wrong_size_is_one_clear_error_and_writes_nothing() {
         cols: 8,
         adc_bits: 12,
         dn: vec![100; 32],
+        layout: None,
     };
     camsim_pipeline::frames::write_png16(&d.path().join("raw/flat-1.png"), &wrong).unwrap();
     let set = load_captures(&d.path().join("captures.json"), None).unwrap();

@@ -354,6 +354,24 @@ pub struct RawFrame {
     pub adc_bits: u32,
     /// `rows × cols` DN values, row 0 first.
     pub dn: Vec<u16>,
+    /// What the values mean (CFA tile, channel names, black and white level), when known: set
+    /// by the sensor stage and by readers of formats that store it (DNG); `None` for a bare
+    /// PNG, TIFF or headerless raw frame, whose layout comes from the camera file.
+    pub layout: Option<RawLayout>,
+}
+
+/// The layout of a raw frame: which channel each pixel carries and where black and white are.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawLayout {
+    /// Channel index per colour-filter tile position, row-major (`cfa_tile[r][c]`); the tile
+    /// repeats from pixel (0, 0).
+    pub cfa_tile: Vec<Vec<usize>>,
+    /// Channel names (index = channel index of the tile), e.g. `["r", "g", "b"]`.
+    pub channel_names: Vec<String>,
+    /// Value at zero signal (DN).
+    pub black_dn: f64,
+    /// Largest usable value (DN), normally `2^bits − 1`.
+    pub white_dn: f64,
 }
 
 #[cfg(test)]

@@ -11,6 +11,9 @@
 //!   [`image::RawFrame`];
 //! * [`scene`]: test targets (Macbeth, uniform, slanted edge, sweep, ramp, point array, grid
 //!   lines, patch charts) and luminance scaling;
+//! * [`scene_import`]: RGB pictures on a display → radiance (ISETCam `sceneFromFile`);
+//!   [`scene_view`]: a scene's field of view and distance in the image plane;
+//!   [`illuminant`]: CIE daylight, illuminant swap and estimation;
 //! * [`colorimetry`]: XYZ, luminance, CIELAB, ΔE*ab; [`cieluv`]: u′v′, CIELUV, ΔE*uv;
 //! * [`data`]: ISETCam spectral and device data embedded in the binary (MIT, see data/iset);
 //! * [`exr_io`]: spectral OpenEXR in the Fichet et al. (JCGT 2021) layout;
@@ -28,14 +31,19 @@ pub mod constants;
 pub mod data;
 pub mod error;
 pub mod exr_io;
+pub mod illuminant;
 pub mod image;
 pub mod linear_model;
 pub mod npy;
 pub mod rng;
 pub mod scene;
+pub mod scene_import;
+pub mod scene_view;
 pub mod spectrum;
 pub mod stats;
 
 pub use error::CoreError;
-pub use image::{Plane, RawFrame, SceneRadiance, SensorIrradiance, SpectralBasis, SpectralImage};
+pub use image::{
+    Plane, RawFrame, RawLayout, SceneRadiance, SensorIrradiance, SpectralBasis, SpectralImage,
+};
 pub use spectrum::{Spectrum, WavelengthGrid};

@@ -32,6 +32,12 @@ pub enum Spectrum {
 /// Largest interval (nm) kept linear when a product of spectra is re-sampled.
 pub const PRODUCT_MAX_STEP_NM: f64 = 2.0;
 
+/// The longest wavelength a spectrum or grid may name: 1 mm (10⁶ nm), past the far infrared
+/// (thermal cameras image 8–14 µm). It bounds the work of a product of spectra, which is
+/// refined every [`PRODUCT_MAX_STEP_NM`] over its span: at most 5·10⁵ samples per product.
+/// Without it a file naming 1e308 nm made [`Spectrum::multiply`] loop for ever (issue 16).
+pub const MAX_WAVELENGTH_NM: f64 = 1e6;
+
 impl Spectrum {
     /// The constant spectrum `value` (a bare number in the file format).
     pub fn constant(value: f64) -> Self {
@@ -60,6 +66,13 @@ impl Spectrum {
         {
             return Err(CoreError::Spectrum(format!(
                 "wavelength_nm[{i}] = {} is not a positive finite number",
+                wavelength_nm[i]
+            )));
+        }
+        if let Some(i) = wavelength_nm.iter().position(|w| *w > MAX_WAVELENGTH_NM) {
+            return Err(CoreError::Spectrum(format!(
+                "wavelength_nm[{i}] = {:e} nm is beyond {MAX_WAVELENGTH_NM:e} nm (1 mm, the \
+                 longest wavelength camsim accepts)",
                 wavelength_nm[i]
             )));
         }
@@ -221,6 +234,7 @@ impl Spectrum {
     /// Pointwise product, re-sampled as a piecewise-linear spectrum on the merged breakpoints
     /// refined to at most [`PRODUCT_MAX_STEP_NM`] (the product of two linear pieces is
     /// quadratic; the refinement keeps the interpolation error below ~1e-5 for smooth data).
+    /// At most about 5·10⁵ refined samples plus the breakpoints ([`MAX_WAVELENGTH_NM`]).
     pub fn multiply(a: &Spectrum, b: &Spectrum) -> Spectrum {
         match (a, b) {
             (
@@ -261,10 +275,16 @@ impl Spectrum {
             _ => {
                 let pts = Spectrum::merged_breakpoints(a, b)
                     .expect("product of two non-constant affine spectra is not representable");
+                // A bounded refinement: validated spectra span at most MAX_WAVELENGTH_NM, so
+                // the step is PRODUCT_MAX_STEP_NM; a wider span (a spectrum built without
+                // `sampled`) widens the step instead of refining without bound.
+                let span = pts.last().zip(pts.first()).map_or(0.0, |(h, l)| h - l);
+                let step = PRODUCT_MAX_STEP_NM.max(span * PRODUCT_MAX_STEP_NM / MAX_WAVELENGTH_NM);
                 let mut w = Vec::with_capacity(pts.len() * 2);
                 for win in pts.windows(2) {
-                    let n = ((win[1] - win[0]) / PRODUCT_MAX_STEP_NM).ceil().max(1.0) as usize;
-                    for k in 0..n {
+                    let n = ((win[1] - win[0]) / step).ceil().max(1.0) as usize;
+                    w.push(win[0]);
+                    for k in 1..n {
                         w.push(win[0] + (win[1] - win[0]) * k as f64 / n as f64);
                     }
                 }
@@ -387,6 +407,12 @@ impl WavelengthGrid {
             return Err(CoreError::Grid(
                 "wavelengths must be positive finite numbers".into(),
             ));
+        }
+        if let Some(w) = wavelength_nm.iter().find(|w| **w > MAX_WAVELENGTH_NM) {
+            return Err(CoreError::Grid(format!(
+                "wavelength {w:e} nm is beyond {MAX_WAVELENGTH_NM:e} nm (1 mm, the longest \
+                 wavelength camsim accepts)"
+            )));
         }
         Ok(WavelengthGrid { wavelength_nm })
     }
@@ -549,5 +575,33 @@ mod tests {
         let p = e.energy_to_photons(&c);
         // ISETCam oracle utility_energy_quanta_1d: 0.1 W at 400 nm -> 2.01361446e17 photons
         assert_relative_eq!(p.eval(400.0), 2.01361446e17, max_relative = 1e-8);
+    }
+
+    #[test]
+    fn wavelengths_beyond_1_mm_are_refused_and_products_stay_bounded() {
+        // issue 16: a capture set's radiance at [400, 1.8e308] nm made energy_to_photons
+        // refine the product every 2 nm for ever.
+        let e = Spectrum::sampled(vec![400.0, f64::MAX], vec![1.0, 1.0]).unwrap_err();
+        assert!(e.to_string().contains("wavelength_nm[1]"), "{e}");
+        assert!(Spectrum::sampled(vec![400.0, MAX_WAVELENGTH_NM], vec![1.0, 1.0]).is_ok());
+        assert!(WavelengthGrid::new(vec![400.0, 2e6]).is_err());
+        assert!(WavelengthGrid::regular(1e300, 2e300, 1e299).is_err());
+        // Built without `sampled`: the refinement widens its step instead of running away.
+        let wide = Spectrum::Sampled {
+            wavelength_nm: vec![400.0, 1e300],
+            values: vec![1.0, 1.0],
+        };
+        let p = wide.energy_to_photons(&crate::constants::SI);
+        let Spectrum::Sampled { wavelength_nm, .. } = &p else {
+            panic!("{p:?}")
+        };
+        let n_max = (MAX_WAVELENGTH_NM / PRODUCT_MAX_STEP_NM) as usize + 2;
+        assert!(wavelength_nm.len() <= n_max, "{}", wavelength_nm.len());
+        // Within 1 mm the 2 nm refinement is unchanged.
+        let q = s(&[400.0, 700.0], &[1.0, 1.0]).energy_to_photons(&crate::constants::SI);
+        let Spectrum::Sampled { wavelength_nm, .. } = &q else {
+            panic!("{q:?}")
+        };
+        assert_eq!(wavelength_nm.len(), 151);
     }
 }

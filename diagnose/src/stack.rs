@@ -184,6 +184,7 @@ mod tests {
             cols: 3,
             adc_bits: 12,
             dn: v.to_vec(),
+            layout: None,
         };
         let s = stack(&[fr([1, 0, 4095]), fr([3, 0, 4095])], &map, 4095);
         assert_eq!(s.mean, vec![2.0, 0.0, 4095.0]);

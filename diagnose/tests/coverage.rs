@@ -1,7 +1,7 @@
 //! Acceptance: on simulated capture sets with known parameters drawn over realistic ranges,
 //! every estimate lies within 2 reported standard errors of the truth in ≥ 95 % of 20 trials
 //! (19/20), and the reported errors are not inflated (rms of (est − truth)/σ ≥ 0.4).
-mod common;
+use crate::common;
 use camsim_diagnose::{calibrate, fitted_camera, CalibrationOptions, CalibrationResult, Outcome};
 use common::*;
 

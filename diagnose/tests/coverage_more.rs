@@ -4,7 +4,7 @@
 //! trials (19/20; QE: of all trial × wavelength samples inside the lights' range). Hot pixels
 //! (a detection, no σ): the detected set equals the injected set in ≥ 19/20 trials, and each
 //! hot pixel's dark current lies within 3 robust σ (the reported per-pixel spread) of its truth.
-mod common;
+use crate::common;
 use camsim_core::Spectrum;
 use camsim_diagnose::*;
 use common::*;

@@ -1,6 +1,5 @@
 //! The two ISETCam estimation oracles (../shared/oracles/isetcam), run through
 //! `calibrate` on our own simulations with the cases' settings.
-mod common;
 use camsim_core::{SensorIrradiance, SpectralBasis, SpectralImage, Spectrum, WavelengthGrid};
 use camsim_diagnose::{calibrate, CalibrationOptions, CalibrationShot, ShotKind};
 use camsim_sensor::isetcam::electron_rate_isetcam_bilinear;

@@ -1,5 +1,5 @@
 //! Appendix B QE recovery, incomplete capture sets, saturation/full well, hot pixels, speed.
-mod common;
+use crate::common;
 use camsim_core::{Spectrum, WavelengthGrid};
 use camsim_diagnose::*;
 use camsim_sensor::{expose, fixed_pattern, Shot};
@@ -318,7 +318,7 @@ fn sixty_frames_calibrate() {
 
 /// The speed benchmark's harness: 60 frames of 1024 × 1024, timed (prints
 /// "calibrate 60 × 1024×1024: … s"). Run by bench/calibrate.sh, which holds the budget:
-/// `cargo test --release --workspace --test spectral_and_sets sixty_megapixel -- --ignored --nocapture`.
+/// `cargo test --release -p camsim-diagnose --test tests sixty_megapixel -- --ignored --nocapture`.
 #[test]
 #[ignore = "benchmark harness (bench/calibrate.sh): 60 × 1 MP frames"]
 fn sixty_megapixel_frames_calibrate_timing() {

@@ -180,6 +180,25 @@ impl Mosaic {
         Mosaic::new(raw.rows, raw.cols, data, tile, channel_names)
     }
 
+    /// [`Mosaic::from_raw`] with the layout the frame carries (CFA tile, channel names,
+    /// black and white level); an error when it carries none (a bare PNG/TIFF/raw read
+    /// without its camera).
+    pub fn from_frame(raw: &RawFrame) -> Result<Self, IspError> {
+        let l = raw.layout.as_ref().ok_or_else(|| {
+            IspError::InvalidMosaic(
+                "the raw frame carries no layout (CFA tile, black and white level); give its camera"
+                    .into(),
+            )
+        })?;
+        Mosaic::from_raw(
+            raw,
+            l.cfa_tile.clone(),
+            l.channel_names.clone(),
+            l.black_dn,
+            l.white_dn,
+        )
+    }
+
     /// Sample an RGB image through a CFA whose channels are named r/g/b (used to simulate a
     /// mosaic from a full-colour reference, e.g. in demosaic tests).
     pub fn sample_rgb(

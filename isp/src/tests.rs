@@ -508,6 +508,7 @@ fn from_raw_subtracts_black_and_normalises() {
         cols: 2,
         adc_bits: 10,
         dn: vec![64, 1023, 543, 0],
+        layout: None,
     };
     let m = Mosaic::from_raw(&raw, vec![vec![0, 1], vec![1, 2]], names(), 64.0, 1023.0).unwrap();
     assert_eq!(m.data[0], 0.0);

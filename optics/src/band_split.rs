@@ -5,8 +5,7 @@
 //! the light of each band `b` with the PSF at `λ_b`. The former method sampled every pixel's
 //! spectrum at the band wavelengths (`L(x, λ_b)`, a piecewise-linear "hat" spectrum): a
 //! narrow-band spectrum then lost or gained light depending on where its edges fell on the
-//! grid (issue 17 §1 measured 0.77× the unblurred signal for a 20-nm box, 1.45× for a 5-nm
-//! box), while the unblurred linear model integrates exactly.
+//! grid (0.77× the unblurred signal was measured for a 20-nm box, 1.45× for a 5-nm box), while the unblurred linear model integrates exactly.
 //!
 //! Here the wavelength axis is partitioned into cells `C_b = [e_b, e_{b+1})` with edges halfway
 //! between grid wavelengths; the first and last cells extend over the whole support of the

@@ -199,8 +199,25 @@ fn outcome_row(name: &str, o: &Outcome<camsim_diagnose::Estimate>) -> String {
     }
 }
 
+/// What `calibrate` reports: the estimates as typed values, and calibration.json as written.
+#[derive(Debug, Clone)]
+pub struct CalibrateSummary {
+    /// The estimates (value ± standard error, or why not estimable).
+    pub result: CalibrationResult,
+    /// Shots left out before the analysis, with the reason.
+    pub skipped_shots: Vec<String>,
+    /// Files written into `--out` (relative paths).
+    pub files: Vec<PathBuf>,
+    /// calibration.json as written.
+    pub json: Value,
+}
+
 /// Run the calibration and write its outputs into `out` (all or nothing).
-pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Value, CliError> {
+pub fn run_calibrate(
+    set: &CaptureSet,
+    out: &Path,
+    progress: bool,
+) -> Result<CalibrateSummary, CliError> {
     let sensor = &set.camera.sensor;
     let LoadedShots {
         shots,
@@ -243,8 +260,9 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
     summary["chart_channel_qe"] =
         serde_json::to_value(&chart).map_err(|e| CliError::Other(e.to_string()))?;
     summary["skipped_shots"] = json!(skipped);
+    let skipped_shots = skipped.clone();
     summary["fitted_camera"] = json!("fitted_camera.json");
-    with_staging(out, |st| {
+    let files = with_staging(out, |st| {
         let mut files: Vec<PathBuf> = Vec::new();
         let mut put = |n: &str| {
             files.push(PathBuf::from(n));
@@ -553,7 +571,12 @@ pub fn run_calibrate(set: &CaptureSet, out: &Path, progress: bool) -> Result<Val
         std::fs::write(&p, h).map_err(|e| CliError::output(&p, e))?;
         Ok(files)
     })?;
-    Ok(summary)
+    Ok(CalibrateSummary {
+        result,
+        skipped_shots,
+        files,
+        json: summary,
+    })
 }
 
 /// Convenience for tests: the spectrum of a uniform target.

@@ -4,7 +4,7 @@
 //!
 //! | step | function | stage call |
 //! |---|---|---|
-//! | scene radiance of a shot | [`shot_scene`] | `camsim_core::scene::render_target` |
+//! | scene radiance of a shot (field of view, distance, illuminant swap) | [`shot_scene`] | [`camsim_core::scene_view::render_target_in_view`], [`camsim_core::illuminant::swap_illuminant`] |
 //! | optics | [`shot_irradiance`], [`irradiance_of`] | [`camsim_optics::form_image`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
 //! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |

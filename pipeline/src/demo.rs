@@ -1,5 +1,5 @@
 //! `camsim demo diagnose`: capture sets in which an effect of effects.md is present but
-//! concealed, with the truth (issue 6, item 6; design per effect id in docs/effects.md).
+//! concealed, with the truth (design per effect id in docs/effects.md).
 //!
 //! A set is a folder with the **believed** camera (`camera.json`, without the effects),
 //! `captures.json`, 16-bit PNG frames simulated with the **true** camera (the believed one plus

@@ -19,6 +19,7 @@ use camsim_diagnose::mismatch::{
     diagnose, DataSet, DiagnoseOptions, Diagnosis, Effect, Forward, ModelState, RateSpec,
     ShotAccumulator, TargetClass,
 };
+use camsim_sensor::PixelTermPlanes;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 use std::collections::HashMap;
@@ -46,22 +47,22 @@ impl Default for DiagnoseCmdOptions {
     }
 }
 
-/// The forward model of the believed camera with a [`RateSpec`] applied: the camera file is
-/// edited as JSON (the effect blocks of the effects contract), parsed like any camera, and
-/// `simulate`'s scene → optics → pixel-integration stages give each shot's electron rates.
+/// The forward model of the believed camera with a [`RateSpec`] applied: the effect blocks
+/// are set on the typed camera (as the camera file with those blocks would give), and the
+/// one chain's scene → optics stages give each shot's irradiance.
 ///
 /// The QE blocks (`qe_shift`, `ir_leakage`) change only the spectral weights of pixel
 /// integration, not the irradiance, and the integration is linear in the irradiance's basis
-/// terms: rate_i = p²·FF·Σ_k (∫ QE_c(λ) B_k(λ) dλ) · Ā_k(i), with Ā_k the plane of term k
-/// averaged over pixel i (camsim_sensor::electron_rate in another order of summation). So
-/// the pixel-averaged planes Ā_k are kept per optics configuration ([`PlaneCache`]) and a
-/// candidate QE costs one weighted sum per pixel instead of a re-render of every target
-/// (issue 6, acceptance 4: the qe_shift candidate's re-renders were 40 % of the 1 MP bench).
+/// terms. So the pixel-averaged term planes of the sensor crate
+/// ([`camsim_sensor::pixel_term_planes`]) are kept per optics configuration ([`PlaneCache`])
+/// and a candidate QE costs one weighted sum per pixel
+/// ([`camsim_sensor::electron_rate_from_term_planes`]) instead of a re-render of every target.
 struct SimForward {
     /// The capture set whose camera is replaced per call (behind a lock: calls are
     /// sequential, each internally parallel).
     set: Mutex<CaptureSet>,
-    camera_json: Value,
+    /// The believed camera, to which each call applies its [`RateSpec`].
+    believed: crate::config::Camera,
     camera_path: PathBuf,
     /// Indices in the capture set of the data set's shots.
     shots: Vec<usize>,
@@ -69,19 +70,11 @@ struct SimForward {
     planes: Mutex<PlaneCache>,
 }
 
-/// The irradiance of one target averaged over every pixel, one plane per spectral basis term.
-struct PixelPlanes {
-    /// 1×1 image carrying the basis (for the spectral integrals of the channels).
-    basis: camsim_core::SpectralImage,
-    /// Row-major sensor-size planes, one per basis term.
-    planes: Vec<Vec<f32>>,
-}
-
 /// Pixel planes by optics key, then by target key; least recently used evicted first when
 /// the planes exceed [`PLANE_CACHE_BYTES`].
 #[derive(Default)]
 struct PlaneCache {
-    entries: HashMap<String, (u64, HashMap<String, Arc<PixelPlanes>>)>,
+    entries: HashMap<String, (u64, HashMap<String, Arc<PixelTermPlanes>>)>,
     bytes: usize,
     stamp: u64,
 }
@@ -89,7 +82,7 @@ struct PlaneCache {
 /// Memory for cached pixel planes.
 const PLANE_CACHE_BYTES: usize = 384 << 20;
 
-fn planes_bytes(m: &HashMap<String, Arc<PixelPlanes>>) -> usize {
+fn planes_bytes(m: &HashMap<String, Arc<PixelTermPlanes>>) -> usize {
     m.values()
         .map(|p| p.planes.iter().map(|x| x.len() * 4).sum::<usize>())
         .sum()
@@ -99,26 +92,15 @@ impl SimForward {
     /// The capture set's camera with `spec` applied (crosstalk removed: the diagnosis applies
     /// it).
     fn camera_for(&self, spec: &RateSpec) -> Result<crate::config::Camera, String> {
-        let mut v = self.camera_json.clone();
-        let names: Vec<String> = self
-            .set
-            .lock()
-            .map_err(|_| "forward model lock poisoned".to_string())?
-            .camera
-            .sensor
-            .channel_names
-            .clone();
-        apply_rate_spec(&mut v, spec, &names);
-        if let Some(s) = v.get_mut("sensor").and_then(Value::as_object_mut) {
-            s.remove("crosstalk");
-        }
-        let raw: CameraFile = serde_json::from_value(v).map_err(|e| {
+        let mut cam = self.believed.clone();
+        apply_rate_spec_typed(&mut cam, spec).map_err(|e| {
             format!(
                 "{}: the camera with the candidate effect is invalid: {e}",
                 self.camera_path.display()
             )
         })?;
-        camera_from_file(&self.camera_path, raw).map_err(|e| e.one_line())
+        cam.sensor.effects.crosstalk = None;
+        Ok(cam)
     }
 
     /// Key of everything but the QE blocks that shapes the pixel planes: the optics blocks,
@@ -146,90 +128,6 @@ impl SimForward {
     }
 }
 
-/// Averages every plane of a sensor irradiance over every pixel (the pixel integration of
-/// `camsim_sensor::electron_rate`, per basis term).
-fn pixel_planes(
-    sensor: &camsim_sensor::SensorModel,
-    irr: &camsim_core::SensorIrradiance,
-) -> PixelPlanes {
-    let img = &irr.irradiance;
-    let wy = camsim_sensor::box_weights(
-        img.rows,
-        irr.sample_pitch_m,
-        sensor.rows,
-        sensor.pixel_pitch_m,
-    );
-    let wx = camsim_sensor::box_weights(
-        img.cols,
-        irr.sample_pitch_m,
-        sensor.cols,
-        sensor.pixel_pitch_m,
-    );
-    let ic = img.cols;
-    let planes = img
-        .planes
-        .iter()
-        .map(|p| {
-            let mut out = vec![0f32; sensor.rows * sensor.cols];
-            out.par_chunks_mut(sensor.cols).enumerate().for_each_init(
-                || vec![0f64; ic],
-                |line, (r, row)| {
-                    line.iter_mut().for_each(|l| *l = 0.0);
-                    for &(y, w) in &wy[r] {
-                        line.iter_mut()
-                            .zip(&p[y * ic..(y + 1) * ic])
-                            .for_each(|(l, s)| *l += w * *s as f64);
-                    }
-                    for (o, wc) in row.iter_mut().zip(&wx) {
-                        *o = wc.iter().map(|&(x, w)| w * line[x]).sum::<f64>() as f32;
-                    }
-                },
-            );
-            out
-        })
-        .collect();
-    let basis = camsim_core::SpectralImage::new(
-        1,
-        1,
-        img.basis.clone(),
-        vec![vec![0f32]; img.planes.len()],
-    )
-    .expect("one plane per term");
-    PixelPlanes { basis, planes }
-}
-
-/// Mean photo-electron rate of every pixel from its averaged planes: p²·FF·Σ_k w_ck Ā_k with
-/// w_ck the channel's (effective, QE blocks included) spectral integral of basis term k.
-fn rates_from_planes(sensor: &camsim_sensor::SensorModel, pp: &PixelPlanes) -> Vec<f32> {
-    let weights: Vec<Vec<(usize, f64)>> = (0..sensor.channel_qe.len())
-        .map(|c| {
-            let used = sensor.cfa.tile.iter().flatten().any(|&t| t == c);
-            if !used {
-                return Vec::new();
-            }
-            camsim_sensor::channel_term_integrals(sensor, &pp.basis, c)
-                .into_iter()
-                .enumerate()
-                .filter(|(_, w)| *w != 0.0)
-                .collect()
-        })
-        .collect();
-    let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
-    let cols = sensor.cols;
-    let mut out = vec![0f32; sensor.rows * cols];
-    out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
-        for (c, o) in row.iter_mut().enumerate() {
-            let i = r * cols + c;
-            let e: f64 = weights[sensor.cfa.channel_at(r, c)]
-                .iter()
-                .map(|&(t, w)| w * pp.planes[t][i] as f64)
-                .sum();
-            *o = (k * e) as f32;
-        }
-    });
-    out
-}
-
 impl Forward for SimForward {
     fn rates(&self, spec: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
         let cam = self.camera_for(spec)?;
@@ -252,7 +150,8 @@ impl Forward for SimForward {
                 e.1.clone()
             })
         };
-        let mut by_target: HashMap<String, Arc<PixelPlanes>> = cached.clone().unwrap_or_default();
+        let mut by_target: HashMap<String, Arc<PixelTermPlanes>> =
+            cached.clone().unwrap_or_default();
         let mut rate_by_target: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
         let mut out = Vec::with_capacity(self.shots.len());
         for &si in &self.shots {
@@ -265,12 +164,15 @@ impl Forward for SimForward {
                 Some(p) => p.clone(),
                 None => {
                     let irr = shot_irradiance(&set, si, &grid).map_err(|e| e.one_line())?;
-                    let p = Arc::new(pixel_planes(&set.camera.sensor, &irr));
+                    let p = Arc::new(camsim_sensor::pixel_term_planes(&set.camera.sensor, &irr));
                     by_target.insert(key.clone(), p.clone());
                     p
                 }
             };
-            let r = Arc::new(rates_from_planes(&set.camera.sensor, &pp));
+            let r = Arc::new(camsim_sensor::electron_rate_from_term_planes(
+                &set.camera.sensor,
+                &pp,
+            ));
             rate_by_target.insert(key, r.clone());
             out.push(r);
         }
@@ -299,6 +201,82 @@ impl Forward for SimForward {
         }
         Ok(out)
     }
+}
+
+/// Sets the blocks of `spec` on a validated camera, in their fitted forms (the typed twin of
+/// [`apply_rate_spec`], which writes them into the camera file; `camera_from_file` of that
+/// file gives the same camera). Values a camera file would refuse are refused.
+fn apply_rate_spec_typed(cam: &mut crate::config::Camera, spec: &RateSpec) -> Result<(), String> {
+    use camsim_optics::effects::{Defocus, Distortion, Falloff, LateralColor, LateralColorKind};
+    use camsim_sensor::effects::{IrLeakage, QeShift};
+    let fx = &mut cam.optics.effects;
+    let finite = |k: &str, v: f64| {
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(format!("{k} = {v} is not finite"))
+        }
+    };
+    let at_least_0 = |k: &str, v: f64| {
+        if v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(format!("{k} = {v}: must be ≥ 0"))
+        }
+    };
+    if let Some(c) = &spec.falloff {
+        for (i, a) in c.iter().enumerate() {
+            finite(
+                &format!("optics.relative_illumination.falloff.coefficients[{i}]"),
+                *a,
+            )?;
+        }
+        fx.falloff = Some(Falloff::Polynomial {
+            coefficients: c.clone(),
+        });
+    }
+    if let Some(f) = spec.glare_fraction {
+        fx.veiling_glare = Some(at_least_0("optics.veiling_glare.fraction", f)?);
+    }
+    if let Some(s) = spec.defocus_sigma_um {
+        fx.defocus = Some(Defocus::Gaussian {
+            sigma_um: at_least_0("optics.defocus.sigma_um", s)?,
+        });
+    }
+    if let Some([k1, k2]) = spec.distortion {
+        fx.distortion = Some(Distortion::Polynomial {
+            k1: finite("optics.distortion.k1", k1)?,
+            k2: finite("optics.distortion.k2", k2)?,
+        });
+    }
+    if let Some(d) = spec.lateral_color_um {
+        fx.lateral_color = Some(LateralColor {
+            kind: LateralColorKind::Linear,
+            displacement_um: finite("optics.lateral_color.displacement_um", d)?,
+        });
+    }
+    let sx = &mut cam.sensor.effects;
+    if let Some(v) = &spec.ir_leakage {
+        let mut channels = vec![None; v.len()];
+        for (c, q) in v.iter().enumerate() {
+            if *q != 0.0 {
+                channels[c] = Some(IrLeakage::band(at_least_0("sensor.ir_leakage", *q)?));
+            }
+        }
+        sx.ir_leakage = channels
+            .iter()
+            .any(Option::is_some)
+            .then_some(IrLeakage { channels });
+    }
+    if let Some(v) = &spec.qe_shift_nm {
+        for s in v {
+            finite("sensor.qe_shift.shift_nm", *s)?;
+        }
+        sx.qe_shift = v.iter().any(|s| *s != 0.0).then(|| QeShift {
+            shift_nm: v.clone(),
+        });
+    }
+    Ok(())
 }
 
 /// Writes the blocks of `spec` into a camera file (JSON), in their fitted forms.
@@ -551,7 +529,7 @@ pub fn run_diagnose(
     set: &CaptureSet,
     out: &Path,
     opts: &DiagnoseCmdOptions,
-) -> Result<Value, CliError> {
+) -> Result<DiagnoseSummary, CliError> {
     let camera_text = std::fs::read_to_string(&set.camera_path)
         .map_err(|e| CliError::input(&set.camera_path, format!("cannot read: {e}")))?;
     let camera_json: Value = serde_json::from_str(&camera_text)
@@ -574,7 +552,7 @@ pub fn run_diagnose(
     let (data, used, skipped) = load_data(set, opts.progress)?;
     let forward = SimForward {
         set: Mutex::new(set.clone()),
-        camera_json: camera_json.clone(),
+        believed: set.camera.clone(),
         camera_path: set.camera_path.clone(),
         shots: used,
         planes: Mutex::new(PlaneCache::default()),
@@ -620,7 +598,7 @@ pub fn run_diagnose(
         .map_err(|e| CliError::Other(format!("internal: the fitted camera does not parse: {e}")))?;
     camera_from_file(&fitted_path, raw)?;
     let report = report_json(&diag, &data, &skipped);
-    with_staging(out, |st| {
+    let files = with_staging(out, |st| {
         let mut files: Vec<PathBuf> = Vec::new();
         let p = st.join("fitted_camera.json");
         std::fs::write(&p, serde_json::to_string_pretty(&fitted).expect("json"))
@@ -640,7 +618,33 @@ pub fn run_diagnose(
         files.push("report.html".into());
         Ok(files)
     })?;
-    Ok(report)
+    Ok(DiagnoseSummary {
+        findings: diag
+            .findings
+            .iter()
+            .map(|f| f.effect.id().to_string())
+            .collect(),
+        chi2_per_dof_before: diag.before.chi2_per_dof,
+        chi2_per_dof_after: diag.after.chi2_per_dof,
+        files,
+        json: report,
+    })
+}
+
+/// What `diagnose` reports: the effects found and the fit before and after, and report.json
+/// as written.
+#[derive(Debug, Clone)]
+pub struct DiagnoseSummary {
+    /// Effect ids found (spec/effects.md), in the order of the report.
+    pub findings: Vec<String>,
+    /// χ²/dof of the believed camera.
+    pub chi2_per_dof_before: f64,
+    /// χ²/dof of the fitted camera.
+    pub chi2_per_dof_after: f64,
+    /// Files written into `--out` (relative paths).
+    pub files: Vec<PathBuf>,
+    /// report.json as written.
+    pub json: Value,
 }
 
 fn r4(x: f64) -> Value {
@@ -766,7 +770,7 @@ mod tests {
             serde_json::from_str(&std::fs::read_to_string(&set.camera_path).unwrap()).unwrap();
         let fw = SimForward {
             set: Mutex::new(set.clone()),
-            camera_json,
+            believed: set.camera.clone(),
             camera_path: set.camera_path.clone(),
             shots: (0..set.shots.len()).collect(),
             planes: Mutex::new(PlaneCache::default()),
@@ -791,6 +795,15 @@ mod tests {
             },
         ];
         for spec in &specs {
+            // The typed blocks are the ones the camera file with the blocks written in gives.
+            let mut v = camera_json.clone();
+            apply_rate_spec(&mut v, spec, &set.camera.sensor.channel_names);
+            let mut from_file =
+                camera_from_file(&set.camera_path, serde_json::from_value(v).unwrap()).unwrap();
+            from_file.sensor.effects.crosstalk = None;
+            let typed = fw.camera_for(spec).unwrap();
+            assert_eq!(typed.optics.effects, from_file.optics.effects, "{spec:?}");
+            assert_eq!(typed.sensor.effects, from_file.sensor.effects, "{spec:?}");
             for pass in 0..2 {
                 let got = fw.rates(spec).unwrap();
                 let mut s2 = set.clone();

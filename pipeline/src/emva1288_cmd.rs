@@ -15,6 +15,7 @@
 use crate::error::CliError;
 use crate::frames::write_png16;
 use crate::plots;
+use crate::png_stored::decode_stored_gray16;
 use crate::report::html_escape;
 use camsim_core::constants::SI;
 use camsim_core::RawFrame;
@@ -1025,11 +1026,55 @@ pub fn parse_descriptor(path: &Path) -> Result<Descriptor, CliError> {
     })
 }
 
-/// Reads an 8- or 16-bit greyscale image as DN (values as stored, not rescaled).
-fn read_gray(path: &Path, d: &Descriptor) -> Result<Vec<u16>, CliError> {
-    let img =
-        image::open(path).map_err(|e| CliError::input(path, format!("cannot read image: {e}")))?;
-    let (w, h) = (img.width() as usize, img.height() as usize);
+/// Reads an 8- or 16-bit greyscale image as DN (values as stored, not rescaled) into `dn`
+/// (resized; its capacity is reused). A 16-bit PNG of stored deflate blocks, as camsim writes
+/// them, is read by [`decode_stored_gray16`] from the file's bytes (held in a per-thread
+/// buffer that is reused too); any other image goes to the general decoder.
+fn read_gray_into(path: &Path, d: &Descriptor, dn: &mut Vec<u16>) -> Result<(), CliError> {
+    thread_local! {
+        static FILE_BYTES: std::cell::Cell<Vec<u8>> = const { std::cell::Cell::new(Vec::new()) };
+    }
+    let cannot =
+        |e: &dyn std::fmt::Display| CliError::input(path, format!("cannot read image: {e}"));
+    // Taken out of the thread's slot for the duration, so no borrow is held.
+    let mut bytes = FILE_BYTES.take();
+    bytes.clear();
+    let read = std::fs::File::open(path).and_then(|mut f| {
+        use std::io::Read;
+        f.read_to_end(&mut bytes)
+    });
+    let fast = match read {
+        Ok(_) => decode_stored_gray16(&bytes, dn),
+        Err(e) => {
+            FILE_BYTES.set(bytes);
+            return Err(cannot(&e));
+        }
+    };
+    FILE_BYTES.set(bytes);
+    let (w, h) = match fast {
+        Some(size) => size,
+        None => {
+            let img = image::open(path).map_err(|e| cannot(&e))?;
+            let size = (img.width() as usize, img.height() as usize);
+            match img {
+                image::DynamicImage::ImageLuma8(b) => {
+                    dn.clear();
+                    dn.extend(b.as_raw().iter().map(|&v| u16::from(v)));
+                }
+                image::DynamicImage::ImageLuma16(b) => {
+                    dn.clear();
+                    dn.extend_from_slice(b.as_raw());
+                }
+                _ => {
+                    return Err(CliError::input(
+                        path,
+                        "expected a single-channel 8- or 16-bit image",
+                    ))
+                }
+            }
+            size
+        }
+    };
     if (w, h) != (d.width, d.height) {
         return Err(CliError::input(
             path,
@@ -1039,25 +1084,22 @@ fn read_gray(path: &Path, d: &Descriptor) -> Result<Vec<u16>, CliError> {
             ),
         ));
     }
-    let dn: Vec<u16> = match img {
-        image::DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(u16::from).collect(),
-        image::DynamicImage::ImageLuma16(b) => b.into_raw(),
-        _ => {
+    let max = ((1u32 << d.bits) - 1) as u16;
+    // Any bit above the range shows in the OR of all values (vectorises, unlike a search).
+    if dn.iter().fold(0u16, |a, &v| a | v) & !max != 0 {
+        if let Some(v) = dn.iter().find(|&&v| v > max) {
             return Err(CliError::input(
                 path,
-                "expected a single-channel 8- or 16-bit image",
-            ))
+                format!("value {v} DN exceeds the descriptor's {}-bit range", d.bits),
+            ));
         }
-    };
-    let max = (1u32 << d.bits) - 1;
-    if let Some(v) = dn.iter().find(|&&v| v as u32 > max) {
-        return Err(CliError::input(
-            path,
-            format!("value {v} DN exceeds the descriptor's {}-bit range", d.bits),
-        ));
     }
-    Ok(dn)
+    Ok(())
 }
+
+/// Frames of a spatial stack read (in parallel) and added to the sums at a time: 8 frames of
+/// a 1 MP sensor are 16 MB of buffers.
+const STACK_CHUNK: usize = 8;
 
 /// Analyses the series of a descriptor file (`camsim calibrate --emva1288`) and writes the
 /// same outputs as `camsim emva1288` into `out`.
@@ -1078,13 +1120,20 @@ pub fn run_descriptor(path: &Path, out: &Path) -> Result<Emva1288Report, CliErro
             if blk.images.len() != 2 {
                 return Ok(None);
             }
-            let (a, c) = rayon::join(
-                || read_gray(&blk.images[0], &d),
-                || read_gray(&blk.images[1], &d),
-            );
-            Ok(Some(pair_stats(&a?, &c?)))
+            thread_local! {
+                static PAIR: std::cell::Cell<[Vec<u16>; 2]> =
+                    const { std::cell::Cell::new([Vec::new(), Vec::new()]) };
+            }
+            let [mut a, mut c] = PAIR.take();
+            let read = read_gray_into(&blk.images[0], &d, &mut a)
+                .and_then(|_| read_gray_into(&blk.images[1], &d, &mut c));
+            let stats = read.map(|_| pair_stats(&a, &c));
+            PAIR.set([a, c]);
+            Ok(Some(stats?))
         })
-        .collect::<Result<_, CliError>>()?;
+        .collect::<Vec<_>>()
+        .into_iter()
+        .collect::<Result<_, CliError>>()?; // the first error in file order
     for (blk, stats) in d.blocks.iter().zip(pair_stats_by_block) {
         if let Some(s) = stats {
             if blk.photons_per_pixel == 0.0 {
@@ -1093,16 +1142,24 @@ pub fn run_descriptor(path: &Path, out: &Path) -> Result<Emva1288Report, CliErro
                 b.bright.push((blk.exposure_s, blk.photons_per_pixel, s));
             }
         } else {
-            // Frames are read in parallel a chunk at a time and added in file order.
+            // Frames are read in parallel a chunk at a time into reused buffers, then the
+            // chunk is added to the sums (integer sums: the order does not matter).
             let mut acc = StackAccumulator::new(d.height, d.width);
-            for chunk in blk.images.chunks(8) {
-                let frames: Vec<Vec<u16>> = chunk
-                    .par_iter()
-                    .map(|p| read_gray(p, &d))
-                    .collect::<Result<_, CliError>>()?;
-                for (p, f) in chunk.iter().zip(&frames) {
-                    acc.add(f).map_err(|e| CliError::input(p, e))?;
-                }
+            let mut buffers: Vec<Vec<u16>> = vec![Vec::new(); STACK_CHUNK.min(blk.images.len())];
+            for chunk in blk.images.chunks(STACK_CHUNK) {
+                // The first error in file order, whatever the scheduling.
+                let read: Vec<Result<(), CliError>> = buffers
+                    .par_iter_mut()
+                    .zip(chunk.par_iter())
+                    .map(|(buf, p)| read_gray_into(p, &d, buf))
+                    .collect();
+                read.into_iter().collect::<Result<(), CliError>>()?;
+                let frames: Vec<&[u16]> = buffers[..chunk.len()]
+                    .iter()
+                    .map(|b| b.as_slice())
+                    .collect();
+                acc.add_frames(&frames)
+                    .map_err(|e| CliError::input(&chunk[0], e))?;
             }
             let slot = if blk.photons_per_pixel == 0.0 {
                 &mut b.stack_dark

@@ -319,6 +319,7 @@ mod tests {
                 rows,
                 cols,
                 adc_bits: 16,
+                layout: None,
                 dn,
             };
             let dir = tempfile::tempdir().unwrap();

@@ -25,15 +25,18 @@ pub mod noise_profiles_cmd;
 #[doc = include_str!("../../docs/physics.md")]
 pub mod physics {}
 pub mod plots;
+pub mod png_stored;
 pub mod progress;
 pub mod raw_input;
 pub mod render_cmd;
 pub mod report;
 pub mod run;
 pub mod scene_cmd;
+pub mod scene_files;
 pub mod simulate;
 pub mod spectrum_file;
 pub mod staging;
 pub mod study;
 pub mod targets;
 pub mod validate_cmd;
+pub mod world_targets;

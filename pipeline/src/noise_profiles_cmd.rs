@@ -17,11 +17,11 @@ pub fn run_noise_profiles(
     file: &Path,
     camera_name: Option<&str>,
     out: &Path,
-) -> Result<serde_json::Value, CliError> {
+) -> Result<NoiseProfilesSummary, CliError> {
     crate::staging::protect_input(file);
     let all = read_noise_profiles(file).map_err(|e| CliError::Other(e.to_string()))?;
     let mut result = serde_json::Value::Null;
-    crate::staging::with_staging(out, |stage| {
+    let files = crate::staging::with_staging(out, |stage| {
         result = analyse_into(file, &all, camera_name, stage)?;
         let mut files = vec![
             std::path::PathBuf::from("noise_negative_b_by_iso.png"),
@@ -33,7 +33,23 @@ pub fn run_noise_profiles(
         }
         Ok(files)
     })?;
-    Ok(result)
+    Ok(NoiseProfilesSummary {
+        census: census(&all),
+        files,
+        json: result,
+    })
+}
+
+/// What `noise-profiles` reports: the census of the profiles, and noise_profiles.json as
+/// written.
+#[derive(Debug, Clone)]
+pub struct NoiseProfilesSummary {
+    /// How many makers, models, profiles and fits with b < 0 or a ≤ 0.
+    pub census: camsim_diagnose::noise_profiles::ProfileCensus,
+    /// Files written into `--out` (relative paths).
+    pub files: Vec<std::path::PathBuf>,
+    /// noise_profiles.json as written.
+    pub json: serde_json::Value,
 }
 
 /// The analysis and its files, written into `out` (the staging folder).

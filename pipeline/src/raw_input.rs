@@ -36,6 +36,7 @@ pub fn read_png16(path: &Path) -> Result<RawFrame, CliError> {
         cols: info.width as usize,
         adc_bits: 16,
         dn,
+        layout: None,
     })
 }
 
@@ -107,6 +108,7 @@ pub fn read_raw(path: &Path, fmt: &RawFormat) -> Result<RawFrame, CliError> {
         cols: fmt.cols,
         adc_bits: (fmt.bytes_per_sample * 8) as u32,
         dn,
+        layout: None,
     })
 }
 
@@ -170,6 +172,7 @@ fn read_frame_unguarded(path: &Path) -> Result<RawFrame, CliError> {
                 cols,
                 adc_bits: bits,
                 dn,
+                layout: None,
             })
         }
         other => Err(CliError::input(

@@ -154,8 +154,26 @@ pub struct DisplayFile {
     pub samples_per_pixel: Option<usize>,
 }
 
-/// What `run` reports (also written as summary.json).
-pub type Summary = Value;
+/// What `run` reports: the headline numbers as fields, and the whole summary.json document.
+#[derive(Debug, Clone)]
+pub struct Summary {
+    /// Camera name.
+    pub camera: String,
+    /// Sensor size (rows, columns).
+    pub rows: usize,
+    /// Sensor columns.
+    pub cols: usize,
+    /// Exposure used (s).
+    pub exposure_s: f64,
+    /// Mean raw value (DN).
+    pub raw_mean_dn: f64,
+    /// ΔE2000 statistics over the chart patches, when the scene is a chart.
+    pub delta_e_2000: Option<camsim_metrics::DeltaEStats>,
+    /// Files written into `--out` (relative paths).
+    pub files: Vec<PathBuf>,
+    /// summary.json as written.
+    pub json: Value,
+}
 
 fn bad(path: &Path, msg: impl std::fmt::Display) -> CliError {
     CliError::input(path, msg)
@@ -233,6 +251,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
             mean_luminance_cd_m2: None,
             illuminant: None,
             patch_labels: None,
+            world: Default::default(),
         },
         (Some(_), _) => return Err(bad(&path, "give either target or render, not both")),
         (None, Value::Null) => return Err(bad(&path, "target: required (or a render section)")),
@@ -530,13 +549,15 @@ pub fn check_config(config: Option<&Path>) -> Result<(), CliError> {
 /// Run the pipeline and write everything into `out`.
 pub fn run(config: Option<&Path>, out: &Path, progress: bool) -> Result<Summary, CliError> {
     let r = load(config)?;
-    let mut summary = Value::Null;
-    with_staging(out, |st| {
+    let mut summary = None;
+    let files = with_staging(out, |st| {
         let (s, files) = run_into(&r, st, progress)?;
-        summary = s;
+        summary = Some(s);
         Ok(files)
     })?;
-    Ok(summary)
+    let mut s = summary.expect("run_into returned a summary");
+    s.files = files;
+    Ok(s)
 }
 
 fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>), CliError> {
@@ -622,14 +643,8 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 
     // 4. Processor
     bar.set_message("processor");
-    let mosaic = Mosaic::from_raw(
-        &raw,
-        sensor.cfa.tile.clone(),
-        sensor.channel_names.clone(),
-        sensor.black_level_dn,
-        max_dn as f64,
-    )
-    .map_err(|e| CliError::Other(format!("processor: {e}")))?;
+    let mosaic =
+        Mosaic::from_frame(&raw).map_err(|e| CliError::Other(format!("processor: {e}")))?;
     let mut planes = demosaic_planes(&mosaic, r.demosaic)
         .map_err(|e| CliError::input(&set.path, format!("processor.demosaic: {e}")))?;
     if let Some(b) = &r.denoise {
@@ -813,6 +828,8 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     bar.inc(1);
 
     // 6. Metrics
+    let raw_mean_dn = raw.dn.iter().map(|&d| d as f64).sum::<f64>() / raw.dn.len() as f64;
+    let mut delta_e_2000 = None;
     bar.set_message("metrics");
     let mut report = json!({
         "camera": cam.name,
@@ -821,8 +838,16 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         "sensor": {"rows": sensor.rows, "cols": sensor.cols, "pixel_pitch_um": sensor.pixel_pitch_m * 1e6, "adc_bits": sensor.adc_bits},
         "optics": {"f_number": cam.optics.f_number, "focal_length_mm": cam.optics.focal_length_m * 1e3},
         "scene_mean_luminance_cd_m2": scene_luminance,
+        "scene_view": {
+            "fov_deg": set.shots[0].target.world.fov_deg,
+            "distance_m": set.shots[0].target.world.distance_m,
+            "sensor_fov_deg": camsim_core::scene_view::fov_deg_of_width(
+                sensor.cols as f64 * sensor.pixel_pitch_m,
+                camsim_optics::thin_lens_image_distance_m(cam.optics.focal_length_m, set.shots[0].target.world.distance_m)),
+            "illuminant": set.shots[0].target.world.illuminant_source,
+        },
         "exposure_s": exposure_s,
-        "raw_mean_dn": raw.dn.iter().map(|&d| d as f64).sum::<f64>() / raw.dn.len() as f64,
+        "raw_mean_dn": raw_mean_dn,
         "processor": {"demosaic": r.demosaic.name(), "channels": names, "white_balance": r.white_balance, "white_balance_gains": wb_gains,
                        "color_correction": r.color_correction, "ccm_fitted_on": ccm_source, "ccm": ccm.m,
                        "calibration_illuminant": r.calibration_illuminant, "exposure_scale": exposure_scale,
@@ -896,6 +921,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         let de = color_eval::patch_delta_e(&targets, &rendered_means)?;
         let (de2000, s2000) = (&de.de2000, &de.stats2000);
         report["delta_e_2000"] = de.json_2000();
+        delta_e_2000 = Some(de.stats2000);
         report["delta_e_76"] = de.json_76();
         report["delta_e_scored_on"] = json!(if mode == "chart_in_image" {
             "the chart the matrix was fitted on (not held out)"
@@ -974,7 +1000,17 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     std::fs::write(&p, html).map_err(|e| out_err(&p, &e))?;
     bar.inc(1);
     bar.finish_and_clear();
-    Ok((report, files))
+    let summary = Summary {
+        camera: cam.name.clone(),
+        rows: sensor.rows,
+        cols: sensor.cols,
+        exposure_s,
+        raw_mean_dn,
+        delta_e_2000,
+        files: files.clone(),
+        json: report,
+    };
+    Ok((summary, files))
 }
 
 /// Path-trace the glTF scene of a `render` section on the scene sampling grid of the sensor

@@ -6,12 +6,29 @@ use crate::config::CaptureSet;
 use crate::error::CliError;
 use camsim_core::constants::SI;
 use camsim_core::exr_io::{
-    bands_energy_to_photons, write_atomically, write_spectral_exr, IRRADIANCE_UNITS, RADIANCE_UNITS,
+    bands_energy_to_photons, write_spectral_exr, IRRADIANCE_UNITS, RADIANCE_UNITS,
 };
 use camsim_core::linear_model::compress;
 use camsim_core::scene::mean_luminance;
-use serde_json::json;
-use std::path::Path;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// What `scene` reports: the scene's size and luminance, and `<id>_scene.json` as written.
+#[derive(Debug, Clone)]
+pub struct SceneSummary {
+    /// The shot.
+    pub shot: String,
+    /// Scene samples (rows).
+    pub rows: usize,
+    /// Scene samples (columns).
+    pub cols: usize,
+    /// Mean luminance over the sensor's window (cd/m²).
+    pub mean_luminance_cd_m2: f64,
+    /// Files written into `--out` (relative paths).
+    pub files: Vec<PathBuf>,
+    /// `<id>_scene.json` as written.
+    pub json: Value,
+}
 
 /// Write `<id>_radiance.exr`, `<id>_irradiance.exr` and `<id>_scene.json` into `out`.
 pub fn write_scene(
@@ -19,7 +36,7 @@ pub fn write_scene(
     shot_id: &str,
     out: &Path,
     basis_terms: Option<usize>,
-) -> Result<serde_json::Value, CliError> {
+) -> Result<SceneSummary, CliError> {
     let idx = set
         .shots
         .iter()
@@ -40,27 +57,22 @@ pub fn write_scene(
     let grid = wavelength_grid(set);
     let scene = shot_scene(set, idx, &grid)?;
     let irr = crate::chain::irradiance_of(set, &scene, &grid)?;
-    std::fs::create_dir_all(out).map_err(|e| CliError::output(out, e))?;
     let mut rad_w = scene.radiance.to_bands(&grid);
     bands_energy_to_photons(&mut rad_w, &SI, true);
     let mut irr_w = irr.irradiance.to_bands(&grid);
     bands_energy_to_photons(&mut irr_w, &SI, true);
-    let rp = out.join(format!("{shot_id}_radiance.exr"));
-    write_spectral_exr(&rp, &rad_w, RADIANCE_UNITS, None).map_err(|e| CliError::output(&rp, e))?;
-    let ip = out.join(format!("{shot_id}_irradiance.exr"));
-    write_spectral_exr(&ip, &irr_w, IRRADIANCE_UNITS, None)
-        .map_err(|e| CliError::output(&ip, e))?;
     let s = &set.camera.sensor;
     let window = (
         s.cols as f64 * s.pixel_pitch_m,
         s.rows as f64 * s.pixel_pitch_m,
     );
+    let mean_luminance_cd_m2 = mean_luminance(&scene, Some(window), &SI);
     let mut report = json!({
         "shot": shot_id,
         "rows": scene.radiance.rows, "cols": scene.radiance.cols,
         "sample_pitch_um": scene.sample_pitch_m * 1e6,
         "wavelength_nm": grid.wavelength_nm,
-        "mean_luminance_cd_m2": mean_luminance(&scene, Some(window), &SI),
+        "mean_luminance_cd_m2": mean_luminance_cd_m2,
     });
     if let Some(k) = basis_terms {
         let c = compress(&scene.radiance, &grid, k);
@@ -71,9 +83,29 @@ pub fn write_scene(
             "max_abs_error_photons": c.max_abs_error,
         });
     }
-    let jp = out.join(format!("{shot_id}_scene.json"));
     let text = serde_json::to_string_pretty(&report).expect("json");
-    write_atomically(&jp, |tmp| std::fs::write(tmp, &text))
-        .map_err(|e| CliError::output(&jp, e))?;
-    Ok(report)
+    let files = crate::staging::with_staging(out, |st| {
+        let names: [PathBuf; 3] = [
+            format!("{shot_id}_radiance.exr").into(),
+            format!("{shot_id}_irradiance.exr").into(),
+            format!("{shot_id}_scene.json").into(),
+        ];
+        let rp = st.join(&names[0]);
+        write_spectral_exr(&rp, &rad_w, RADIANCE_UNITS, None)
+            .map_err(|e| CliError::output(&rp, e))?;
+        let ip = st.join(&names[1]);
+        write_spectral_exr(&ip, &irr_w, IRRADIANCE_UNITS, None)
+            .map_err(|e| CliError::output(&ip, e))?;
+        let jp = st.join(&names[2]);
+        std::fs::write(&jp, &text).map_err(|e| CliError::output(&jp, e))?;
+        Ok(names.to_vec())
+    })?;
+    Ok(SceneSummary {
+        shot: shot_id.to_string(),
+        rows: scene.radiance.rows,
+        cols: scene.radiance.cols,
+        mean_luminance_cd_m2,
+        files,
+        json: report,
+    })
 }

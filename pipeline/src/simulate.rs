@@ -7,7 +7,7 @@ use crate::frames;
 use camsim_core::constants::SI;
 use camsim_core::exr_io::write_single_channel_exr;
 use camsim_core::image::{Plane, SceneRadiance, SensorIrradiance};
-use camsim_core::scene::{render_target, scale_to_mean_luminance, SamplingGrid};
+use camsim_core::scene::{scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};
 use camsim_sensor::{
@@ -128,8 +128,19 @@ pub fn shot_memory_bytes(set: &CaptureSet, grid: &WavelengthGrid) -> f64 {
     let (os, margin) = sampling_for(&set.camera.optics, s, grid, set.simulation.oversample);
     let side = |n: usize| (n as f64 + 2.0 * margin as f64) * os as f64;
     let samples = side(s.rows) * side(s.cols);
-    crate::budget::f32_bytes(samples * grid.len() as f64, 3.0)
-        + s.rows as f64 * s.cols as f64 * 48.0
+    // A picture or cube keeps its own basis on the sampling grid (one plane per band of a
+    // cube) until the optics expand it to the simulation's bands.
+    let planes = set
+        .shots
+        .iter()
+        .map(|sh| match &sh.target.target {
+            camsim_core::scene::Target::Image { radiance } => radiance.terms(),
+            _ => 0,
+        })
+        .max()
+        .unwrap_or(0)
+        .max(grid.len());
+    crate::budget::f32_bytes(samples * planes as f64, 3.0) + s.rows as f64 * s.cols as f64 * 48.0
 }
 
 /// Refuse a capture set whose shots need more memory than the budget allows
@@ -153,25 +164,66 @@ pub fn check_budget(set: &CaptureSet) -> Result<(), CliError> {
 
 /// A shot's target rendered on `g`, with its illuminant, scaled to its mean luminance over
 /// the sensor when the target asks for one.
+///
+/// Scenes from the world (docs/config.md): with `fov_deg` the target covers
+/// `W = 2 s′ tan(F/2)` of the image plane ([`camsim_core::scene_view`]; `s′` the thin-lens
+/// image distance of the optics' focal length for the target's `distance_m`, `f` at
+/// infinity) instead of filling the sensor, and its mean luminance is then taken over that
+/// extent (the part of it the grid samples); `distance_m` is the scene's object distance (the
+/// camera equation's magnification); with `swap_illuminant` the scene is rendered under its
+/// own illuminant and swapped keeping reflectance and mean luminance
+/// ([`camsim_core::illuminant::swap_illuminant`]).
 fn scene_on_grid(
     set: &CaptureSet,
     shot: &crate::config::Shot,
     g: &SamplingGrid,
 ) -> Result<SceneRadiance, CliError> {
-    let radiance = render_target(&shot.target.target, g)
+    let world = &shot.target.world;
+    let f_m = set.camera.optics.focal_length_m;
+    if let Some(d) = world.distance_m {
+        if !(d > f_m) {
+            return Err(CliError::input(
+                &set.path,
+                format!(
+                    "shot {}: target.distance_m = {d} must exceed the focal length ({f_m} m) to \
+                     form a real image",
+                    shot.id
+                ),
+            ));
+        }
+    }
+    let extent = world.fov_deg.map(|fov| {
+        let image_distance_m = camsim_optics::thin_lens_image_distance_m(f_m, world.distance_m);
+        let aspect = match &shot.target.target {
+            camsim_core::scene::Target::Image { radiance } => {
+                radiance.rows as f64 / radiance.cols as f64
+            }
+            _ => g.sensor_height_m / g.sensor_width_m,
+        };
+        camsim_core::scene_view::extent_in_image_plane_m(fov, aspect, image_distance_m)
+    });
+    let radiance = camsim_core::scene_view::render_target_in_view(&shot.target.target, g, extent)
         .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
     let mut scene = SceneRadiance {
         radiance,
         sample_pitch_m: g.pitch_m,
-        object_distance_m: None,
-        illuminant: shot.target.illuminant.clone(),
+        object_distance_m: world.distance_m,
+        illuminant: world
+            .swapped_from
+            .clone()
+            .or_else(|| shot.target.illuminant.clone()),
         depth_m: None,
     };
+    if let (Some(_), Some(new)) = (&world.swapped_from, &shot.target.illuminant) {
+        camsim_core::illuminant::swap_illuminant(&mut scene, new, true, &SI).map_err(|e| {
+            CliError::input(&set.path, format!("shot {}: swap_illuminant: {e}", shot.id))
+        })?;
+    }
     if let Some(l) = shot.target.mean_luminance_cd_m2 {
         scale_to_mean_luminance(
             &mut scene,
             l,
-            Some((g.sensor_width_m, g.sensor_height_m)),
+            Some(extent.unwrap_or((g.sensor_width_m, g.sensor_height_m))),
             &SI,
         );
     }

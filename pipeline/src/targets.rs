@@ -23,9 +23,12 @@ pub struct ParsedTarget {
     /// `patches` extension `labels`: where each patch is in the recorded frames (used by
     /// `camsim calibrate`; simulation keeps the spec's chart geometry).
     pub patch_labels: Option<std::sync::Arc<crate::raw_input::PatchLabels>>,
+    /// Field of view, distance, illuminant swap and the illuminant's source (the keys every
+    /// target accepts; docs/config.md "Scenes from the world").
+    pub world: crate::world_targets::SceneWorld,
 }
 
-const KINDS: &str = "dark, uniform, patches, slanted_edge, image, macbeth, ramp, frequency_sweep, point_array, grid_lines";
+const KINDS: &str = "dark, uniform, patches, slanted_edge, image, cube, macbeth, ramp, frequency_sweep, point_array, grid_lines";
 
 struct Obj<'a> {
     m: &'a Map<String, Value>,
@@ -38,6 +41,7 @@ impl<'a> Obj<'a> {
             if k != "kind"
                 && k != "radiance_unit"
                 && k != "mean_luminance_cd_m2"
+                && !crate::world_targets::COMMON_KEYS.contains(&k.as_str())
                 && !keys.contains(&k.as_str())
             {
                 let kind = self.m["kind"].as_str().unwrap_or("");
@@ -159,6 +163,8 @@ pub fn target_from_value(
     let pitch = sensor.pixel_pitch_m;
     let mut illuminant = None;
     let mut patch_labels = None;
+    let mut world_illuminant: Option<(Spectrum, String)> = None;
+    let mut implied: (Option<f64>, Option<f64>) = (None, None);
     let target = match kind {
         "dark" => {
             o.allow(&[])?;
@@ -235,8 +241,28 @@ pub fn target_from_value(
                 angle_deg: o.num("angle_deg", None)?,
             }
         }
+        "image" if m.contains_key("display") => {
+            o.allow(&["file", "display", "illuminant"])?;
+            let w = crate::world_targets::rgb_image_target(m, dir, photons)?;
+            implied = (w.implied_fov_deg, w.implied_distance_m);
+            world_illuminant = w.illuminant;
+            w.target
+        }
+        "cube" => {
+            o.allow(&[
+                "file",
+                "illuminant",
+                "quantity",
+                "wavelength_nm",
+                "wavelength_file",
+                "data_file",
+            ])?;
+            let w = crate::world_targets::cube_target(m, dir, photons)?;
+            world_illuminant = w.illuminant;
+            w.target
+        }
         "image" => {
-            o.allow(&["file"])?;
+            o.allow(&["file", "illuminant"])?;
             let f = m
                 .get("file")
                 .and_then(Value::as_str)
@@ -269,6 +295,7 @@ pub fn target_from_value(
             if !photon_file {
                 exr_io::bands_energy_to_photons(&mut img, &SI, false);
             }
+            world_illuminant = crate::world_targets::file_illuminant(m, &img, photons)?;
             Target::Image { radiance: img }
         }
         "macbeth" => {
@@ -352,11 +379,38 @@ pub fn target_from_value(
              luminance (give it a radiance, or drop mean_luminance_cd_m2)"
         ));
     }
+    let mut world = crate::world_targets::SceneWorld {
+        fov_deg: crate::world_targets::fov_value(m.get("fov_deg"), implied.0)?,
+        distance_m: crate::world_targets::distance_value(m.get("distance_m"), implied.1)?,
+        swapped_from: None,
+        illuminant_source: None,
+    };
+    if let Some((ill, src)) = world_illuminant {
+        illuminant = Some(ill);
+        world.illuminant_source = Some(src);
+    } else if illuminant.is_some() {
+        world.illuminant_source = Some("given".into());
+    }
+    if let Some(v) = m.get("swap_illuminant") {
+        let new = crate::world_targets::swap_illuminant_value(v, photons)?;
+        let Some(old) = illuminant.replace(new) else {
+            return Err(format!(
+                ".swap_illuminant: a {kind} target has no illuminant to swap (only macbeth, \
+                 image and cube targets carry one)"
+            ));
+        };
+        world.swapped_from = Some(old);
+        world.illuminant_source = Some(format!(
+            "swapped in for the scene's own ({})",
+            world.illuminant_source.as_deref().unwrap_or("given")
+        ));
+    }
     Ok(ParsedTarget {
         target,
         mean_luminance_cd_m2,
         illuminant,
         patch_labels,
+        world,
     })
 }
 

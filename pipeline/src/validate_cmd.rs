@@ -327,22 +327,40 @@ fn diverging_rgb8(v: &[f64], scale: f64) -> Vec<u8> {
         .collect()
 }
 
+/// What `validate` reports: the worst mismatches, and validation.json as written.
+#[derive(Debug, Clone)]
+pub struct ValidateSummary {
+    /// Largest |relative mismatch| of a shot's mean over every shot and channel.
+    pub max_abs_relative_mismatch: Option<f64>,
+    /// Largest |normalised residual| (measured − expected mean, in standard errors).
+    pub max_abs_normalised_residual: Option<f64>,
+    /// Files written into `--out` (relative paths).
+    pub files: Vec<PathBuf>,
+    /// validation.json as written.
+    pub json: Value,
+}
+
 /// Validate `set` against its camera and write the outputs into `out` (all or nothing).
-/// Returns the content of validation.json.
 pub fn run_validate(
     set: &CaptureSet,
     out: &Path,
     seed: u64,
     progress: bool,
-) -> Result<Value, CliError> {
+) -> Result<ValidateSummary, CliError> {
     check_frames(set)?;
     let mut summary = Value::Null;
-    with_staging(out, |st| {
+    let files = with_staging(out, |st| {
         let (s, files) = validate_into(set, st, seed, progress)?;
         summary = s;
         Ok(files)
     })?;
-    Ok(summary)
+    let num = |k: &str| summary["summary"][k].as_f64();
+    Ok(ValidateSummary {
+        max_abs_relative_mismatch: num("max_abs_relative_mismatch"),
+        max_abs_normalised_residual: num("max_abs_normalised_residual"),
+        files,
+        json: summary,
+    })
 }
 
 /// Figures of the report: (file, caption).

@@ -557,7 +557,7 @@ impl CaptureSet {
         let v = py
             .detach(|| camsim_pipeline::scene_cmd::write_scene(&self.set, shot_id, &out, basis))
             .map_err(err)?;
-        json_to_py(py, &v)
+        json_to_py(py, &v.json)
     }
 
     /// `camsim calibrate`: estimate the sensor's parameters (Appendix A/B, photon transfer);
@@ -566,7 +566,7 @@ impl CaptureSet {
         let v = py
             .detach(|| camsim_pipeline::calibrate_cmd::run_calibrate(&self.set, &out, false))
             .map_err(err)?;
-        json_to_py(py, &v)
+        json_to_py(py, &v.json)
     }
 
     /// `camsim validate`: simulate every shot and compare with the recording; returns the
@@ -582,7 +582,7 @@ impl CaptureSet {
         let v = py
             .detach(|| camsim_pipeline::validate_cmd::run_validate(&self.set, &out, seed, false))
             .map_err(err)?;
-        json_to_py(py, &v)
+        json_to_py(py, &v.json)
     }
 
     /// `camsim diagnose`: the physics the camera model leaves out (fit check, locate,
@@ -603,7 +603,7 @@ impl CaptureSet {
         let v = py
             .detach(|| camsim_pipeline::diagnose_cmd::run_diagnose(&self.set, &out, &opts))
             .map_err(err)?;
-        json_to_py(py, &v)
+        json_to_py(py, &v.json)
     }
 
     fn __repr__(&self) -> String {
@@ -647,8 +647,7 @@ fn run<'py>(py: Python<'py>, out: PathBuf, config: Option<PathBuf>) -> PyResult<
     let s = py
         .detach(|| camsim_pipeline::run::run(config.as_deref(), &out, false))
         .map_err(err)?;
-    let v = serde_json::to_value(&s).map_err(err_msg)?;
-    json_to_py(py, &v)
+    json_to_py(py, &s.json)
 }
 
 /// `camsim study`: evaluate a parameter study (points already finished in `out` are reused);

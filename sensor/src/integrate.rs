@@ -46,6 +46,19 @@ pub fn box_weights(
         .collect()
 }
 
+/// The [`box_weights`] of the sensor's pixel rows and columns over the irradiance grid.
+fn pixel_box_weights(
+    sensor: &SensorModel,
+    irradiance: &SensorIrradiance,
+) -> (Vec<Vec<(usize, f64)>>, Vec<Vec<(usize, f64)>>) {
+    let img = &irradiance.irradiance;
+    let p = irradiance.sample_pitch_m;
+    (
+        box_weights(img.rows, p, sensor.rows, sensor.pixel_pitch_m),
+        box_weights(img.cols, p, sensor.cols, sensor.pixel_pitch_m),
+    )
+}
+
 /// Mean photo-electron rate per pixel (step 2 without t): `p² · FF · ∫ QE_c(λ) Ē(λ) dλ`,
 /// Ē the irradiance (photons/(s·m²·nm)) area-averaged over the pixel's p × p square; with
 /// the effect blocks, QE_c is the effective QE (QE shift, IR leakage) and the result is
@@ -70,18 +83,7 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
             })
         })
         .collect();
-    let wy = box_weights(
-        img.rows,
-        irradiance.sample_pitch_m,
-        sensor.rows,
-        sensor.pixel_pitch_m,
-    );
-    let wx = box_weights(
-        img.cols,
-        irradiance.sample_pitch_m,
-        sensor.cols,
-        sensor.pixel_pitch_m,
-    );
+    let (wy, wx) = pixel_box_weights(sensor, irradiance);
     let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
     let (oi_cols, n_ch) = (img.cols, weights.len());
     let mut out = vec![0f32; sensor.rows * sensor.cols];
@@ -127,6 +129,91 @@ pub fn electron_rate(sensor: &SensorModel, irradiance: &SensorIrradiance) -> Ele
         crate::effects::apply_crosstalk(ct, &mut rate);
     }
     rate
+}
+
+/// The irradiance of one image averaged over every pixel, one plane per spectral basis term:
+/// `Ā_k(i)`, the plane of term k area-averaged over pixel i's p × p square (the box weights of
+/// [`electron_rate`]).
+#[derive(Debug, Clone)]
+pub struct PixelTermPlanes {
+    /// 1×1 image carrying the basis (for the channels' spectral integrals).
+    pub basis: camsim_core::SpectralImage,
+    /// Row-major sensor-size planes, one per basis term.
+    pub planes: Vec<Vec<f32>>,
+}
+
+/// Pixel integration per basis term, before the spectral weighting: with these planes the
+/// electron rate of any effective QE is one weighted sum per pixel
+/// ([`electron_rate_from_term_planes`]). By linearity, `electron_rate` of the same sensor
+/// (without crosstalk) is the same sum taken in another order.
+pub fn pixel_term_planes(sensor: &SensorModel, irradiance: &SensorIrradiance) -> PixelTermPlanes {
+    let img = &irradiance.irradiance;
+    let (wy, wx) = pixel_box_weights(sensor, irradiance);
+    let ic = img.cols;
+    let planes = img
+        .planes
+        .iter()
+        .map(|p| {
+            let mut out = vec![0f32; sensor.rows * sensor.cols];
+            out.par_chunks_mut(sensor.cols).enumerate().for_each_init(
+                || vec![0f64; ic],
+                |line, (r, row)| {
+                    line.iter_mut().for_each(|l| *l = 0.0);
+                    for &(y, w) in &wy[r] {
+                        line.iter_mut()
+                            .zip(&p[y * ic..(y + 1) * ic])
+                            .for_each(|(l, s)| *l += w * *s as f64);
+                    }
+                    for (o, wc) in row.iter_mut().zip(&wx) {
+                        *o = wc.iter().map(|&(x, w)| w * line[x]).sum::<f64>() as f32;
+                    }
+                },
+            );
+            out
+        })
+        .collect();
+    let basis = camsim_core::SpectralImage::new(
+        1,
+        1,
+        img.basis.clone(),
+        vec![vec![0f32]; img.planes.len()],
+    )
+    .expect("one plane per term");
+    PixelTermPlanes { basis, planes }
+}
+
+/// Mean photo-electron rate of every pixel from its term planes:
+/// `p²·FF·Σ_k w_ck Ā_k(i)`, with `w_ck = ∫ QE_c(λ) B_k(λ) dλ` the channel's effective QE (QE
+/// shift and IR leakage blocks included) against basis term k. No crosstalk (the caller
+/// applies it where wanted).
+pub fn electron_rate_from_term_planes(sensor: &SensorModel, pp: &PixelTermPlanes) -> Vec<f32> {
+    let weights: Vec<Vec<(usize, f64)>> = (0..sensor.channel_qe.len())
+        .map(|c| {
+            let used = sensor.cfa.tile.iter().flatten().any(|&t| t == c);
+            if !used {
+                return Vec::new();
+            }
+            crate::effects::channel_term_integrals(sensor, &pp.basis, c)
+                .into_iter()
+                .enumerate()
+                .filter(|(_, w)| *w != 0.0)
+                .collect()
+        })
+        .collect();
+    let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
+    let cols = sensor.cols;
+    let mut out = vec![0f32; sensor.rows * cols];
+    out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
+        for (c, o) in row.iter_mut().enumerate() {
+            let i = r * cols + c;
+            let e: f64 = weights[sensor.cfa.channel_at(r, c)]
+                .iter()
+                .map(|&(t, w)| w * pp.planes[t][i] as f64)
+                .sum();
+            *o = (k * e) as f32;
+        }
+    });
+    out
 }
 
 pub(crate) fn channel_maps(
@@ -304,5 +391,45 @@ mod tests {
         );
         // pixel 1 spans [−2, 0] µm: all in the left cell; pixel 2 [0, 2] right.
         assert_eq!(r4.electrons_per_s[1], 0.0);
+    }
+
+    /// Term planes + weighted sum give `electron_rate` (same box weights, same exact spectral
+    /// integrals, other order of summation): a 2-channel CFA, a non-integer pitch ratio, a
+    /// varying band image and a QE-shift block.
+    #[test]
+    fn term_planes_give_the_electron_rate() {
+        let g = WavelengthGrid::regular(400.0, 700.0, 20.0).unwrap();
+        let (ir, ic) = (13usize, 17usize);
+        let planes: Vec<Vec<f32>> = (0..g.len())
+            .map(|k| {
+                (0..ir * ic)
+                    .map(|i| 1e12 * (1.0 + ((i * 7 + k * 3) % 11) as f32 * 0.1))
+                    .collect()
+            })
+            .collect();
+        let img = SpectralImage::new(ir, ic, SpectralBasis::Bands(g), planes).unwrap();
+        let mut s = mono(5, 6);
+        s.cfa = Cfa {
+            tile: vec![vec![0, 1], vec![1, 0]],
+        };
+        s.channel_names = vec!["a".into(), "b".into()];
+        s.channel_qe = vec![
+            Spectrum::sampled(vec![450.0, 550.0, 650.0], vec![0.0, 1.0, 0.0]).unwrap(),
+            Spectrum::constant(0.5),
+        ];
+        s.effects.qe_shift = Some(crate::effects::QeShift {
+            shift_nm: vec![7.0, -3.0],
+        });
+        let irr = SensorIrradiance {
+            irradiance: img,
+            sample_pitch_m: 1.37e-6,
+        };
+        let want = electron_rate(&s, &irr).electrons_per_s;
+        let got = electron_rate_from_term_planes(&s, &pixel_term_planes(&s, &irr));
+        assert_eq!(want.len(), got.len());
+        for (w, g) in want.iter().zip(&got) {
+            assert_relative_eq!(*w as f64, *g as f64, max_relative = 1e-5);
+        }
+        assert!(want.iter().any(|&w| w != want[0]), "the image varies");
     }
 }

@@ -39,7 +39,9 @@ pub use effects::{
     apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map, Crosstalk, HotPixel,
     HotPixels, IrLeakage, Nonlinearity, QeShift, SensorEffects,
 };
-pub use integrate::{box_weights, electron_rate};
+pub use integrate::{
+    box_weights, electron_rate, electron_rate_from_term_planes, pixel_term_planes, PixelTermPlanes,
+};
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
     nonlinearity_magnitude, PatternSource, FIXED_PATTERN_TAG,
@@ -291,6 +293,17 @@ impl SensorModel {
     /// Largest DN, `2^bits − 1` (step 7).
     pub fn max_dn(&self) -> f64 {
         ((1u64 << self.adc_bits) - 1) as f64
+    }
+
+    /// The layout of this sensor's raw frames: CFA tile, channel names, black level and
+    /// `2^bits − 1` as white.
+    pub fn raw_layout(&self) -> camsim_core::RawLayout {
+        camsim_core::RawLayout {
+            cfa_tile: self.cfa.tile.clone(),
+            channel_names: self.channel_names.clone(),
+            black_dn: self.black_level_dn,
+            white_dn: self.max_dn(),
+        }
     }
 
     /// DN per volt of output voltage u: `(2^bits − 1) / swing` (step 7).

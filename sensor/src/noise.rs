@@ -295,6 +295,7 @@ pub fn expose_with(
         cols,
         adc_bits: sensor.adc_bits,
         dn,
+        layout: Some(sensor.raw_layout()),
     }
 }
 

@@ -84,6 +84,31 @@ fn bad_wavelength_grids_are_refused() {
     );
 }
 
+/// Found by the captures fuzzer (issue 16, acceptance 2): a radiance sampled at
+/// [400, 1.8e308] nm made the conversion to photons refine the spectrum every 2 nm, for ever.
+/// Wavelengths past 1 mm (core::spectrum::MAX_WAVELENGTH_NM) are refused.
+#[test]
+fn a_spectrum_reaching_1e308_nm_is_refused_at_once() {
+    let (cam, mut caps) = base();
+    caps["shots"][1]["target"]["radiance"]["wavelength_nm"] = json!([400, 1.7976931348623157e308]);
+    let d = set(&cam, &caps);
+    let o = simulate(d.path());
+    refused(
+        &o,
+        &[
+            "captures.json",
+            "shots[1] (flat).target.radiance",
+            "wavelength_nm[1]",
+            "1 mm",
+        ],
+    );
+    assert!(
+        o.elapsed.as_secs_f64() < 10.0,
+        "{:.1} s",
+        o.elapsed.as_secs_f64()
+    );
+}
+
 fn run_config(d: &Path, cfg: &Value) -> Outcome {
     std::fs::write(d.join("run.json"), cfg.to_string()).unwrap();
     camsim_limited(&["run", "run.json", "--out", "o"], d)
@@ -500,6 +525,7 @@ fn calibrate_refuses_a_frame_of_the_wrong_size() {
         cols: 4,
         adc_bits: 12,
         dn: vec![100; 16],
+        layout: None,
     };
     camsim_pipeline::frames::write_png16(&rec.join("raw/flat-1.png"), &small).unwrap();
     refused(

@@ -53,7 +53,8 @@ pub fn pair_stats(a: &[u16], b: &[u16]) -> PairStats {
     for (&x, &y) in a.iter().zip(b) {
         sa += x as u64;
         sb += y as u64;
-        let d = x as i64 - y as i64;
+        // |x − y|² < 2³²: exact in u32 (a 16-bit widening multiply, which vectorises).
+        let d = x.abs_diff(y) as u32;
         sd2 += (d * d) as u64;
     }
     let n = a.len() as f64;

@@ -34,25 +34,40 @@ impl StackAccumulator {
 
     /// Adds one row-major frame; a frame of another size is an error naming both sizes.
     pub fn add(&mut self, dn: &[u16]) -> Result<(), String> {
-        if dn.len() != self.sum.len() {
+        self.add_frames(&[dn])
+    }
+
+    /// Adds several row-major frames; a frame of another size is an error naming both sizes
+    /// (and nothing is added). The sums are integers, so they are the same as adding the
+    /// frames one by one in any order; adding them together a tile of pixels at a time loads
+    /// and stores each tile of the sums once per call instead of once per frame.
+    pub fn add_frames(&mut self, frames: &[&[u16]]) -> Result<(), String> {
+        const TILE: usize = 4096;
+        if let Some(f) = frames.iter().find(|f| f.len() != self.sum.len()) {
             return Err(format!(
                 "frame has {} pixels, the stack is {}×{}",
-                dn.len(),
+                f.len(),
                 self.rows,
                 self.cols
             ));
         }
         self.sum
-            .par_chunks_mut(4096)
-            .zip(self.sum_sq.par_chunks_mut(4096))
-            .zip(dn.par_chunks(4096))
-            .for_each(|((s, q), d)| {
-                for ((s, q), &v) in s.iter_mut().zip(q.iter_mut()).zip(d) {
-                    *s += v as u64;
-                    *q += (v as u64) * (v as u64);
+            .par_chunks_mut(TILE)
+            .zip(self.sum_sq.par_chunks_mut(TILE))
+            .enumerate()
+            .for_each(|(t, (s, q))| {
+                let start = t * TILE;
+                for f in frames {
+                    let d = &f[start..start + s.len()];
+                    for ((s, q), &v) in s.iter_mut().zip(q.iter_mut()).zip(d) {
+                        // v² < 2³², so the square is exact in u32.
+                        let v = v as u32;
+                        *s += v as u64;
+                        *q += (v * v) as u64;
+                    }
                 }
             });
-        self.frames += 1;
+        self.frames += frames.len() as u32;
         Ok(())
     }
 
@@ -100,17 +115,17 @@ pub fn stack_stats(acc: &StackAccumulator) -> StackStats {
     let mn = (m * n) as f64;
     let mean = avg.iter().sum::<f64>() / mn;
     // Per-pixel variance across the stack from the integer sums (exact numerators):
-    // (L Σy² − (Σy)²) / (L (L − 1)).
+    // (L Σy² − (Σy)²) / (L (L − 1)); their sum is exact too (u128), so it does not depend on
+    // the order in which the threads add.
     let var_stack = acc
         .sum
         .par_iter()
         .zip(acc.sum_sq.par_iter())
         .map(|(&s, &q)| {
             let li = acc.frames as u128;
-            let pv = li * q as u128 - (s as u128) * (s as u128);
-            pv as f64
+            li * q as u128 - (s as u128) * (s as u128)
         })
-        .sum::<f64>()
+        .sum::<u128>() as f64
         / (l * (l - 1.0))
         / mn;
     let var_measured = avg.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (mn - 1.0);
@@ -213,37 +228,38 @@ pub fn spectrogram(avg: &[f64], rows: usize, cols: usize, vertical: bool) -> Spe
     let (lines, len) = if vertical { (cols, rows) } else { (rows, cols) };
     let fft = FftPlanner::<f64>::new().plan_fft_forward(len);
     let half = len / 2 + 1;
-    let power = (0..lines)
+    // Lines are transformed in parallel in fixed groups whose sums are added in group order,
+    // so the result does not depend on the thread count or the scheduling.
+    const GROUP: usize = 16;
+    let partial: Vec<Vec<f64>> = (0..lines.div_ceil(GROUP))
         .into_par_iter()
-        .fold(
-            || vec![0.0; half],
-            |mut acc, i| {
-                let mut buf: Vec<Complex<f64>> = (0..len)
-                    .map(|j| {
-                        let v = if vertical {
-                            avg[j * cols + i]
-                        } else {
-                            avg[i * cols + j]
-                        };
-                        Complex::new(v - mean, 0.0)
-                    })
-                    .collect();
+        .map(|g| {
+            let mut acc = vec![0.0; half];
+            let mut buf: Vec<Complex<f64>> = Vec::with_capacity(len);
+            for i in g * GROUP..((g + 1) * GROUP).min(lines) {
+                buf.clear();
+                buf.extend((0..len).map(|j| {
+                    let v = if vertical {
+                        avg[j * cols + i]
+                    } else {
+                        avg[i * cols + j]
+                    };
+                    Complex::new(v - mean, 0.0)
+                }));
                 fft.process(&mut buf);
                 for (a, c) in acc.iter_mut().zip(&buf[..half]) {
                     *a += c.norm_sqr() / len as f64;
                 }
-                acc
-            },
-        )
-        .reduce(
-            || vec![0.0; half],
-            |mut a, b| {
-                for (x, y) in a.iter_mut().zip(b) {
-                    *x += y;
-                }
-                a
-            },
-        );
+            }
+            acc
+        })
+        .collect();
+    let mut power = vec![0.0; half];
+    for p in partial {
+        for (x, y) in power.iter_mut().zip(p) {
+            *x += y;
+        }
+    }
     Spectrogram {
         frequency_per_px: (0..half).map(|k| k as f64 / len as f64).collect(),
         power_dn2: power.into_iter().map(|p| p / lines as f64).collect(),

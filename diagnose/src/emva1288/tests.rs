@@ -249,3 +249,54 @@ fn nonuniformity_parts_and_dsnu_prnu_recover_the_patterns() {
         ((m - 4) * (n - 4)) as u64
     );
 }
+
+#[test]
+fn adding_frames_together_gives_the_sums_of_adding_them_one_by_one() {
+    // 3 × 2000 pixels: more than one 4096-pixel tile and a partial one; full-range values
+    // (65535² is the largest square) so an overflow would show.
+    let (m, n) = (3usize, 2000usize);
+    let frames: Vec<Vec<u16>> = (0..5u64)
+        .map(|f| {
+            (0..(m * n) as u64)
+                .map(|i| ((i * 2_654_435_761 + f * 40_503) % 65_536) as u16)
+                .collect()
+        })
+        .collect();
+    let mut one = StackAccumulator::new(m, n);
+    for f in &frames {
+        one.add(f).unwrap();
+    }
+    let mut together = StackAccumulator::new(m, n);
+    let refs: Vec<&[u16]> = frames.iter().map(|f| f.as_slice()).collect();
+    together.add_frames(&refs[..2]).unwrap();
+    together.add_frames(&refs[2..]).unwrap();
+    assert_eq!(together.frames, 5);
+    assert_eq!(together.average(), one.average());
+    assert_eq!(stack_stats(&together), stack_stats(&one));
+    // The exact sums of one pixel from the frames themselves.
+    let p = 4100;
+    let sum: u64 = frames.iter().map(|f| f[p] as u64).sum();
+    assert_eq!(together.average()[p], sum as f64 / 5.0);
+    // The temporal variance from the squares, against a direct two-pass computation.
+    let var_stack = (0..m * n)
+        .map(|i| {
+            let mu = frames.iter().map(|f| f[i] as f64).sum::<f64>() / 5.0;
+            frames
+                .iter()
+                .map(|f| (f[i] as f64 - mu).powi(2))
+                .sum::<f64>()
+                / 4.0
+        })
+        .sum::<f64>()
+        / (m * n) as f64;
+    let got = stack_stats(&together).var_stack_dn2;
+    assert!(
+        (got - var_stack).abs() <= 1e-12 * var_stack,
+        "{got} vs {var_stack}"
+    );
+    // A frame of the wrong size adds nothing.
+    let short = vec![0u16; m * n - 1];
+    assert!(together.add_frames(&[refs[0], &short]).is_err());
+    assert_eq!(together.frames, 5);
+    assert_eq!(stack_stats(&together), stack_stats(&one));
+}

@@ -244,8 +244,7 @@ fn fit_1d(
 
 /// `f` of every pixel of the rows a fit-row evaluation reads ([`Ctx::calc_rows`]; every
 /// pixel when the fit uses all rows), 0 elsewhere: the candidates' rate algebra touches only
-/// what the fit looks at (issue 6, acceptance 4: full 1 MP images per likelihood evaluation
-/// otherwise).
+/// what the fit looks at (instead of full 1 MP images per likelihood evaluation).
 fn on_calc_rows(ctx: &Ctx, n: usize, f: &(dyn Fn(usize) -> f32 + Sync)) -> Vec<f32> {
     if ctx.calc_rows.is_empty() {
         return (0..n).into_par_iter().map(f).collect();

@@ -798,7 +798,7 @@ impl<'a> Ctx<'a> {
                                 // same likelihood the fit maximises. (Pearson's (n−m)²/var is
                                 // not: one rail frame where the model expects 10⁻⁴ adds 10⁴
                                 // to it but only ≈ 9 to −lnL, so a fit that improves lnL could
-                                // make χ² explode; issue 6, Flea3 8-bit darks.) Every censored
+                                // make χ² explode, as on the Flea3 8-bit darks.) Every censored
                                 // term is kept, and its dof is the deviance the model itself
                                 // expects, E[G²] (exact sum over the rail-count outcomes): for
                                 // sparse counts E[G²] is far from 1 (≈ 2Fp·ln(1/p) for a rare

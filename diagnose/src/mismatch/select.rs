@@ -362,7 +362,7 @@ pub(crate) fn select(
             ));
             break;
         }
-        // Censored-dominated data (e.g. 8-bit darks at the black rail, issue 6): the rail
+        // Censored-dominated data (e.g. 8-bit darks at the black rail): the rail
         // counts are sparse, 2ΔlnL there is large for any shift of the per-frame rail
         // probabilities, and the χ² summary's dof (the model's own expected deviance) moves
         // with the model. A finding must then also bring χ²/dof closer to 1 (within the noise

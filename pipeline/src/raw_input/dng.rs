@@ -76,6 +76,43 @@ pub struct DngInfo {
     pub white_level: u32,
 }
 
+/// The frame's layout when the DNG stores one black level for every pixel (no repeat cell
+/// variation, no row/column deltas); `None` otherwise (use [`DngInfo::black_level_at`]).
+/// Channel indices follow the letters' first appearance in the tile, row-major.
+fn frame_layout(
+    cfa: &[String],
+    black: &[f64],
+    delta_h: &[f64],
+    delta_v: &[f64],
+    white: f64,
+) -> Option<camsim_core::RawLayout> {
+    let b0 = *black.first()?;
+    if black.iter().any(|&b| b != b0) || delta_h.iter().chain(delta_v).any(|&d| d != 0.0) {
+        return None;
+    }
+    let mut names: Vec<String> = Vec::new();
+    let cfa_tile = cfa
+        .iter()
+        .map(|row| {
+            row.chars()
+                .map(|ch| {
+                    let n = ch.to_string();
+                    names.iter().position(|x| *x == n).unwrap_or_else(|| {
+                        names.push(n);
+                        names.len() - 1
+                    })
+                })
+                .collect()
+        })
+        .collect();
+    Some(camsim_core::RawLayout {
+        cfa_tile,
+        channel_names: names,
+        black_dn: b0,
+        white_dn: white,
+    })
+}
+
 impl DngInfo {
     /// Black level (DN) at active-area pixel (row, col): the repeat cell plus the deltas.
     pub fn black_level_at(&self, row: usize, col: usize) -> f64 {
@@ -602,6 +639,7 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
     let adc_bits = (64 - (white as u64).leading_zeros()).max(1);
     let mut all_tags = dirs[0].values.clone();
     all_tags.extend(d.values.iter().map(|(k, v)| (*k, v.clone())));
+    let layout = frame_layout(&cfa, &black, &black_delta_h, &black_delta_v, white as f64);
     Ok(DngFrame {
         tags: all_tags,
         frame: RawFrame {
@@ -609,6 +647,7 @@ pub fn read_dng(path: &Path) -> Result<DngFrame, CliError> {
             cols: ac,
             adc_bits,
             dn,
+            layout,
         },
         info: DngInfo {
             ifd: d.name.clone(),

@@ -49,7 +49,7 @@ use serde::Deserialize;
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 
 /// Luminance (cd/m²) at which optics results are computed before scaling to the point's.
 const REFERENCE_LUMINANCE_CD_M2: f64 = 100.0;
@@ -285,22 +285,15 @@ fn illuminant_energy(d: &CaptureDoc) -> Result<Spectrum, String> {
     }
 }
 
-type CameraCache = Mutex<HashMap<String, Arc<Camera>>>;
-type RateCache = Mutex<HashMap<String, Arc<ElectronRate>>>;
-
-fn cameras() -> &'static CameraCache {
-    static C: OnceLock<CameraCache> = OnceLock::new();
-    C.get_or_init(|| Mutex::new(HashMap::new()))
-}
-
-fn lens_blurs() -> &'static Mutex<HashMap<String, Arc<camsim_optics::LensBlur>>> {
-    static C: OnceLock<Mutex<HashMap<String, Arc<camsim_optics::LensBlur>>>> = OnceLock::new();
-    C.get_or_init(|| Mutex::new(HashMap::new()))
-}
-
-fn rates() -> &'static RateCache {
-    static C: OnceLock<RateCache> = OnceLock::new();
-    C.get_or_init(|| Mutex::new(HashMap::new()))
+/// What the points of one study share, keyed by content: validated cameras (with their lens
+/// field models), lens field models by prescription and covered field, and electron rates at
+/// the reference luminance. One value per study run, created by its caller and passed to
+/// every point; each map is cleared when it holds `CACHE_LIMIT` (64) entries.
+#[derive(Default)]
+pub struct StudyCaches {
+    cameras: Mutex<HashMap<String, Arc<Camera>>>,
+    lens_blurs: Mutex<HashMap<String, Arc<camsim_optics::LensBlur>>>,
+    rates: Mutex<HashMap<String, Arc<ElectronRate>>>,
 }
 
 /// Number of entries kept per cache before it is cleared (memory bound for long studies).
@@ -325,10 +318,10 @@ fn cached<T>(
 }
 
 /// The camera of the document (with its lens field model), cached by content.
-fn load_camera(d: &CaptureDoc) -> Result<(String, Arc<Camera>), CliError> {
+fn load_camera(d: &CaptureDoc, caches: &StudyCaches) -> Result<(String, Arc<Camera>), CliError> {
     let lens = d.lens.clone().unwrap_or(Value::Null);
     let key = cache_key(&[&d.camera, &lens]);
-    let cam = cached(cameras(), &key, || {
+    let cam = cached(&caches.cameras, &key, || {
         let f = camera_file(d).map_err(CliError::Other)?;
         let mut cam = camera_from_file(Path::new("camera"), f)?;
         if let Some(l) = &d.lens {
@@ -344,7 +337,7 @@ fn load_camera(d: &CaptureDoc) -> Result<(String, Arc<Camera>), CliError> {
                 cover_mm *= 2.0;
             }
             let lkey = cache_key(&[l, &json!(cover_mm)]);
-            let blur = cached(lens_blurs(), &lkey, || {
+            let blur = cached(&caches.lens_blurs, &lkey, || {
                 let lens = lens_prescription(l).map_err(CliError::Other)?;
                 let opts = camsim_optics::LensBlurOptions::covering(cover_mm);
                 camsim_optics::LensBlur::from_prescription(&lens, &opts)
@@ -374,6 +367,7 @@ fn without_psf(cam: &Camera) -> Camera {
 
 /// Everything a metric needs about the point.
 struct Ctx<'a> {
+    caches: &'a StudyCaches,
     cam_key: String,
     cam: Arc<Camera>,
     sim: SimulationFile,
@@ -410,7 +404,7 @@ impl Ctx<'_> {
             &self.illuminant_json,
             &Value::Bool(psf),
         ]);
-        let base = cached(rates(), &key, || {
+        let base = cached(&self.caches.rates, &key, || {
             let cam = if psf {
                 (*self.cam).clone()
             } else {
@@ -451,6 +445,7 @@ impl Ctx<'_> {
             mean_luminance_cd_m2: Some(REFERENCE_LUMINANCE_CD_M2),
             illuminant: Some(self.illuminant_photons.clone()),
             patch_labels: None,
+            world: Default::default(),
         }
     }
 
@@ -466,15 +461,7 @@ impl Ctx<'_> {
     }
 
     fn planes(&self, raw: &camsim_core::image::RawFrame) -> Result<ChannelPlanes, CliError> {
-        let s = self.sensor();
-        let m = Mosaic::from_raw(
-            raw,
-            s.cfa.tile.clone(),
-            s.channel_names.clone(),
-            s.black_level_dn,
-            s.max_dn(),
-        )
-        .map_err(|e| CliError::Other(format!("processor: {e}")))?;
+        let m = Mosaic::from_frame(raw).map_err(|e| CliError::Other(format!("processor: {e}")))?;
         demosaic_planes(&m, self.demosaic)
             .map_err(|e| CliError::Other(format!("processor.demosaic: {e}")))
     }
@@ -494,15 +481,21 @@ fn dark_e(s: &SensorModel, t: f64) -> f64 {
 }
 
 /// Evaluate a capture point into `dir` (images) and return its metrics.
-pub fn evaluate(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
+pub fn evaluate(
+    doc: &Value,
+    seed: u64,
+    dir: &Path,
+    caches: &StudyCaches,
+) -> Result<PointOutput, CliError> {
     let d = parse(doc).map_err(CliError::Other)?;
     validate(doc).map_err(CliError::Other)?;
-    let (cam_key, cam) = load_camera(&d)?;
+    let (cam_key, cam) = load_camera(&d, caches)?;
     let ill_e = illuminant_energy(&d).map_err(CliError::Other)?;
     let sim = d.simulation.clone().unwrap_or_default();
     let sim_json = doc.get("simulation").cloned().unwrap_or(Value::Null);
     let fixed = fixed_pattern(&cam.sensor, seed);
     let ctx = Ctx {
+        caches,
         cam_key,
         sim,
         sim_json,
@@ -643,6 +636,7 @@ fn mtf50(ctx: &Ctx, o: &Mtf50Opts) -> Result<MtfResult, CliError> {
         mean_luminance_cd_m2: Some(REFERENCE_LUMINANCE_CD_M2),
         illuminant: Some(ill.clone()),
         patch_labels: None,
+        world: Default::default(),
     };
     let what = format!("slanted_edge:{angle}:{contrast}");
     let rate = ctx.rate(&what, edge, true)?;

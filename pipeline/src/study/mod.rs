@@ -190,11 +190,12 @@ fn run_local(
         "{spinner} study [{bar:40}] {pos}/{len} points ({eta}) {msg}",
     );
     let count = AtomicUsize::new(0);
+    let caches = capture::StudyCaches::default();
     let errors: Vec<CliError> = todo
         .par_iter()
         .filter_map(|p| {
             let dir = point_dir(out, p);
-            let r = point::evaluate_into(&p.doc, &p.hash, &dir).map_err(|e| {
+            let r = point::evaluate_into(&p.doc, &p.hash, &dir, &caches).map_err(|e| {
                 CliError::Other(format!(
                     "point {} ({}): {}",
                     p.index,
@@ -225,5 +226,5 @@ pub fn run_point_file(point_file: &Path, out: &Path) -> Result<Value, CliError> 
     if !out.join("point.json").exists() {
         point::write_point_file(out, &doc, &hash)?;
     }
-    point::evaluate_into(&doc, &hash, out)
+    point::evaluate_into(&doc, &hash, out, &capture::StudyCaches::default())
 }

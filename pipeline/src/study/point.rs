@@ -103,13 +103,18 @@ pub fn read_point_file(path: &Path) -> Result<(Value, String), CliError> {
 
 /// Evaluate the point `doc` (content hash `hash`) into `dir`: images first, result.json last
 /// (atomically). Returns the result.
-pub fn evaluate_into(doc: &Value, hash: &str, dir: &Path) -> Result<Value, CliError> {
+pub fn evaluate_into(
+    doc: &Value,
+    hash: &str,
+    dir: &Path,
+    caches: &capture::StudyCaches,
+) -> Result<Value, CliError> {
     std::fs::create_dir_all(dir).map_err(|e| CliError::output(dir, e))?;
     let point_path = dir.join("point.json");
     let kind = PointKind::of(doc).map_err(|m| CliError::input(&point_path, m))?;
     let seed = seed_of(doc, hash);
     let out = match kind {
-        PointKind::Capture => capture::evaluate(doc, seed, dir)
+        PointKind::Capture => capture::evaluate(doc, seed, dir, caches)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
         PointKind::Render => render::evaluate(doc, seed, dir)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,

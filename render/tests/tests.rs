@@ -1,0 +1,10 @@
+//! Integration tests of camsim-render: one test binary for the crate, one module per topic
+//! (`cargo test --release -p camsim-render --test tests <module>::`).
+
+mod depth_path;
+mod gltf_input;
+mod lightfield;
+mod mitsuba;
+mod physics;
+mod real_lens;
+mod samplers;

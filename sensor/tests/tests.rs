@@ -1,0 +1,6 @@
+//! Integration tests of camsim-sensor: one test binary for the crate, one module per topic
+//! (`cargo test --release -p camsim-sensor --test tests <module>::`).
+
+mod effects;
+mod isetcam_oracle;
+mod statistics;
