@@ -350,6 +350,9 @@ pub(super) fn grey_png(path: &Path, img: &[f32], w: usize, h: usize) -> Result<(
     crate::plots::rgb8_png(path, &rgb, h, w)
 }
 
+/// MTF50 of a 100 %-fill square pixel aperture alone: the root of sin(πf)/(πf) = ½ (cy/px).
+const PIXEL_BOX_MTF50_CY_PER_PX: f64 = 0.6034;
+
 fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
     let d = parse_dof(doc).map_err(CliError::Other)?;
     let tiles = tiles_of(&d);
@@ -388,7 +391,12 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
             col1: (xc + half).floor() as usize,
         };
         let e = slanted_edge_mtf(img, h, w, roi).ok()?;
+        // Both images integrate over the full pixel (the renderer's box filter), so the system
+        // MTF is at most the pixel aperture's, sinc(f) = sin(πf)/(πf), and MTF50 cannot exceed
+        // the box's 0.6034 cy/px: a larger value is the slanted-edge fit failing on the Monte
+        // Carlo noise of a strongly blurred tile, i.e. not measurable.
         e.mtf50_cycles_per_pixel
+            .filter(|f| *f <= PIXEL_BOX_MTF50_CY_PER_PX)
     };
     let mut per = Vec::new();
     for (k, z) in tiles.depths_m.iter().enumerate() {
