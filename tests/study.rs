@@ -713,7 +713,7 @@ fn lens_point_is_independent_of_threads_and_process() {
     );
 }
 
-/// Study 2 at CI size (examples/study_dof/spec_ci.json: 16 depths, 128 px, 32 spp): the
+/// Study 2 at CI size (examples/study_dof/spec_ci.json: 16 depths, 128 px, 64 spp for the real lens): the
 /// depth of field (vergence width 1/near − 1/far where MTF50 ≥ 0.15 cy/px) grows linearly in
 /// the f-number (f/2 → f/4 → f/8: ratios 2 ± 0.3), agrees with the thin-lens expectation of
 /// the entrance-pupil disc within 15 % (the lens's aberrations and the slanted-edge noise),
