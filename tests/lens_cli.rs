@@ -572,24 +572,24 @@ fn lens_cli_bad_input_is_one_error_line() {
         &zmx,
         "malformed zmx",
     );
-    // Unsupported surface type: a real Zemax file with one surface turned into a coordinate
-    // break.
+    // Unsupported surface type: a real Zemax file with one surface turned into a toroid
+    // (coordinate breaks are supported since issue 17, camsim_lens::fold).
     let src =
         root().join("../shared/data/real/lens/prescriptions/rayoptics_US00583336-2-scaled.zmx");
     let text = camsim_lens::readers::decode_text(&std::fs::read(src).unwrap());
     let pos = text.find("SURF 2").expect("SURF 2");
     let t = text[pos..].find("TYPE STANDARD").unwrap() + pos;
     let mut cb = text.clone();
-    cb.replace_range(t..t + "TYPE STANDARD".len(), "TYPE COORDBRK");
-    let zcb = d.join("coordbrk.zmx");
+    cb.replace_range(t..t + "TYPE STANDARD".len(), "TYPE TOROIDAL");
+    let zcb = d.join("toroidal.zmx");
     std::fs::write(&zcb, cb).unwrap();
     assert_one_line_error(
         &["lens", "report", zcb.to_str().unwrap(), "--json"],
         &zcb,
-        "COORDBRK",
+        "TOROIDAL",
     );
     let (_, _, err) = run(&["lens", "report", zcb.to_str().unwrap(), "--json"]);
-    assert!(err.contains("COORDBRK"), "{err}");
+    assert!(err.contains("TOROIDAL"), "{err}");
     // Unknown glass; the report folder must not be created.
     let text = std::fs::read_to_string(dgauss()).unwrap();
     let bad = d.join("badglass.json");

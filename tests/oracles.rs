@@ -90,6 +90,7 @@ fn scene_macbeth_default() {
         object_distance_m: None,
         illuminant: Some(d65),
         depth_m: None,
+        sample_aperture: Default::default(),
     };
     let lum = mean_luminance_riemann(&scene, &g, &ISETCAM);
     scene.scale(100.0 / lum);
@@ -130,6 +131,7 @@ fn scene_uniform_bb_small() {
         object_distance_m: None,
         illuminant: None,
         depth_m: None,
+        sample_aperture: Default::default(),
     };
     let lum = mean_luminance_riemann(&scene, &g, &ISETCAM);
     scene.scale(100.0 / lum);

@@ -189,6 +189,7 @@ fn random_cube_scene() -> SceneRadiance {
         object_distance_m: None,
         illuminant: Some(d65),
         depth_m: None,
+        sample_aperture: Default::default(),
     }
 }
 
@@ -261,6 +262,7 @@ fn illuminant_swap_round_trips_and_is_the_reflectance_formula() {
         object_distance_m: None,
         illuminant: Some(rgb.illuminant_photons.clone()),
         depth_m: None,
+        sample_aperture: Default::default(),
     };
     let mut s = orig.clone();
     swap_illuminant(&mut s, &tungsten, true, &SI).unwrap();

@@ -274,6 +274,9 @@ pub struct SceneRadiance {
     pub illuminant: Option<Spectrum>,
     /// Planar depth along the viewing axis (m), when known.
     pub depth_m: Option<Plane>,
+    /// What each sample stands for (cell average, or the B-spline-filtered target that the
+    /// optics' band-limited blurs compensate): [`crate::sample_aperture`].
+    pub sample_aperture: crate::sample_aperture::SampleAperture,
 }
 
 impl SceneRadiance {
@@ -411,6 +414,7 @@ mod tests {
             object_distance_m: None,
             illuminant: Some(Spectrum::sampled(vec![400.0, 700.0], vec![2.0, 2.0]).unwrap()),
             depth_m: None,
+            sample_aperture: Default::default(),
         };
         let new = Spectrum::sampled(vec![400.0, 700.0], vec![4.0, 8.0]).unwrap();
         scene.swap_illuminant(new).unwrap();

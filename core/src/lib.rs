@@ -19,7 +19,9 @@
 //! * [`exr_io`]: spectral OpenEXR in the Fichet et al. (JCGT 2021) layout;
 //! * [`linear_model`]: SVD compression of spectral images with round-trip error;
 //! * [`stats`]: region statistics and the photon-transfer curve;
-//! * [`rng`]: seeded random streams that do not depend on the thread count.
+//! * [`rng`]: seeded random streams that do not depend on the thread count;
+//! * [`sample_aperture`]: what one sample of a rendered scene stands for (cell average or
+//!   cubic B-spline filter).
 //!
 //! Units live in names: `_nm`, `_m`, `_um`, `_s`, `_v`, `_e` (electrons), `_dn`.
 #![deny(missing_docs)]
@@ -36,6 +38,7 @@ pub mod image;
 pub mod linear_model;
 pub mod npy;
 pub mod rng;
+pub mod sample_aperture;
 pub mod scene;
 pub mod scene_import;
 pub mod scene_view;

@@ -5,11 +5,14 @@
 //! centre, and outside the sensor the target continues (so blur near the border is defined).
 //! A target is rendered on a [`SamplingGrid`] of square cells centred on the optical axis;
 //! each cell holds the exact area average of the target over the cell where that is
-//! available in closed form (patches, edges, lines, ramps), otherwise a 4×4 supersample.
+//! available in closed form (patches, edges, lines, ramps), otherwise a 4×4 supersample; or,
+//! with [`SampleAperture::CubicBSpline`] (uniform, dark, patches, edges, points and grid
+//! lines), the target exactly filtered by the cubic B-spline of the cell pitch.
 use crate::colorimetry::luminance_weight_for_photons;
 use crate::constants::PhysicalConstants;
 use crate::error::CoreError;
 use crate::image::{SceneRadiance, SpectralBasis, SpectralImage};
+use crate::sample_aperture::{half_plane_weight, interval_weight, periodic_weight, SampleAperture};
 use crate::spectrum::Spectrum;
 use rayon::prelude::*;
 
@@ -27,6 +30,9 @@ pub struct SamplingGrid {
     pub sensor_width_m: f64,
     /// Height of the area the target fills (the sensor), m.
     pub sensor_height_m: f64,
+    /// What a sample stands for ([`SampleAperture`]); targets without a closed form for the
+    /// B-spline ([`rendered_aperture`]) are rendered as cell averages whatever it says.
+    pub aperture: SampleAperture,
 }
 
 impl SamplingGrid {
@@ -46,7 +52,13 @@ impl SamplingGrid {
             pitch_m: pixel_pitch_m / os as f64,
             sensor_width_m: cols as f64 * pixel_pitch_m,
             sensor_height_m: rows as f64 * pixel_pitch_m,
+            aperture: SampleAperture::Cell,
         }
+    }
+
+    /// The same grid with samples of `aperture`.
+    pub fn with_aperture(self, aperture: SampleAperture) -> Self {
+        SamplingGrid { aperture, ..self }
     }
 
     /// x (m) of the left edge of column `c`.
@@ -160,6 +172,21 @@ fn periodic_coverage(c0: f64, c1: f64, spacing: f64, lo: f64, hi: f64) -> f64 {
     (s / (c1 - c0)).min(1.0)
 }
 
+/// [`periodic_coverage`] of the intervals `k·spacing + [−half, half]` for the cell `[c0, c1]`
+/// under `ap` (pitch `d`).
+fn periodic_cover(ap: SampleAperture, d: f64, c0: f64, c1: f64, spacing: f64, half: f64) -> f64 {
+    match ap {
+        SampleAperture::Cell => periodic_coverage(c0, c1, spacing, -half, half),
+        _ => {
+            let c = 0.5 * (c0 + c1);
+            // shift the pattern so that the period containing the centre is k = 0
+            let k = (c / spacing).round();
+            let off = c - k * spacing;
+            periodic_weight(ap, spacing / d, (-half - off) / d, (half - off) / d)
+        }
+    }
+}
+
 /// Area of the part of the axis-aligned square [x0,x1]×[y0,y1] where n·p > 0
 /// (Sutherland–Hodgman clip of the square by the half-plane, then the shoelace formula).
 fn half_plane_area(x0: f64, x1: f64, y0: f64, y1: f64, nx: f64, ny: f64) -> f64 {
@@ -191,6 +218,25 @@ fn half_plane_area(x0: f64, x1: f64, y0: f64, y1: f64, nx: f64, ny: f64) -> f64 
     0.5 * a.abs()
 }
 
+/// `wx(x_c) · wy(y_r)` at every sample (x_c, y_r: the sample centres).
+fn separable_plane(g: &SamplingGrid, wx: impl Fn(f64) -> f64, wy: impl Fn(f64) -> f64) -> Vec<f32> {
+    let cx: Vec<f64> = (0..g.cols)
+        .map(|c| wx(0.5 * (g.x0(c) + g.x0(c + 1))))
+        .collect();
+    let ry: Vec<f64> = (0..g.rows)
+        .map(|r| wy(0.5 * (g.y0(r) + g.y0(r + 1))))
+        .collect();
+    let mut p = vec![0f32; g.rows * g.cols];
+    p.par_chunks_mut(g.cols)
+        .zip(ry.par_iter())
+        .for_each(|(row, &y)| {
+            for (v, &x) in row.iter_mut().zip(&cx) {
+                *v = (x * y) as f32;
+            }
+        });
+    p
+}
+
 fn plane_from_fn(g: &SamplingGrid, f: impl Fn(f64, f64, f64, f64) -> f32 + Sync) -> Vec<f32> {
     let mut p = vec![0f32; g.rows * g.cols];
     p.par_chunks_mut(g.cols).enumerate().for_each(|(r, row)| {
@@ -202,9 +248,27 @@ fn plane_from_fn(g: &SamplingGrid, f: impl Fn(f64, f64, f64, f64) -> f32 + Sync)
     p
 }
 
-/// Render a target on a sampling grid as a spectral image (photons/(s·sr·m²·nm)).
+/// The aperture `render_target` gives `target`'s samples on `g`: the grid's, for targets
+/// with a closed form under it (dark, uniform, patches, slanted edge, point array, grid
+/// lines), else [`SampleAperture::Cell`].
+pub fn rendered_aperture(target: &Target, g: &SamplingGrid) -> SampleAperture {
+    match target {
+        Target::Dark
+        | Target::Uniform { .. }
+        | Target::Patches { .. }
+        | Target::SlantedEdge { .. }
+        | Target::PointArray { .. }
+        | Target::GridLines { .. } => g.aperture,
+        _ => SampleAperture::Cell,
+    }
+}
+
+/// Render a target on a sampling grid as a spectral image (photons/(s·sr·m²·nm)); samples
+/// stand for [`rendered_aperture`].
 pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage, CoreError> {
     let (w, h) = (g.sensor_width_m, g.sensor_height_m);
+    let ap = rendered_aperture(target, g);
+    let d = g.pitch_m;
     let n = g.rows * g.cols;
     let single = |s: &Spectrum, plane: Vec<f32>| {
         SpectralImage::from_single_spectrum(g.rows, g.cols, s.clone(), plane)
@@ -237,9 +301,17 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
                     let (px0, px1, py0, py1) =
                         (cx - pw / 2.0, cx + pw / 2.0, cy - ph / 2.0, cy + ph / 2.0);
                     let a = g.pitch_m * g.pitch_m;
-                    let plane = plane_from_fn(g, |x0, x1, y0, y1| {
-                        (overlap(x0, x1, px0, px1) * overlap(y0, y1, py0, py1) / a) as f32
-                    });
+                    let plane = match ap {
+                        SampleAperture::Cell => plane_from_fn(g, |x0, x1, y0, y1| {
+                            (overlap(x0, x1, px0, px1) * overlap(y0, y1, py0, py1) / a) as f32
+                        }),
+                        // Separable: one weight per column and one per row.
+                        _ => separable_plane(
+                            g,
+                            |xc| interval_weight(ap, (px0 - xc) / d, (px1 - xc) / d),
+                            |yc| interval_weight(ap, (py0 - yc) / d, (py1 - yc) / d),
+                        ),
+                    };
                     bg.iter_mut().zip(&plane).for_each(|(b, p)| *b -= p);
                     planes.push(plane);
                 }
@@ -258,8 +330,14 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             let a = angle_deg.to_radians();
             let (nx, ny) = (a.cos(), a.sin());
             let area = g.pitch_m * g.pitch_m;
-            let lightp = plane_from_fn(g, |x0, x1, y0, y1| {
-                (half_plane_area(x0, x1, y0, y1, nx, ny) / area).clamp(0.0, 1.0) as f32
+            let lightp = plane_from_fn(g, |x0, x1, y0, y1| match ap {
+                SampleAperture::Cell => {
+                    (half_plane_area(x0, x1, y0, y1, nx, ny) / area).clamp(0.0, 1.0) as f32
+                }
+                _ => {
+                    let (xc, yc) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+                    half_plane_weight(ap, nx, ny, -(nx * xc + ny * yc) / d) as f32
+                }
             });
             let darkp = lightp.iter().map(|v| 1.0 - v).collect();
             SpectralImage::new(
@@ -316,8 +394,8 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
         } => {
             let (s, half) = (*spacing_m, point_size_m / 2.0);
             let pts = plane_from_fn(g, |x0, x1, y0, y1| {
-                (periodic_coverage(x0, x1, s, -half, half)
-                    * periodic_coverage(y0, y1, s, -half, half)) as f32
+                (periodic_cover(ap, d, x0, x1, s, half) * periodic_cover(ap, d, y0, y1, s, half))
+                    as f32
             });
             let bg = pts.iter().map(|v| 1.0 - v).collect();
             SpectralImage::new(
@@ -335,8 +413,8 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
         } => {
             let (s, half) = (*spacing_m, line_width_m / 2.0);
             let lines = plane_from_fn(g, |x0, x1, y0, y1| {
-                let cx = periodic_coverage(x0, x1, s, -half, half);
-                let cy = periodic_coverage(y0, y1, s, -half, half);
+                let cx = periodic_cover(ap, d, x0, x1, s, half);
+                let cy = periodic_cover(ap, d, y0, y1, s, half);
                 (1.0 - (1.0 - cx) * (1.0 - cy)) as f32
             });
             let bg = lines.iter().map(|v| 1.0 - v).collect();

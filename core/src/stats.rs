@@ -105,9 +105,12 @@ pub struct LineFit {
     pub intercept: f64,
     /// standard error of the slope
     pub slope_std_error: f64,
+    /// standard error of the intercept, `√(s² (1/n + x̄²/Sxx))`
+    pub intercept_std_error: f64,
 }
 
-/// Ordinary least squares fit of a line.
+/// Ordinary least squares fit of a line with the textbook standard errors of slope and
+/// intercept (residual variance `s² = RSS/(n−2)`).
 pub fn fit_line(x: &[f64], y: &[f64]) -> LineFit {
     let n = x.len() as f64;
     let mx = x.iter().sum::<f64>() / n;
@@ -121,15 +124,12 @@ pub fn fit_line(x: &[f64], y: &[f64]) -> LineFit {
         .zip(y)
         .map(|(a, b)| (b - slope * a - intercept).powi(2))
         .sum();
-    let se = if n > 2.0 {
-        (rss / (n - 2.0) / sxx).sqrt()
-    } else {
-        f64::NAN
-    };
+    let s2 = if n > 2.0 { rss / (n - 2.0) } else { f64::NAN };
     LineFit {
         slope,
         intercept,
-        slope_std_error: se,
+        slope_std_error: (s2 / sxx).sqrt(),
+        intercept_std_error: (s2 * (1.0 / n + mx * mx / sxx)).sqrt(),
     }
 }
 

@@ -132,6 +132,34 @@ pub(crate) fn stack(frames: &[RawFrame], map: &ChannelMap, max_dn: u16) -> Stack
 /// Pixels per chunk of the deterministic parallel sums of [`moments`].
 const MOMENT_CHUNK: usize = 4096;
 
+/// Count and the two sums of `g(i)` over the pixel indices where `keep(i)`, in fixed chunks
+/// summed in order: the same bits at any thread count (a rayon `reduce` splits by work
+/// stealing, so its rounding would depend on the schedule). Generic, not `dyn`, so that `g`
+/// inlines into the per-pixel loop.
+fn chunk_sums<K, G>(n_pix: usize, keep: &K, g: G) -> (usize, f64, f64)
+where
+    K: Fn(usize) -> bool + Sync,
+    G: Fn(usize) -> (f64, f64) + Sync,
+{
+    (0..n_pix.div_ceil(MOMENT_CHUNK))
+        .into_par_iter()
+        .map(|k| {
+            let (mut n, mut a, mut b) = (0usize, 0.0f64, 0.0f64);
+            for i in k * MOMENT_CHUNK..((k + 1) * MOMENT_CHUNK).min(n_pix) {
+                if keep(i) {
+                    let (x, y) = g(i);
+                    n += 1;
+                    a += x;
+                    b += y;
+                }
+            }
+            (n, a, b)
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
+}
+
 /// Mean, sample variance and fourth central moment of the values `f(i)` over the pixel
 /// indices where `keep(i)` (parallel, two passes).
 pub(crate) fn moments(
@@ -139,30 +167,15 @@ pub(crate) fn moments(
     keep: impl Fn(usize) -> bool + Sync,
     f: impl Fn(usize) -> f64 + Sync,
 ) -> (usize, f64, f64, f64) {
-    // Fixed chunks summed in order: the same bits at any thread count (a rayon `reduce`
-    // splits by work stealing, so its rounding depends on the schedule).
-    let chunks = |g: &(dyn Fn(usize) -> (usize, f64, f64) + Sync)| -> (usize, f64, f64) {
-        (0..n_pix.div_ceil(MOMENT_CHUNK))
-            .into_par_iter()
-            .map(|k| {
-                (k * MOMENT_CHUNK..((k + 1) * MOMENT_CHUNK).min(n_pix))
-                    .filter(|&i| keep(i))
-                    .map(g)
-                    .fold((0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
-            })
-            .collect::<Vec<_>>()
-            .into_iter()
-            .fold((0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
-    };
-    let (cnt, s, _) = chunks(&|i| (1usize, f(i), 0.0));
+    let (cnt, s, _) = chunk_sums(n_pix, &keep, |i| (f(i), 0.0));
     if cnt < 2 {
         return (cnt, f64::NAN, f64::NAN, f64::NAN);
     }
     let m = s / cnt as f64;
-    let (_, s2, s4) = chunks(&|i| {
+    let (_, s2, s4) = chunk_sums(n_pix, &keep, |i| {
         let d = f(i) - m;
         let d2 = d * d;
-        (0, d2, d2 * d2)
+        (d2, d2 * d2)
     });
     (cnt, m, s2 / (cnt - 1) as f64, s4 / cnt as f64)
 }

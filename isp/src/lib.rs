@@ -43,7 +43,7 @@ pub use color::{
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
 pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};
-pub use srgb::{srgb_decode, srgb_encode, to_srgb16, to_srgb8};
+pub use srgb::{from_srgb8, srgb_decode, srgb_encode, to_srgb16, to_srgb8};
 pub use tone::{Bilateral, ToneCurve};
 
 use thiserror::Error;

@@ -27,6 +27,19 @@ pub fn to_srgb8(img: &RgbImage) -> Vec<u8> {
     quantise(img, 255.0).into_iter().map(|x| x as u8).collect()
 }
 
+/// The linear image that interleaved 8-bit sRGB codes stand for (the inverse of [`to_srgb8`]
+/// up to quantisation): `decode(code / 255)` per channel.
+pub fn from_srgb8(codes: &[u8], rows: usize, cols: usize) -> RgbImage {
+    RgbImage {
+        rows,
+        cols,
+        data: codes
+            .chunks_exact(3)
+            .map(|c| [0, 1, 2].map(|k| srgb_decode(c[k] as f64 / 255.0) as f32))
+            .collect(),
+    }
+}
+
 /// Interleaved R, G, B 16-bit sRGB codes: clip to [0, 1], encode, `round(e · 65535)`.
 pub fn to_srgb16(img: &RgbImage) -> Vec<u16> {
     quantise(img, 65535.0)

@@ -487,6 +487,10 @@ impl<'a> TraceSystem<'a> {
     }
 
     fn trace_block(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
+        if self.lens.has_folds() {
+            self.trace_block_folded(c, clip, src);
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         {
             let fma = std::arch::is_x86_feature_detected!("fma");
@@ -514,6 +518,44 @@ impl<'a> TraceSystem<'a> {
     #[target_feature(enable = "avx2,fma")]
     unsafe fn trace_block_avx2(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
         self.trace_block_generic::<true>(c, clip, src);
+    }
+
+    /// Lenses with mirrors or coordinate breaks: the rays of the block one by one through
+    /// [`LensPrescription::trace`] (the folded trace of [`crate::fold`]).
+    fn trace_block_folded(&self, c: &mut Chunk<'_>, clip: bool, src: Src<'_>) {
+        let len = c.x.len();
+        if let Some((g, pp)) = src {
+            let mut i = 0;
+            while i < len {
+                let k = (len - i).min(LANES);
+                Lanes::generate(g, &pp[i..i + k]).store(c, i, k);
+                i += k;
+            }
+        }
+        let clipping = if clip {
+            Clipping::SemiDiameters
+        } else {
+            Clipping::None
+        };
+        for i in 0..len {
+            if !c.alive[i] {
+                continue;
+            }
+            let ray = Ray {
+                origin_mm: [c.x[i], c.y[i], c.z[i]],
+                direction: [c.l[i], c.m[i], c.n[i]],
+                opl_mm: c.opl[i],
+            };
+            match self.lens.trace(&ray, self.wavelength_nm, clipping) {
+                Some(t) => {
+                    [c.x[i], c.y[i], c.z[i]] = t.image_mm;
+                    [c.l[i], c.m[i], c.n[i]] = t.direction;
+                    c.opl[i] = t.opl_mm;
+                    [c.sx[i], c.sy[i], c.sz[i]] = t.stop_mm;
+                }
+                None => c.alive[i] = false,
+            }
+        }
     }
 
     #[inline(always)]

@@ -71,6 +71,13 @@ impl LensPrescription {
             field_deg,
             msg: format!("chief ray {m} at {wavelength_nm} nm"),
         };
+        if self.has_folds() {
+            return Err(LensError::Prescription(
+                "Coddington field curvature is not implemented for mirrors / coordinate breaks \
+                 (use field_curvature_from_ray_pairs)"
+                    .into(),
+            ));
+        }
         let mut r = self.chief_ray(field_deg, wavelength_nm)?;
         let z = self.vertex_z_mm();
         let mut n1 = 1.0;

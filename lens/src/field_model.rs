@@ -434,7 +434,7 @@ impl FieldModel {
             Focus::Spec(s) => lens.focus(s)?.lens,
             Focus::Focused(f) => f.lens.clone(),
         };
-        let image_distance_mm = focused.surfaces.last().unwrap().thickness_mm;
+        let image_distance_mm = focused.image_distance_mm();
         if !image_distance_mm.is_finite() {
             return Err(bad("the focus distance has no real paraxial image".into()));
         }

@@ -201,7 +201,7 @@ impl LensPrescription {
                 "best focus: search interval [{lo_mm}, {hi_mm}] mm is empty"
             )));
         }
-        let d0 = self.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+        let d0 = self.image_distance_mm();
         let mut alias_free = true;
         let mut eval = |dz: f64| -> Result<f64, LensError> {
             let (m, ok) = self.with_image_distance(d0 + dz).mtf_merit(merit)?;

@@ -389,7 +389,7 @@ impl LensPrescription {
             }
         }
         let paraxial = self.focus_at(spec.focus_distance_mm)?;
-        let s0 = paraxial.surfaces.last().map_or(f64::NAN, |s| s.thickness_mm);
+        let s0 = paraxial.image_distance_mm();
         if !(s0.is_finite() && s0 > 0.0) {
             return Err(LensError::Paraxial(format!(
                 "the focus distance has no real paraxial image (image distance {s0} mm)"
@@ -424,7 +424,7 @@ impl LensPrescription {
         let tol_mm = 0.1 * self.primary_nm * 1e-6 * nw * nw;
         let (mtf_paraxial, mut alias_free) = merit(&paraxial)?;
         let done = |lens: LensPrescription, shift: f64, mtf: f64, alias_free: bool| {
-            let image_distance_mm = lens.surfaces.last().unwrap().thickness_mm;
+            let image_distance_mm = lens.image_distance_mm();
             let (mtf_at_frequency, _) = lens.poly_mtf_merit(&fields, &wls, &[freq])?;
             Ok::<FocusedLens, LensError>(FocusedLens {
                 lens,

@@ -23,6 +23,8 @@
 //!   save/load);
 //! * [`readers`]: Zemax `.zmx`, ISET/pbrt `.dat` and ISET lens JSON readers;
 //! * [`agf`]: Zemax `.agf` glass catalogues;
+//! * [`fold`]: mirrors and coordinate breaks (decentres, tilts) in sequential tracing,
+//!   Zemax conventions, results in unfolded image-space coordinates;
 //! * [`focus`]: pupil sampling set by the OPD slope for FFT PSFs and MTFs, and the MTF best
 //!   focus;
 //! * [`focus_model`]: the focus model every consumer uses: focus distance, criterion (best
@@ -62,6 +64,10 @@
 //!   with [`trace::Clipping::SemiDiameters`].
 //! * `conic` (k, default 0) and `aspheric_coeffs` (A4, A6, …, default none) give the even
 //!   asphere sag z = c r²/(1 + √(1 − (1+k)c²r²)) + A4 r⁴ + A6 r⁶ + ….
+//! * `"material": "mirror"` makes a surface a mirror (light goes back towards −z, so the
+//!   following thicknesses are negative); `"coordinate_breaks": [{"surface": j,
+//!   "decenter_y_mm": …, "tilt_x_deg": …}]` makes flat surface j a decentre/tilt of the local
+//!   frame (see [`fold`] for the conventions).
 //! * Exactly one surface has `"stop": true`.
 //! * `object_distance_mm`: distance from the object to the first vertex; `null` = infinity.
 //! * `fields_deg`: object-space chief-ray angles; `wavelengths_nm`; `primary_nm` (default the
@@ -80,6 +86,7 @@ pub mod field_curvature;
 pub mod field_model;
 pub mod focus;
 pub mod focus_model;
+pub mod fold;
 pub mod glass;
 pub mod huygens;
 pub mod paraxial;

@@ -4,7 +4,8 @@
 //! y = 1, nu = 0 and the "b" ray, y = 0, nu = 1 at the first vertex) span every paraxial ray, so
 //! focal points, principal planes and pupils follow from linear combinations.
 //!
-//! Positions `*_z_mm` are axial coordinates with the first vertex at z = 0 and light towards +z.
+//! Positions `*_z_mm` are axial coordinates with the first vertex at z = 0 and light towards +z
+//! (for systems with mirrors: unfolded coordinates, see [`crate::fold`]).
 use crate::error::LensError;
 use crate::prescription::{Aperture, LensPrescription};
 
@@ -69,11 +70,22 @@ pub fn ynu_trace(lens: &LensPrescription, wavelength_nm: f64, y0: f64, nu0: f64)
     let mut n_prev = 1.0;
     let mut ys = Vec::with_capacity(n.len() + 1);
     let mut nus = Vec::with_capacity(n.len());
+    // Unfolded (crate::fold): the light sees curvature s·c, a mirror has power −2 n s c
+    // (refraction into −n), a coordinate break none, and thicknesses count as s·t.
+    let folded = lens.has_folds();
+    let mut sign = 1.0;
     for (j, s) in lens.surfaces.iter().enumerate() {
         ys.push(y);
-        nu -= y * s.curvature_per_mm * (n[j] - n_prev);
+        if !folded {
+            nu -= y * s.curvature_per_mm * (n[j] - n_prev);
+        } else if s.is_mirror() {
+            nu += y * 2.0 * n_prev * sign * s.curvature_per_mm;
+            sign = -sign;
+        } else if lens.coordinate_break(j).is_none() {
+            nu -= y * sign * s.curvature_per_mm * (n[j] - n_prev);
+        }
         nus.push(nu);
-        y += s.thickness_mm * nu / n[j];
+        y += sign * s.thickness_mm * nu / n[j];
         n_prev = n[j];
     }
     ys.push(y);

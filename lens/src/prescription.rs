@@ -6,6 +6,7 @@
 //! `thickness_mm` of surface *j* is the axial distance from its vertex to the next vertex, and
 //! the thickness of the **last** surface is the distance to the image plane. Object space is air.
 use crate::error::LensError;
+pub use crate::fold::CoordinateBreak;
 use crate::glass::{Glass, GlassCatalog};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -129,6 +130,10 @@ pub struct PrescriptionFile {
     /// Where the data come from (publication, patent, licence), free text.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub provenance: Option<String>,
+    /// Coordinate breaks (decentres and tilts, [`crate::fold`]); each names a flat dummy
+    /// surface.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub coordinate_breaks: Vec<CoordinateBreak>,
 }
 
 fn default_units() -> String {
@@ -281,6 +286,8 @@ pub struct LensPrescription {
     pub aperture: Aperture,
     /// Provenance text.
     pub provenance: Option<String>,
+    /// Coordinate breaks ([`crate::fold`]), at most one per surface.
+    pub coordinate_breaks: Vec<CoordinateBreak>,
 }
 
 impl LensPrescription {
@@ -317,6 +324,37 @@ impl LensPrescription {
         }
         let mut surfaces = Vec::with_capacity(f.surfaces.len());
         let mut stop = None;
+        let mut prev_medium = Medium::Air;
+        for (k, c) in f.coordinate_breaks.iter().enumerate() {
+            let v = [
+                c.decenter_x_mm,
+                c.decenter_y_mm,
+                c.tilt_x_deg,
+                c.tilt_y_deg,
+                c.tilt_z_deg,
+            ];
+            if c.surface >= f.surfaces.len() {
+                return Err(bad(format!(
+                    "coordinate_breaks[{k}]: surface {} does not exist ({} surfaces)",
+                    c.surface,
+                    f.surfaces.len()
+                )));
+            }
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(bad(format!(
+                    "coordinate_breaks[{k}]: decentres and tilts must be finite, got {v:?}"
+                )));
+            }
+            if f.coordinate_breaks[..k]
+                .iter()
+                .any(|o| o.surface == c.surface)
+            {
+                return Err(bad(format!(
+                    "coordinate_breaks[{k}]: surface {} has two coordinate breaks",
+                    c.surface
+                )));
+            }
+        }
         for (i, s) in f.surfaces.iter().enumerate() {
             let curvature_per_mm = match s.radius_mm {
                 None => 0.0,
@@ -346,7 +384,11 @@ impl LensPrescription {
                     "surface {i}: conic / aspheric_coeffs must be finite"
                 )));
             }
+            let is_break = f.coordinate_breaks.iter().any(|c| c.surface == i);
             let medium = match &s.material {
+                // A mirror or a coordinate break leaves the light in the medium it was in.
+                _ if is_break => prev_medium.clone(),
+                MaterialFile::Name(n) if n.eq_ignore_ascii_case("mirror") => prev_medium.clone(),
                 MaterialFile::Name(n) if n.eq_ignore_ascii_case("air") => Medium::Air,
                 MaterialFile::Name(n) => Medium::Glass(catalog.glass(n, None)?),
                 MaterialFile::Catalog { glass, catalog: c } => {
@@ -368,6 +410,20 @@ impl LensPrescription {
                 }
                 stop = Some(i);
             }
+            if is_break && s.stop {
+                return Err(bad(format!(
+                    "surface {i}: a coordinate break cannot be the stop"
+                )));
+            }
+            if is_break
+                && (curvature_per_mm != 0.0 || s.conic != 0.0 || !s.aspheric_coeffs.is_empty())
+            {
+                return Err(bad(format!(
+                    "surface {i}: a coordinate break must be flat (radius_mm null, no conic or \
+                     aspheric_coeffs)"
+                )));
+            }
+            prev_medium = medium.clone();
             surfaces.push(Surface {
                 curvature_per_mm,
                 thickness_mm: s.thickness_mm,
@@ -467,6 +523,7 @@ impl LensPrescription {
             primary_nm,
             aperture,
             provenance: f.provenance.clone(),
+            coordinate_breaks: f.coordinate_breaks.clone(),
         })
     }
 
@@ -502,19 +559,33 @@ impl LensPrescription {
                 Aperture::FNumber(f_number) => ApertureFile::FNumber { f_number },
             },
             provenance: self.provenance.clone(),
+            coordinate_breaks: self.coordinate_breaks.clone(),
         }
     }
 
     /// Axial position (mm) of each vertex, the first at 0, plus the image plane as last entry.
+    /// With mirrors these are unfolded positions (Σ s·t, s the propagation sign, see
+    /// [`crate::fold`]).
     pub fn vertex_z_mm(&self) -> Vec<f64> {
         let mut z = Vec::with_capacity(self.surfaces.len() + 1);
         let mut acc = 0.0;
         z.push(0.0);
+        let mut sign = 1.0;
         for s in &self.surfaces {
-            acc += s.thickness_mm;
+            if s.is_mirror() {
+                sign = -sign;
+            }
+            acc += sign * s.thickness_mm;
             z.push(acc);
         }
         z
+    }
+
+    /// The image distance: unfolded last thickness (the last thickness itself unless an odd
+    /// number of mirrors precedes the image).
+    pub fn image_distance_mm(&self) -> f64 {
+        let s = self.propagation_signs().last().copied().unwrap_or(1.0);
+        s * self.surfaces.last().map_or(0.0, |x| x.thickness_mm)
     }
 
     /// Index after each surface at `wavelength_nm` (object space is air, n = 1).
@@ -528,8 +599,9 @@ impl LensPrescription {
     /// A copy with the image distance (last thickness) set to `image_distance_mm`.
     pub fn with_image_distance(&self, image_distance_mm: f64) -> Self {
         let mut l = self.clone();
+        let sign = self.propagation_signs().last().copied().unwrap_or(1.0);
         if let Some(s) = l.surfaces.last_mut() {
-            s.thickness_mm = image_distance_mm;
+            s.thickness_mm = sign * image_distance_mm;
         }
         l
     }

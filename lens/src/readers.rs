@@ -18,7 +18,7 @@ use crate::error::LensError;
 use crate::glass::GlassCatalog;
 use crate::paraxial::ynu_trace;
 use crate::prescription::{
-    ApertureFile, LensPrescription, MaterialFile, PrescriptionFile, SurfaceFile,
+    ApertureFile, CoordinateBreak, LensPrescription, MaterialFile, PrescriptionFile, SurfaceFile,
 };
 
 /// Parse an ISET/pbrt `.dat` lens. The EPD is set so the paraxial marginal ray of an object at
@@ -91,6 +91,7 @@ pub fn read_iset_dat(text: &str, name: &str) -> Result<PrescriptionFile, LensErr
         primary_nm: None,
         aperture: ApertureFile::Epd { epd_mm: 1.0 },
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     // Unit-height parallel ray → its stop height gives EPD = 2 sd / |y_stop|.
     let l = LensPrescription::from_file_form(&f, &GlassCatalog::bundled())?;
@@ -339,8 +340,11 @@ struct ZSurf {
 /// Surface 0 is the object (its `DISZ` is the object distance); the last surface is the image
 /// plane. Everything else (solves, pickups, merit function, tolerances…) is ignored.
 ///
+/// `GLAS MIRROR` surfaces reflect and `TYPE COORDBRK` surfaces (`PARM 1`–`6`: decentre x, y,
+/// tilt x, y, z, order) move the local frame, both with Zemax's conventions ([`crate::fold`]).
+///
 /// Errors name the surface number (Zemax numbering) and cause: an unsupported `TYPE` (e.g.
-/// `COORDBRK`, `TOROIDAL`), a `MIRROR` (reflective systems are not supported), a glass not in
+/// `TOROIDAL`), a glass not in
 /// the catalogue nor in `opts.substitutions`, a missing or repeated stop.
 pub fn read_zmx(
     bytes: &[u8],
@@ -512,10 +516,7 @@ pub fn read_zmx(
         };
         let sn = s.number;
         if g.eq_ignore_ascii_case("MIRROR") {
-            return Err(err(
-                *ln,
-                format!("surface {sn}: GLAS MIRROR (reflective surfaces are not supported)"),
-            ));
+            return Ok(MaterialFile::Name("mirror".into()));
         }
         if g.is_empty() || g.eq_ignore_ascii_case("AIR") {
             return Ok(MaterialFile::Name("air".into()));
@@ -604,13 +605,58 @@ pub fn read_zmx(
     };
     let nsurf = surfs.len();
     let mut out = Vec::new();
+    let mut breaks: Vec<CoordinateBreak> = Vec::new();
     for s in &surfs[1..nsurf - 1] {
         let kind = s.kind.to_ascii_uppercase();
+        if kind == "COORDBRK" {
+            // PARM 1, 2: decentre x, y; 3, 4, 5: tilt about x, y, z (degrees); 6: order.
+            let mut a = [0.0f64; 7];
+            for &(k, v) in &s.parm {
+                if (1..=6).contains(&k) {
+                    a[k] = v;
+                }
+            }
+            if s.stop {
+                return Err(err(
+                    s.line,
+                    format!(
+                        "surface {}: a COORDBRK surface cannot be the stop",
+                        s.number
+                    ),
+                ));
+            }
+            let t = s.disz.ok_or_else(|| {
+                err(
+                    s.line,
+                    format!("surface {}: DISZ INFINITY inside the lens", s.number),
+                )
+            })?;
+            breaks.push(CoordinateBreak {
+                surface: out.len(),
+                decenter_x_mm: a[1] * unit_scale,
+                decenter_y_mm: a[2] * unit_scale,
+                tilt_x_deg: a[3],
+                tilt_y_deg: a[4],
+                tilt_z_deg: a[5],
+                tilt_first: a[6] != 0.0,
+            });
+            out.push(SurfaceFile {
+                radius_mm: None,
+                thickness_mm: t * unit_scale,
+                material: MaterialFile::Name("air".into()),
+                semi_diameter_mm: None,
+                conic: 0.0,
+                aspheric_coeffs: Vec::new(),
+                stop: false,
+            });
+            continue;
+        }
         if kind != "STANDARD" && kind != "EVENASPH" {
             return Err(err(
                 s.line,
                 format!(
-                    "surface {}: surface type {} is not supported (STANDARD, EVENASPH only)",
+                    "surface {}: surface type {} is not supported (STANDARD, EVENASPH, \
+                     COORDBRK only)",
                     s.number, s.kind
                 ),
             ));
@@ -712,6 +758,7 @@ pub fn read_zmx(
         primary_nm: Some(primary_nm),
         aperture: ApertureFile::Epd { epd_mm: 1.0 },
         provenance: (!glass_notes.is_empty()).then(|| format!("Zemax .zmx; {glass_notes}")),
+        coordinate_breaks: breaks,
     };
     // First-order data of the lens with a provisional aperture, for the aperture and field
     // conversions.

@@ -168,6 +168,9 @@ impl LensPrescription {
         clipping: Clipping,
         upto: usize,
     ) -> Option<(Vec3, Vec3, f64, Vec3)> {
+        if self.has_folds() {
+            return crate::fold::trace_folded(self, ray, wavelength_nm, clipping, upto);
+        }
         let z = self.vertex_z_mm();
         let mut r = *ray;
         let mut n_prev = 1.0;

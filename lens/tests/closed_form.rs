@@ -36,6 +36,7 @@ fn lens(
         primary_nm: None,
         aperture: ApertureFile::Epd { epd_mm },
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     LensPrescription::from_file_form(&f, &GlassCatalog::bundled()).unwrap()
 }
@@ -267,6 +268,7 @@ fn validation_names_the_bad_value() {
         primary_nm: None,
         aperture: ApertureFile::FNumber { f_number: 2.0 },
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     let e = LensPrescription::from_file_form(&f, &GlassCatalog::bundled())
         .unwrap_err()

@@ -56,6 +56,7 @@ fn thin_lens(sd: Option<f64>) -> LensPrescription {
         primary_nm: None,
         aperture: ApertureFile::Epd { epd_mm: 4.0 },
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     LensPrescription::from_file_form(&pf, &GlassCatalog::bundled()).unwrap()
 }

@@ -32,6 +32,7 @@ fn lens(mut surfaces: Vec<SurfaceFile>, stop: usize, epd_mm: f64) -> LensPrescri
         primary_nm: None,
         aperture: ApertureFile::Epd { epd_mm },
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     LensPrescription::from_file_form(&f, &GlassCatalog::bundled()).unwrap()
 }

@@ -39,6 +39,7 @@ fn thin_lens() -> LensPrescription {
         primary_nm: None,
         aperture: ApertureFile::Epd { epd_mm: 5.0 },
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     LensPrescription::from_file_form(&f, &GlassCatalog::bundled()).unwrap()
 }

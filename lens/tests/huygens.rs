@@ -50,6 +50,7 @@ fn perfect_lens(epd_mm: f64) -> LensPrescription {
         primary_nm: None,
         aperture: ApertureFile::Epd { epd_mm },
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     LensPrescription::from_file_form(&f, &GlassCatalog::bundled()).unwrap()
 }
@@ -152,6 +153,7 @@ fn off_axis_huygens_psf_of_a_concentric_lens_is_the_projected_airy_pattern() {
             primary_nm: None,
             aperture: ApertureFile::Epd { epd_mm: 1.0 },
             provenance: None,
+            coordinate_breaks: Vec::new(),
         };
         LensPrescription::from_file_form(&f, &GlassCatalog::bundled()).unwrap()
     };

@@ -75,6 +75,7 @@ fn reversed(l: &LensPrescription) -> (LensPrescription, f64) {
         primary_nm: l.primary_nm,
         aperture: l.aperture,
         provenance: None,
+        coordinate_breaks: Vec::new(),
     };
     (r, z_last)
 }

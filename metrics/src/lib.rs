@@ -10,6 +10,7 @@
 //! * [`sfr`]: ISO 12233 slanted-edge spatial frequency response (e-SFR) and MTF50;
 //! * [`patches`]: per-patch mean, noise and SNR of test charts laid out as in the capture-format
 //!   spec (target kind `patches`), per CFA channel;
+//! * [`rolling_shutter`]: edge skew per row and flicker band period of rolling-shutter frames;
 //! * [`summary`]: PSNR and ΔE distribution statistics.
 //!
 //! Units live in names (`_db`, `_deg`, `_cycles_per_pixel`).
@@ -18,6 +19,7 @@
 pub mod color_difference;
 pub mod error;
 pub mod patches;
+pub mod rolling_shutter;
 pub mod scielab;
 pub mod sfr;
 pub mod summary;

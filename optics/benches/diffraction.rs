@@ -29,6 +29,7 @@ fn main() {
         object_distance_m: None,
         illuminant: None,
         depth_m: None,
+        sample_aperture: Default::default(),
     };
     let optics = OpticsModel {
         f_number: 4.0,

@@ -79,6 +79,21 @@ pub(crate) struct FftConvolver {
     fx2: Vec<f64>,
     /// Squared row frequencies fy², one per FFT row index (len pr).
     fy2: Vec<f64>,
+    /// Sample-aperture compensation `(gx per spectrum column, gy per row)`, see
+    /// [`FftConvolver::compensate_sample_aperture`].
+    aperture_gain: Option<(Vec<f32>, Vec<f32>)>,
+    /// Sample spacing (m).
+    dx: f64,
+}
+
+/// `sin(πx)/(πx)`.
+fn sinc(x: f64) -> f64 {
+    if x.abs() < 1e-12 {
+        1.0
+    } else {
+        let px = std::f64::consts::PI * x;
+        px.sin() / px
+    }
 }
 
 /// Signed frequency (cycles/m) of FFT index `k` of an `n`-point transform at spacing `dx`.
@@ -143,7 +158,26 @@ impl FftConvolver {
             col_inv: cp.plan_fft_inverse(pr),
             fx2,
             fy2,
+            aperture_gain: None,
+            dx,
         }
+    }
+
+    /// Make every transfer act on samples of aperture order `n` and give cell averages: the
+    /// transfer is multiplied by `[sinc(d fx) sinc(d fy)]^(1 − n)` (divide by the samples'
+    /// B-spline transfer `sincⁿ`, multiply by the output cell's `sinc`;
+    /// [`camsim_core::sample_aperture`]). Exact for transfers that vanish beyond the grid's
+    /// Nyquist frequency (the caller's duty). `n = 1` (cell averages in and out) is the identity.
+    pub fn compensate_sample_aperture(&mut self, order: u32) {
+        if order <= 1 {
+            self.aperture_gain = None;
+            return;
+        }
+        let e = 1 - order as i32;
+        let g = |f2: &f64| sinc(self.dx * f2.sqrt()).powi(e) as f32;
+        let gx = self.fx2.iter().map(g).collect();
+        let gy = self.fy2.iter().map(g).collect();
+        self.aperture_gain = Some((gx, gy));
     }
 
     /// Fresh buffers for one thread.
@@ -273,6 +307,13 @@ impl FftConvolver {
             Transfer::Spectrum(h) => {
                 for (v, hv) in ws.b.iter_mut().zip(h.iter()) {
                     *v *= *hv;
+                }
+            }
+        }
+        if let Some((gx, gy)) = &self.aperture_gain {
+            for (col, &a) in ws.b.chunks_exact_mut(self.pr).zip(gx) {
+                for (v, &b) in col.iter_mut().zip(gy) {
+                    *v *= a * b;
                 }
             }
         }

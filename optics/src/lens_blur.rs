@@ -262,7 +262,7 @@ impl LensBlur {
             })
             .map_err(ctx)?;
         let focused = focus.lens.with_object_distance(object_mm);
-        let image_mm = focused.surfaces.last().map_or(f64::NAN, |s| s.thickness_mm);
+        let image_mm = focused.image_distance_mm();
         if !(image_mm.is_finite() && image_mm > 0.0) {
             return Err(lens_err(format!(
                 "{name}: focused on {}, the paraxial image is not real (image distance {image_mm} mm)",

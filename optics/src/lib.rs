@@ -258,6 +258,20 @@ pub fn form_image(
     if rows == 0 || cols == 0 {
         return Err(OpticsError::Scene(format!("empty image {rows}×{cols}")));
     }
+    // A scene of B-spline samples: only the FFT blurs undo its aperture (see the blur step).
+    let aperture_order = scene.sample_aperture.order();
+    if aperture_order > 1
+        && !matches!(
+            optics.blur,
+            Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pillbox { .. }
+        )
+    {
+        return Err(OpticsError::Scene(format!(
+            "the scene's samples have the {:?} aperture, which only the FFT blurs (diffraction, \
+             wavefront, psf, pillbox) compensate; render it with cell averages for this blur",
+            scene.sample_aperture
+        )));
+    }
     if let Blur::Lens(lb) = &optics.blur {
         let split = lens_blur::form_lens_image(optics, lb, &scene.radiance, bands, dx)?;
         let (mut img, band_wl) = (split.image, split.wavelength_nm);
@@ -373,7 +387,9 @@ pub fn form_image(
     }
     let band_wl = band_wl.unwrap_or_default();
 
-    // 3. Blur.
+    // 3. Blur. The FFT blurs take samples of the scene's aperture (`aperture_order`) and give
+    // cell averages of the blurred irradiance, which the sensor's box average over the pixel
+    // turns into the exact pixel mean ([`camsim_core::sample_aperture`]).
     let band_finish = match optics.padding {
         Padding::Zero => Finish::Abs,
         Padding::Replicate => Finish::NonNegative,
@@ -384,7 +400,8 @@ pub fn form_image(
             let lmax = band_wl.iter().cloned().fold(0.0, f64::max) * 1e-9;
             // Airy tail: ~1 % of the energy lies beyond 20 λN.
             let margin = ((20.0 * lmax * n_eff / dx).ceil() as usize).clamp(2, 1024);
-            let conv = FftConvolver::new(rows, cols, dx, optics.padding, margin, margin);
+            let mut conv = FftConvolver::new(rows, cols, dx, optics.padding, margin, margin);
+            conv.compensate_sample_aperture(aperture_order);
             img.planes
                 .par_iter_mut()
                 .zip(band_wl.par_iter())
@@ -405,10 +422,14 @@ pub fn form_image(
         }
         Blur::Pillbox { width_um } => {
             let psf = pillbox_psf(width_um * 1e-6, dx);
-            convolve_planes_with(&mut img, optics.padding, Finish::Keep, |_| psf.clone())?;
+            let pad = optics.padding;
+            convolve_planes_with_aperture(&mut img, pad, Finish::Keep, aperture_order, |_| {
+                psf.clone()
+            })?;
         }
         Blur::Psf(set) => {
-            convolve_planes_with(&mut img, optics.padding, band_finish, |b| {
+            let pad = optics.padding;
+            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
                 set.resampled(band_wl[b], dx)
             })?;
         }
@@ -420,7 +441,10 @@ pub fn form_image(
                 .iter()
                 .map(|&w| wavefront_psf(w, n_eff, *defocus_um, *pupil_samples, dx))
                 .collect::<Result<_, _>>()?;
-            convolve_planes_with(&mut img, optics.padding, band_finish, |b| psfs[b].clone())?;
+            let pad = optics.padding;
+            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
+                psfs[b].clone()
+            })?;
         }
         Blur::Lens(_) => unreachable!("handled above"),
     }
@@ -494,11 +518,24 @@ pub(crate) fn convolve_planes_with(
     finish: Finish,
     psf_of: impl Fn(usize) -> SampledPsf + Sync,
 ) -> Result<(), OpticsError> {
+    convolve_planes_with_aperture(img, padding, finish, 1, psf_of)
+}
+
+/// [`convolve_planes_with`] for samples of aperture order `aperture_order`
+/// ([`fft::FftConvolver::compensate_sample_aperture`]).
+pub(crate) fn convolve_planes_with_aperture(
+    img: &mut SpectralImage,
+    padding: Padding,
+    finish: Finish,
+    aperture_order: u32,
+    psf_of: impl Fn(usize) -> SampledPsf + Sync,
+) -> Result<(), OpticsError> {
     let (rows, cols) = (img.rows, img.cols);
     let psfs: Vec<SampledPsf> = (0..img.planes.len()).into_par_iter().map(&psf_of).collect();
     let mr = psfs.iter().map(|p| p.half_rows).max().unwrap_or(0).max(1);
     let mc = psfs.iter().map(|p| p.half_cols).max().unwrap_or(0).max(1);
-    let conv = FftConvolver::new(rows, cols, psfs[0].pitch_m, padding, mr, mc);
+    let mut conv = FftConvolver::new(rows, cols, psfs[0].pitch_m, padding, mr, mc);
+    conv.compensate_sample_aperture(aperture_order);
     img.planes
         .par_iter_mut()
         .zip(psfs.par_iter())

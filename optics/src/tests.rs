@@ -92,6 +92,7 @@ fn band_scene(
         object_distance_m: None,
         illuminant: None,
         depth_m: None,
+        sample_aperture: Default::default(),
     }
 }
 
@@ -668,6 +669,7 @@ fn linear_model_planes_blur_like_bands() {
         object_distance_m: None,
         illuminant: None,
         depth_m: None,
+        sample_aperture: Default::default(),
     };
     let mut bands = lm.clone();
     bands.radiance = lm.radiance.to_bands(&g);
@@ -704,6 +706,7 @@ fn diffraction_expands_linear_model_to_bands() {
         object_distance_m: None,
         illuminant: None,
         depth_m: None,
+        sample_aperture: Default::default(),
     };
     let e = form_image(&plain(Blur::Diffraction), &sc, &g)
         .unwrap()

@@ -57,6 +57,7 @@ fn scene(rows: usize, cols: usize, pitch_m: f64, plane: Vec<f32>) -> SceneRadian
         object_distance_m: None,
         illuminant: None,
         depth_m: None,
+        sample_aperture: Default::default(),
     }
 }
 

@@ -8,6 +8,7 @@
 //! | optics | [`shot_irradiance`], [`irradiance_of`] | [`camsim_optics::form_image`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
 //! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |
+//! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`] | [`camsim_sensor::time_averaged_rate`] |
 //! | expected frame (DN) | [`expected_frame`] | [`camsim_sensor::expected_dn`] |
 //! | noisy frame (DN) | [`simulate_frame`] | [`camsim_sensor::expose_with`] |
 //! | contrast autofocus (lens position of the sharpest region) | [`crate::autofocus::contrast_autofocus`] | the steps above per position |
@@ -15,7 +16,8 @@ use crate::config::{CaptureSet, Exposure};
 use crate::error::CliError;
 use camsim_core::image::{Plane, RawFrame, SceneRadiance, SensorIrradiance};
 use camsim_core::spectrum::WavelengthGrid;
-use camsim_sensor::{ElectronRate, PatternSource, SensorModel, Shot};
+use camsim_sensor::{ElectronRate, PatternSource, SensorModel, Shot, TimeModel};
+use std::borrow::Cow;
 
 pub use crate::simulate::{
     sampling_for, shot_electron_rate, shot_irradiance, shot_scene, wavelength_grid,
@@ -43,6 +45,39 @@ pub fn shot_exposure(set: &CaptureSet, shot_index: usize, rate: &ElectronRate) -
     Shot {
         exposure_s,
         analog_gain: shot.analog_gain,
+    }
+}
+
+/// The time model of shot `shot_index`: the camera's readout with the shot's light
+/// modulation and motion.
+pub fn shot_time_model(set: &CaptureSet, shot_index: usize) -> TimeModel {
+    let shot = &set.shots[shot_index];
+    TimeModel {
+        readout: set.camera.readout,
+        light: shot.light,
+        motion: shot.motion,
+    }
+}
+
+/// The electron rate of shot `shot_index` averaged over each row's exposure window under
+/// `shot` (rolling shutter, PWM light, motion: [`camsim_sensor::time_averaged_rate`]); `rate`
+/// itself, untouched, when the shot has neither light modulation nor motion.
+pub fn shot_time_rate<'a>(
+    set: &CaptureSet,
+    shot_index: usize,
+    rate: &'a ElectronRate,
+    shot: &Shot,
+) -> Cow<'a, ElectronRate> {
+    let model = shot_time_model(set, shot_index);
+    if model.is_static() {
+        Cow::Borrowed(rate)
+    } else {
+        Cow::Owned(camsim_sensor::time_averaged_rate(
+            &set.camera.sensor,
+            rate,
+            shot.exposure_s,
+            &model,
+        ))
     }
 }
 

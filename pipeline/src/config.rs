@@ -9,8 +9,8 @@ use camsim_optics::{
     OpticsEffects, OpticsModel, Padding, RelativeIllumination,
 };
 use camsim_sensor::{
-    Cfa, ColumnFpn, Crosstalk, HotPixels, IrLeakage, NoiseSwitches, Nonlinearity, QeShift,
-    ResetNoise, SensorEffects, SensorModel,
+    Cfa, ColumnFpn, Crosstalk, HotPixels, IrLeakage, Motion, NoiseSwitches, Nonlinearity, PwmLight,
+    QeShift, Readout, ResetNoise, SensorEffects, SensorModel, ShutterMode,
 };
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -479,6 +479,68 @@ pub struct SensorFile {
     /// Effect block `qe_shift`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub qe_shift: Option<QeShiftFile>,
+    /// Extension: readout timing (default: global shutter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub readout: Option<ReadoutFile>,
+    /// Extension: operating temperature (°C); with `dark_reference_temperature_c` and
+    /// `dark_doubling_temperature_c`, scales `dark_voltage_v_per_s` by the doubling law.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature_c: Option<f64>,
+    /// Extension: temperature (°C) at which `dark_voltage_v_per_s` holds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark_reference_temperature_c: Option<f64>,
+    /// Extension: temperature step (°C) over which the dark current doubles.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark_doubling_temperature_c: Option<f64>,
+}
+
+/// `sensor.readout` (extension): when the rows expose.
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `mode` | required | `"global"` (every row over `[0, T]`) or `"rolling"` (row r over `[r·row_time, r·row_time + T]`) |
+/// | `row_time_us` | 0 | time between the exposure starts of consecutive rows (µs); required > 0 for `"rolling"` |
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReadoutFile {
+    /// `"global"` or `"rolling"`.
+    pub mode: String,
+    /// Row time (µs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub row_time_us: Option<f64>,
+}
+
+/// `shots[i].light_modulation` (extension): the scene's light is pulse-width modulated.
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `frequency_hz` | required | modulation frequency f (Hz) |
+/// | `duty_cycle` | required | on-fraction D of each period, in (0, 1] |
+/// | `phase` | 0 | start of the on-phase at t = 0 as a fraction of the period, in [0, 1) |
+///
+/// The mean light is the target's (the peak is 1/D times it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightModulationFile {
+    /// f (Hz).
+    pub frequency_hz: f64,
+    /// D.
+    pub duty_cycle: f64,
+    /// Phase (fraction of a period).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phase: Option<f64>,
+}
+
+/// `shots[i].motion` (extension): rigid image motion during the exposure.
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `velocity_px_per_s` | required | `[v_x, v_y]`: image velocity on the sensor (pixels/s; x along columns, y down the rows); at time t the image is shifted by v·t |
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionFile {
+    /// `[v_x, v_y]` (pixels/s).
+    pub velocity_px_per_s: [f64; 2],
 }
 
 /// `sensor.noise` switches (all default true).
@@ -576,6 +638,12 @@ pub struct ShotFile {
     pub analog_gain: Option<f64>,
     /// Frame files, relative to the captures file.
     pub frames: Vec<String>,
+    /// Extension: PWM modulation of the light during the exposure.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_modulation: Option<LightModulationFile>,
+    /// Extension: image motion during the exposure.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<MotionFile>,
 }
 
 /// `captures.simulation` (extension).
@@ -591,6 +659,21 @@ pub struct SimulationFile {
     /// Default seed when --seed is not given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
+    /// What a scene sample stands for: `"auto"` (default: the cubic B-spline filter under a
+    /// band-limited blur, [`crate::simulate::sample_aperture_for`]) or `"cell"` (always the
+    /// cell average, as before issue 17 §5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sample_aperture: Option<SampleApertureChoice>,
+}
+
+/// `simulation.sample_aperture`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SampleApertureChoice {
+    /// The most exact aperture the optics allow.
+    Auto,
+    /// Cell averages.
+    Cell,
 }
 
 /// A regular wavelength grid as written.
@@ -614,6 +697,8 @@ pub struct Camera {
     pub optics: OpticsModel,
     /// Sensor model.
     pub sensor: SensorModel,
+    /// Readout timing (`sensor.readout`; default global shutter).
+    pub readout: Readout,
 }
 
 /// A validated shot.
@@ -631,6 +716,10 @@ pub struct Shot {
     pub analog_gain: f64,
     /// Frame paths relative to the captures file.
     pub frames: Vec<String>,
+    /// PWM light modulation (`light_modulation`; None: steady light).
+    pub light: Option<PwmLight>,
+    /// Image motion during the exposure (`motion`; None: static).
+    pub motion: Option<Motion>,
 }
 
 /// How a shot's exposure time is set.
@@ -789,11 +878,65 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         effects: optics_effects_from_file(path, o, &raw.sensor)?,
     };
     let sensor = sensor_from_file(path, &raw.sensor)?;
+    let readout = readout_from_file(path, raw.sensor.readout.as_ref())?;
     Ok(Camera {
         name: raw.name.unwrap_or_else(|| "camera".into()),
         optics,
         sensor,
+        readout,
     })
+}
+
+/// `sensor.readout` → [`Readout`] (absent: global shutter).
+fn readout_from_file(path: &Path, r: Option<&ReadoutFile>) -> Result<Readout, CliError> {
+    let Some(r) = r else {
+        return Ok(Readout::default());
+    };
+    let row_time_s = non_negative(
+        path,
+        "sensor.readout.row_time_us",
+        r.row_time_us.unwrap_or(0.0),
+    )? * 1e-6;
+    let mode = match r.mode.as_str() {
+        "global" => ShutterMode::Global,
+        "rolling" => {
+            positive(path, "sensor.readout.row_time_us", row_time_s * 1e6)?;
+            ShutterMode::Rolling
+        }
+        other => {
+            return Err(CliError::input(
+                path,
+                format!(
+                    "sensor.readout.mode: unknown value \"{other}\" (expected global or rolling)"
+                ),
+            ))
+        }
+    };
+    Ok(Readout { mode, row_time_s })
+}
+
+/// The dark voltage at the operating temperature: `dark_voltage_v_per_s` (at
+/// `dark_reference_temperature_c`) through [`camsim_sensor::dark_at_temperature`] when
+/// `temperature_c` is given (the three keys go together).
+fn dark_voltage_at_temperature(
+    path: &Path,
+    s: &SensorFile,
+    dark_v_per_s: f64,
+) -> Result<f64, CliError> {
+    match (s.temperature_c, s.dark_reference_temperature_c, s.dark_doubling_temperature_c) {
+        (None, None, None) => Ok(dark_v_per_s),
+        (Some(t), Some(t_ref), Some(t_double)) => {
+            for (k, v) in [("sensor.temperature_c", t), ("sensor.dark_reference_temperature_c", t_ref)] {
+                check(path, v.is_finite() && v > -273.15, k, format!("must be a temperature above absolute zero (°C), got {v}"))?;
+            }
+            let t_double = positive(path, "sensor.dark_doubling_temperature_c", t_double)?;
+            Ok(camsim_sensor::dark_at_temperature(dark_v_per_s, t, t_ref, t_double))
+        }
+        _ => Err(CliError::input(
+            path,
+            "sensor.temperature_c: give temperature_c, dark_reference_temperature_c and dark_doubling_temperature_c together".to_string(),
+        )),
+    }
 }
 
 fn blur_from_file(
@@ -1014,10 +1157,14 @@ fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError
         analog_offset_v: s.analog_offset_v.unwrap_or(0.0),
         adc_bits: s.adc_bits,
         black_level_dn: s.black_level_dn.unwrap_or(0.0),
-        dark_voltage_v_per_s: non_negative(
+        dark_voltage_v_per_s: dark_voltage_at_temperature(
             path,
-            "sensor.dark_voltage_v_per_s",
-            s.dark_voltage_v_per_s.unwrap_or(0.0),
+            s,
+            non_negative(
+                path,
+                "sensor.dark_voltage_v_per_s",
+                s.dark_voltage_v_per_s.unwrap_or(0.0),
+            )?,
         )?,
         read_noise_v: non_negative(path, "sensor.read_noise_v", s.read_noise_v.unwrap_or(0.0))?,
         dsnu_sigma_v: non_negative(path, "sensor.dsnu_sigma_v", s.dsnu_sigma_v.unwrap_or(0.0))?,
@@ -1473,6 +1620,21 @@ pub fn captures_with_camera(
         }
         let target = crate::targets::target_from_value(&s.target, &dir, &camera.sensor)
             .map_err(|m| CliError::input(path, format!("{key}.target{m}")))?;
+        let light = s.light_modulation.as_ref().map(|l| PwmLight {
+            frequency_hz: l.frequency_hz,
+            duty_cycle: l.duty_cycle,
+            phase: l.phase.unwrap_or(0.0),
+        });
+        let motion = s.motion.as_ref().map(|m| Motion {
+            velocity_px_per_s: m.velocity_px_per_s,
+        });
+        let time = camsim_sensor::TimeModel {
+            readout: camera.readout,
+            light,
+            motion,
+        };
+        time.validate()
+            .map_err(|e| CliError::input(path, format!("{key}: {e}")))?;
         shots.push(Shot {
             id: s.id.clone(),
             target,
@@ -1480,6 +1642,8 @@ pub fn captures_with_camera(
             exposure,
             analog_gain,
             frames: s.frames.clone(),
+            light,
+            motion,
         });
     }
     let simulation = raw.simulation.unwrap_or_default();

@@ -56,6 +56,13 @@ pub enum Concealment {
     /// exposure series whose means alone look like exposure_scale); the evidence that tells
     /// them apart (repeats, darks, illuminants, edges) is present.
     Mimicked,
+    /// Darks and six flats up to 85 % of full scale under one illuminant (3200 K), nothing
+    /// else: a spectral change of a channel (QE shift, IR leakage, crosstalk) looks like a
+    /// change of that channel's gain, so the set cannot tell them apart.
+    OneIlluminant,
+    /// [`Concealment::OneIlluminant`] plus the same flats under a second illuminant (a
+    /// 6500 K blackbody), which separates a spectral change from a gain.
+    TwoIlluminants,
 }
 
 /// What to generate.
@@ -264,6 +271,20 @@ fn flats(levels: &[f64], repeats: usize) -> Vec<Plan> {
         .collect()
 }
 
+/// Flats under a blackbody of `kelvin` (ids `flat-{kelvin}k-{level}`).
+fn flats_at(kelvin: f64, levels: &[f64], repeats: usize) -> Vec<Plan> {
+    levels
+        .iter()
+        .map(|&f| Plan {
+            id: format!("flat-{}k-{}", kelvin.round() as i64, pct(f)),
+            target: json!({"kind": "uniform", "radiance": blackbody(kelvin),
+                           "mean_luminance_cd_m2": 200.0}),
+            level: Level::FullScale(f),
+            repeats,
+        })
+        .collect()
+}
+
 fn charts(levels: &[f64], repeats: usize) -> Vec<Plan> {
     let mut out = Vec::new();
     for (name, ill) in [("d65", json!("D65")), ("a", blackbody(2856.0))] {
@@ -359,6 +380,8 @@ fn radial_scene(dir: &Path, rows: usize, cols: usize) -> Result<Plan, CliError> 
 
 const DARK_T: [f64; 3] = [0.01, 0.25, 1.0];
 const PTC: [f64; 6] = [0.05, 0.15, 0.3, 0.5, 0.7, 0.9];
+/// Flat levels of the one- and two-illuminant sets (up to 85 % of full scale).
+const FLATS_85: [f64; 6] = [0.05, 0.2, 0.35, 0.5, 0.7, 0.85];
 
 /// The shots of a set (docs/effects.md, "Concealed-effect capture sets").
 fn plan_shots(spec: &DemoSpec, dir: &Path) -> Result<Vec<Plan>, CliError> {
@@ -386,6 +409,17 @@ fn plan_shots(spec: &DemoSpec, dir: &Path) -> Result<Vec<Plan>, CliError> {
             p.extend(edge(0.7, 2));
             p.extend(points(0.7, 2));
             p.extend(ramp(0.9, 2));
+            p
+        }
+        Concealment::OneIlluminant => {
+            let mut p = darks(&DARK_T, 4);
+            p.extend(flats(&FLATS_85, 4));
+            p
+        }
+        Concealment::TwoIlluminants => {
+            let mut p = darks(&DARK_T, 4);
+            p.extend(flats(&FLATS_85, 4));
+            p.extend(flats_at(6500.0, &FLATS_85, 4));
             p
         }
         Concealment::Mimicked => {

@@ -549,7 +549,9 @@ pub fn run_diagnose(
             opts.bic_threshold
         )));
     }
+    let t_load = std::time::Instant::now();
     let (data, used, skipped) = load_data(set, opts.progress)?;
+    let load_s = t_load.elapsed().as_secs_f64();
     let forward = SimForward {
         set: Mutex::new(set.clone()),
         believed: set.camera.clone(),
@@ -597,7 +599,10 @@ pub fn run_diagnose(
     let raw: CameraFile = serde_json::from_value(fitted.clone())
         .map_err(|e| CliError::Other(format!("internal: the fitted camera does not parse: {e}")))?;
     camera_from_file(&fitted_path, raw)?;
-    let report = report_json(&diag, &data, &skipped);
+    let mut report = report_json(&diag, &data, &skipped);
+    if !profile {
+        report["timing"] = Value::Null;
+    }
     let files = with_staging(out, |st| {
         let mut files: Vec<PathBuf> = Vec::new();
         let p = st.join("fitted_camera.json");
@@ -608,6 +613,17 @@ pub fn run_diagnose(
         std::fs::write(&p, serde_json::to_string_pretty(&report).expect("json"))
             .map_err(|e| CliError::output(&p, e))?;
         files.push("report.json".into());
+        // Wall times differ from run to run: written only on request (CAMSIM_PROFILE), so that
+        // the default outputs stay byte-identical for the same inputs and seed.
+        if profile {
+            let p = st.join("timing.json");
+            std::fs::write(
+                &p,
+                serde_json::to_string_pretty(&timing_json(&diag, &data, load_s)).expect("json"),
+            )
+            .map_err(|e| CliError::output(&p, e))?;
+            files.push("timing.json".into());
+        }
         let figs = figures::write_figures(st, &diag, &data)?;
         for f in &figs {
             files.push(PathBuf::from(&f.file));
@@ -645,6 +661,26 @@ pub struct DiagnoseSummary {
     pub files: Vec<PathBuf>,
     /// report.json as written.
     pub json: Value,
+}
+
+/// timing.json: wall time per stage (frames read and reduced, then the diagnosis's stages
+/// and the likelihood/forward-model counters), and what was subsampled. Kept out of
+/// report.json, which is byte-identical for the same inputs.
+fn timing_json(d: &Diagnosis, data: &DataSet, load_s: f64) -> Value {
+    let mut stages = vec![json!({"stage": "read and reduce the frames", "seconds": load_s})];
+    for t in &d.timing {
+        let mut v = json!({"stage": t.stage, "seconds": t.seconds});
+        if let Some(c) = t.calls {
+            v["calls"] = json!(c);
+        }
+        stages.push(v);
+    }
+    json!({
+        "stages": stages,
+        "note": "the first stages are sequential wall times; the counters (likelihood, forward model, identifiability) are parts of them",
+        "subsampled": {"fit_pixels": d.fit_pixels, "sensor_pixels": data.pixels(),
+                       "rule": "fits use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels; the reported fit (fit_before/fit_after, locate) uses every pixel"},
+    })
 }
 
 fn r4(x: f64) -> Value {
@@ -703,6 +739,49 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
         .iter()
         .map(|(e, why)| json!({"effect": e.id(), "reason": why}))
         .collect();
+    let vif = |x: f64| {
+        if x.is_finite() {
+            json!(x)
+        } else {
+            json!("infinite")
+        }
+    };
+    let cannot_tell: Vec<Value> = d
+        .selection
+        .identifiability
+        .iter()
+        .filter(|x| x.cannot_tell)
+        .map(|x| {
+            json!({
+                "effect": x.effect.id(),
+                "explanation": format!(
+                    "cannot tell from these shots: a change of {} is {} along the baseline ({}); variance inflation {} > {}",
+                    x.effect.id(),
+                    if x.variance_inflation.is_finite() { "almost entirely" } else { "entirely" },
+                    x.baseline.join(", "),
+                    if x.variance_inflation.is_finite() { format!("{:.3e}", x.variance_inflation) } else { "∞".into() },
+                    camsim_diagnose::mismatch::MAX_VARIANCE_INFLATION
+                ),
+                "variance_inflation": vif(x.variance_inflation),
+                "would_separate": x.would_separate,
+            })
+        })
+        .collect();
+    let identifiability: Vec<Value> = d
+        .selection
+        .identifiability
+        .iter()
+        .map(|x| {
+            json!({
+                "effect": x.effect.id(),
+                "parameters": x.parameters,
+                "variance_inflation": vif(x.variance_inflation),
+                "baseline": x.baseline,
+                "most_alike": x.most_alike.map(|(e, r2)| json!({"effect": e.id(), "rho2": r4(r2)})),
+                "cannot_tell": x.cannot_tell,
+            })
+        })
+        .collect();
     let table = |rows: &[camsim_diagnose::mismatch::CandidateRow]| -> Vec<Value> {
         rows.iter()
             .filter(|r| r.not_testable.is_none())
@@ -737,6 +816,10 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
         "fitted_camera": "fitted_camera.json",
         "undecided": undecided,
         "not_testable": not_testable,
+        "cannot_tell": cannot_tell,
+        "identifiability": {"max_variance_inflation": camsim_diagnose::mismatch::MAX_VARIANCE_INFLATION,
+                            "candidates": identifiability},
+        "timing": "timing.json",
         "candidates": {"rounds": rounds},
         "locate": {"before": sc(&d.before), "after": sc(&d.after),
                    "hot_pixels_classified": {"before": d.before.hot_pixels, "after": d.after.hot_pixels}},

@@ -84,6 +84,11 @@ pub struct LensArg {
     /// files named on a .zmx's GCAT line are also looked for beside the .zmx.
     #[arg(long = "glass-catalog", value_name = "FILE.agf")]
     pub glass_catalog: Vec<PathBuf>,
+    /// Sensor diagonal (mm): the maximum field becomes the field whose paraxial chief ray
+    /// reaches the sensor corner (tan θ = (d/2)/EFL at infinity), replacing the file's fields
+    /// (pbrt .dat and ISET lens files state none). --max-field-deg still overrides it.
+    #[arg(long = "sensor-diagonal-mm", value_name = "MM")]
+    pub sensor_diagonal_mm: Option<f64>,
 }
 
 impl LensArg {
@@ -110,7 +115,32 @@ impl LensArg {
             };
             opts = opts.substitute(from, glass, vendor);
         }
-        load_lens_with(&self.path, &opts)
+        let mut lens = load_lens_with(&self.path, &opts)?;
+        if let Some(d) = self.sensor_diagonal_mm {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(CliError::Other(format!(
+                    "--sensor-diagonal-mm {d} must be a positive number of mm"
+                )));
+            }
+            let half_fov = lens
+                .focused(lens.primary_nm)
+                .and_then(|f| f.paraxial_full_fov_deg(d / 2.0))
+                .map_err(|e| CliError::input(&self.path, e))?
+                / 2.0;
+            if !(half_fov > 0.0 && half_fov < 90.0) {
+                return Err(CliError::input(
+                    &self.path,
+                    format!("--sensor-diagonal-mm {d} gives a field of {half_fov}°"),
+                ));
+            }
+            eprintln!(
+                "camsim: {}: maximum field {half_fov:.4}° from the sensor diagonal {d} mm \
+                 (paraxial chief ray to the corner)",
+                self.path.display()
+            );
+            lens.fields_deg = vec![0.0, half_fov];
+        }
+        Ok(lens)
     }
 }
 
@@ -435,7 +465,7 @@ fn focused(lens: &LensPrescription, path: &Path) -> Result<LensPrescription, Cli
     let l = lens
         .focused(lens.primary_nm)
         .map_err(|e| CliError::input(path, e))?;
-    let d = l.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+    let d = l.image_distance_mm();
     if !d.is_finite() {
         return Err(CliError::input(
             path,
@@ -851,7 +881,7 @@ pub fn lens_report(
     } else {
         dz
     };
-    let img_d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+    let img_d = lens.image_distance_mm();
     let mtf_lens = lens.with_image_distance(img_d + dz);
     // Pupil grid set by the OPD slope (camsim_lens::focus), 64…1024 per side.
     let (wo, sampling) = mtf_lens
@@ -1650,7 +1680,7 @@ pub fn run_lens(cmd: LensCommand) -> Result<(), CliError> {
                 field_fraction,
                 max_field_deg(&lens, mfd, &path, field_fraction != 0.0)?,
             )?;
-            let d = lens.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+            let d = lens.image_distance_mm();
             let lens = lens.with_image_distance(d + defocus_mm);
             let (m, sample_mm, mut v, extra) = match method {
                 PsfMethod::Fft => {
@@ -1784,6 +1814,11 @@ pub fn draw_svg(
     max_field_deg: f64,
     rays: usize,
 ) -> Result<String, camsim_lens::LensError> {
+    if lens.has_folds() {
+        return Err(camsim_lens::LensError::Prescription(
+            "drawing a lens with mirrors or coordinate breaks is not supported".into(),
+        ));
+    }
     let primary = lens.primary_nm;
     let fo = lens.first_order(primary)?;
     let z = lens.vertex_z_mm();

@@ -22,9 +22,9 @@ use camsim_core::scene::{mean_luminance, Target};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_display::{show, DigitalImage, DisplayModel};
 use camsim_isp::{
-    demosaic_planes, fit_channel_matrix, macbeth_target_linear_srgb, srgb_decode, to_srgb16,
-    to_srgb8, Bilateral, ChannelBalance, ChannelMatrix, ChannelPlanes, DemosaicMethod, Mosaic,
-    RgbImage, ToneCurve, XYZ_TO_LINEAR_SRGB,
+    demosaic_planes, fit_channel_matrix, macbeth_target_linear_srgb, to_srgb16, to_srgb8,
+    Bilateral, ChannelBalance, ChannelMatrix, ChannelPlanes, DemosaicMethod, Mosaic, ToneCurve,
+    XYZ_TO_LINEAR_SRGB,
 };
 use camsim_metrics::{patch_stats, ChartLayout};
 use camsim_sensor::{electron_rate, fixed_pattern};
@@ -388,6 +388,8 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         exposure,
         analog_gain: camera.sensor.analog_gain,
         frames: vec!["raw.png".into()],
+        light: None,
+        motion: None,
     };
     let set = CaptureSet {
         path: path.clone(),
@@ -659,20 +661,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     });
     let wb_method = WbMethod::parse(&r.white_balance).expect("validated white_balance");
     // The chart geometry when the target is a 4 × 6 chart (macbeth or patches).
-    let chart = match &set.shots[0].target.target {
-        Target::Patches {
-            rows: 4,
-            cols: 6,
-            patch_fraction,
-            ..
-        } => Some(ChartLayout {
-            chart_rows: 4,
-            chart_cols: 6,
-            patch_fraction: *patch_fraction,
-            margin_fraction: 0.2,
-        }),
-        _ => None,
-    };
+    let chart = crate::targets::chart_layout(&set.shots[0].target.target);
     let d65 = camsim_core::data::illuminant("D65").expect("D65");
     let targets = macbeth_target_linear_srgb(&d65, r.white_level)
         .map_err(|e| CliError::Other(format!("colour targets: {e}")))?;
@@ -909,14 +898,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
             "Per-patch SNR of the green pixels (raw DN)",
         ));
         // ΔE between desired (D65 sRGB targets) and rendered (output codes decoded), paper Figs. 5–6
-        let rendered_lin = RgbImage {
-            rows: rgb.rows,
-            cols: rgb.cols,
-            data: rendered8
-                .chunks_exact(3)
-                .map(|c| [0, 1, 2].map(|k| srgb_decode(c[k] as f64 / 255.0) as f32))
-                .collect(),
-        };
+        let rendered_lin = camsim_isp::from_srgb8(&rendered8, rgb.rows, rgb.cols);
         let rendered_means = patch_means(&rendered_lin, layout);
         let de = color_eval::patch_delta_e(&targets, &rendered_means)?;
         let (de2000, s2000) = (&de.de2000, &de.stats2000);

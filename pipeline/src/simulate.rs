@@ -7,6 +7,7 @@ use crate::frames;
 use camsim_core::constants::SI;
 use camsim_core::exr_io::write_single_channel_exr;
 use camsim_core::image::{Plane, SceneRadiance, SensorIrradiance};
+use camsim_core::sample_aperture::SampleAperture;
 use camsim_core::scene::{scale_to_mean_luminance, SamplingGrid};
 use camsim_core::spectrum::{Spectrum, WavelengthGrid};
 use camsim_optics::{form_image, Blur, OpticsModel};
@@ -119,6 +120,36 @@ pub fn sampling_for(
     (oversample.unwrap_or(os.clamp(1, 4)), margin)
 }
 
+/// What the scene's samples stand for ([`camsim_core::sample_aperture`]): the cubic B-spline
+/// filter of the cell pitch when the blur is band-limited within the grid's Nyquist frequency
+/// (diffraction or a wavefront pupil, cutoff `1/(λ_min N)` ≤ `os/(2p)`, edge-replicated
+/// padding, no warp block), so that the optics return exact cell averages of the blurred
+/// irradiance up to an aliasing residue ~30× below the cell average's (issue 17 §5); else cell
+/// averages. `simulation.sample_aperture = "cell"` forces cell averages.
+pub fn sample_aperture_for(
+    optics: &OpticsModel,
+    sensor: &SensorModel,
+    grid: &WavelengthGrid,
+    os: usize,
+    choice: Option<crate::config::SampleApertureChoice>,
+) -> SampleAperture {
+    if choice == Some(crate::config::SampleApertureChoice::Cell) {
+        return SampleAperture::Cell;
+    }
+    let band_limited = matches!(optics.blur, Blur::Diffraction | Blur::Wavefront { .. })
+        && optics.padding == camsim_optics::Padding::Replicate
+        && !optics.effects.has_warp();
+    // The OTF cutoff 1/(λ N) (the working f-number N(1+|m|) only lowers it) must lie within
+    // the grid's Nyquist frequency os/(2p).
+    let d_m = sensor.pixel_pitch_m / os as f64;
+    let cutoff_ok = d_m <= 0.5 * grid.wavelength_nm[0] * 1e-9 * optics.f_number * (1.0 + 1e-9);
+    if band_limited && cutoff_ok {
+        SampleAperture::CubicBSpline
+    } else {
+        SampleAperture::Cell
+    }
+}
+
 /// The memory one shot of `set` needs (docs/limits.md), bytes: the scene and the sensor
 /// irradiance as f32 planes of `((rows + 2·margin)·os) × ((cols + 2·margin)·os)` samples ×
 /// bands, one more such plane set as the blur's working copy, and ~48 bytes per sensor pixel
@@ -213,6 +244,7 @@ fn scene_on_grid(
             .clone()
             .or_else(|| shot.target.illuminant.clone()),
         depth_m: None,
+        sample_aperture: camsim_core::scene::rendered_aperture(&shot.target.target, g),
     };
     if let (Some(_), Some(new)) = (&world.swapped_from, &shot.target.illuminant) {
         camsim_core::illuminant::swap_illuminant(&mut scene, new, true, &SI).map_err(|e| {
@@ -240,7 +272,8 @@ pub fn shot_scene(
     let s = &cam.sensor;
     let shot = &set.shots[shot_index];
     let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
-    let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin);
+    let ap = sample_aperture_for(&cam.optics, s, grid, os, set.simulation.sample_aperture);
+    let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin).with_aperture(ap);
     scene_on_grid(set, shot, &g)
 }
 
@@ -389,8 +422,11 @@ fn uniform_electron_rate(
             let k = &k_rows[r % k_rows.len()];
             if cos4 {
                 let y2 = ((r as f64 - yc) * dx).powi(2);
+                // The focal length as a local value: read through the closure's capture it is
+                // re-loaded for every pixel and the loop does not vectorise.
+                let f_m = f;
                 for ((o, &k), &x2) in row.iter_mut().zip(k).zip(&x2) {
-                    *o = (k * cos4_at(x2 + y2)) as f32;
+                    *o = (k * camsim_optics::relative_illumination_cos4_r2(x2 + y2, f_m)) as f32;
                 }
             } else {
                 for (o, &k) in row.iter_mut().zip(k) {
@@ -501,6 +537,7 @@ pub fn simulate_each(
         }
         let rate = &cache[shot.target_key.as_str()];
         let sh = crate::chain::shot_exposure(set, si, rate);
+        let rate = &*crate::chain::shot_time_rate(set, si, rate, &sh);
         exposures_s.push((shot.id.clone(), sh.exposure_s));
         if expected {
             let plane = crate::chain::expected_frame(sensor, rate, &sh);

@@ -450,3 +450,24 @@ pub fn read_exr_target(
             .map_err(|e| crate::error::CliError::Other(e.to_string()))
     })
 }
+
+/// Fraction of a patch side dropped on every side before sampling a chart patch.
+pub const PATCH_MARGIN_FRACTION: f64 = 0.2;
+
+/// The chart layout of a 4 × 6 chart target (macbeth or patches), as `camsim run` samples it.
+pub fn chart_layout(t: &Target) -> Option<camsim_metrics::ChartLayout> {
+    match t {
+        Target::Patches {
+            rows: 4,
+            cols: 6,
+            patch_fraction,
+            ..
+        } => Some(camsim_metrics::ChartLayout {
+            chart_rows: 4,
+            chart_cols: 6,
+            patch_fraction: *patch_fraction,
+            margin_fraction: PATCH_MARGIN_FRACTION,
+        }),
+        _ => None,
+    }
+}

@@ -24,17 +24,14 @@ use crate::plots;
 use crate::raw_input::read_frame_with;
 use crate::report::html_escape;
 use crate::staging::with_staging;
-use camsim_core::scene::Target;
 use camsim_core::RawFrame;
 use camsim_isp::{fit_color_correction, macbeth_target_linear_srgb};
-use camsim_metrics::{patch_sample_rect, ChartLayout};
+use camsim_metrics::patch_sample_rect;
 use camsim_sensor::{fixed_pattern, ElectronRate, FixedPattern, PatternSource, SensorModel, Shot};
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-/// Fraction of a patch side dropped on every side before sampling (as `camsim run`).
-const PATCH_MARGIN_FRACTION: f64 = 0.2;
 /// Linear sRGB level of the Macbeth white patch in the colour targets (`camsim run`'s default).
 const WHITE_LEVEL: f64 = 0.9;
 /// A relative mismatch is reported only when the measured signal above black exceeds this
@@ -234,24 +231,6 @@ impl PatchSnr {
     }
 }
 
-/// The chart layout of a 4 × 6 chart target (macbeth or patches), as `camsim run` samples it.
-fn chart_layout(t: &Target) -> Option<ChartLayout> {
-    match t {
-        Target::Patches {
-            rows: 4,
-            cols: 6,
-            patch_fraction,
-            ..
-        } => Some(ChartLayout {
-            chart_rows: 4,
-            chart_cols: 6,
-            patch_fraction: *patch_fraction,
-            margin_fraction: PATCH_MARGIN_FRACTION,
-        }),
-        _ => None,
-    }
-}
-
 fn channel_colour(name: &str, k: usize) -> [u8; 3] {
     match name {
         "r" | "R" => [220, 30, 30],
@@ -427,10 +406,11 @@ fn validate_into(
         }
         let rate = &cache[shot.target_key.as_str()];
         let sh = crate::chain::shot_exposure(set, si, rate);
+        let rate = &*crate::chain::shot_time_rate(set, si, rate, &sh);
         let exposure_s = sh.exposure_s;
         let expected = crate::chain::expected_frame(sensor, rate, &sh).data;
         let model = NoiseModel::new(sensor, &sh);
-        let layout = chart_layout(&shot.target.target);
+        let layout = crate::targets::chart_layout(&shot.target.target);
         let n_patches = layout.map_or(0, |l| l.chart_rows * l.chart_cols);
         let nch = names.len();
         // per (patch, channel): spatial moments per frame, averaged over frames

@@ -61,6 +61,8 @@ impl Camera {
                 auto_exposure,
                 analog_gain,
                 frames: (0..frames).map(|i| format!("frame_{i}.png")).collect(),
+                light_modulation: None,
+                motion: None,
             }],
             simulation,
             raw_format: None,

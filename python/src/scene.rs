@@ -148,6 +148,7 @@ impl Scene {
                 object_distance_m,
                 illuminant: None,
                 depth_m: depth,
+                sample_aperture: Default::default(),
             },
             grid,
         })
@@ -170,6 +171,7 @@ impl Scene {
                 object_distance_m: None,
                 illuminant: None,
                 depth_m: exr.depth_m,
+                sample_aperture: Default::default(),
             },
             grid: exr.grid,
         })

@@ -137,6 +137,7 @@ pub fn scene_radiance(
             cols: out.width,
             data: out.depth_z_m.clone(),
         }),
+        sample_aperture: Default::default(),
     })
 }
 

@@ -30,6 +30,7 @@ mod noise;
 pub mod normal;
 pub mod pixel_rng;
 pub mod poisson;
+pub mod temporal;
 
 use camsim_core::Spectrum;
 use thiserror::Error;
@@ -45,6 +46,10 @@ pub use integrate::{
 pub use noise::{
     auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
     nonlinearity_magnitude, PatternSource, FIXED_PATTERN_TAG,
+};
+pub use temporal::{
+    dark_at_temperature, flicker_period_rows, time_averaged_rate, Motion, PwmLight, Readout,
+    ShutterMode, TimeModel,
 };
 
 /// Errors of the sensor stage.

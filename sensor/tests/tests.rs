@@ -4,3 +4,4 @@
 mod effects;
 mod isetcam_oracle;
 mod statistics;
+mod temporal;

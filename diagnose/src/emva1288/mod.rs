@@ -139,22 +139,15 @@ pub fn fit_through_origin(x: &[f64], y: &[f64]) -> LineFit {
 }
 
 /// Ordinary least-squares line `y = a x + b` with the textbook standard errors
-/// (Rel. 4.0 §7: dark mean and dark variance against exposure time).
+/// (Rel. 4.0 §7: dark mean and dark variance against exposure time):
+/// [`camsim_core::stats::fit_line`] in this module's field names.
 pub fn fit_line(x: &[f64], y: &[f64]) -> LineFit {
-    let n = x.len() as f64;
-    let mx = x.iter().sum::<f64>() / n;
-    let my = y.iter().sum::<f64>() / n;
-    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
-    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    let a = sxy / sxx;
-    let b = my - a * mx;
-    let rss: f64 = x.iter().zip(y).map(|(u, v)| (v - a * u - b).powi(2)).sum();
-    let s2 = if n > 2.0 { rss / (n - 2.0) } else { f64::NAN };
+    let f = camsim_core::stats::fit_line(x, y);
     LineFit {
-        slope: a,
-        slope_se: (s2 / sxx).sqrt(),
-        offset: b,
-        offset_se: (s2 * (1.0 / n + mx * mx / sxx)).sqrt(),
+        slope: f.slope,
+        slope_se: f.slope_std_error,
+        offset: f.intercept,
+        offset_se: f.intercept_std_error,
     }
 }
 

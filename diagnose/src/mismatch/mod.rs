@@ -17,6 +17,7 @@
 mod candidates;
 pub mod data;
 pub mod effects;
+pub mod identify;
 mod like;
 pub mod locate;
 pub mod model;
@@ -26,6 +27,7 @@ mod select;
 pub use candidates::magnitude;
 pub use data::{DataSet, ShotAccumulator, ShotData, TargetClass};
 pub use effects::{alike, AlikePair, Effect, ALIKE};
+pub use identify::{Identifiability, MAX_VARIANCE_INFLATION};
 pub use like::{prof, Eval, ScStat};
 pub use locate::{EdgeMtf, Located, ShotChannel, ShotMaps, ShotProfiles};
 pub use model::{Forward, ModelState, RateSpec};
@@ -106,6 +108,19 @@ pub struct Diagnosis {
     pub fit_pixels: usize,
     /// The ΔBIC acceptance threshold used.
     pub bic_threshold: f64,
+    /// Wall time per stage of this diagnosis (not deterministic: kept out of report.json).
+    pub timing: Vec<StageTime>,
+}
+
+/// Wall time of one stage of a diagnosis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StageTime {
+    /// The stage.
+    pub stage: String,
+    /// Seconds.
+    pub seconds: f64,
+    /// Calls (likelihood evaluations, forward-model runs), where counted.
+    pub calls: Option<u64>,
 }
 
 /// Runs the diagnosis.
@@ -119,12 +134,30 @@ pub fn diagnose(
     if data.shots.is_empty() {
         return Err("the capture set has no usable shots".into());
     }
+    let prof0 = prof::snapshot();
+    let mut timing: Vec<StageTime> = Vec::new();
+    let mut clock = std::time::Instant::now();
+    let mut lap = |stage: &str, timing: &mut Vec<StageTime>| {
+        timing.push(StageTime {
+            stage: stage.to_string(),
+            seconds: clock.elapsed().as_secs_f64(),
+            calls: None,
+        });
+        clock = std::time::Instant::now();
+    };
     let ctx = Ctx::new(data, forward, opts.max_fit_pixels);
+    lap("set-up (fit rows, outlier mask)", &mut timing);
     progress("fit check (believed camera)");
     let (before, ev_before) = ctx.locate(believed)?;
+    lap("fit check and locate, believed camera", &mut timing);
     let selection = select::select(&ctx, believed, &opts.select, progress)?;
+    lap(
+        "candidates: identifiability, fits and selection",
+        &mut timing,
+    );
     progress("fit check (fitted camera)");
     let (after, _) = ctx.locate(&selection.state)?;
+    lap("fit check and locate, fitted camera", &mut timing);
     let k_total: usize = selection.findings.iter().map(|f| f.k).sum();
     let mut findings = Vec::new();
     let mut prev = ev_before.clone();
@@ -161,6 +194,8 @@ pub fn diagnose(
             )
         })
         .collect();
+    lap("residual maps", &mut timing);
+    timing.extend(prof::since(&prof0));
     Ok(Diagnosis {
         believed: believed.clone(),
         fitted: selection.state.clone(),
@@ -172,6 +207,7 @@ pub fn diagnose(
         maps,
         fit_pixels: ctx.fit_rows.len() * data.cols,
         bic_threshold: opts.select.bic_threshold,
+        timing,
     })
 }
 

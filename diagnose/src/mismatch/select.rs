@@ -6,6 +6,7 @@
 //! diagnosis says it cannot tell them apart instead of guessing.
 use super::candidates::{fit_effect, magnitude, Evidence, FitOutcome};
 use super::effects::{alike, Effect};
+use super::identify::{identifiability, Identifiability};
 use super::like::{Ctx, Eval, RowSel};
 use super::model::ModelState;
 
@@ -89,9 +90,9 @@ pub struct Finding {
 pub struct Undecided {
     /// The effects (the first is the one kept in the fitted camera).
     pub effects: Vec<Effect>,
-    /// Their ΔBIC.
+    /// Their ΔBIC (NaN for a look-alike the shots cannot tell from the baseline: not fitted).
     pub delta_bic: Vec<f64>,
-    /// Their magnitudes.
+    /// Their magnitudes (NaN where not fitted).
     pub magnitudes: Vec<f64>,
     /// Evidence that would separate them.
     pub separated_by: Vec<String>,
@@ -114,6 +115,9 @@ pub struct Selection {
     pub state: ModelState,
     /// Observations behind the BIC penalty (fit rows).
     pub n_obs: f64,
+    /// The identifiability check of the candidates (Fisher information at the believed
+    /// model); those it marks `cannot_tell` were not fitted.
+    pub identifiability: Vec<Identifiability>,
 }
 
 fn neg_ll(ctx: &Ctx, st: &ModelState) -> Result<f64, String> {
@@ -265,6 +269,8 @@ pub(crate) fn select(
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Selection, String> {
     let ev = Evidence::new(ctx, believed);
+    progress("identifiability (Fisher information of the shots)");
+    let identifiability = identifiability(ctx, &ev, believed, &opts.effects)?;
     let mut state = believed.clone();
     let first = ctx.evaluate(&state, RowSel::Fit)?;
     let n_obs = first.dof.max(2.0);
@@ -284,6 +290,9 @@ pub(crate) fn select(
             if model.contains(&e)
                 || dropped_ever.contains(&e)
                 || not_testable.iter().any(|x| x.0 == e)
+                || identifiability
+                    .iter()
+                    .any(|x| x.effect == e && x.cannot_tell)
             {
                 continue;
             }
@@ -396,6 +405,22 @@ pub(crate) fn select(
             })
             .map(|x| (x.0, x.3, x.1.clone()))
             .collect();
+        // An exposure-scale winner whose look-alike partner the identifiability check marked
+        // cannot-tell: that partner changes the frames only as light does (on flats veiling
+        // glare, QE shift, IR leakage are exposure scales), so the shots cannot tell it from this
+        // winner either. The partner was not fitted (no ΔBIC, no magnitude); the pair is
+        // undecided, never a finding. (Only exposure: a cannot-tell light effect is not
+        // degenerate with black level or gain when darks or photon transfer separate those.)
+        let blind: Vec<Effect> = if best == Effect::ExposureScale {
+            identifiability
+                .iter()
+                .filter(|x| x.cannot_tell && alike(best, x.effect).is_some())
+                .filter(|x| !partners.iter().any(|p| p.0 == x.effect))
+                .map(|x| x.effect)
+                .collect()
+        } else {
+            Vec::new()
+        };
         // Relative illumination seen only through structured targets could be the scene's own
         // shading: without a uniform flat the set cannot tell.
         let scene_content = best == Effect::RelativeIllumination && !ev.uniform_light;
@@ -425,7 +450,7 @@ pub(crate) fn select(
             dropped_ever.push(*e);
         }
         let after = ctx.evaluate(&state, RowSel::All)?;
-        if !partners.is_empty() || scene_content {
+        if !partners.is_empty() || scene_content || !blind.is_empty() {
             let mut effects = vec![best];
             let mut dbics = vec![dbic];
             let mut mags = vec![magnitude(best, &state, believed)];
@@ -434,6 +459,12 @@ pub(crate) fn select(
                 effects.push(*e);
                 dbics.push(*b);
                 mags.push(magnitude(*e, st, believed));
+                sep.push(alike(best, *e).expect("alike").separated_by.to_string());
+            }
+            for e in &blind {
+                effects.push(*e);
+                dbics.push(f64::NAN);
+                mags.push(f64::NAN);
                 sep.push(alike(best, *e).expect("alike").separated_by.to_string());
             }
             if scene_content {
@@ -493,6 +524,7 @@ pub(crate) fn select(
         rounds,
         state,
         n_obs,
+        identifiability,
     })
 }
 

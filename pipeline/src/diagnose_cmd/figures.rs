@@ -437,6 +437,21 @@ pub fn report_html(report: &Value, d: &Diagnosis, data: &DataSet, figs: &[Figure
         }
         h.push_str("</table>");
     }
+    if let Some(u) = report["cannot_tell"].as_array().filter(|u| !u.is_empty()) {
+        h.push_str("<h2>Cannot tell from these shots</h2><p>The Fisher information of the shots cannot separate these candidates from the baseline parameters; they are not fitted and never reported as findings.</p><ul>");
+        for x in u {
+            h.push_str(&format!(
+                "<li><b>{}</b>: {}. Would separate it: {}</li>",
+                html_escape(x["effect"].as_str().unwrap_or("")),
+                html_escape(x["explanation"].as_str().unwrap_or("")),
+                html_escape(x["would_separate"].as_str().unwrap_or(""))
+            ));
+        }
+        h.push_str("</ul>");
+    }
+    if report["timing"].is_string() {
+        h.push_str("<p>Time per stage and what the fit subsampled: <a href=\"timing.json\">timing.json</a>.</p>");
+    }
     if let Some(u) = report["not_testable"].as_array().filter(|u| !u.is_empty()) {
         h.push_str("<h2>Not testable with this capture set</h2><ul>");
         for x in u {

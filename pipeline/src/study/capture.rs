@@ -39,8 +39,8 @@ use camsim_core::spectrum::Spectrum;
 use camsim_core::stats::Rect;
 use camsim_isp::{
     demosaic_planes, fit_channel_matrix, illuminant_channel_gains, macbeth_channel_responses,
-    macbeth_target_linear_srgb, srgb_decode, to_srgb8, ChannelBalance, ChannelPlanes,
-    DemosaicMethod, Mosaic, RgbImage,
+    macbeth_target_linear_srgb, to_srgb8, ChannelBalance, ChannelPlanes, DemosaicMethod, Mosaic,
+    RgbImage,
 };
 use camsim_metrics::{slanted_edge_mtf, ChartLayout};
 use camsim_optics::Blur;
@@ -422,6 +422,8 @@ impl Ctx<'_> {
                     exposure: Exposure::Fixed(0.0),
                     analog_gain: self.cam.sensor.analog_gain,
                     frames: vec![],
+                    light: None,
+                    motion: None,
                 }],
                 simulation: self.sim.clone(),
                 raw_format: None,
@@ -979,14 +981,7 @@ fn delta_e(ctx: &Ctx, o: &DeltaEOpts) -> Result<DeltaEResult, CliError> {
         .for_each(|p| p.iter_mut().for_each(|x| *x *= k));
     let rendered8 = to_srgb8(&rgb);
     ctx.png("chart.png", &rendered8, rgb.rows, rgb.cols)?;
-    let rendered_lin = RgbImage {
-        rows: rgb.rows,
-        cols: rgb.cols,
-        data: rendered8
-            .chunks_exact(3)
-            .map(|c| [0, 1, 2].map(|k| srgb_decode(c[k] as f64 / 255.0) as f32))
-            .collect(),
-    };
+    let rendered_lin = camsim_isp::from_srgb8(&rendered8, rgb.rows, rgb.cols);
     let de = patch_delta_e(&targets, &patch_means(&rendered_lin, &layout))?;
     Ok(DeltaEResult {
         mean: de.stats2000.mean,

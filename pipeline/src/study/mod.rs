@@ -11,6 +11,7 @@
 //!   result.json exists, so an interrupted study resumes where it stopped;
 //! * [`capture`]: the sensor-level evaluator (MTF50, SNR, vSNR, ΔE2000, dynamic range);
 //! * [`render`]: the renderer-based evaluator (depth of field: real-lens camera vs depth path);
+//! * [`rolling`]: the rolling-shutter evaluator (skew of a moving edge, LED flicker bands);
 //! * [`table`] and [`report`]: CSV + JSON tables in spec order, HTML report with plots and
 //!   image strips;
 //! * [`ray`]: the Ray engine: the same points, each run by `camsim study-point` on a Ray
@@ -25,6 +26,7 @@ pub mod point;
 pub mod ray;
 pub mod render;
 pub mod report;
+pub mod rolling;
 pub mod spec;
 pub mod table;
 

@@ -24,6 +24,9 @@ pub enum PointKind {
     /// glTF scenes through the render crate's cameras (depth of field: real lens vs depth
     /// path), measured on the rendered images ([`super::render`]).
     Render,
+    /// A moving edge under a PWM light through a rolling shutter: skew and flicker band
+    /// period against their closed forms ([`super::rolling`]).
+    RollingShutter,
 }
 
 impl PointKind {
@@ -32,8 +35,9 @@ impl PointKind {
         match doc.get("kind").and_then(Value::as_str) {
             Some("capture") => Ok(PointKind::Capture),
             Some("render") => Ok(PointKind::Render),
+            Some("rolling_shutter") => Ok(PointKind::RollingShutter),
             Some(other) => Err(format!(
-                "kind: unknown point kind \"{other}\" (expected \"capture\" or \"render\")"
+                "kind: unknown point kind \"{other}\" (expected \"capture\", \"render\" or \"rolling_shutter\")"
             )),
             None => Err("kind: required (a string)".into()),
         }
@@ -45,6 +49,7 @@ pub fn validate(doc: &Value) -> Result<(), String> {
     match PointKind::of(doc)? {
         PointKind::Capture => capture::validate(doc),
         PointKind::Render => render::validate(doc),
+        PointKind::RollingShutter => super::rolling::validate(doc),
     }
 }
 
@@ -117,6 +122,8 @@ pub fn evaluate_into(
         PointKind::Capture => capture::evaluate(doc, seed, dir, caches)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
         PointKind::Render => render::evaluate(doc, seed, dir)
+            .map_err(|e| CliError::input(&point_path, e.one_line()))?,
+        PointKind::RollingShutter => super::rolling::evaluate(doc, seed, dir)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
     };
     let metrics: serde_json::Map<String, Value> = out

@@ -342,6 +342,13 @@ impl RealLensCamera {
                 opts.pupil_bins, opts.pupil_grid
             )));
         }
+        if lens.has_folds() {
+            return Err(cfg(format!(
+                "lens '{}': mirrors and coordinate breaks are not supported by the real-lens \
+                 camera",
+                lens.name
+            )));
+        }
         let ns = lens.surfaces.len();
         if !matches!(lens.surfaces[ns - 1].medium, Medium::Air) {
             return Err(cfg(format!(

@@ -1,0 +1,543 @@
+//! The likelihood of the reduced recording under a [`ModelState`], and the fit statistic.
+//!
+//! Per pixel i, shot s with F frames: frame mean m, temporal sample variance v, rail counts.
+//! With the model's per-frame mean μ and temporal variance σ_t² ([`ShotConst::predict`]):
+//!
+//! * **temporal**: (F−1)·v/σ_t² ~ χ²(F−1) (a Gamma density in v);
+//! * **fixed pattern**: the residual vector r_s = m_s − μ_s of a pixel over all its shots is
+//!   Gaussian with covariance diag(σ_t²/F) + σ_D² u uᵀ + σ_P² w wᵀ: DSNU (u = DN per volt)
+//!   and PRNU (w = DN per unit gain error) are the same random offsets/gains in every shot,
+//!   so repeated frames separate temporal noise from fixed pattern and the shots' signal
+//!   levels separate DSNU from PRNU (Woodbury form, [`super::num::Woodbury`]);
+//! * **columns**: the residuals are split into per-column means (one "super-pixel" per
+//!   column, whose covariance adds the column-offset variance σ_c² u uᵀ) and the deviations
+//!   from them (within-column part), the exact decomposition of a Gaussian random-effects
+//!   model with equal pixel variances;
+//! * **hot pixels**: a two-component mixture per pixel: normal, or an extra dark rate V whose
+//!   logarithm is N(ln V_h, σ_h²) across hot pixels, integrated by Laplace's method (by
+//!   Gauss–Hermite quadrature over that prior when every shot of the pixel is censored);
+//! * **clipping**: a pixel-shot with any frame at 0 DN or at the ADC maximum contributes the
+//!   multinomial probability of its rail counts instead of its mean and variance.
+//!
+//! The reported χ²/dof sums, per pixel-shot, r²/Var(m) (marginal variance of the frame mean:
+//! temporal/F + every fixed-pattern term) + (F−1)v/σ_t² (F degrees of freedom), or the
+//! Pearson χ² of the rail counts (1 degree of freedom): close to 1 when the model explains
+//! the recording.
+//!
+//! One file per term: `temporal.rs`, `pixel.rs` (the fixed-pattern Woodbury term of a pixel,
+//! which folds in the temporal one), `column.rs`, `hot.rs`, `rail.rs` (clipping); `rates.rs`
+//! holds the forward-model cache and the exposure/crosstalk transform, `linear.rs` the
+//! normal equations of linear rate parameters; `prof.rs` the stage timers.
+mod column;
+mod hot;
+mod linear;
+mod pixel;
+pub mod prof;
+mod rail;
+mod rates;
+mod temporal;
+
+use super::data::DataSet;
+use super::model::{Forward, ModelState, Pred, ShotConst};
+use super::num::log_add_exp;
+use column::{outlier_pixels, ColView};
+use hot::Hot;
+#[cfg(test)]
+pub(crate) use rail::rail_stats;
+use rail::ExpectedDevianceCache;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// Rows per work block (fixed, so sums do not depend on the thread count).
+const BLOCK_ROWS: usize = 8;
+/// Rows per work block of the pixel pass (fixed, as [`BLOCK_ROWS`]).
+const PIXEL_BLOCK_ROWS: usize = 2;
+/// Most pixel-shot predictions the column pass keeps for the pixel pass (80 bytes each).
+const PRED_STORE: usize = 1 << 20;
+/// Fewest rows for the column decomposition.
+pub(crate) const MIN_COLUMN_ROWS: usize = 8;
+
+/// Per-shot rate images.
+pub(crate) type Rates = Vec<Arc<Vec<f32>>>;
+
+/// Shared state of a diagnosis: the data, the forward model, the rows used and caches.
+pub(crate) struct Ctx<'a> {
+    pub data: &'a DataSet,
+    pub forward: &'a dyn Forward,
+    /// Rows used while fitting (all rows of small sensors, a subset of large ones).
+    pub fit_rows: Vec<usize>,
+    /// All rows.
+    pub all_rows: Vec<usize>,
+    /// Pixels left out of the column means (isolated outliers found in the data alone).
+    pub col_excluded: Vec<bool>,
+    /// The fit rows and their neighbours above and below: the rows a rate image must hold
+    /// for a fit-row evaluation (crosstalk reads the neighbours). Empty when the fit rows are
+    /// all rows.
+    pub calc_rows: Vec<usize>,
+    /// The data of the fit rows, pixel-major: ((row position in `fit_rows`)·cols + column)·
+    /// shots + shot.
+    fit_pix: Vec<PixShot>,
+    /// Forward-model results by rate spec, with their insertion stamp (oldest evicted first).
+    cache: Mutex<HashMap<String, (u64, Arc<Rates>)>>,
+    stamp: std::sync::atomic::AtomicU64,
+    /// The last evaluations of whole states (the selection and every candidate of a round
+    /// start from the same state; the final fit check repeats the last acceptance's).
+    memo: Mutex<Vec<(ModelState, RowSel, Arc<Eval>)>>,
+    /// Reused buffer of the column pass's predictions.
+    pred_buf: Mutex<Vec<Pred>>,
+}
+
+/// Evaluations kept in [`Ctx`]'s memo.
+const MEMO_EVALS: usize = 4;
+
+/// One pixel's data in one shot, stored pixel-major for the fit rows ([`Ctx::fit_pix`]): the
+/// pixel pass reads every shot of a pixel together, which from the per-shot arrays is one
+/// cache miss per shot and field.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct PixShot {
+    mean: f32,
+    var: f32,
+    n_lo: u16,
+    n_hi: u16,
+    censored: bool,
+    /// Censored only because of its own rail frames ([`super::data::ShotData::rail_only`]).
+    rail_only: bool,
+}
+
+/// Which rows an evaluation covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum RowSel {
+    Fit,
+    All,
+}
+
+/// χ² and moments of one (shot, channel).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ScStat {
+    /// Σ χ² contributions.
+    pub chi2: f64,
+    /// Degrees of freedom.
+    pub dof: f64,
+    /// Pixels (uncensored).
+    pub n: f64,
+    /// Σ residual of the frame mean (DN).
+    pub sum_resid: f64,
+    /// Σ model mean (DN).
+    pub sum_model: f64,
+    /// Σ data mean (DN).
+    pub sum_data: f64,
+    /// Σ model temporal variance (DN²).
+    pub sum_model_var: f64,
+    /// Σ data temporal variance (DN²) (shots with ≥ 2 frames).
+    pub sum_data_var: f64,
+    /// Σ marginal variance of the frame mean (DN²).
+    pub sum_var_mean: f64,
+    /// Σ r² (DN²).
+    pub sum_r2: f64,
+    /// Pixel-shots with rail frames.
+    pub censored: f64,
+}
+
+impl ScStat {
+    fn add(&mut self, o: &ScStat) {
+        self.chi2 += o.chi2;
+        self.dof += o.dof;
+        self.n += o.n;
+        self.sum_resid += o.sum_resid;
+        self.sum_model += o.sum_model;
+        self.sum_data += o.sum_data;
+        self.sum_model_var += o.sum_model_var;
+        self.sum_data_var += o.sum_data_var;
+        self.sum_var_mean += o.sum_var_mean;
+        self.sum_r2 += o.sum_r2;
+        self.censored += o.censored;
+    }
+}
+
+/// Result of one evaluation.
+#[derive(Debug, Clone)]
+pub struct Eval {
+    /// Log-likelihood (constants dropped).
+    pub logl: f64,
+    /// Σ χ².
+    pub chi2: f64,
+    /// Σ degrees of freedom (before subtracting parameters).
+    pub dof: f64,
+    /// Per (shot, channel), shot-major.
+    pub per_sc: Vec<ScStat>,
+    /// Pixels classified as hot (posterior > 1/2).
+    pub hot_pixels: usize,
+    /// Column-term share of the log-likelihood.
+    pub logl_columns: f64,
+}
+
+impl<'a> Ctx<'a> {
+    pub fn new(data: &'a DataSet, forward: &'a dyn Forward, max_fit_pixels: usize) -> Self {
+        let all_rows: Vec<usize> = (0..data.rows).collect();
+        let fit_rows = if data.pixels() <= max_fit_pixels {
+            all_rows.clone()
+        } else {
+            // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
+            let keep = (max_fit_pixels / data.cols.max(1)).max(16) / 2;
+            let groups = data.rows / 2;
+            let mut rows = Vec::new();
+            for k in 0..keep.min(groups) {
+                let g = k * groups / keep.min(groups);
+                rows.push(2 * g);
+                rows.push(2 * g + 1);
+            }
+            rows
+        };
+        let col_excluded = outlier_pixels(data);
+        let calc_rows = if fit_rows.len() == data.rows {
+            Vec::new()
+        } else {
+            let mut v: Vec<usize> = fit_rows
+                .iter()
+                .flat_map(|&r| [r.saturating_sub(1), r, (r + 1).min(data.rows - 1)])
+                .collect();
+            v.sort_unstable();
+            v.dedup();
+            v
+        };
+        let ns = data.shots.len();
+        let mut fit_pix = vec![PixShot::default(); fit_rows.len() * data.cols * ns];
+        fit_pix
+            .par_chunks_mut(data.cols * ns)
+            .zip(fit_rows.par_iter())
+            .for_each(|(row, &r)| {
+                for j in 0..data.cols {
+                    gather_pixel(data, r * data.cols + j, &mut row[j * ns..(j + 1) * ns]);
+                }
+            });
+        Ctx {
+            calc_rows,
+            fit_pix,
+            data,
+            forward,
+            fit_rows,
+            all_rows,
+            col_excluded,
+            cache: Mutex::new(HashMap::new()),
+            stamp: std::sync::atomic::AtomicU64::new(0),
+            memo: Mutex::new(Vec::new()),
+            pred_buf: Mutex::new(Vec::new()),
+        }
+    }
+
+    fn rows(&self, sel: RowSel) -> &[usize] {
+        match sel {
+            RowSel::Fit => &self.fit_rows,
+            RowSel::All => &self.all_rows,
+        }
+    }
+
+    /// Whether the column decomposition is used for this row selection.
+    pub fn column_term(&self, sel: RowSel) -> bool {
+        self.rows(sel).len() >= MIN_COLUMN_ROWS
+    }
+
+    /// Log-likelihood and χ² of the state.
+    pub fn evaluate(&self, state: &ModelState, sel: RowSel) -> Result<Eval, String> {
+        if let Some(e) = self.memo_get(state, sel) {
+            return Ok(e);
+        }
+        let rates = self.rates(state)?;
+        Ok(self.evaluate_memo(state, &rates, sel))
+    }
+
+    fn memo_get(&self, state: &ModelState, sel: RowSel) -> Option<Eval> {
+        let m = self.memo.lock().expect("memo");
+        m.iter()
+            .find(|(st, s, _)| *s == sel && st == state)
+            .map(|x| (*x.2).clone())
+    }
+
+    /// [`Ctx::evaluate_with`] for `rates` = [`Ctx::rates`] of `state`, remembered.
+    pub(crate) fn evaluate_memo(&self, state: &ModelState, rates: &Rates, sel: RowSel) -> Eval {
+        if let Some(e) = self.memo_get(state, sel) {
+            return e;
+        }
+        let e = self.evaluate_with(state, rates, sel);
+        let mut m = self.memo.lock().expect("memo");
+        if m.len() >= MEMO_EVALS {
+            m.remove(0);
+        }
+        m.push((state.clone(), sel, Arc::new(e.clone())));
+        e
+    }
+
+    /// Per-shot chain constants.
+    pub fn consts(&self, state: &ModelState) -> Vec<ShotConst> {
+        self.data
+            .shots
+            .iter()
+            .map(|s| ShotConst::new(&state.sensor, s.exposure_s, s.analog_gain, s.frames))
+            .collect()
+    }
+
+    /// Column-mean statistics of the residuals (per shot, column), shot-major.
+    /// With `store`, also every pixel-shot's prediction, at
+    /// Evaluation with given (transformed) rates.
+    pub fn evaluate_with(&self, state: &ModelState, rates: &Rates, sel: RowSel) -> Eval {
+        let t0 = std::time::Instant::now();
+        let e = self.evaluate_inner(state, rates, sel, true);
+        prof::add(if sel == RowSel::Fit { 0 } else { 1 }, t0);
+        e
+    }
+
+    /// The log-likelihood alone (what the fits maximise): [`Ctx::evaluate_with`] without the
+    /// χ² and moment sums.
+    pub fn logl_with(&self, state: &ModelState, rates: &Rates, sel: RowSel) -> f64 {
+        let t0 = std::time::Instant::now();
+        let e = self.evaluate_inner(state, rates, sel, false);
+        prof::add(if sel == RowSel::Fit { 0 } else { 1 }, t0);
+        e.logl
+    }
+
+    fn evaluate_inner(&self, state: &ModelState, rates: &Rates, sel: RowSel, stats: bool) -> Eval {
+        let d = self.data;
+        let (ns, cols, nch) = (d.shots.len(), d.cols, d.channels());
+        let consts = self.consts(state);
+        let s = &state.sensor;
+        let sig_d = if s.noise.dsnu { s.dsnu_sigma_v } else { 0.0 };
+        let sig_p = if s.noise.prnu {
+            s.prnu_sigma_percent / 100.0
+        } else {
+            0.0
+        };
+        let sig_c = s.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
+        let hot = s
+            .effects
+            .hot_pixels
+            .filter(|h| h.fraction > 0.0 && h.dark_voltage_v_per_s > 0.0)
+            .map(|h| Hot {
+                fraction: h.fraction.min(0.5),
+                ln_rate: h.dark_voltage_v_per_s.ln(),
+                log_sigma: h.log_sigma,
+            });
+        let use_cols = self.column_term(sel);
+        let rows = self.rows(sel);
+        // The column pass keeps its predictions for the pixel pass (when they fit in
+        // PRED_STORE pixel-shots, e.g. the fit rows of a large sensor).
+        let n_ps = rows.len() * cols * ns;
+        let mut store: Vec<Pred> = Vec::new();
+        let use_store = use_cols && n_ps <= PRED_STORE;
+        if use_store {
+            store = std::mem::take(&mut *self.pred_buf.lock().expect("pred buffer"));
+            store.resize(n_ps, Pred::default());
+        }
+        let col = if use_cols {
+            self.column_stats_store(rates, &consts, sel, use_store.then_some(&mut store[..]))
+        } else {
+            Vec::new()
+        };
+        let stored: Option<&[Pred]> = use_store.then_some(&store[..]);
+        // Column term: per column, the S-vector of column-mean residuals.
+        let logl_columns = if use_cols {
+            self.column_logl(&col, sig_d, sig_p, sig_c)
+        } else {
+            0.0
+        };
+        // Pixel term (blocks of PIXEL_BLOCK_ROWS rows: enough pieces to balance the threads
+        // on a few fit rows).
+        let blocks: Vec<(f64, Vec<ScStat>, usize)> = rows
+            .par_chunks(PIXEL_BLOCK_ROWS)
+            .enumerate()
+            .map(|(bi, blk)| {
+                let mut ll = 0.0;
+                let mut sc = vec![ScStat::default(); ns * nch];
+                let mut n_hot = 0usize;
+                let mut preds_buf: Vec<Pred> = vec![Pred::default(); ns];
+                let mut es: Vec<f64> = vec![0.0; ns];
+                let mut hot_buf: Vec<Pred> = vec![Pred::default(); ns];
+                let mut pxbuf: Vec<PixShot> = vec![PixShot::default(); ns];
+                let mut edev = ExpectedDevianceCache::default();
+                // Hot-class likelihoods of pixels censored in every shot: they depend on the
+                // pixel's expected electrons and rail counts alone (the rail likelihood reads
+                // neither the column nor the fixed-pattern terms), which most pixels of a
+                // uniform shot share.
+                let mut hot_memo: HashMap<Vec<(u64, u16, u16)>, (f64, Vec<Pred>)> = HashMap::new();
+                for (ri, &r) in blk.iter().enumerate() {
+                    for j in 0..cols {
+                        let i = r * cols + j;
+                        let ch = d.channel[i] as usize;
+                        let at = ((bi * PIXEL_BLOCK_ROWS + ri) * cols + j) * ns;
+                        let px: &[PixShot] = if sel == RowSel::Fit || self.calc_rows.is_empty() {
+                            &self.fit_pix[at..at + ns]
+                        } else {
+                            gather_pixel(d, i, &mut pxbuf);
+                            &pxbuf
+                        };
+                        // the column pass's predictions, or computed here
+                        let preds: &[Pred] = match stored {
+                            Some(st) => &st[at..at + ns],
+                            None => {
+                                for (sidx, c) in consts.iter().enumerate() {
+                                    preds_buf[sidx] = c.predict(rates[sidx][i] as f64 * c.t, 0.0);
+                                }
+                                &preds_buf
+                            }
+                        };
+                        let cs = use_cols.then_some(ColView {
+                            stats: &col,
+                            cols,
+                            j,
+                        });
+                        let l0 = self.pixel_ll(
+                            px,
+                            preds,
+                            &consts,
+                            cs,
+                            sig_d,
+                            sig_p,
+                            if use_cols { 0.0 } else { sig_c },
+                        );
+                        let mut hot_class = false;
+                        let li = match &hot {
+                            None => l0,
+                            Some(h) => {
+                                for (sidx, c) in consts.iter().enumerate() {
+                                    es[sidx] = rates[sidx][i] as f64 * c.t;
+                                }
+                                let key: Option<Vec<(u64, u16, u16)>> =
+                                    px.iter().all(|x| x.censored).then(|| {
+                                        px.iter()
+                                            .zip(&es)
+                                            .map(|(x, e)| (e.to_bits(), x.n_lo, x.n_hi))
+                                            .collect()
+                                    });
+                                let memo = key.as_ref().and_then(|k| hot_memo.get(k));
+                                let lh = if let Some((l, hpm)) = memo {
+                                    hot_buf.copy_from_slice(hpm);
+                                    *l
+                                } else {
+                                    let lh = self.hot_ll(
+                                        px,
+                                        preds,
+                                        &es,
+                                        &consts,
+                                        cs,
+                                        sig_d,
+                                        sig_p,
+                                        sig_c,
+                                        use_cols,
+                                        h,
+                                        &mut hot_buf,
+                                    );
+                                    if let Some(k) = key {
+                                        hot_memo.insert(k, (lh, hot_buf.clone()));
+                                    }
+                                    lh
+                                };
+                                let a = (1.0 - h.fraction).ln() + l0;
+                                let b = h.fraction.ln() + lh;
+                                let tot = log_add_exp(a, b);
+                                // posterior of the hot class > 1/2
+                                if b - tot > -std::f64::consts::LN_2 {
+                                    n_hot += 1;
+                                    hot_class = true;
+                                }
+                                tot
+                            }
+                        };
+                        ll += li;
+                        if !stats {
+                            continue;
+                        }
+                        // Reported χ² (marginal per pixel-shot) with the pixel's class.
+                        let used = if hot_class { &hot_buf[..] } else { preds };
+                        for sidx in 0..ns {
+                            let sh = &d.shots[sidx];
+                            let x = &px[sidx];
+                            let p = &used[sidx];
+                            let st = &mut sc[sidx * nch + ch];
+                            let f = consts[sidx].frames;
+                            let (nlo, nhi) = (x.n_lo as f64, x.n_hi as f64);
+                            if x.censored {
+                                // Deviance (likelihood-ratio G²) of the rail counts:
+                                // 2·(lnL of the saturated multinomial − lnL of the model), the
+                                // same likelihood the fit maximises. (Pearson's (n−m)²/var is
+                                // not: one rail frame where the model expects 10⁻⁴ adds 10⁴
+                                // to it but only ≈ 9 to −lnL, so a fit that improves lnL could
+                                // make χ² explode, as on the Flea3 8-bit darks.) Every censored
+                                // term is kept, and its dof is the deviance the model itself
+                                // expects, E[G²] (exact sum over the rail-count outcomes): for
+                                // sparse counts E[G²] is far from 1 (≈ 2Fp·ln(1/p) for a rare
+                                // rail), so counting 1 per term, or leaving out the terms
+                                // whose rail frames the model does not expect, made χ²/dof
+                                // and the likelihood disagree (a lnL gain could raise χ²/dof).
+                                // With a model-independent saturated term a lnL gain of Δ
+                                // lowers Σ G² by 2Δ, and Σ G² / Σ E[G²] ≈ 1 under the model.
+                                let (g2, e_g2) = edev.term(p, f, nlo, nhi, x.rail_only);
+                                st.censored += 1.0;
+                                st.chi2 += g2;
+                                st.dof += e_g2;
+                                continue;
+                            }
+                            let m = x.mean as f64;
+                            let rr = m - p.mean;
+                            let vm = consts[sidx].var_mean(p)
+                                + (sig_d * sig_d + sig_c * sig_c) * p.u * p.u
+                                + sig_p * sig_p * p.w * p.w;
+                            st.chi2 += rr * rr / vm;
+                            st.dof += 1.0;
+                            st.n += 1.0;
+                            st.sum_resid += rr;
+                            st.sum_model += p.mean;
+                            st.sum_data += m;
+                            st.sum_model_var += p.var_t;
+                            st.sum_var_mean += vm;
+                            st.sum_r2 += rr * rr;
+                            if sh.has_variance() {
+                                let v = x.var as f64;
+                                st.chi2 += (f - 1.0) * v / p.var_t;
+                                st.dof += f - 1.0;
+                                st.sum_data_var += v;
+                            }
+                        }
+                    }
+                }
+                (ll, sc, n_hot)
+            })
+            .collect();
+        let mut logl = logl_columns;
+        let mut per_sc = vec![ScStat::default(); ns * nch];
+        let mut hot_pixels = 0;
+        for (ll, sc, nh) in &blocks {
+            logl += ll;
+            for (t, x) in per_sc.iter_mut().zip(sc) {
+                t.add(x);
+            }
+            hot_pixels += nh;
+        }
+        if use_store {
+            *self.pred_buf.lock().expect("pred buffer") = store;
+        }
+        let chi2 = per_sc.iter().map(|x| x.chi2).sum();
+        let dof = per_sc.iter().map(|x| x.dof).sum();
+        Eval {
+            logl,
+            chi2,
+            dof,
+            per_sc,
+            hot_pixels,
+            logl_columns,
+        }
+    }
+}
+
+/// The data of pixel `i` in every shot.
+fn gather_pixel(d: &DataSet, i: usize, out: &mut [PixShot]) {
+    for (o, sh) in out.iter_mut().zip(&d.shots) {
+        *o = PixShot {
+            mean: sh.mean_dn[i],
+            var: if sh.has_variance() { sh.var_dn[i] } else { 0.0 },
+            n_lo: sh.n_low[i],
+            n_hi: sh.n_high[i],
+            censored: sh.censored[i],
+            rail_only: sh.rail_only[i],
+        };
+    }
+}

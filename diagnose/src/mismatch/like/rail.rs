@@ -1,0 +1,592 @@
+//! The clipping term: a pixel-shot with any frame at 0 DN or at the ADC maximum contributes
+//! the probability of its rail counts instead of its mean and variance, and its deviance to
+//! the χ² summary.
+use crate::mismatch::model::Pred;
+use std::collections::HashMap;
+
+/// The rail counts of a censored pixel-shot under the model: log-likelihood and the mean
+/// number of frames at a rail.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RailStat {
+    pub ll: f64,
+    /// (Read by the tests only since the χ² summary stopped using it.)
+    #[allow(dead_code)]
+    pub mean: f64,
+}
+
+/// Per-frame rail probabilities of a pixel-shot at the nodes of the fixed-pattern mixture
+/// (z ~ N(0, s_f²), 24-point Gauss–Hermite; one node without fixed pattern): weight w,
+/// p_lo(z) = Φ((0.5 − y − z)/s_t), p_hi(z) = 1 − Φ((M − 0.5 − y − z)/s_t).
+struct RailNodes {
+    n: usize,
+    w: [f64; 24],
+    plo: [f64; 24],
+    phi: [f64; 24],
+}
+
+impl RailNodes {
+    /// (w, p_lo, p_hi) of each node.
+    fn iter(&self) -> impl Iterator<Item = (f64, f64, f64)> + '_ {
+        (0..self.n).map(|k| (self.w[k], self.plo[k], self.phi[k]))
+    }
+}
+
+fn rail_nodes(p: &Pred) -> RailNodes {
+    use crate::mismatch::num::{gauss_hermite_24, norm_cdf};
+    let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
+    let one = [(0.0, 1.0)];
+    let nodes: &[(f64, f64)] = if s_f > 1e-9 * s_t.max(1e-300) {
+        gauss_hermite_24()
+    } else {
+        &one
+    };
+    let st = s_t.max(1e-9);
+    let mut r = RailNodes {
+        n: nodes.len(),
+        w: [0.0; 24],
+        plo: [0.0; 24],
+        phi: [0.0; 24],
+    };
+    for (k, &(z, w)) in nodes.iter().enumerate() {
+        let y = p.y + s_f * z;
+        r.w[k] = w;
+        r.plo[k] = norm_cdf((0.5 - y) / st);
+        r.phi[k] = 1.0 - norm_cdf((p.hi - 0.5 - y) / st);
+    }
+    r
+}
+
+/// The frames of a pixel share its fixed pattern, so its rail counts are a mixture over the
+/// pixel's fixed offset z ~ N(0, s_f²) of multinomials with per-frame probabilities
+/// p_lo(z) = Φ((0.5 − y − z)/s_t), p_hi(z) = 1 − Φ((M − 0.5 − y − z)/s_t) (24-point
+/// Gauss–Hermite quadrature over z).
+pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
+    let nmid = f - nlo - nhi;
+    let nodes = rail_nodes(p);
+    let mut lmax = f64::NEG_INFINITY;
+    let mut terms = [(0.0f64, 0.0f64, 0.0f64); 24];
+    let mut m1 = 0.0;
+    for (k, (w, plo, phi)) in nodes.iter().enumerate() {
+        let pm = (1.0 - plo - phi).max(0.0);
+        let mut l = 0.0;
+        if nlo > 0.0 {
+            l += nlo * plo.max(1e-300).ln();
+        }
+        if nhi > 0.0 {
+            l += nhi * phi.max(1e-300).ln();
+        }
+        if nmid > 0.0 {
+            l += nmid * pm.max(1e-300).ln();
+        }
+        let l = l + w.ln();
+        lmax = lmax.max(l);
+        terms[k] = (l, 0.0, 0.0);
+        let pr = (plo + phi).min(1.0);
+        m1 += w * pr;
+    }
+    let sum: f64 = terms[..nodes.n].iter().map(|t| (t.0 - lmax).exp()).sum();
+    RailStat {
+        ll: lmax + sum.ln(),
+        mean: f * m1,
+    }
+}
+
+/// Deviance of a pixel-shot's rail counts (frames at the low rail, at the high rail, between):
+/// G² = 2·(Σ_k n_k ln(n_k/F) − lnL_model) ≥ 0, since the model (a mixture of multinomials) is
+/// never more likely than the saturated multinomial with the observed frequencies.
+pub(crate) fn rail_deviance(rs: &RailStat, f: f64, nlo: f64, nhi: f64) -> f64 {
+    let nmid = f - nlo - nhi;
+    let sat: f64 = [nlo, nhi, nmid]
+        .iter()
+        .filter(|&&n| n > 0.0)
+        .map(|&n| n * (n / f).ln())
+        .sum();
+    (2.0 * (sat - rs.ll)).max(0.0)
+}
+
+/// Expected deviance E[G²] of a censored pixel-shot's rail counts under the model (the dof
+/// of its χ² term): Σ over the outcomes (n_lo, n_hi), n_lo + n_hi ≤ F, of P(n_lo, n_hi) ·
+/// G²(n_lo, n_hi), with P the model's own distribution — the same Gauss–Hermite mixture of
+/// multinomials as [`rail_stats`] times the multinomial coefficient — and G² as
+/// [`rail_deviance`]. Exact for that model (no large-count approximation); a rail the model
+/// reaches in under 10⁻¹⁵ frames at every fixed-pattern node is left out of the sum (its
+/// share of E[G²] is below ≈ 10⁻¹³). `given_rail`: the pixel-shot is censored only because
+/// one of its own frames hit a rail ([`crate::mismatch::data::ShotData::rail_only`]), so it is seen
+/// only with n_lo + n_hi ≥ 1 and the expectation is conditional on that. Costs
+/// (F + 1)·24 exponentials near one rail, (F + 1)(F + 2)/2·24 near both.
+pub(crate) fn rail_expected_deviance(p: &Pred, f: f64, given_rail: bool) -> f64 {
+    let nf = f.round().max(0.0) as usize;
+    if nf == 0 {
+        return 0.0;
+    }
+    let nodes = rail_nodes(p);
+    let mut ln_node = [(0.0f64, 0.0f64, 0.0f64, 0.0f64); 24];
+    let (mut max_lo, mut max_hi) = (0.0f64, 0.0f64);
+    for (k, (w, plo, phi)) in nodes.iter().enumerate() {
+        let pm = (1.0 - plo - phi).max(0.0);
+        ln_node[k] = (
+            w.ln(),
+            plo.max(1e-300).ln(),
+            phi.max(1e-300).ln(),
+            pm.max(1e-300).ln(),
+        );
+        max_lo = max_lo.max(plo);
+        max_hi = max_hi.max(phi);
+    }
+    let ln_node = &ln_node[..nodes.n];
+    let mut lo_on = max_lo * f >= 1e-15;
+    let mut hi_on = max_hi * f >= 1e-15;
+    if given_rail && !lo_on && !hi_on {
+        // Conditional on a rail frame the model all but excludes: keep the likelier rail.
+        if max_lo >= max_hi {
+            lo_on = true;
+        } else {
+            hi_on = true;
+        }
+    }
+    let lo_max = if lo_on { nf } else { 0 };
+    let hi_max = if hi_on { nf } else { 0 };
+    let mut ln_fact = Vec::with_capacity(nf + 1);
+    ln_fact.push(0.0f64);
+    for k in 1..=nf {
+        ln_fact.push(ln_fact[k - 1] + (k as f64).ln());
+    }
+    // (ln P, G²) of each outcome; normalised at the end (log domain: P can underflow).
+    let mut out: Vec<(f64, f64)> = Vec::with_capacity((lo_max + 1) * (hi_max + 1));
+    let mut terms = [0.0f64; 24];
+    for a in 0..=lo_max {
+        for b in 0..=hi_max.min(nf - a) {
+            if given_rail && a + b == 0 {
+                continue;
+            }
+            let c = nf - a - b;
+            let (af, bf, cf) = (a as f64, b as f64, c as f64);
+            let mut lmax = f64::NEG_INFINITY;
+            for (k, &(lw, llo, lhi, lmid)) in ln_node.iter().enumerate() {
+                let mut l = lw;
+                if a > 0 {
+                    l += af * llo;
+                }
+                if b > 0 {
+                    l += bf * lhi;
+                }
+                if c > 0 {
+                    l += cf * lmid;
+                }
+                terms[k] = l;
+                lmax = lmax.max(l);
+            }
+            let sum: f64 = terms[..ln_node.len()]
+                .iter()
+                .map(|&l| (l - lmax).exp())
+                .sum();
+            let ll = lmax + sum.ln();
+            let sat: f64 = [af, bf, cf]
+                .iter()
+                .filter(|&&n| n > 0.0)
+                .map(|&n| n * (n / f).ln())
+                .sum();
+            let g2 = (2.0 * (sat - ll)).max(0.0);
+            let ln_p = ln_fact[nf] - ln_fact[a] - ln_fact[b] - ln_fact[c] + ll;
+            out.push((ln_p, g2));
+        }
+    }
+    let m = out.iter().fold(f64::NEG_INFINITY, |a, x| a.max(x.0));
+    if !m.is_finite() {
+        return 0.0;
+    }
+    let (mut sp, mut sg) = (0.0, 0.0);
+    for &(lp, g2) in &out {
+        let w = (lp - m).exp();
+        sp += w;
+        sg += w * g2;
+    }
+    sg / sp
+}
+
+/// Memo of [`rail_expected_deviance`] within one block of an evaluation: the pixel-shots of a
+/// uniform (e.g. dark) shot share their prediction, so most lookups hit.
+#[derive(Default)]
+pub(crate) struct ExpectedDevianceCache {
+    map: HashMap<[u64; 6], f64>,
+}
+
+impl ExpectedDevianceCache {
+    /// Entries kept before the memo is cleared (a textured scene has a prediction per pixel).
+    const MAX: usize = 1 << 14;
+
+    fn get(&mut self, p: &Pred, f: f64, given_rail: bool) -> f64 {
+        let key = [
+            p.y.to_bits(),
+            p.s2_t.to_bits(),
+            p.s2_f.to_bits(),
+            p.hi.to_bits(),
+            f.to_bits(),
+            given_rail as u64,
+        ];
+        if let Some(&v) = self.map.get(&key) {
+            return v;
+        }
+        if self.map.len() >= Self::MAX {
+            self.map.clear();
+        }
+        let v = rail_expected_deviance(p, f, given_rail);
+        self.map.insert(key, v);
+        v
+    }
+
+    /// The χ² summary's (χ², dof) of a censored pixel-shot: (G², E[G²]).
+    pub(crate) fn term(
+        &mut self,
+        p: &Pred,
+        f: f64,
+        nlo: f64,
+        nhi: f64,
+        given_rail: bool,
+    ) -> (f64, f64) {
+        let rs = rail_stats(p, f, nlo, nhi);
+        (rail_deviance(&rs, f, nlo, nhi), self.get(p, f, given_rail))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mismatch::num::norm_cdf;
+
+    /// Without fixed pattern the rail counts are multinomial: the deviance must equal the
+    /// closed-form binomial deviance 2[n ln(n/(Fp)) + (F−n) ln((F−n)/(F(1−p)))] with
+    /// p = Φ((0.5 − y)/σ), and stay of order ln(1/(Fp)) for a rare rail frame, where
+    /// Pearson's (n − Fp)²/(Fp(1−p)) explodes (the issue-6 χ² inconsistency).
+    #[test]
+    fn rail_deviance_is_binomial_deviance_and_bounded_for_rare_events() {
+        let f = 16.0;
+        for &(y, n) in &[(0.3, 5.0), (2.0, 1.0), (4.5, 1.0), (1.0, 16.0), (0.0, 0.0)] {
+            let p = Pred {
+                y,
+                s2_t: 1.0,
+                s2_f: 0.0,
+                hi: 255.0,
+                ..Default::default()
+            };
+            let rs = rail_stats(&p, f, n, 0.0);
+            let q = norm_cdf(0.5 - y);
+            let term = |k: f64, pr: f64| {
+                if k > 0.0 {
+                    k * (k / (f * pr)).ln()
+                } else {
+                    0.0
+                }
+            };
+            let want = 2.0 * (term(n, q) + term(f - n, 1.0 - q));
+            let got = rail_deviance(&rs, f, n, 0.0);
+            assert!(
+                (got - want).abs() < 1e-6 * want.max(1.0),
+                "y {y} n {n}: deviance {got} vs closed form {want}"
+            );
+            assert!(got >= 0.0);
+            if y == 4.5 {
+                let pearson = (n - f * q).powi(2) / (f * q * (1.0 - q));
+                assert!(pearson > 100.0 * got, "pearson {pearson} deviance {got}");
+            }
+        }
+    }
+
+    /// SplitMix64: a fixed-seed generator for the simulations below.
+    struct Rng(u64);
+
+    impl Rng {
+        fn u64(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+        fn unif(&mut self) -> f64 {
+            ((self.u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        }
+        fn normal(&mut self) -> f64 {
+            let (u, v) = (self.unif(), self.unif());
+            (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+        }
+    }
+
+    /// A dark prediction whose per-frame probability of the low rail is `p_lo` at zero fixed
+    /// offset (temporal σ 1 DN, fixed-pattern σ `s_f`).
+    fn dark_pred(p_lo: f64, s_f: f64) -> Pred {
+        use statrs::distribution::{ContinuousCDF, Normal};
+        let q = Normal::new(0.0, 1.0).unwrap().inverse_cdf(p_lo);
+        Pred {
+            y: 0.5 - q,
+            s2_t: 1.0,
+            s2_f: s_f * s_f,
+            hi: 255.0,
+            ..Default::default()
+        }
+    }
+
+    /// Rail counts of one pixel-shot drawn from the model: a fixed offset z ~ N(0, s_f²) per
+    /// pixel-shot, then F independent frames.
+    fn draw(rng: &mut Rng, p: &Pred, f: usize) -> (f64, f64) {
+        let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
+        let y = p.y + s_f * rng.normal();
+        let plo = norm_cdf((0.5 - y) / s_t);
+        let phi = 1.0 - norm_cdf((p.hi - 0.5 - y) / s_t);
+        let (mut lo, mut hi) = (0.0, 0.0);
+        for _ in 0..f {
+            let u = rng.unif();
+            if u < plo {
+                lo += 1.0;
+            } else if u > 1.0 - phi {
+                hi += 1.0;
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Without fixed pattern E[G²] is the binomial sum Σ_n C(F,n) pⁿ(1−p)^(F−n) G²(n).
+    #[test]
+    fn rail_expected_deviance_is_the_binomial_expectation() {
+        for &f in &[1usize, 2, 4, 8, 16] {
+            for &p in &[1e-9, 1e-3, 0.02, 0.3, 0.5, 0.9, 0.999] {
+                let ff = f as f64;
+                let g2 = |n: f64| {
+                    let t = |k: f64, pr: f64| {
+                        if k > 0.0 {
+                            k * (k / (ff * pr)).ln()
+                        } else {
+                            0.0
+                        }
+                    };
+                    2.0 * (t(n, p) + t(ff - n, 1.0 - p))
+                };
+                let mut want = 0.0;
+                let mut want_given = (0.0, 0.0);
+                let mut c = 1.0;
+                for n in 0..=f {
+                    if n > 0 {
+                        c *= (f - n + 1) as f64 / n as f64;
+                    }
+                    let pr = c * p.powi(n as i32) * (1.0 - p).powi((f - n) as i32);
+                    want += pr * g2(n as f64);
+                    if n > 0 {
+                        want_given.0 += pr * g2(n as f64);
+                        want_given.1 += pr;
+                    }
+                }
+                let want_given = want_given.0 / want_given.1;
+                let pred = dark_pred(p, 0.0);
+                let got = rail_expected_deviance(&pred, ff, false);
+                let got_given = rail_expected_deviance(&pred, ff, true);
+                let tol = |w: f64| 1e-7 * w.max(1e-6) + 1e-12;
+                assert!(
+                    (got - want).abs() < tol(want),
+                    "F {f} p {p}: E[G²] {got} vs {want}"
+                );
+                assert!(
+                    (got_given - want_given).abs() < tol(want_given),
+                    "F {f} p {p}: E[G² | rail] {got_given} vs {want_given}"
+                );
+            }
+        }
+    }
+
+    /// E[G²] (including the fixed-pattern mixture and the conditional form) agrees with the
+    /// Monte-Carlo mean of G² over counts drawn from the model.
+    #[test]
+    fn rail_expected_deviance_matches_monte_carlo() {
+        let mut rng = Rng(0x5EED_0006);
+        let n = 200_000;
+        for &(p_lo, s_f, f, given) in &[
+            (0.01, 0.0, 2usize, false),
+            (0.2, 0.0, 4, false),
+            (0.05, 0.0, 8, false),
+            (0.003, 0.5, 4, false),
+            (0.05, 1.0, 8, false),
+            (0.3, 2.0, 2, false),
+            (0.01, 0.7, 4, true),
+        ] {
+            let pred = dark_pred(p_lo, s_f);
+            let want = rail_expected_deviance(&pred, f as f64, given);
+            let mut cache = ExpectedDevianceCache::default();
+            let (mut s1, mut s2, mut k) = (0.0, 0.0, 0.0);
+            while k < n as f64 {
+                let (lo, hi) = draw(&mut rng, &pred, f);
+                if given && lo + hi == 0.0 {
+                    continue;
+                }
+                let (g2, e) = cache.term(&pred, f as f64, lo, hi, given);
+                assert_eq!(e, want);
+                s1 += g2;
+                s2 += g2 * g2;
+                k += 1.0;
+            }
+            let mean = s1 / k;
+            let se = ((s2 / k - mean * mean) / k).sqrt();
+            assert!(
+                (mean - want).abs() < 4.0 * se,
+                "p {p_lo} s_f {s_f} F {f} given {given}: MC {mean} ± {se} vs E[G²] {want}"
+            );
+        }
+    }
+
+    /// Under the model the summary is calibrated for any sparsity: Σ G² / Σ E[G²] ≈ 1 over
+    /// thousands of rail-count terms with per-frame probabilities 10⁻³…0.5 (z-test with the
+    /// terms' own scatter).
+    #[test]
+    fn chi2_per_dof_of_sparse_rail_counts_is_one_under_the_model() {
+        let mut rng = Rng(0xF1EA_0003);
+        let mut cache = ExpectedDevianceCache::default();
+        for &f in &[2usize, 4, 8] {
+            for &s_f in &[0.0, 0.8] {
+                let (mut chi2, mut dof, mut var) = (0.0, 0.0, 0.0);
+                for i in 0..6000 {
+                    // log-uniform 10⁻³ … 0.5, on a grid so that the memo is exercised
+                    let p = 1e-3 * 500f64.powf((i % 60) as f64 / 59.0);
+                    let pred = dark_pred(p, s_f);
+                    let (lo, hi) = draw(&mut rng, &pred, f);
+                    let (g2, e) = cache.term(&pred, f as f64, lo, hi, false);
+                    chi2 += g2;
+                    dof += e;
+                    var += (g2 - e) * (g2 - e);
+                }
+                let z = (chi2 - dof) / var.sqrt();
+                assert!(
+                    z.abs() < 4.0,
+                    "F {f} s_f {s_f}: χ²/dof {:.4} (χ² {chi2:.1}, dof {dof:.1}, z {z:.2})",
+                    chi2 / dof
+                );
+            }
+        }
+    }
+
+    /// The summary of counts drawn from `truth` and compared with the model `truth × k`
+    /// (per-frame rail probability): new (χ², dof), −lnL, and the old summary's (χ², dof)
+    /// (terms whose minority outcome is expected in under half a frame and not seen skipped,
+    /// 1 dof per kept term).
+    struct Summary {
+        chi2: f64,
+        dof: f64,
+        nll: f64,
+        old_chi2: f64,
+        old_dof: f64,
+    }
+
+    impl Summary {
+        fn r(&self) -> f64 {
+            self.chi2 / self.dof
+        }
+        fn old_r(&self) -> f64 {
+            self.old_chi2 / self.old_dof
+        }
+    }
+
+    fn summarise(k: f64, f: usize, seed: u64) -> Summary {
+        let mut rng = Rng(seed);
+        let mut cache = ExpectedDevianceCache::default();
+        let ff = f as f64;
+        let mut s = Summary {
+            chi2: 0.0,
+            dof: 0.0,
+            nll: 0.0,
+            old_chi2: 0.0,
+            old_dof: 0.0,
+        };
+        for i in 0..20_000 {
+            let p = 1e-3 * 100f64.powf((i % 40) as f64 / 39.0);
+            let (lo, hi) = draw(&mut rng, &dark_pred(p, 0.0), f);
+            let model = dark_pred((k * p).min(0.9), 0.0);
+            let (g2, e) = cache.term(&model, ff, lo, hi, false);
+            s.chi2 += g2;
+            s.dof += e;
+            s.nll -= rail_stats(&model, ff, lo, hi).ll;
+            let mean = ff * norm_cdf(0.5 - model.y);
+            let q = mean.min(ff - mean);
+            let minority = if mean > 0.5 * ff { ff - lo } else { lo };
+            if !(q < 0.5 && minority == 0.0) {
+                s.old_chi2 += g2;
+                s.old_dof += 1.0;
+            }
+        }
+        s
+    }
+
+    /// Issue 6: under a wrong model the summary and the likelihood must agree. Counts drawn
+    /// with per-frame rail probabilities 10⁻³…0.1 (F = 2, 4). At the truth χ²/dof ≈ 1 (the
+    /// old summary: ≈ 4, it keeps only the sparse terms with a rail frame). A model that
+    /// under-predicts the rail frames has χ²/dof ≫ 1, and moving it towards the truth lowers
+    /// −lnL and χ²/dof together. One that over-predicts them (the Flea3 direction: the
+    /// believed camera expects non-zero frames the data do not have) is off too (below 1 at
+    /// F = 2, either side at F = 4); there moving towards the truth lowers χ² by exactly
+    /// 2Δ(−lnL) (every term kept, saturated term fixed), while the old summary rose — but
+    /// χ²/dof is not monotone on the way, since the model's own E[G²] moves as much as the
+    /// misfit for counts this sparse.
+    #[test]
+    fn chi2_per_dof_moves_with_the_likelihood_under_a_wrong_model() {
+        for &f in &[2usize, 4] {
+            let seed = 0xBAD0_0000 + f as u64;
+            let t = summarise(1.0, f, seed);
+            let [a, b, c, d] = [0.2, 0.5, 5.0, 2.0].map(|k| summarise(k, f, seed));
+            eprintln!(
+                "F {f}: χ²/dof ×0.2 {:.3} ×0.5 {:.3} ×1 {:.3} ×2 {:.3} ×5 {:.3}; old ×5 {:.3} ×2 {:.3} ×1 {:.3}",
+                a.r(), b.r(), t.r(), d.r(), c.r(), c.old_r(), d.old_r(), t.old_r()
+            );
+            let z_true = (t.chi2 - t.dof) / (2.0 * t.dof).sqrt();
+            assert!(
+                z_true.abs() < 4.0 && (t.r() - 1.0).abs() < 0.05,
+                "F {f}: χ²/dof {} at the truth",
+                t.r()
+            );
+            // Under-predicted rail frames.
+            assert!(
+                a.r() > 1.5,
+                "F {f}: χ²/dof {} with rails under-predicted ×5",
+                a.r()
+            );
+            assert!(
+                a.nll > b.nll && b.nll > t.nll,
+                "F {f}: −lnL {} {} {}",
+                a.nll,
+                b.nll,
+                t.nll
+            );
+            assert!(
+                a.r() > b.r() && b.r() > t.r(),
+                "F {f}: χ²/dof {} {} {}",
+                a.r(),
+                b.r(),
+                t.r()
+            );
+            // Over-predicted rail frames.
+            assert!(
+                (c.r() - 1.0).abs() > 0.1 && (d.r() - 1.0).abs() > 0.1,
+                "F {f}: χ²/dof {} {}",
+                c.r(),
+                d.r()
+            );
+            assert!(
+                c.nll > d.nll && d.nll > t.nll,
+                "F {f}: −lnL {} {} {}",
+                c.nll,
+                d.nll,
+                t.nll
+            );
+            for (x, y) in [(&c, &d), (&d, &t), (&a, &b), (&b, &t)] {
+                let (dchi2, dnll) = (x.chi2 - y.chi2, x.nll - y.nll);
+                assert!(
+                    (dchi2 - 2.0 * dnll).abs() < 1e-6 * dchi2.abs(),
+                    "F {f}: Δχ² {dchi2} vs 2Δ(−lnL) {dnll}"
+                );
+            }
+            // The old summary on the same counts: far from 1 at the truth, and higher there
+            // than for the ×5 over-predicting model.
+            assert!(
+                t.old_r() > 1.5 && c.old_r() < t.old_r(),
+                "F {f}: old χ²/dof {} {}",
+                c.old_r(),
+                t.old_r()
+            );
+        }
+    }
+}

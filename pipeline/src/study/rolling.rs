@@ -1,0 +1,214 @@
+//! The `"rolling_shutter"` study point: one shot of a moving edge under a PWM light through a
+//! rolling-shutter camera, simulated by the one chain ([`crate::simulate::simulate_each`]),
+//! then measured on the frame: the skew of the edge from row to row and the period of the
+//! flicker bands along the rows, each beside its closed form.
+//!
+//! | key | default | meaning |
+//! |---|---|---|
+//! | `camera` | required | camera.json content; `sensor.readout` must be `"rolling"` |
+//! | `target` | required | a captures.json target holding one near-vertical edge (`slanted_edge` with `angle_deg` 0) |
+//! | `exposure_s` | required | exposure time (s) |
+//! | `light_modulation` | required | `{"frequency_hz", "duty_cycle", "phase"}` as in captures.json |
+//! | `motion` | required | `{"velocity_px_per_s": [v_x, v_y]}` as in captures.json |
+//! | `reference_fraction` | 0.125 | fraction of the columns at each side used as the edge's reference levels (the light side's also give the flicker row means) |
+//! | `simulation` | absent | captures.json `simulation` block |
+//!
+//! Metrics (one row of the study table): `skew_px_measured` (slope of the OLS line through
+//! the edge position of every row whose edge contrast is at least a quarter of the largest, times rows − 1: the edge's displacement from the first to
+//! the last row), `skew_px_expected` = `v_x · row_time · (rows − 1)`, `skew_px_tolerance`
+//! (5 standard errors of the fitted skew plus the model bias: under a PWM light the edge
+//! centroid follows the light-weighted mean time of each window, not its middle; the bias is
+//! the skew of the exact model positions minus the closed form),
+//! `flicker_period_rows_measured` (dominant period of the light side's row means,
+//! [`camsim_metrics::rolling_shutter::dominant_period`]), `flicker_period_rows_expected` =
+//! `(1/f) / row_time`, `flicker_period_rows_tolerance` (5 Cramér–Rao standard errors from the
+//! measured row-mean noise plus the estimator's bias on the noise-free frame),
+//! `flicker_visibility_expected` ([`camsim_sensor::PwmLight::band_visibility`]).
+use super::output::PointOutput;
+use crate::config::{camera_from_file, captures_with_camera, CameraFile, CapturesFile};
+use crate::error::CliError;
+use crate::simulate::SimOutput;
+use camsim_metrics::rolling_shutter::{dominant_period, edge_skew_fit, row_edge_positions_px};
+use camsim_sensor::ShutterMode;
+use serde::Deserialize;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// Rows whose edge contrast is below this fraction of the largest (rows that caught little
+/// of the flickering light) are left out of the skew fit.
+const MIN_CONTRAST_FRACTION: f64 = 0.25;
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RollingDoc {
+    #[allow(dead_code)]
+    kind: String,
+    camera: Value,
+    target: Value,
+    exposure_s: f64,
+    light_modulation: Value,
+    motion: Value,
+    #[serde(default)]
+    reference_fraction: Option<f64>,
+    #[serde(default)]
+    simulation: Option<Value>,
+    /// Added by the study planner (hashed with the point).
+    #[allow(dead_code)]
+    #[serde(default)]
+    camsim_version: Option<String>,
+    /// Per-point seed override ([`super::point::seed_of`]).
+    #[allow(dead_code)]
+    #[serde(default)]
+    seed: Option<u64>,
+}
+
+/// The capture set of the point (one shot, one frame) from the document.
+fn capture_set(doc: &Value) -> Result<(crate::config::CaptureSet, f64), String> {
+    let d: RollingDoc = serde_json::from_value(doc.clone()).map_err(|e| e.to_string())?;
+    let f: CameraFile =
+        serde_json::from_value(d.camera.clone()).map_err(|e| format!("camera: {e}"))?;
+    let cam = camera_from_file(Path::new("camera"), f).map_err(|e| e.one_line())?;
+    if cam.readout.mode != ShutterMode::Rolling {
+        return Err("camera.sensor.readout: a rolling_shutter point needs {\"mode\": \"rolling\", \"row_time_us\": …}".into());
+    }
+    let frac = d.reference_fraction.unwrap_or(0.125);
+    if !(frac > 0.0 && frac <= 0.5) {
+        return Err(format!(
+            "reference_fraction: must be in (0, 0.5], got {frac}"
+        ));
+    }
+    let mut captures = json!({
+        "camera": "camera.json",
+        "shots": [{
+            "id": "frame",
+            "target": d.target,
+            "exposure_s": d.exposure_s,
+            "frames": ["frame.png"],
+            "light_modulation": d.light_modulation,
+            "motion": d.motion,
+        }],
+    });
+    if let Some(s) = d.simulation {
+        captures["simulation"] = s;
+    }
+    let raw: CapturesFile = serde_json::from_value(captures).map_err(|e| e.to_string())?;
+    let set = captures_with_camera(Path::new("point"), raw, cam, PathBuf::from("camera"))
+        .map_err(|e| e.one_line())?;
+    if set.shots[0].light.is_none() || set.shots[0].motion.is_none() {
+        return Err("light_modulation and motion: both required".into());
+    }
+    Ok((set, frac))
+}
+
+/// Cheap validation of a rolling-shutter document.
+pub fn validate(doc: &Value) -> Result<(), String> {
+    capture_set(doc).map(|_| ())
+}
+
+/// Evaluate a rolling-shutter point (see the module documentation).
+pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliError> {
+    let (set, frac) = capture_set(doc).map_err(CliError::Other)?;
+    let sensor = &set.camera.sensor;
+    let (rows, cols) = (sensor.rows, sensor.cols);
+    let black = sensor.black_level_dn;
+    let mut noisy: Vec<f64> = Vec::new();
+    let mut clean: Vec<f64> = Vec::new();
+    for expected in [false, true] {
+        crate::simulate::simulate_each(&set, seed, expected, &mut |_, _| {}, &mut |o| {
+            match o {
+                SimOutput::Frame { raw, .. } => {
+                    noisy = raw.dn.iter().map(|&v| v as f64 - black).collect()
+                }
+                SimOutput::Expected { dn, .. } => {
+                    clean = dn.data.iter().map(|&v| v as f64 - black).collect()
+                }
+            }
+            Ok(())
+        })?;
+    }
+    let k = ((cols as f64 * frac).round() as usize).max(1);
+    let readout = set.camera.readout;
+    let model = crate::chain::shot_time_model(&set, 0);
+    let light = set.shots[0].light.expect("checked");
+    let v = set.shots[0].motion.expect("checked").velocity_px_per_s;
+    let exposure_s = match set.shots[0].exposure {
+        crate::config::Exposure::Fixed(t) => t,
+        crate::config::Exposure::Auto(_) => unreachable!("exposure_s is fixed"),
+    };
+    let span = (rows - 1) as f64;
+
+    // Skew: the edge position of every row.
+    let positions = row_edge_positions_px(&noisy, rows, cols, k, MIN_CONTRAST_FRACTION);
+    let fit = edge_skew_fit(&positions);
+    let skew_expected = v[0] * readout.row_time_s * span;
+    // Exact model positions on the same rows.
+    let model_pos: Vec<f64> = (0..rows)
+        .map(|r| {
+            if positions[r].is_finite() {
+                v[0] * model.row_mean_time_s(r, exposure_s)
+            } else {
+                f64::NAN
+            }
+        })
+        .collect();
+    let skew_model = edge_skew_fit(&model_pos).slope * span;
+    let skew_tol = 5.0 * fit.slope_std_error * span + (skew_model - skew_expected).abs();
+
+    // Flicker: row means of the light side (the side with the larger reference level).
+    let side_mean = |data: &[f64], left: bool| -> f64 {
+        let (lo, hi) = if left { (0, k) } else { (cols - k, cols) };
+        (0..rows)
+            .map(|r| data[r * cols + lo..r * cols + hi].iter().sum::<f64>())
+            .sum()
+    };
+    let left = side_mean(&clean, true) > side_mean(&clean, false);
+    let (c0, c1) = if left { (0, k) } else { (cols - k, cols) };
+    let row_stats = |data: &[f64]| -> (Vec<f64>, f64) {
+        let mut means = Vec::with_capacity(rows);
+        let mut var_of_mean = 0.0;
+        for r in 0..rows {
+            let s = &data[r * cols + c0..r * cols + c1];
+            let n = s.len() as f64;
+            let m = s.iter().sum::<f64>() / n;
+            let var = s.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+            means.push(m);
+            var_of_mean += var / n;
+        }
+        (means, var_of_mean / rows as f64)
+    };
+    let (noisy_means, noise_var) = row_stats(&noisy);
+    let (clean_means, _) = row_stats(&clean);
+    let period_expected = camsim_sensor::flicker_period_rows(&light, &readout);
+    let measured = dominant_period(&noisy_means, noise_var);
+    let noise_free = dominant_period(&clean_means, 0.0);
+    let estimator_bias = noise_free.map(|p| (p.period_rows - period_expected).abs());
+    let period_tol = match (measured, estimator_bias) {
+        (Some(m), Some(b)) => Some(5.0 * m.period_std_error_rows + b),
+        _ => None,
+    };
+
+    let mut out = PointOutput::default();
+    out.put("skew_px_measured", fit.slope * span);
+    out.put("skew_px_expected", skew_expected);
+    out.put("skew_px_tolerance", skew_tol);
+    out.put_opt(
+        "flicker_period_rows_measured",
+        measured.map(|m| m.period_rows),
+    );
+    out.put("flicker_period_rows_expected", period_expected);
+    out.put_opt("flicker_period_rows_tolerance", period_tol);
+    out.put(
+        "flicker_visibility_expected",
+        light.band_visibility(exposure_s),
+    );
+    out.detail = json!({
+        "skew_px_std_error": fit.slope_std_error * span,
+        "skew_px_model": skew_model,
+        "skew_rows_used": positions.iter().filter(|p| p.is_finite()).count(),
+        "flicker_period_rows_std_error": measured.map(|m| m.period_std_error_rows),
+        "flicker_period_rows_noise_free": noise_free.map(|p| p.period_rows),
+        "row_mean_noise_variance_dn2": noise_var,
+        "flicker_row_means_dn": noisy_means,
+    });
+    Ok(out)
+}

@@ -1,0 +1,156 @@
+//! Time within the exposure through the pipeline: the rolling-shutter study
+//! (examples/study_rolling_shutter/spec_ci.json: skew of a moving edge and LED flicker band
+//! period measured on simulated frames against `v · row_time` and `(1/f)/row_time`), the
+//! camera and shot keys (one-line errors), and the dark-current temperature law through
+//! `camera.json`.
+use crate::util::camsim;
+use camsim_pipeline::config::{camera_from_file, CameraFile};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn rolling_shutter_study_measures_skew_and_flicker_period() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = repo().join("examples/study_rolling_shutter/spec_ci.json");
+    let o = camsim()
+        .arg("study")
+        .arg(&spec)
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("table.json")).unwrap())
+            .unwrap();
+    let rows = t["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "two exposure times");
+    let num = |r: &Value, k: &str| {
+        r[k].as_f64()
+            .unwrap_or_else(|| panic!("{k} missing in {r}"))
+    };
+    for r in rows {
+        // Skew: v · row_time · (rows − 1) = 2000 px/s · 20 µs · 199.
+        let (m, e, tol) = (
+            num(r, "skew_px_measured"),
+            num(r, "skew_px_expected"),
+            num(r, "skew_px_tolerance"),
+        );
+        assert!((e - 2000.0 * 20e-6 * 199.0).abs() < 1e-9, "{e}");
+        // The tolerance is 5 standard errors from the noise plus the model's PWM bias; it must
+        // be small enough to tell the skew from none.
+        assert!(tol < 0.1 * e, "skew tolerance {tol} too loose for {e}");
+        assert!(
+            (m - e).abs() <= tol,
+            "skew measured {m} expected {e} ± {tol}"
+        );
+        // Flicker: (1/1000 Hz) / 20 µs = 50 rows.
+        let (m, e, tol) = (
+            num(r, "flicker_period_rows_measured"),
+            num(r, "flicker_period_rows_expected"),
+            num(r, "flicker_period_rows_tolerance"),
+        );
+        assert!((e - 50.0).abs() < 1e-9, "{e}");
+        assert!(tol < 0.05 * e, "period tolerance {tol} too loose for {e}");
+        assert!(
+            (m - e).abs() <= tol,
+            "period measured {m} expected {e} ± {tol}"
+        );
+    }
+    // Band visibility from the closed form: 0.3 ms = 0.3 periods > D = 0.2: (0.2 − 0.0)/(0.2);
+    // 2.5 ms = 2.5 periods: (0.6 − 0.4)/(0.6 + 0.4).
+    assert!((num(&rows[0], "flicker_visibility_expected") - 1.0).abs() < 1e-12);
+    assert!((num(&rows[1], "flicker_visibility_expected") - 0.2).abs() < 1e-12);
+}
+
+fn camera(sensor_extra: Value) -> Value {
+    let mut c = json!({
+        "name": "t",
+        "optics": {"f_number": 2.0, "focal_length_mm": 4.0, "relative_illumination": "none",
+                   "blur": {"kind": "none"}},
+        "sensor": {"rows": 8, "cols": 8, "pixel_pitch_um": 2.0, "cfa": ["m"],
+                   "channels": {"m": 0.5}, "well_capacity_e": 1e4,
+                   "conversion_gain_v_per_e": 1e-4, "voltage_swing_v": 1.0, "adc_bits": 12,
+                   "dark_voltage_v_per_s": 2e-3}
+    });
+    for (k, v) in sensor_extra.as_object().unwrap() {
+        c["sensor"][k] = v.clone();
+    }
+    c
+}
+
+fn load(c: Value) -> Result<camsim_pipeline::config::Camera, String> {
+    let f: CameraFile = serde_json::from_value(c).map_err(|e| e.to_string())?;
+    camera_from_file(Path::new("camera.json"), f).map_err(|e| e.one_line())
+}
+
+#[test]
+fn dark_current_follows_the_doubling_temperature_through_camera_json() {
+    let base = load(camera(json!({}))).unwrap().sensor.dark_voltage_v_per_s;
+    for (t, factor) in [(25.0, 1.0), (31.0, 2.0), (43.0, 8.0), (19.0, 0.5)] {
+        let s = load(camera(
+            json!({"temperature_c": t, "dark_reference_temperature_c": 25.0,
+                                   "dark_doubling_temperature_c": 6.0}),
+        ))
+        .unwrap()
+        .sensor;
+        assert!(
+            (s.dark_voltage_v_per_s - factor * base).abs() < 1e-15,
+            "T = {t}: {} vs {}",
+            s.dark_voltage_v_per_s,
+            factor * base
+        );
+    }
+    let e = load(camera(json!({"temperature_c": 30.0}))).unwrap_err();
+    assert!(e.contains("sensor.temperature_c"), "{e}");
+    let e = load(camera(
+        json!({"temperature_c": 30.0, "dark_reference_temperature_c": 25.0,
+                               "dark_doubling_temperature_c": 0.0}),
+    ))
+    .unwrap_err();
+    assert!(e.contains("dark_doubling_temperature_c"), "{e}");
+}
+
+#[test]
+fn readout_and_shot_time_keys_are_checked() {
+    let c = load(camera(
+        json!({"readout": {"mode": "rolling", "row_time_us": 15}}),
+    ))
+    .unwrap();
+    assert_eq!(c.readout.mode, camsim_sensor::ShutterMode::Rolling);
+    assert!((c.readout.row_time_s - 15e-6).abs() < 1e-18);
+    assert_eq!(
+        load(camera(json!({}))).unwrap().readout,
+        camsim_sensor::Readout::default()
+    );
+    let e = load(camera(json!({"readout": {"mode": "diagonal"}}))).unwrap_err();
+    assert!(
+        e.contains("sensor.readout.mode") && e.contains("diagonal"),
+        "{e}"
+    );
+    let e = load(camera(json!({"readout": {"mode": "rolling"}}))).unwrap_err();
+    assert!(e.contains("sensor.readout.row_time_us"), "{e}");
+    // Shot keys: a duty cycle of 0 is named with its shot.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("camera.json"),
+        camera(json!({})).to_string(),
+    )
+    .unwrap();
+    let caps = json!({"camera": "camera.json", "shots": [
+        {"id": "a", "exposure_s": 0.01, "frames": ["a.png"], "target": {"kind": "dark"},
+         "light_modulation": {"frequency_hz": 100, "duty_cycle": 0.0}}]});
+    let p = dir.path().join("captures.json");
+    std::fs::write(&p, caps.to_string()).unwrap();
+    let e = camsim_pipeline::config::load_captures(&p, None)
+        .unwrap_err()
+        .one_line();
+    assert!(
+        e.contains("shots[0] (a)") && e.contains("duty_cycle"),
+        "{e}"
+    );
+}
