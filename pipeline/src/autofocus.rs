@@ -146,7 +146,7 @@ pub fn contrast_autofocus(
     let h = vmax / (af.steps - 1) as f64;
     let mut samples = Vec::new();
     let mut best: Option<(AutofocusSample, LensBlur)> = None;
-    let mut keep = |r: (AutofocusSample, LensBlur),
+    let keep = |r: (AutofocusSample, LensBlur),
                     samples: &mut Vec<AutofocusSample>,
                     best: &mut Option<(AutofocusSample, LensBlur)>| {
         samples.push(r.0);
