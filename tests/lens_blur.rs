@@ -132,8 +132,14 @@ fn object_distance_focuses_the_lens_and_sets_its_working_f_number() {
 /// the one chain and keeping the sharpest image puts the sensor within the depth of focus
 /// ±N_w·c (c = 2 pixels, N_w the working F-number at 2 m) of the focus model's best focus for
 /// that object (an independent criterion: the polychromatic MTF of traced wavefronts).
+///
+/// The edge's radiance (5·10¹³–5·10¹⁴ photons/(s·sr·m²·nm)) keeps the light side at ≈ ⅓ of
+/// the 20 000 e well in 10 ms: a clipped region has no contrast at any position (the former
+/// 10¹⁷ saturated every pixel, so the metric was 0 everywhere and the scan kept its first
+/// position, infinity; `contrast_autofocus` now refuses a region more than half clipped).
+/// Scan: 5 steps in vergence 0–1/m, then golden section to 0.008/m (the depth of focus is
+/// ±0.008/m in object vergence, Δv = Δs'/f²); ≈ 16 positions, ≈ 45–50 s release.
 #[test]
-#[ignore = "open (issue 18): the scan keeps the infinity position (contrast maximal at 1/d = 0) for an edge at 2 m; 150 s"]
 fn contrast_autofocus_finds_the_focus_model_plane() {
     use camsim_lens::{FocusMethod, FocusSpec, GlassCatalog, LensPrescription};
     use camsim_pipeline::autofocus::{contrast_autofocus, AutofocusOptions};
@@ -145,7 +151,7 @@ fn contrast_autofocus_finds_the_focus_model_plane() {
     let caps = json!({"camera": "camera.json",
         "simulation": {"wavelength_nm": {"start_nm": 450, "stop_nm": 650, "step_nm": 50}},
         "shots": [{"id": "edge", "exposure_s": 0.01, "frames": ["e.png"],
-        "target": {"kind": "slanted_edge", "dark": 1e16, "light": 1e17, "angle_deg": 5.0,
+        "target": {"kind": "slanted_edge", "dark": 5e13, "light": 5e14, "angle_deg": 5.0,
                    "radiance_unit": "photons"}}]});
     write_set(dir.path(), &cam, &caps);
     let set = camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None)
@@ -171,7 +177,7 @@ fn contrast_autofocus_finds_the_focus_model_plane() {
             },
             near_m: 1.0,
             steps: 5,
-            tolerance_per_m: 0.004,
+            tolerance_per_m: 0.008,
         },
     )
     .unwrap();
@@ -182,6 +188,12 @@ fn contrast_autofocus_finds_the_focus_model_plane() {
         af.best.vergence_per_m,
         af.best.image_distance_mm
     );
+    for s in &af.samples {
+        eprintln!(
+            "  1/d = {:.4}/m, image distance {:.4} mm, contrast {:.5}",
+            s.vergence_per_m, s.image_distance_mm, s.contrast
+        );
+    }
     let model = lens
         .focus(&FocusSpec {
             focus_distance_mm: Some(2000.0),

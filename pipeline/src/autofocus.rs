@@ -14,7 +14,8 @@
 //!   IJCV 1 (1987); Groen, Young & Ligthart, Cytometry 6 (1985)): on the region of the noise-free
 //!   expected frame, the sum of squared differences between pixels one CFA period apart
 //!   (same colour filter) horizontally and vertically, divided by the number of differences
-//!   and by the squared mean of the region (so exposure does not change it).
+//!   and by the squared mean of the region (so exposure does not change it). A region more than
+//!   half clipped at the ADC's full scale is an error (its contrast is flat).
 use crate::config::CaptureSet;
 use crate::error::CliError;
 use camsim_core::stats::Rect;
@@ -126,6 +127,18 @@ pub fn contrast_autofocus(
         let rate = crate::chain::shot_electron_rate(&set_v, shot_index, &grid)?;
         let shot = crate::chain::shot_exposure(&set_v, shot_index, &rate);
         let frame = crate::chain::expected_frame(s, &rate, &shot);
+        // A clipped region has no contrast to maximise (the metric is 0 at every position).
+        let max_dn = s.max_dn() as f32;
+        let clipped = (rg.row0..rg.row1)
+            .flat_map(|r| (rg.col0..rg.col1).map(move |c| (r, c)))
+            .filter(|&(r, c)| frame.data[r * frame.cols + c] >= max_dn)
+            .count();
+        if 2 * clipped > (rg.row1 - rg.row0) * (rg.col1 - rg.col0) {
+            return Err(CliError::Other(format!(
+                "autofocus: {clipped} of the region's pixels are clipped at {max_dn} DN \
+                 (1/d = {v:.4}/m): shorten the shot's exposure"
+            )));
+        }
         let contrast = tenengrad_contrast(&frame.data, frame.cols, rg, period).ok_or_else(|| {
             CliError::Other("autofocus: the region is black in the simulated image".into())
         })?;
