@@ -70,6 +70,7 @@ fn check_schema(r: &Value, wavelengths: &[&str]) {
             "entrance_pupil_diameter_mm",
             "f_number",
             "fields",
+            "focus",
             "huygens_psf",
             "mtf_alias_free",
             "mtf_image_shift_mm",
@@ -78,6 +79,10 @@ fn check_schema(r: &Value, wavelengths: &[&str]) {
             "primary_wavelength_nm"
         ]
     );
+    // The focus model's section (issue 18): the merit at its plane is at least the paraxial one.
+    let f = &r["focus"];
+    assert!(f["mtf_merit"].as_f64().unwrap() >= f["mtf_merit_paraxial"].as_f64().unwrap());
+    assert!(f["image_distance_mm"].as_f64().unwrap() > 0.0);
     for f in r["fields"].as_array().unwrap() {
         assert_eq!(
             keys(f),

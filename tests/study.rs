@@ -392,39 +392,100 @@ fn mtf50_is_the_product_of_diffraction_and_pixel_mtf() {
     }
 }
 
-/// MTF50 (cycles/mm) of a lens alone: `camsim lens report` on-axis wave-optics MTF at the
-/// primary wavelength on the paraxial image plane (the focus of the lens field model).
-fn lens_mtf50_cy_per_mm(lens_file: &Path, f_number: f64, dir: &Path) -> f64 {
+/// Standard error of a study point's noisy slanted-edge MTF50 (see
+/// [`mtf50_standard_error_cy_per_mm`]).
+#[derive(Debug)]
+struct Mtf50Error {
+    /// RMS of noisy − noise-free MTF over [0.5, 1.5] × the noise-free MTF50.
+    sigma_mtf: f64,
+    /// Slope of the noise-free MTF at its 50 % crossing (per cycle/mm).
+    slope_per_cy_per_mm: f64,
+    /// σ_MTF / |slope| (cycles/mm).
+    sigma_cy_per_mm: f64,
+}
+
+/// Standard error of the noisy MTF50 of study point `row` (result.json `detail.mtf`), by error
+/// propagation through the 50 % crossing: σ_f50 = σ_MTF / |dMTF/df| (first order), with σ_MTF
+/// the RMS difference of the noisy and the noise-free curves of the same edge over
+/// [0.5, 1.5] × the noise-free MTF50 (the noise-free frame is the noisy one's expectation, so
+/// the difference is the measurement noise, plus any noise bias, which this keeps) and the
+/// slope between the two noise-free samples bracketing the crossing.
+fn mtf50_standard_error_cy_per_mm(out: &Path, row: &Value) -> Mtf50Error {
+    let folder = row["folder"].as_str().unwrap();
+    let r: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("points").join(folder).join("result.json")).unwrap(),
+    )
+    .unwrap();
+    let m = &r["detail"]["mtf"];
+    let px_mm = num(row, "pixel_pitch_um") * 1e-3;
+    let f: Vec<f64> = m["frequencies_cy_per_px"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() / px_mm)
+        .collect();
+    let nf: Vec<f64> = m["mtf_noise_free"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let noisy: Vec<f64> = m["mtf"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let f50 = num(row, "mtf50_noise_free_cy_per_mm");
+    let band: Vec<f64> = (0..f.len())
+        .filter(|&i| f[i] >= 0.5 * f50 && f[i] <= 1.5 * f50)
+        .map(|i| noisy[i] - nf[i])
+        .collect();
+    assert!(band.len() >= 5, "{folder}: {} MTF samples around MTF50", band.len());
+    let sigma_mtf = (band.iter().map(|d| d * d).sum::<f64>() / band.len() as f64).sqrt();
+    let k = (1..f.len()).find(|&i| nf[i] < 0.5).unwrap();
+    let slope = (nf[k] - nf[k - 1]) / (f[k] - f[k - 1]);
+    Mtf50Error {
+        sigma_mtf,
+        slope_per_cy_per_mm: slope,
+        sigma_cy_per_mm: sigma_mtf / slope.abs(),
+    }
+}
+
+/// MTF50 (cycles/mm) of a lens alone, on axis at its primary wavelength (wave optics from the
+/// traced OPD, `camsim_lens`), with the lens focused as the co-design camera focuses it
+/// (`optics.blur.kind = "lens"`, object at infinity): the focus model's best focus, merit
+/// frequency half the pixel Nyquist 1/(4p), over the sensor's field (≈ 0.05–0.15°, taken as on
+/// axis), the lens's wavelengths. Monochromatic, so only a reference for the polychromatic
+/// system.
+fn lens_mtf50_cy_per_mm(lens_file: &Path, f_number: f64, pixel_pitch_um: f64, dir: &Path) -> f64 {
+    use camsim_lens::{FocusMethod, FocusSpec, GlassCatalog, LensPrescription};
     let mut lens: Value =
         serde_json::from_str(&std::fs::read_to_string(lens_file).unwrap()).unwrap();
     lens["aperture"] = json!({"f_number": f_number});
     let p = dir.join(format!("lens_{f_number}.json"));
     std::fs::write(&p, lens.to_string()).unwrap();
-    let freqs: Vec<String> = (1..=120).map(|i| (5 * i).to_string()).collect();
-    let o = camsim()
-        .args(["lens", "report"])
-        .arg(&p)
-        .args([
-            "--json",
-            "--mtf-focus",
-            "paraxial",
-            "--mtf-lp-mm",
-            &freqs.join(","),
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r: Value = serde_json::from_slice(&o.stdout).unwrap();
-    let pts: Vec<(f64, f64)> = r["mtf_on_axis"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            (
-                p["lp_per_mm"].as_f64().unwrap(),
-                p["mtf"].as_f64().unwrap_or(0.0),
-            )
+    let lens = LensPrescription::from_json_file(&p, &GlassCatalog::bundled()).unwrap();
+    let focus = lens
+        .focus(&FocusSpec {
+            focus_distance_mm: None,
+            method: FocusMethod {
+                frequency_cyc_per_mm: Some(0.25 / (pixel_pitch_um * 1e-3)),
+                max_field_deg: Some(0.0),
+                ..Default::default()
+            },
         })
+        .unwrap();
+    let freqs: Vec<f64> = (1..=240).map(|i| 2.5 * i as f64).collect();
+    let (wo, _) = focus
+        .lens
+        .wave_optics_sampled(0.0, lens.primary_nm, 64, 1024, 2, &freqs)
+        .unwrap();
+    let pts: Vec<(f64, f64)> = wo
+        .mtf
+        .iter()
+        .zip(&freqs)
+        .map(|(m, &f)| (f, 0.5 * (m.tangential + m.sagittal)))
         .collect();
     let mut prev = (0.0, 1.0);
     for &(f, m) in &pts {
@@ -445,14 +506,25 @@ fn lens_mtf50_cy_per_mm(lens_file: &Path, f_number: f64, dir: &Path) -> f64 {
 ///   (z < 3.5, SNR standard error ≈ SNR/√(2n) for n pixels), and SNR grows as the pixel pitch
 ///   (∝ √area): the 3 µm / 1 µm ratio is the model's within 3.5 σ and within 8 % of the
 ///   shot-noise value 3 (a read-noise-limited sensor would give 9, a PRNU-limited one 1);
-/// * MTF50 (noise-free slanted edge; the simulated frame's agrees within 10 % at f/2.8) is
-///   limited by the smaller of the pixel and the lens: within [0.6, 1.2] × min(pixel MTF50, the
-///   lens's own on-axis MTF50 from `camsim lens report`, monochromatic at the primary
-///   wavelength on the paraxial image plane, so only a reference for the polychromatic
-///   system); the aberrated double Gauss
-///   at f/2.8 and both lenses at f/11 are lens-limited (MTF50 within 25 % across 1–3 µm, ≥ 0.6 ×
-///   the lens's), while the sharp Petzval at f/2.8 is pixel-limited at 3 µm (≥ 0.6 × the pixel
-///   MTF50) and resolves ≥ 1.3 × more at 1 µm;
+/// * the simulated (noisy) frame's MTF50 agrees with the noise-free edge's at f/2.8 within
+///   3.5 standard errors, σ_f50 = σ_MTF / |dMTF/df| at the crossing (error propagation,
+///   `mtf50_standard_error_cy_per_mm`), and that standard error is < 15 % of MTF50. A fixed
+///   relative tolerance is wrong here: the focused (best-focus) double Gauss at f/2.8 has a
+///   halo from its residual spherical aberration, so its MTF falls fast to ≈ 0.6 and then
+///   slowly: at 1 µm (272 e per pixel, SNR ≈ 16) the slope at the crossing is only
+///   ≈ 2.5 per cycle/pixel and the edge's MTF noise of ≈ 0.04 moves MTF50 by ≈ 9 % (1 σ);
+///   at the paraxial image plane the lens was blurrier and its MTF steeper there;
+/// * MTF50 (noise-free slanted edge) is limited by the smaller of the pixel and the lens:
+///   within [0.6, 1.2] × min(pixel MTF50, the lens's own on-axis MTF50 with the lens focused
+///   as the camera focuses it, by the focus model at half the pixel Nyquist,
+///   `lens_mtf50_cy_per_mm`; monochromatic at the primary wavelength, so only a reference for
+///   the polychromatic system). The trend follows the Gaussian cascade (MTFs multiply, so
+///   50 % frequencies add in inverse quadrature, f⁻² = f_lens⁻² + f_pixel⁻²): where the lens
+///   MTF50 is ≤ ½ the pixel's at every pitch (both lenses at f/11, diffraction-limited,
+///   62 cy/mm) the system is lens-limited and varies by ≤ 1/√1.25 − 1 ≈ 11 % (asserted
+///   < 25 %, ≥ 0.6 × the lens's); otherwise (both lenses at f/2.8: focused, the double Gauss
+///   is no longer the 36 cy/mm blur of its paraxial image plane but ≈ 175–190 cy/mm) the 1 µm /
+///   3 µm MTF50 ratio is the cascade's within 20 % (neither MTF is Gaussian) and > 1.2;
 /// * the report shows its figures (non-blank PNGs).
 #[test]
 fn codesign_ci_reproduces_the_expected_trends() {
@@ -533,7 +605,10 @@ fn codesign_ci_reproduces_the_expected_trends() {
     // MTF50.
     for (lens, file) in lenses {
         for n in [2.8, 11.0] {
-            let lens50 = lens_mtf50_cy_per_mm(&repo().join(file), n, dir.path());
+            let lens50: Vec<f64> = [1.0, 2.0, 3.0]
+                .iter()
+                .map(|&p| lens_mtf50_cy_per_mm(&repo().join(file), n, p, dir.path()))
+                .collect();
             let m: Vec<f64> = [1.0, 2.0, 3.0]
                 .iter()
                 .map(|&p| num(pick(lens, n, p), "mtf50_noise_free_cy_per_mm"))
@@ -545,37 +620,65 @@ fn codesign_ci_reproduces_the_expected_trends() {
                         num(r, "mtf50_cy_per_mm"),
                         num(r, "mtf50_noise_free_cy_per_mm"),
                     );
+                    let se = mtf50_standard_error_cy_per_mm(&out, r);
+                    eprintln!(
+                        "{lens} f/{n} {p} µm: MTF50 noisy {a:.1} vs noise-free {b:.1} cy/mm, \
+                         σ_MTF {:.3}, slope {:.5}/(cy/mm), standard error {:.1} ({:.1} %), z = {:.2}",
+                        se.sigma_mtf,
+                        se.slope_per_cy_per_mm,
+                        se.sigma_cy_per_mm,
+                        100.0 * se.sigma_cy_per_mm / b,
+                        (a - b) / se.sigma_cy_per_mm
+                    );
                     assert!(
-                        (a / b - 1.0).abs() < 0.1,
-                        "{lens} f/{n} {p} µm: noisy {a} vs {b}"
+                        se.sigma_cy_per_mm < 0.15 * b,
+                        "{lens} f/{n} {p} µm: the noisy MTF50 is uninformative: {se:?} vs {b}"
+                    );
+                    assert!(
+                        ((a - b) / se.sigma_cy_per_mm).abs() < 3.5,
+                        "{lens} f/{n} {p} µm: noisy {a} vs {b} ({se:?})"
                     );
                 }
             }
-            eprintln!("{lens} f/{n}: lens MTF50 {lens50:.1} cy/mm; system 1/2/3 µm: {m:.1?}");
+            let pixel50: Vec<f64> = [1.0, 2.0, 3.0]
+                .iter()
+                .map(|&p| num(pick(lens, n, p), "pixel_mtf50_cy_per_mm"))
+                .collect();
+            // Gaussian cascade: MTFs multiply, so 50 % frequencies add in inverse quadrature.
+            let cascade: Vec<f64> = (0..3)
+                .map(|i| 1.0 / (lens50[i].powi(-2) + pixel50[i].powi(-2)).sqrt())
+                .collect();
+            eprintln!(
+                "{lens} f/{n}: lens MTF50 {lens50:.1?} pixel {pixel50:.1?} cascade {cascade:.1?} \
+                 cy/mm; system 1/2/3 µm: {m:.1?}"
+            );
             for (i, &p) in [1.0, 2.0, 3.0].iter().enumerate() {
-                let pixel50 = num(pick(lens, n, p), "pixel_mtf50_cy_per_mm");
-                let lim = pixel50.min(lens50);
+                let lim = pixel50[i].min(lens50[i]);
                 assert!(
                     m[i] <= 1.2 * lim && m[i] >= 0.6 * lim,
-                    "{lens} f/{n} {p} µm: {} vs pixel {pixel50} lens {lens50}",
-                    m[i]
+                    "{lens} f/{n} {p} µm: {} vs pixel {} lens {}",
+                    m[i],
+                    pixel50[i],
+                    lens50[i]
                 );
             }
-            let lens_limited = lens == "double Gauss 50 mm" && n == 2.8 || n == 11.0;
-            if lens_limited {
-                let (lo, hi) = m
-                    .iter()
-                    .fold((f64::MAX, 0f64), |(a, b), &x| (a.min(x), b.max(x)));
+            let (lo, hi) = m
+                .iter()
+                .fold((f64::MAX, 0f64), |(a, b), &x| (a.min(x), b.max(x)));
+            if (0..3).all(|i| lens50[i] <= 0.5 * pixel50[i]) {
+                // lens-limited: the cascade varies by ≤ 1/√(1 + 0.25) → 11 % across pitches
                 assert!(hi / lo < 1.25, "{lens} f/{n} not lens-limited: {m:?}");
-                assert!(lo >= 0.6 * lens50, "{lens} f/{n}: {lo} vs lens {lens50}");
+                let l_lo = lens50.iter().cloned().fold(f64::MAX, f64::min);
+                assert!(lo >= 0.6 * l_lo, "{lens} f/{n}: {lo} vs lens {lens50:?}");
             } else {
-                let pixel3 = num(pick(lens, n, 3.0), "pixel_mtf50_cy_per_mm");
+                // the pixel matters: 1 µm pixels resolve more than 3 µm ones, by the cascade's
+                // ratio (within 20 %: neither MTF is Gaussian)
+                let want = cascade[0] / cascade[2];
+                let got = m[0] / m[2];
                 assert!(
-                    m[2] >= 0.6 * pixel3,
-                    "{lens} f/{n} 3 µm: {} vs pixel {pixel3}",
-                    m[2]
+                    want > 1.2 && (got / want - 1.0).abs() < 0.2,
+                    "{lens} f/{n}: MTF50(1 µm)/MTF50(3 µm) = {got:.3}, cascade {want:.3}: {m:?}"
                 );
-                assert!(m[0] >= 1.3 * m[2], "{lens} f/{n}: {m:?}");
             }
         }
     }
@@ -713,7 +816,7 @@ fn lens_point_is_independent_of_threads_and_process() {
     );
 }
 
-/// Study 2 at CI size (examples/study_dof/spec_ci.json: 16 depths, 128 px, 32 spp): the
+/// Study 2 at CI size (examples/study_dof/spec_ci.json: 16 depths, 128 px, 64 spp for the real lens): the
 /// depth of field (vergence width 1/near − 1/far where MTF50 ≥ 0.15 cy/px) grows linearly in
 /// the f-number (f/2 → f/4 → f/8: ratios 2 ± 0.3), agrees with the thin-lens expectation of
 /// the entrance-pupil disc within 15 % (the lens's aberrations and the slanted-edge noise),
@@ -753,14 +856,50 @@ fn dof_study_ci_depth_path_agrees_with_the_real_lens() {
             wl[k],
             wt[k]
         );
+        // Issue 18, acceptance 2: the DoF of a study focused at D = 2 m contains D, for both
+        // paths (the lens at its paraxial plane gave 1.53–1.86 m at f/2).
+        for p in ["lens", "depth_path"] {
+            let (near, far) = (
+                num(&r[k], &format!("dof_near_{p}_m")),
+                num(&r[k], &format!("dof_far_{p}_m")),
+            );
+            assert!(
+                near < 2.0 && far > 2.0,
+                "f/{}: {p} DoF {near:.3}–{far:.3} m does not contain the 2 m focus",
+                n[k]
+            );
+        }
+        // The through-focus MTF50 peaks at the configured distance within the depth of
+        // focus ±N_w·c (c the circle of confusion of the DoF threshold, 2·0.3526/0.15 px),
+        // image side; and the real-lens render and the depth path agree on the focus plane
+        // within half of it.
+        let dof_mm = num(&r[k], "depth_of_focus_mm");
+        let pl = num(&r[k], "focus_peak_lens_image_mm");
+        let pd = num(&r[k], "focus_peak_depth_path_image_mm");
+        eprintln!(
+            "f/{}: through-focus peak {:.4} m (real lens), {:.4} m (depth path); image side {pl:+.4} / {pd:+.4} mm, depth of focus ±{dof_mm:.4} mm; focus shift {:+.4} mm",
+            n[k],
+            num(&r[k], "focus_peak_lens_m"),
+            num(&r[k], "focus_peak_depth_path_m"),
+            num(&r[k], "focus_image_shift_mm")
+        );
+        assert!(dof_mm > 0.0);
+        assert!(pl.abs() < dof_mm, "f/{}: real-lens peak {pl} mm vs ±{dof_mm} mm", n[k]);
+        assert!(pd.abs() < dof_mm, "f/{}: depth-path peak {pd} mm vs ±{dof_mm} mm", n[k]);
+        assert!(
+            (pl - pd).abs() < 0.5 * dof_mm,
+            "f/{}: focus planes differ by {} mm (depth of focus ±{dof_mm} mm)",
+            n[k],
+            pl - pd
+        );
+        // both paths used the focus model's best focus, not the paraxial plane
+        assert!(num(&r[k], "focus_mtf") >= num(&r[k], "focus_mtf_paraxial"));
         let agree = num(&r[k], "dof_agreement_pct");
         assert!(
             agree.abs() < 10.0,
             "f/{}: depth path vs real lens DoF differ by {agree:.1} %",
             n[k]
         );
-        // the near and far limits bracket the 2 m focus
-        assert!(num(&r[k], "dof_near_lens_m") < 2.0 && num(&r[k], "dof_far_lens_m") > 1.8);
     }
     // far limit grows and near limit shrinks as the lens is stopped down
     assert!(num(&r[2], "dof_far_lens_m") > num(&r[0], "dof_far_lens_m"));

@@ -79,13 +79,18 @@ pub enum PsfKind {
 }
 
 /// Where the lens is focused when a [`FieldModel`] is built.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub enum Focus {
-    /// On the prescription's own object distance (its `object_distance_mm`).
+    /// On the prescription's own object distance (its `object_distance_mm`), paraxially.
     #[default]
     Prescription,
-    /// On an object at this distance from the first vertex (mm; `None` = infinity).
+    /// On an object at this distance from the first vertex (mm; `None` = infinity),
+    /// paraxially by unit motion.
     At(Option<f64>),
+    /// By the focus model ([`crate::focus_model`]): distance, criterion and motion.
+    Spec(crate::focus_model::FocusSpec),
+    /// A lens already focused by the focus model (its prescription is used as it stands).
+    Focused(Box<crate::focus_model::FocusedLens>),
 }
 
 /// Largest pupil grid per side a wave-PSF entry of [`FieldModel::compute`] is given.
@@ -179,7 +184,8 @@ pub struct FieldModel {
     pub psf_kind: PsfKind,
     /// Object distance the lens is focused on (mm; `None` = infinity).
     pub focus_distance_mm: Option<f64>,
-    /// Last vertex → image plane (mm): the paraxial image of the focus distance.
+    /// Last vertex → image plane (mm) at the focus setting (the paraxial image of the focus
+    /// distance for [`Focus::Prescription`] / [`Focus::At`]).
     pub image_distance_mm: f64,
     /// EFL at the primary wavelength (mm).
     pub efl_mm: f64,
@@ -407,9 +413,11 @@ impl FieldModel {
             ));
         }
         let psf_n = opts.psf_n | 1;
-        let focus_distance_mm = match opts.focus {
+        let focus_distance_mm = match &opts.focus {
             Focus::Prescription => lens.object_distance_mm,
-            Focus::At(d) => d,
+            Focus::At(d) => *d,
+            Focus::Spec(s) => s.focus_distance_mm,
+            Focus::Focused(f) => f.focus_distance_mm,
         };
         for d in std::iter::once(&focus_distance_mm)
             .chain(&opts.object_distances_mm)
@@ -421,7 +429,11 @@ impl FieldModel {
                 )));
             }
         }
-        let focused = lens.focus_at(focus_distance_mm)?;
+        let focused = match &opts.focus {
+            Focus::Prescription | Focus::At(_) => lens.focus_at(focus_distance_mm)?,
+            Focus::Spec(s) => lens.focus(s)?.lens,
+            Focus::Focused(f) => f.lens.clone(),
+        };
         let image_distance_mm = focused.image_distance_mm();
         if !image_distance_mm.is_finite() {
             return Err(bad("the focus distance has no real paraxial image".into()));

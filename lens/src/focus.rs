@@ -188,7 +188,8 @@ impl LensPrescription {
     /// Best focus: the image-plane shift in [`lo_mm`, `hi_mm`] (from the lens's own image plane)
     /// maximising `merit`. The merit of a strongly aberrated lens can have several local
     /// maxima, so the interval is first scanned at 24 steps, then the best step is refined by
-    /// golden-section search to 1e-4 of the interval.
+    /// golden-section search to 1e-4 of the interval
+    /// ([`crate::focus_model::maximise_on_interval`]).
     pub fn best_focus_mtf(
         &self,
         merit: &MtfMerit,
@@ -207,39 +208,8 @@ impl LensPrescription {
             alias_free &= ok;
             Ok(m)
         };
-        let steps = 24;
-        let h = (hi_mm - lo_mm) / steps as f64;
-        let mut best = (lo_mm, f64::MIN);
-        for k in 0..=steps {
-            let z = lo_mm + h * k as f64;
-            let m = eval(z)?;
-            if m > best.1 {
-                best = (z, m);
-            }
-        }
-        let g = (5f64.sqrt() - 1.0) / 2.0;
-        let (mut a, mut b) = ((best.0 - h).max(lo_mm), (best.0 + h).min(hi_mm));
-        let mut c = b - g * (b - a);
-        let mut d = a + g * (b - a);
-        let (mut fc, mut fd) = (eval(c)?, eval(d)?);
-        while b - a > 1e-4 * (hi_mm - lo_mm) {
-            if fc > fd {
-                b = d;
-                d = c;
-                fd = fc;
-                c = b - g * (b - a);
-                fc = eval(c)?;
-            } else {
-                a = c;
-                c = d;
-                fc = fd;
-                d = a + g * (b - a);
-                fd = eval(d)?;
-            }
-        }
-        let z = 0.5 * (a + b);
-        let mz = eval(z)?;
-        let (image_shift_mm, merit_best) = if mz >= best.1 { (z, mz) } else { best };
+        let best = crate::focus_model::maximise_on_interval(&mut eval, lo_mm, hi_mm, 24, 1e-4 * (hi_mm - lo_mm))?;
+        let (image_shift_mm, merit_best) = (best.x, best.value);
         let merit_at_zero = eval(0.0)?;
         Ok(BestFocus {
             image_shift_mm,

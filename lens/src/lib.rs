@@ -26,7 +26,9 @@
 //! * [`fold`]: mirrors and coordinate breaks (decentres, tilts) in sequential tracing,
 //!   Zemax conventions, results in unfolded image-space coordinates;
 //! * [`focus`]: pupil sampling set by the OPD slope for FFT PSFs and MTFs, and the MTF best
-//!   focus.
+//!   focus;
+//! * [`focus_model`]: the focus model every consumer uses: focus distance, criterion (best
+//!   polychromatic MTF or paraxial), unit or group motion ([`FocusSpec`] → [`FocusedLens`]).
 //!
 //! ## Prescription file format (`lenses/*.json`)
 //!
@@ -83,6 +85,7 @@ pub mod error;
 pub mod field_curvature;
 pub mod field_model;
 pub mod focus;
+pub mod focus_model;
 pub mod fold;
 pub mod glass;
 pub mod huygens;
@@ -94,6 +97,7 @@ pub mod trace;
 
 pub use batch::{RayBatch, TraceSystem};
 pub use error::LensError;
+pub use focus_model::{FocusCriterion, FocusMethod, FocusMotion, FocusSpec, FocusedLens};
 pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
 pub use glass::{Glass, GlassCatalog, NearGlass};
 pub use paraxial::FirstOrder;

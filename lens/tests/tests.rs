@@ -6,6 +6,7 @@ mod closed_form;
 mod cos4;
 mod field_curvature;
 mod field_model;
+mod focus_model;
 mod fold;
 mod full_field;
 mod glass;

@@ -38,9 +38,11 @@
 //! [`LensBlur::from_prescription`] computes it when the camera is loaded (config `"lens"`
 //! kind) for one object distance, `LensBlurOptions::object_distance_mm` (config:
 //! `optics.object_distance_m`; default the prescription's own `object_distance_mm`, infinity
-//! when null). The lens is focused per `LensBlurOptions::focus`: by default on that object
-//! (image plane at its paraxial image at the primary wavelength, as a camera focused on its
-//! subject), or at a fixed distance, in which case the object is defocused. A saved model
+//! when null). The lens is focused at the distance `LensBlurOptions::focus` gives (by default
+//! on that object, as a camera focused on its subject, or at a fixed distance, in which case
+//! the object is defocused) by the focus model `camsim_lens::focus_model` with
+//! `LensBlurOptions::focus_method` (default: best polychromatic MTF, weighted over the field
+//! the model covers, unit motion). A saved model
 //! with several distances is used through [`LensBlur::from_model_at`]. The fields are chosen
 //! so that the tabulated **real** heights cover
 //! `LensBlurOptions::max_image_height_mm` (config: the sensor's half-diagonal) with 10 %
@@ -58,7 +60,10 @@ use crate::{
 use camsim_core::{SpectralImage, Spectrum, WavelengthGrid};
 use camsim_lens::analysis::pupil_grid;
 use camsim_lens::field_model::{FieldTable, Focus};
-use camsim_lens::{Clipping, FieldModel, FieldModelOptions, LensPrescription, PsfKind};
+use camsim_lens::{
+    Clipping, FieldModel, FieldModelOptions, FocusMethod, FocusSpec, FocusedLens,
+    LensPrescription, PsfKind,
+};
 use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
@@ -86,12 +91,16 @@ pub struct LensBlurOptions {
     pub object_distance_mm: Option<f64>,
     /// Where the lens is focused.
     pub focus: LensFocus,
+    /// How it is focused (`camsim_lens::focus_model`): criterion, motion, merit frequency
+    /// (camera: half the pixel Nyquist). The merit's maximum field is this model's (covering
+    /// `max_image_height_mm`) unless set.
+    pub focus_method: FocusMethod,
 }
 
-/// The focus setting of a [`LensBlur`].
+/// The focus distance of a [`LensBlur`] (the method is [`LensBlurOptions::focus_method`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum LensFocus {
-    /// On the object (image plane at its paraxial image, primary wavelength).
+    /// On the object.
     #[default]
     OnObject,
     /// On the prescription's own object distance (objects elsewhere are defocused).
@@ -114,6 +123,7 @@ impl LensBlurOptions {
             n_dense_fields: 41,
             object_distance_mm: None,
             focus: LensFocus::OnObject,
+            focus_method: FocusMethod::default(),
         }
     }
 }
@@ -132,6 +142,8 @@ pub struct LensBlur {
     /// A denser table of distortion and relative illumination than the field model's (traced
     /// by [`LensBlur::from_prescription`]); `None`: the field model's tables are used.
     pub radial: Option<Arc<RadialTable>>,
+    /// How the lens was focused (`None` for a loaded field model).
+    pub focus: Option<Arc<FocusedLens>>,
 }
 
 /// Real chief-ray heights and relative illumination on a dense set of fields (same conventions
@@ -190,6 +202,7 @@ impl LensBlur {
             model: Arc::new(model),
             apply_psf: true,
             radial: None,
+            focus: None,
         }
     }
 
@@ -231,12 +244,25 @@ impl LensBlur {
             LensFocus::Prescription => lens.object_distance_mm,
             LensFocus::At(d) => d,
         };
-        // The lens at its focus setting, imaging the object (defocused unless they coincide).
-        let focused = lens
-            .focus_at(focus_mm)
-            .map_err(ctx)?
-            .with_object_distance(object_mm);
-        let image_mm = focused.surfaces.last().map_or(f64::NAN, |s| s.thickness_mm);
+        // The lens at its focus setting (camsim_lens::focus_model), imaging the object
+        // (defocused unless they coincide). The merit covers the field of the model: estimated
+        // from the paraxially focused lens (tan θ = 1.1 r / (image height per unit tan θ)).
+        let mut method = opts.focus_method.clone();
+        if method.max_field_deg.is_none() {
+            let p = lens.focus_at(focus_mm).map_err(ctx)?;
+            let per_tan = (p.paraxial_chief_height_mm(1.0, lens.primary_nm).map_err(ctx)?
+                / 1f64.to_radians().tan())
+            .abs();
+            method.max_field_deg = Some((1.1 * r / per_tan).atan().to_degrees());
+        }
+        let focus = lens
+            .focus(&FocusSpec {
+                focus_distance_mm: focus_mm,
+                method,
+            })
+            .map_err(ctx)?;
+        let focused = focus.lens.with_object_distance(object_mm);
+        let image_mm = focused.image_distance_mm();
         if !(image_mm.is_finite() && image_mm > 0.0) {
             return Err(lens_err(format!(
                 "{name}: focused on {}, the paraxial image is not real (image distance {image_mm} mm)",
@@ -324,7 +350,7 @@ impl LensBlur {
             pupil_n,
             pad,
             ri_grid_n: 64,
-            focus: Focus::At(focus_mm),
+            focus: Focus::Focused(Box::new(focus.clone())),
             object_distances_mm: vec![object_mm],
         };
         let model = FieldModel::compute(lens, &fm_opts).map_err(ctx)?;
@@ -369,6 +395,7 @@ impl LensBlur {
             working_f_number: nw,
             apply_psf: true,
             radial: Some(Arc::new(radial)),
+            focus: Some(Arc::new(focus)),
         })
     }
 

@@ -115,11 +115,12 @@ fn moments(v: &[f32], cols: usize, r0: usize, r1: usize, c0: usize, c1: usize) -
 #[test]
 fn point_sources_land_on_the_traced_spot_with_the_traced_rms() {
     let l = load("iset_fisheye_87deg_12.5mm.json");
-    let lf = l.focused(l.primary_nm).unwrap();
     let w = l.primary_nm;
     let mut o = LensBlurOptions::covering(6.5);
     o.wavelengths_nm = vec![w];
     let lb = LensBlur::from_prescription(&l, &o).unwrap();
+    // the lens as the blur focused it (camsim_lens::focus_model)
+    let lf = lb.focus.as_ref().unwrap().lens.clone();
     assert_eq!(lb.model.psf_kind, camsim_lens::PsfKind::Geometric);
     let pt = per_tan(&lf);
     let dx = 10e-6;
@@ -204,10 +205,11 @@ fn point_sources_land_on_the_traced_spot_with_the_traced_rms() {
 #[test]
 fn uniform_scene_keeps_energy_up_to_the_traced_relative_illumination() {
     let l = scaled(&load("double_gauss_50mm_f2.json"), 0.04);
-    let lf = l.focused(l.primary_nm).unwrap();
     let (n, dx) = (121usize, 8e-6);
     let half_diag_mm = 60.0 * 2f64.sqrt() * dx * 1e3;
     let lb = LensBlur::from_prescription(&l, &LensBlurOptions::covering(half_diag_mm)).unwrap();
+    // the lens as the blur focused it (camsim_lens::focus_model)
+    let lf = lb.focus.as_ref().unwrap().lens.clone();
     let nw = lb.working_f_number;
     assert!((nw - 2.0).abs() < 0.01, "working F/# {nw}");
     let k = camera_equation_factor(nw, 0.0);
@@ -263,13 +265,14 @@ fn uniform_scene_keeps_energy_up_to_the_traced_relative_illumination() {
 #[test]
 fn grid_lines_move_to_the_traced_real_chief_ray_heights() {
     let l = scaled(&load("iset_fisheye_87deg_12.5mm.json"), 0.1);
-    let lf = l.focused(l.primary_nm).unwrap();
     let w = l.primary_nm;
     let (half, dx) = (230usize, 4e-6);
     let n = 2 * half + 1;
     let mut o = LensBlurOptions::covering(half as f64 * dx * 1e3 * 1.05);
     o.wavelengths_nm = vec![w];
     let lb = LensBlur::from_prescription(&l, &o).unwrap();
+    // the lens as the blur focused it (camsim_lens::focus_model)
+    let lf = lb.focus.as_ref().unwrap().lens.clone();
     let pt = per_tan(&lf);
     let lines: Vec<usize> = [0.2, 0.4, 0.6, 0.8]
         .iter()

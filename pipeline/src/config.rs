@@ -382,6 +382,22 @@ pub struct BlurFile {
     /// lens: a prescription (needs the lens ray tracer)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lens_file: Option<String>,
+    /// lens: focus distance (m, from the first vertex; default `optics.object_distance_m`,
+    /// i.e. the lens focused on its object, infinity when that is absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_distance_m: Option<f64>,
+    /// lens: focus criterion, `"best"` (default: maximum polychromatic MTF up to the focus
+    /// frequency, weighted over the sensor's field) or `"paraxial"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_criterion: Option<String>,
+    /// lens: merit frequency of the best focus (cycles/mm; default half the pixel Nyquist,
+    /// 1/(4·pixel_pitch)).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_frequency_cyc_per_mm: Option<f64>,
+    /// lens: focusing group `[first, last]` (0-based surface indices of the prescription,
+    /// first ≥ 1); default: the lens moves as a unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_group_surfaces: Option<[usize; 2]>,
 }
 
 /// `optics.diffuser` as written.
@@ -829,6 +845,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
                 b,
                 (0.5 * pixel_pitch_m * (r * r + c * c).sqrt()).max(pixel_pitch_m),
                 o.object_distance_m,
+                pixel_pitch_m,
             )?
         }
     };
@@ -928,6 +945,7 @@ fn blur_from_file(
     b: &BlurFile,
     sensor_half_diagonal_m: f64,
     object_distance_m: Option<f64>,
+    pixel_pitch_m: f64,
 ) -> Result<Blur, CliError> {
     let allowed: &[&str] = match b.kind.as_str() {
         "none" | "diffraction" => &[],
@@ -935,7 +953,13 @@ fn blur_from_file(
         "pillbox" => &["width_um"],
         "psf" => &["psf_file"],
         "wavefront" => &["defocus_um"],
-        "lens" => &["lens_file"],
+        "lens" => &[
+            "lens_file",
+            "focus_distance_m",
+            "focus_criterion",
+            "focus_frequency_cyc_per_mm",
+            "focus_group_surfaces",
+        ],
         other => {
             return Err(CliError::input(
                 path,
@@ -949,6 +973,10 @@ fn blur_from_file(
         ("psf_file", b.psf_file.is_some()),
         ("defocus_um", b.defocus_um.is_some()),
         ("lens_file", b.lens_file.is_some()),
+        ("focus_distance_m", b.focus_distance_m.is_some()),
+        ("focus_criterion", b.focus_criterion.is_some()),
+        ("focus_frequency_cyc_per_mm", b.focus_frequency_cyc_per_mm.is_some()),
+        ("focus_group_surfaces", b.focus_group_surfaces.is_some()),
     ];
     for (k, p) in present {
         if p && !allowed.contains(&k) {
@@ -1011,8 +1039,27 @@ fn blur_from_file(
             )
             .map_err(|e| CliError::input(&p, e))?;
             let mut opts = camsim_optics::LensBlurOptions::covering(sensor_half_diagonal_m * 1e3);
-            // optics.object_distance_m: the lens is focused on that object (lens_blur.rs docs).
+            // optics.object_distance_m: the object; the lens is focused on it unless
+            // optics.blur.focus_distance_m says otherwise, by the focus model
+            // (camsim_lens::focus_model; merit frequency default half the pixel Nyquist).
             opts.object_distance_mm = object_distance_m.map(|d| d * 1e3);
+            if let Some(fd) = b.focus_distance_m {
+                opts.focus = camsim_optics::LensFocus::At(Some(positive(
+                    path,
+                    "optics.blur.focus_distance_m",
+                    fd,
+                )? * 1e3));
+            }
+            let mut method = camsim_lens::FocusMethod::from_keys(
+                b.focus_criterion.as_deref(),
+                b.focus_frequency_cyc_per_mm,
+                b.focus_group_surfaces,
+            )
+            .map_err(|m| CliError::input(path, format!("optics.blur.{m}")))?;
+            method.frequency_cyc_per_mm = method
+                .frequency_cyc_per_mm
+                .or(Some(0.25 / (pixel_pitch_m * 1e3)));
+            opts.focus_method = method;
             Blur::Lens(
                 camsim_optics::LensBlur::from_prescription(&lens, &opts)
                     .map_err(|e| CliError::input(&p, e))?,

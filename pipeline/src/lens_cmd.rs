@@ -65,6 +65,9 @@ pub enum MtfFocus {
     BestMtf,
     /// The paraxial image plane of the primary wavelength.
     Paraxial,
+    /// The focus model's plane (`camsim_lens::focus_model`, the report's `focus` section):
+    /// best polychromatic MTF weighted over the report's field, the plane every camera uses.
+    Model,
 }
 
 /// The LENS argument and the glass substitutions for Zemax files.
@@ -799,9 +802,53 @@ pub fn lens_report(
             }
         }
     }
+    // The focus model (camsim_lens::focus_model): the lens as every camera focuses it, on its
+    // own object distance, the merit over the report's field and wavelengths.
+    let focus = lens
+        .focus(&camsim_lens::FocusSpec {
+            focus_distance_mm: lens.object_distance_mm,
+            method: camsim_lens::FocusMethod {
+                max_field_deg: Some(max_deg),
+                wavelengths_nm: Some(wls.clone()),
+                ..Default::default()
+            },
+        })
+        .map_err(lerr)?;
+    let focus_shift_mm = focus.image_distance_mm - focus.paraxial_image_distance_mm;
+    let focus_rms_um: Vec<Value> = std::iter::once(0.0)
+        .chain([0.5, 0.7, 1.0].map(|f| f * max_deg))
+        .map(|th| {
+            let fans: Result<Vec<_>, _> = wls
+                .iter()
+                .map(|&w| focus.lens.ray_fan(th, w, primary, &grid, clipping))
+                .collect();
+            let rms = fans
+                .map(|f| 1e3 * focus.lens.polychromatic_rms_mm(&f, 0.0))
+                .unwrap_or(f64::NAN);
+            json!({"field_deg": th, "polychromatic_rms_spot_um": finite_or_null(rms)})
+        })
+        .collect();
+    let focus_json = json!({
+        "criterion": focus.criterion.name(),
+        "motion": "unit",
+        "focus_distance_mm": focus.focus_distance_mm,
+        "image_distance_mm": focus.image_distance_mm,
+        "paraxial_image_distance_mm": focus.paraxial_image_distance_mm,
+        "image_shift_mm": focus_shift_mm,
+        "group_shift_mm": focus.group_shift_mm,
+        "frequency_cyc_per_mm": focus.frequency_cyc_per_mm,
+        "merit_fields": focus.merit_fields.iter().map(|f| json!({"field_deg": f.0, "weight": f.1})).collect::<Vec<_>>(),
+        "merit_wavelengths_nm": focus.merit_wavelengths_nm,
+        "mtf_merit": focus.mtf,
+        "mtf_merit_paraxial": focus.mtf_paraxial,
+        "mtf_at_frequency": focus.mtf_at_frequency,
+        "alias_free": focus.alias_free,
+        "rms_spot": focus_rms_um,
+    });
     // On-axis MTF.
     let dz = match opts.mtf_focus {
         MtfFocus::Paraxial => 0.0,
+        MtfFocus::Model => focus_shift_mm,
         MtfFocus::Best | MtfFocus::BestMtf => {
             let fans: Vec<_> = wls
                 .iter()
@@ -907,6 +954,7 @@ pub fn lens_report(
         "fields": fields,
         "mtf_on_axis": mtf,
         "mtf_image_shift_mm": dz,
+        "focus": focus_json,
         "mtf_pupil_samples": sampling.samples,
         "mtf_alias_free": sampling.alias_free,
         "huygens_psf": huygens_json,
@@ -1162,6 +1210,7 @@ fn write_report_files(
             MtfFocus::Best => "best focus: minimum on-axis polychromatic RMS spot",
             MtfFocus::BestMtf => "best focus: maximum on-axis MTF",
             MtfFocus::Paraxial => "paraxial focus",
+            MtfFocus::Model => "the focus model's plane: best polychromatic MTF over the field",
         }
     ));
     h.push_str("<h2>Field curvature</h2><table><tr><th>angle (°)</th>");

@@ -235,7 +235,8 @@ pub fn defocus_layered(
 /// Conventions are those of the real-lens camera ([`crate::camera::real_lens`]): the camera
 /// frame's origin is the paraxial entrance pupil, so a planar depth z (m) is the object
 /// distance z·10³ − z_ep (mm) from the first vertex; the lens is stopped to `f_number` and
-/// focused (sensor moved) on `focus_distance_m` from the entrance pupil.
+/// focused on `focus_distance_m` from the entrance pupil by the focus model
+/// (`LensDefocusOptions::focus_method`).
 ///
 /// On-axis PSFs are used for the whole frame (justified for small fields: the study scenes
 /// span ≲ 2° off axis, where the real-lens PSF changes little); paraxially, the defocus disc
@@ -262,6 +263,10 @@ pub struct LensDefocusOptions {
     pub wavelengths_nm: Vec<f64>,
     /// Pupil rays per side of the geometric PSFs.
     pub pupil_n: usize,
+    /// How the lens is focused (`camsim_lens::focus_model`; an unset merit frequency is half
+    /// the pixel Nyquist, 1/(4p)). Pass the real-lens camera's resolved method
+    /// (`RealLensInfo::focus.method`) to image with the same focus.
+    pub focus_method: camsim_lens::FocusMethod,
 }
 
 impl LensDefocus {
@@ -302,7 +307,15 @@ impl LensDefocus {
             Ok(Some(d))
         };
         let focus_mm = to_vertex(opts.focus_distance_m.map_or(0.0, |d| 1.0 / d))?;
-        let focused = lens.focus_at(focus_mm)?;
+        let mut method = opts.focus_method.clone();
+        method.frequency_cyc_per_mm = method
+            .frequency_cyc_per_mm
+            .or(Some(0.25 / opts.pixel_pitch_mm));
+        let focus = lens.focus(&camsim_lens::FocusSpec {
+            focus_distance_mm: focus_mm,
+            method,
+        })?;
+        let focused = focus.lens.clone();
         // Image-side scale (mm of paraxial image per unit tan θ) → the largest defocus disc.
         let per_tan_mm = (focused.paraxial_chief_height_mm(1.0, lens.primary_nm)?
             / 1f64.to_radians().tan())
@@ -331,7 +344,7 @@ impl LensDefocus {
                 pupil_n: opts.pupil_n.max(8),
                 pad: 1,
                 ri_grid_n: 8,
-                focus: Focus::At(focus_mm),
+                focus: Focus::Focused(Box::new(focus)),
                 object_distances_mm: distances.clone(),
             },
         )?;

@@ -162,6 +162,9 @@ pub struct DofRenderOptions {
     pub layers: usize,
     /// Render the real-lens image (false: depth path only).
     pub real_lens: bool,
+    /// How the lens is focused (`camsim_lens::focus_model`); both paths use the real-lens
+    /// camera's resolved method, so they share one focus plane.
+    pub focus_method: camsim_lens::FocusMethod,
 }
 
 /// The images of [`render_dof`] (one band, row-major `width × height`).
@@ -183,6 +186,8 @@ pub struct DofRenders {
     pub depth_m: Vec<f32>,
     /// Depth path: the pinhole radiance defocused with the lens PSFs.
     pub depth_path: Vec<f32>,
+    /// How the lens was focused (both paths).
+    pub focus: camsim_lens::FocusedLens,
     /// Entrance-pupil radius of the stopped lens (m).
     pub entrance_pupil_radius_m: f64,
     /// Render times (s): real lens, pinhole, depth path.
@@ -243,6 +248,15 @@ pub fn render_dof(
             pupil_bins: 8,
             pupil_grid: 48,
             wavelength_range_nm: (o.band_nm.0, o.band_nm.1),
+            focus_method: {
+                // the merit's wavelengths: the rendered band's (as the depth path's PSFs)
+                let mut m = o.focus_method.clone();
+                let (lo, hi) = o.band_nm;
+                m.wavelengths_nm = m.wavelengths_nm.or_else(|| {
+                    Some((0..5).map(|k| lo + (hi - lo) * (k as f64 + 0.5) / 5.0).collect())
+                });
+                m
+            },
         },
     )
     .map_err(|e| e.to_string())?;
@@ -287,6 +301,7 @@ pub fn render_dof(
                 .map(|k| lo + (hi - lo) * (k as f64 + 0.5) / 5.0)
                 .collect(),
             pupil_n: 128,
+            focus_method: cam.info().focus.method.clone(),
         },
         &invs,
     )
@@ -304,6 +319,7 @@ pub fn render_dof(
         pinhole: pin.band_planes[0].clone(),
         depth_m: pin.depth_z_m.clone(),
         depth_path: dp[0].clone(),
+        focus: cam.info().focus.clone(),
         entrance_pupil_radius_m: defocus.entrance_pupil_radius_m,
         times_s: [
             (t1 - t0).as_secs_f64(),

@@ -415,9 +415,24 @@ fn lens_depth_path_matches_the_real_lens_render() {
         focus_distance_m: 2.0,
         layers: 32,
         real_lens: true,
+        // the focus model's best focus (image plane −0.113 mm, ≈ 2.19 m), as both paths use it
+        focus_method: Default::default(),
     };
     let r = render_dof(&tiles, &lens, &o).unwrap();
     eprintln!("times {:?}, pitch {:.4} mm", r.times_s, r.pixel_pitch_mm);
+    // Both paths share the focus model's best focus; the object vergence it images paraxially
+    // (Gauss, Δv = Δs'/s'², s' the image distance of 2 m from the principal plane) centres
+    // the expected defocus discs below.
+    let efl = r.focus.lens.first_order(r.focus.lens.primary_nm).unwrap().efl_mm;
+    let s_img = 1.0 / (1.0 / efl - 1.0 / 2000.0);
+    let v_focus =
+        0.5 + (r.focus.image_distance_mm - r.focus.paraxial_image_distance_mm) * 1e3 / (s_img * s_img);
+    eprintln!(
+        "focus: image plane {:+.4} mm from paraxial, images 1/z = {v_focus:.4}/m paraxially; merit {:.4} vs paraxial {:.4}",
+        r.focus.image_distance_mm - r.focus.paraxial_image_distance_mm,
+        r.focus.mtf,
+        r.focus.mtf_paraxial
+    );
     let real = r.real_lens.as_ref().unwrap();
     let (w, h) = (r.width, r.height);
     // gain: irradiance / radiance, from the in-focus tile nearest 2 m (mean over its cell)
@@ -461,10 +476,15 @@ fn lens_depth_path_matches_the_real_lens_render() {
     let mut worst_inside = 0f64;
     for (k, z) in tiles.depths_m.iter().enumerate() {
         let cell = tiles.cell_px(k, w as u32, h as u32);
-        let c_px = r.entrance_pupil_radius_m * (1.0 / z - 0.5).abs() * h as f64
+        let c_px = r.entrance_pupil_radius_m * (1.0 / z - v_focus).abs() * h as f64
             / (2.0 * (0.5 * tiles.yfov_deg.to_radians()).tan());
         let frac = 0.75;
-        let fits = c_px + 1.0 < 0.5 * frac * cell_w - 2.0;
+        // The rise is measurable where a plateau exists: samples ≥ c + 1 from the edge line
+        // inside the window, and outside the blur reach c of the tile's left/right occlusion
+        // boundaries (½ cell from the edge line): c + 1 < ½ cell − c. At best focus the
+        // nearest tile (1.14 m, c = 7.75 px in a 32 px cell) has no such plateau; both paths
+        // then misread it (real lens 7.9 px, below its neighbours' trend; depth path 17.0 px).
+        let fits = c_px + 1.0 < 0.5 * frac * cell_w - 2.0 && 2.0 * c_px + 1.0 < 0.5 * cell_w;
         let er = edge_rise_px(real, w, cell, tiles.edge_angle_deg, frac, c_px + 1.0);
         let ed = edge_rise_px(
             &r.depth_path,
@@ -549,6 +569,8 @@ fn lens_defocus_psf_is_the_entrance_pupil_disc() {
             pixel_pitch_mm: pitch_mm,
             wavelengths_nm: vec![550.0],
             pupil_n: 256,
+            // the thin-lens identity below is paraxial
+            focus_method: camsim_lens::FocusMethod::paraxial(),
         },
         &invs,
     )

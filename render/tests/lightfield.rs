@@ -324,7 +324,7 @@ fn refocusing_brings_a_plane_into_focus() {
 fn prescription_main_lens_flux_matches_the_real_lens_camera() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json");
     let lens = LensPrescription::from_json_file(p, &GlassCatalog::bundled()).unwrap();
-    let main = LightFieldCamera::prescription_main_lens(&lens, 2.0, Some(4.0)).unwrap();
+    let main = LightFieldCamera::prescription_main_lens(&lens, 2.0, Some(4.0), 100.0).unwrap();
     let cam = LightFieldCamera::new(
         MainLens::Prescription(Box::new(main)),
         2.0,

@@ -24,9 +24,12 @@ fn dgauss() -> LensPrescription {
 
 /// 64×64 film whose paraxial field is ±15° vertically (half-diagonal ≈ 19 mm, past 20°).
 fn build(f_number: Option<f64>) -> RealLensCamera {
+    // Paraxial focus: these tests compare the camera's tracer with the lens crate's own
+    // analyses (distortion, field-model PSF, pupil bounds) on the paraxial image plane those use.
     let opts = RealLensOptions {
         f_number,
         film: FilmSize::VerticalFovRad(30f64.to_radians()),
+        focus_method: camsim_lens::FocusMethod::paraxial(),
         ..Default::default()
     };
     RealLensCamera::new(&dgauss(), 64, 64, &opts).unwrap()

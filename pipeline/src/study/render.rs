@@ -109,6 +109,15 @@ struct DofDoc {
     lens: Value,
     f_number: f64,
     focus_distance_m: f64,
+    /// `"best"` (default) or `"paraxial"` (camsim_lens::focus_model).
+    #[serde(default)]
+    focus_criterion: Option<String>,
+    /// Best-focus merit frequency (cycles/mm; default half the pixel Nyquist).
+    #[serde(default)]
+    focus_frequency_cyc_per_mm: Option<f64>,
+    /// Focusing group `[first, last]` (surfaces; default: unit focusing).
+    #[serde(default)]
+    focus_group_surfaces: Option<[usize; 2]>,
     #[serde(default)]
     render: Option<RenderDoc>,
     #[serde(default)]
@@ -165,7 +174,16 @@ fn parse_dof(doc: &Value) -> Result<DofDoc, String> {
         ));
     }
     lens_of(&d.lens)?;
+    focus_method_of(&d)?;
     Ok(d)
+}
+
+fn focus_method_of(d: &DofDoc) -> Result<camsim_lens::FocusMethod, String> {
+    camsim_lens::FocusMethod::from_keys(
+        d.focus_criterion.as_deref(),
+        d.focus_frequency_cyc_per_mm,
+        d.focus_group_surfaces,
+    )
 }
 
 fn tiles_of(d: &DofDoc) -> DofTiles {
@@ -299,6 +317,26 @@ pub fn dof_range(samples: &[(f64, Option<f64>)], threshold: f64) -> Option<DofRa
     })
 }
 
+/// Vergence (1/m) of the peak of MTF50 vs vergence: the vertex of the parabola through the
+/// best sample and its two neighbours in vergence (the best sample itself at the ends).
+fn through_focus_peak_per_m(s: &[(f64, Option<f64>)]) -> Option<f64> {
+    let mut v: Vec<(f64, f64)> = s.iter().filter_map(|p| Some((p.0, p.1?))).collect();
+    v.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
+    let k = (0..v.len()).max_by(|&a, &b| v[a].1.partial_cmp(&v[b].1).unwrap())?;
+    if k == 0 || k + 1 == v.len() {
+        return Some(v[k].0);
+    }
+    let ((x0, y0), (x1, y1), (x2, y2)) = (v[k - 1], v[k], v[k + 1]);
+    // Lagrange parabola through three points; vertex where its derivative vanishes.
+    let d1 = (y1 - y0) / (x1 - x0);
+    let d2 = (y2 - y1) / (x2 - x1);
+    let a = (d2 - d1) / (x2 - x0);
+    if !(a < 0.0) {
+        return Some(x1);
+    }
+    Some((0.5 * (x0 + x1) - d1 / (2.0 * a)).clamp(x0, x2))
+}
+
 pub(super) fn grey_png(path: &Path, img: &[f32], w: usize, h: usize) -> Result<(), CliError> {
     let max = img.iter().cloned().fold(0f32, f32::max).max(1e-30);
     let rgb: Vec<u8> = img
@@ -311,6 +349,9 @@ pub(super) fn grey_png(path: &Path, img: &[f32], w: usize, h: usize) -> Result<(
         .collect();
     crate::plots::rgb8_png(path, &rgb, h, w)
 }
+
+/// MTF50 of a 100 %-fill square pixel aperture alone: the root of sin(πf)/(πf) = ½ (cy/px).
+const PIXEL_BOX_MTF50_CY_PER_PX: f64 = 0.6034;
 
 fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
     let d = parse_dof(doc).map_err(CliError::Other)?;
@@ -331,6 +372,7 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
             focus_distance_m: d.focus_distance_m,
             layers: r.layers,
             real_lens: true,
+            focus_method: focus_method_of(&d).map_err(CliError::Other)?,
         },
     )
     .map_err(|e| CliError::Other(format!("render: {e}")))?;
@@ -349,7 +391,12 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
             col1: (xc + half).floor() as usize,
         };
         let e = slanted_edge_mtf(img, h, w, roi).ok()?;
+        // Both images integrate over the full pixel (the renderer's box filter), so the system
+        // MTF is at most the pixel aperture's, sinc(f) = sin(πf)/(πf), and MTF50 cannot exceed
+        // the box's 0.6034 cy/px: a larger value is the slanted-edge fit failing on the Monte
+        // Carlo noise of a strongly blurred tile, i.e. not measurable.
         e.mtf50_cycles_per_pixel
+            .filter(|f| *f <= PIXEL_BOX_MTF50_CY_PER_PX)
     };
     let mut per = Vec::new();
     for (k, z) in tiles.depths_m.iter().enumerate() {
@@ -362,6 +409,31 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
     let dd = dof_range(&dp_s, thr);
     let mut out = PointOutput::default();
     out.put("pixel_pitch_um", out_r.pixel_pitch_mm * 1e3);
+    // Focus (camsim_lens::focus_model), shared by both paths.
+    let fz = &out_r.focus;
+    out.put("focus_image_shift_mm", fz.image_distance_mm - fz.paraxial_image_distance_mm);
+    out.put("focus_group_shift_mm", fz.group_shift_mm);
+    out.put("focus_mtf", fz.mtf);
+    out.put("focus_mtf_paraxial", fz.mtf_paraxial);
+    // Through focus: the vergence of the MTF50 peak (vertex of the parabola through the best
+    // tile and its neighbours in 1/z), as an object distance, and its image-side distance from
+    // the focus plane, Δs' = s'² Δv (Gauss, s' = 1/(1/f − 1/D) the image distance of the
+    // focus from the principal plane). The depth of focus is ±N_w c with the circle of
+    // confusion c the disc diameter at the DoF threshold, 2·0.3526/thr px (below), and the
+    // working F-number N_w = N s'/f.
+    let efl_mm = fz.lens.first_order(fz.lens.primary_nm).map_err(|e| CliError::Other(e.to_string()))?.efl_mm;
+    let s_img_mm = 1.0 / (1.0 / efl_mm - 1.0 / (d.focus_distance_m * 1e3));
+    let coc_mm = 2.0 * 0.3526 / m.mtf50_threshold_cy_per_px * out_r.pixel_pitch_mm;
+    out.put("depth_of_focus_mm", d.f_number * s_img_mm / efl_mm * coc_mm);
+    for (name, s) in [("lens", &lens_s), ("depth_path", &dp_s)] {
+        if let Some(v) = through_focus_peak_per_m(s) {
+            out.put(&format!("focus_peak_{name}_m"), 1.0 / v);
+            out.put(
+                &format!("focus_peak_{name}_image_mm"),
+                s_img_mm * s_img_mm * (v - 1.0 / d.focus_distance_m) * 1e-3,
+            );
+        }
+    }
     out.put(
         "mtf50_focus_lens_cy_per_px",
         lens_s.iter().filter_map(|p| p.1).fold(0.0, f64::max),

@@ -266,6 +266,7 @@ impl LightFieldCamera {
                         &lens,
                         cfg.focus_distance_m,
                         cfg.main_lens.f_number,
+                        cfg.microlens_pitch_um,
                     )
                     .map_err(|e| file_err(e.to_string()))?,
                 ))
@@ -289,13 +290,17 @@ impl LightFieldCamera {
         .map_err(|e| file_err(e.to_string()))
     }
 
-    /// A prescription main lens focused at `focus_distance_m` (its sensor plane = the MLA).
+    /// A prescription main lens focused at `focus_distance_m` (its sensor plane = the MLA) by
+    /// the focus model (`camsim_lens::focus_model`, default method): best polychromatic MTF on
+    /// axis up to half the Nyquist frequency of the microlens grid, 1/(4 p_μ).
     pub fn prescription_main_lens(
         lens: &LensPrescription,
         focus_distance_m: f64,
         f_number: Option<f64>,
+        microlens_pitch_um: f64,
     ) -> Result<RealLensCamera, RealLensError> {
-        // Only the tracer is used: a one-pixel film keeps the exit-pupil table trivial.
+        // Only the tracer is used: a one-pixel film (one microlens) keeps the exit-pupil table
+        // trivial.
         RealLensCamera::new(
             lens,
             1,
@@ -303,7 +308,7 @@ impl LightFieldCamera {
             &RealLensOptions {
                 focus_distance_m: Some(focus_distance_m),
                 f_number,
-                film: FilmSize::PixelPitchUm(1.0),
+                film: FilmSize::PixelPitchUm(microlens_pitch_um),
                 pupil_bins: 1,
                 pupil_grid: 8,
                 ..Default::default()

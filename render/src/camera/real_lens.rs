@@ -13,9 +13,11 @@
 //! * **Image orientation.** The lens inverts the image; film pixel (i, j) is mapped to the
 //!   sensor point x = −(i − W/2)·p, y = (j − H/2)·p, so the output image is upright like a
 //!   pinhole camera's (pixel (0,0) top-left).
-//! * **Focus** by moving the sensor: the last thickness becomes the paraxial image distance of
-//!   an object at the focus distance (measured from the entrance pupil) at the primary
-//!   wavelength. The aperture stop's clear radius is set to the paraxial stop radius that the
+//! * **Focus** by the focus model (`camsim_lens::focus_model`) on an object at the focus
+//!   distance (measured from the entrance pupil): by default the lens moves as a unit to the
+//!   best polychromatic MTF up to half the pixel Nyquist frequency over the film's field
+//!   (`RealLensOptions::focus_method`; `paraxial` = the paraxial image at the primary
+//!   wavelength; a focusing group moves its surfaces instead). The aperture stop's clear radius is set to the paraxial stop radius that the
 //!   prescription's aperture (or an `f_number` override) implies.
 //! * **Exit-pupil bounds, sensor-side trace and chief rays** come from the lens crate
 //!   (`camsim_lens::pupil`: [`SensorSideLens`], [`ExitPupilTable`], in the manner of pbrt-v4's
@@ -34,7 +36,9 @@ use super::{Camera, CameraRay, OutputQuantity};
 use camsim_lens::prescription::{Aperture, Medium};
 use camsim_lens::pupil::{ExitPupilOptions, ExitPupilTable, SensorSideLens};
 pub use camsim_lens::pupil::{PupilBounds, SensorExit as LensExit};
-use camsim_lens::{Clipping, GlassCatalog, LensError, LensPrescription};
+use camsim_lens::{
+    Clipping, FocusMethod, FocusSpec, FocusedLens, GlassCatalog, LensError, LensPrescription,
+};
 use glam::{Vec2, Vec3};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -83,6 +87,9 @@ pub struct RealLensOptions {
     pub pupil_grid: usize,
     /// Shortest and longest wavelength the pupil bounds must cover (nm).
     pub wavelength_range_nm: (f64, f64),
+    /// How the lens is focused (`camsim_lens::focus_model`); an unset merit frequency is half
+    /// the pixel Nyquist frequency, 1/(4p), and an unset merit field the film's half-diagonal.
+    pub focus_method: FocusMethod,
 }
 
 impl Default for RealLensOptions {
@@ -94,6 +101,7 @@ impl Default for RealLensOptions {
             pupil_bins: 32,
             pupil_grid: 64,
             wavelength_range_nm: (360.0, 830.0),
+            focus_method: FocusMethod::default(),
         }
     }
 }
@@ -107,7 +115,10 @@ impl Default for RealLensOptions {
 ///                                    // focus_distance, else infinity
 ///  "f_number": 4.0,                  // optional stop-down
 ///  "pixel_pitch_um": 5.0,            // optional; default: film fits the glTF camera's yfov
-///  "pupil_bins": 32, "pupil_grid": 64}
+///  "pupil_bins": 32, "pupil_grid": 64,
+///  "focus_criterion": "best",        // optional: "best" (default) or "paraxial"
+///  "focus_frequency_cyc_per_mm": 60, // optional; default half the pixel Nyquist 1/(4p)
+///  "focus_group_surfaces": [6, 10]}  // optional; default the lens moves as a unit
 /// ```
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -129,6 +140,15 @@ pub struct RealLensConfig {
     /// Exit-pupil grid per side.
     #[serde(default)]
     pub pupil_grid: Option<usize>,
+    /// Focus criterion: `"best"` (default) or `"paraxial"` (`camsim_lens::focus_model`).
+    #[serde(default)]
+    pub focus_criterion: Option<String>,
+    /// Merit frequency of the best focus (cycles/mm; default half the pixel Nyquist).
+    #[serde(default)]
+    pub focus_frequency_cyc_per_mm: Option<f64>,
+    /// Focusing group `[first, last]` (surface indices; default: the lens moves as a unit).
+    #[serde(default)]
+    pub focus_group_surfaces: Option<[usize; 2]>,
 }
 
 /// First-order facts about the configured camera (for reports and tests).
@@ -158,6 +178,8 @@ pub struct RealLensInfo {
     pub primary_nm: f64,
     /// Rear-vertex plane → sensor distance (mm).
     pub rear_plane_mm: f64,
+    /// How the lens was focused (focus model).
+    pub focus: FocusedLens,
 }
 
 /// The real-lens camera (see the module docs).
@@ -230,7 +252,31 @@ impl RealLensCamera {
                 Some(od)
             }
         };
-        let mut lens = lens.focus_at(object_distance_mm)?;
+        // Focus by the focus model; its merit frequency (half the pixel Nyquist) and field (the
+        // film half-diagonal) are estimated on the paraxially focused lens.
+        let paraxial = lens.focus_at(object_distance_mm)?;
+        let per_tan_mm = (paraxial.paraxial_chief_height_mm(1.0, lens.primary_nm)?
+            / 1f64.to_radians().tan())
+        .abs();
+        let pitch_est_mm = match opts.film {
+            FilmSize::PixelPitchUm(p) => p * 1e-3,
+            FilmSize::VerticalFovRad(fov) => {
+                2.0 * per_tan_mm * (fov / 2.0).tan() / height_px as f64
+            }
+        };
+        let mut method = opts.focus_method.clone();
+        if pitch_est_mm.is_finite() && pitch_est_mm > 0.0 {
+            method.frequency_cyc_per_mm = method.frequency_cyc_per_mm.or(Some(0.25 / pitch_est_mm));
+            let r_mm = 0.5 * (width_px as f64).hypot(height_px as f64) * pitch_est_mm;
+            method.max_field_deg = method
+                .max_field_deg
+                .or(Some((r_mm / per_tan_mm).atan().to_degrees()));
+        }
+        let focus = lens.focus(&FocusSpec {
+            focus_distance_mm: object_distance_mm,
+            method,
+        })?;
+        let mut lens = focus.lens.clone();
         let fo = lens.first_order(lens.primary_nm)?;
         if !(fo.paraxial_image_distance_mm.is_finite() && fo.paraxial_image_distance_mm > 0.0) {
             return Err(cfg(format!(
@@ -287,6 +333,7 @@ impl RealLensCamera {
             object_distance_mm,
             primary_nm: lens.primary_nm,
             rear_plane_mm: rear_z_mm,
+            focus,
         };
         let pupil = ExitPupilTable::new(
             &side,
@@ -345,6 +392,9 @@ impl RealLensCamera {
                     pixel_pitch_um: None,
                     pupil_bins: None,
                     pupil_grid: None,
+                    focus_criterion: None,
+                    focus_frequency_cyc_per_mm: None,
+                    focus_group_surfaces: None,
                 },
             )
         } else {
@@ -366,6 +416,12 @@ impl RealLensCamera {
             pupil_bins: cfg.pupil_bins.unwrap_or(d.pupil_bins),
             pupil_grid: cfg.pupil_grid.unwrap_or(d.pupil_grid),
             wavelength_range_nm: d.wavelength_range_nm,
+            focus_method: FocusMethod::from_keys(
+                cfg.focus_criterion.as_deref(),
+                cfg.focus_frequency_cyc_per_mm,
+                cfg.focus_group_surfaces,
+            )
+            .map_err(file_err)?,
         };
         Self::new(&lens, width_px, height_px, &opts).map_err(|e| file_err(e.to_string()))
     }
