@@ -154,8 +154,8 @@ fn contrast_autofocus_finds_the_focus_model_plane() {
         "target": {"kind": "slanted_edge", "dark": 5e13, "light": 5e14, "angle_deg": 5.0,
                    "radiance_unit": "photons"}}]});
     write_set(dir.path(), &cam, &caps);
-    let set = camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None)
-        .unwrap();
+    let set =
+        camsim_pipeline::config::load_captures(&dir.path().join("captures.json"), None).unwrap();
     let lens = LensPrescription::from_json_file(lens_path(), &GlassCatalog::bundled()).unwrap();
     let mut opts = camsim_optics::LensBlurOptions::covering(0.5 * 32.0 * 5e-3 * 2f64.sqrt());
     opts.object_distance_mm = Some(2000.0);
@@ -220,5 +220,9 @@ fn contrast_autofocus_finds_the_focus_model_plane() {
     );
     // the scan saw a real maximum: the ends are blurrier than the kept position
     let c_inf = af.samples[0].contrast;
-    assert!(af.best.contrast > 1.5 * c_inf, "{} vs {c_inf}", af.best.contrast);
+    assert!(
+        af.best.contrast > 1.5 * c_inf,
+        "{} vs {c_inf}",
+        af.best.contrast
+    );
 }

@@ -441,7 +441,11 @@ fn mtf50_standard_error_cy_per_mm(out: &Path, row: &Value) -> Mtf50Error {
         .filter(|&i| f[i] >= 0.5 * f50 && f[i] <= 1.5 * f50)
         .map(|i| noisy[i] - nf[i])
         .collect();
-    assert!(band.len() >= 5, "{folder}: {} MTF samples around MTF50", band.len());
+    assert!(
+        band.len() >= 5,
+        "{folder}: {} MTF samples around MTF50",
+        band.len()
+    );
     let sigma_mtf = (band.iter().map(|d| d * d).sum::<f64>() / band.len() as f64).sqrt();
     let k = (1..f.len()).find(|&i| nf[i] < 0.5).unwrap();
     let slope = (nf[k] - nf[k - 1]) / (f[k] - f[k - 1]);
@@ -884,8 +888,16 @@ fn dof_study_ci_depth_path_agrees_with_the_real_lens() {
             num(&r[k], "focus_image_shift_mm")
         );
         assert!(dof_mm > 0.0);
-        assert!(pl.abs() < dof_mm, "f/{}: real-lens peak {pl} mm vs ±{dof_mm} mm", n[k]);
-        assert!(pd.abs() < dof_mm, "f/{}: depth-path peak {pd} mm vs ±{dof_mm} mm", n[k]);
+        assert!(
+            pl.abs() < dof_mm,
+            "f/{}: real-lens peak {pl} mm vs ±{dof_mm} mm",
+            n[k]
+        );
+        assert!(
+            pd.abs() < dof_mm,
+            "f/{}: depth-path peak {pd} mm vs ±{dof_mm} mm",
+            n[k]
+        );
         assert!(
             (pl - pd).abs() < 0.5 * dof_mm,
             "f/{}: focus planes differ by {} mm (depth of focus ±{dof_mm} mm)",

@@ -208,7 +208,13 @@ impl LensPrescription {
             alias_free &= ok;
             Ok(m)
         };
-        let best = crate::focus_model::maximise_on_interval(&mut eval, lo_mm, hi_mm, 24, 1e-4 * (hi_mm - lo_mm))?;
+        let best = crate::focus_model::maximise_on_interval(
+            &mut eval,
+            lo_mm,
+            hi_mm,
+            24,
+            1e-4 * (hi_mm - lo_mm),
+        )?;
         let (image_shift_mm, merit_best) = (best.x, best.value);
         let merit_at_zero = eval(0.0)?;
         Ok(BestFocus {

@@ -120,7 +120,9 @@ impl FocusMethod {
         let criterion = match criterion {
             None => FocusCriterion::Best,
             Some(c) => FocusCriterion::parse(c).ok_or_else(|| {
-                format!("focus_criterion: unknown value \"{c}\" (expected \"best\" or \"paraxial\")")
+                format!(
+                    "focus_criterion: unknown value \"{c}\" (expected \"best\" or \"paraxial\")"
+                )
             })?,
         };
         if let Some(f) = frequency_cyc_per_mm {
@@ -413,14 +415,19 @@ impl LensPrescription {
             .clone()
             .unwrap_or_else(|| self.wavelengths_nm.clone());
         if wls.is_empty() {
-            return Err(LensError::Prescription("focus: no merit wavelengths".into()));
+            return Err(LensError::Prescription(
+                "focus: no merit wavelengths".into(),
+            ));
         }
         let freqs: Vec<f64> = (1..=MERIT_FREQS)
             .map(|k| freq * k as f64 / MERIT_FREQS as f64)
             .collect();
         let merit = |l: &LensPrescription| l.poly_mtf_merit(&fields, &wls, &freqs);
         // Search resolution: a tenth of the diffraction depth of focus ±λN_w² … ±2λN_w².
-        let nw = paraxial.first_order(self.primary_nm)?.working_f_number.abs();
+        let nw = paraxial
+            .first_order(self.primary_nm)?
+            .working_f_number
+            .abs();
         let tol_mm = 0.1 * self.primary_nm * 1e-6 * nw * nw;
         let (mtf_paraxial, mut alias_free) = merit(&paraxial)?;
         let done = |lens: LensPrescription, shift: f64, mtf: f64, alias_free: bool| {
@@ -594,9 +601,7 @@ impl LensPrescription {
         let grid = crate::analysis::pupil_grid(33);
         let fans = wavelengths_nm
             .iter()
-            .map(|&w| {
-                self.ray_fan(0.0, w, self.primary_nm, &grid, crate::trace::Clipping::None)
-            })
+            .map(|&w| self.ray_fan(0.0, w, self.primary_nm, &grid, crate::trace::Clipping::None))
             .collect::<Result<Vec<_>, _>>()?;
         let efl = self.first_order(self.primary_nm)?.efl_mm.abs();
         let dz = self.best_focus_shift_mm(&fans, 0.02 * efl);

@@ -97,8 +97,8 @@ pub mod trace;
 
 pub use batch::{RayBatch, TraceSystem};
 pub use error::LensError;
-pub use focus_model::{FocusCriterion, FocusMethod, FocusMotion, FocusSpec, FocusedLens};
 pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
+pub use focus_model::{FocusCriterion, FocusMethod, FocusMotion, FocusSpec, FocusedLens};
 pub use glass::{Glass, GlassCatalog, NearGlass};
 pub use paraxial::FirstOrder;
 pub use prescription::{LensPrescription, PrescriptionFile};

@@ -46,7 +46,10 @@ fn thin_lens() -> LensPrescription {
 
 fn double_gauss() -> LensPrescription {
     LensPrescription::from_json_file(
-        concat!(env!("CARGO_MANIFEST_DIR"), "/../lenses/double_gauss_50mm_f2.json"),
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../lenses/double_gauss_50mm_f2.json"
+        ),
         &GlassCatalog::bundled(),
     )
     .unwrap()
@@ -201,16 +204,27 @@ fn double_gauss_best_focus_beats_paraxial_as_the_aberration_polynomial_predicts(
     let (rms_p, rms_b) = (spot(&p.lens), spot(&b.lens));
     let (cf_p, cf_b) = (poly.rms_mm(0.0), poly.rms_mm(dz));
     // The traced spots are the closed form's (the polynomial holds the aberration).
-    assert!((rms_p / cf_p - 1.0).abs() < 0.03, "paraxial {rms_p} vs {cf_p}");
+    assert!(
+        (rms_p / cf_p - 1.0).abs() < 0.03,
+        "paraxial {rms_p} vs {cf_p}"
+    );
     assert!((rms_b / cf_b - 1.0).abs() < 0.05, "best {rms_b} vs {cf_b}");
     // The MTF best focus lies near the closed-form minimum-RMS focus: its spot is within 50 %
     // of the minimum, which is less than a third of the paraxial spot (third-order spherical
     // alone gives exactly 1/3; the higher orders of this lens balance further).
     let cf_min = poly.rms_mm(poly.best_dz_mm());
     assert!(cf_min < cf_p / 3.0, "min {cf_min} vs paraxial {cf_p}");
-    assert!(rms_b < 1.5 * cf_min, "best {rms_b} vs closed-form minimum {cf_min}");
+    assert!(
+        rms_b < 1.5 * cf_min,
+        "best {rms_b} vs closed-form minimum {cf_min}"
+    );
     assert!(rms_b < 0.5 * rms_p);
-    assert!(b.mtf > 2.0 * b.mtf_paraxial, "merit {} vs {}", b.mtf, b.mtf_paraxial);
+    assert!(
+        b.mtf > 2.0 * b.mtf_paraxial,
+        "merit {} vs {}",
+        b.mtf,
+        b.mtf_paraxial
+    );
 }
 
 #[test]

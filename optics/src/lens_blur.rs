@@ -61,8 +61,8 @@ use camsim_core::{SpectralImage, Spectrum, WavelengthGrid};
 use camsim_lens::analysis::pupil_grid;
 use camsim_lens::field_model::{FieldTable, Focus};
 use camsim_lens::{
-    Clipping, FieldModel, FieldModelOptions, FocusMethod, FocusSpec, FocusedLens,
-    LensPrescription, PsfKind,
+    Clipping, FieldModel, FieldModelOptions, FocusMethod, FocusSpec, FocusedLens, LensPrescription,
+    PsfKind,
 };
 use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
@@ -250,7 +250,9 @@ impl LensBlur {
         let mut method = opts.focus_method.clone();
         if method.max_field_deg.is_none() {
             let p = lens.focus_at(focus_mm).map_err(ctx)?;
-            let per_tan = (p.paraxial_chief_height_mm(1.0, lens.primary_nm).map_err(ctx)?
+            let per_tan = (p
+                .paraxial_chief_height_mm(1.0, lens.primary_nm)
+                .map_err(ctx)?
                 / 1f64.to_radians().tan())
             .abs();
             method.max_field_deg = Some((1.1 * r / per_tan).atan().to_degrees());

@@ -102,8 +102,7 @@ pub fn contrast_autofocus(
             rg.row0, rg.row1, rg.col0, rg.col1, s.rows, s.cols
         )));
     }
-    if !(af.near_m.is_finite() && af.near_m > 0.0) || af.steps < 3 || !(af.tolerance_per_m > 0.0)
-    {
+    if !(af.near_m.is_finite() && af.near_m > 0.0) || af.steps < 3 || !(af.tolerance_per_m > 0.0) {
         return Err(CliError::Other(format!(
             "autofocus: near_m = {} and tolerance_per_m = {} must be > 0 and steps = {} ≥ 3",
             af.near_m, af.tolerance_per_m, af.steps
@@ -139,13 +138,11 @@ pub fn contrast_autofocus(
                  (1/d = {v:.4}/m): shorten the shot's exposure"
             )));
         }
-        let contrast = tenengrad_contrast(&frame.data, frame.cols, rg, period).ok_or_else(|| {
-            CliError::Other("autofocus: the region is black in the simulated image".into())
-        })?;
-        let image_distance_mm = lb
-            .focus
-            .as_ref()
-            .map_or(f64::NAN, |f| f.image_distance_mm);
+        let contrast =
+            tenengrad_contrast(&frame.data, frame.cols, rg, period).ok_or_else(|| {
+                CliError::Other("autofocus: the region is black in the simulated image".into())
+            })?;
+        let image_distance_mm = lb.focus.as_ref().map_or(f64::NAN, |f| f.image_distance_mm);
         Ok((
             AutofocusSample {
                 vergence_per_m: v,
@@ -160,8 +157,8 @@ pub fn contrast_autofocus(
     let mut samples = Vec::new();
     let mut best: Option<(AutofocusSample, LensBlur)> = None;
     let keep = |r: (AutofocusSample, LensBlur),
-                    samples: &mut Vec<AutofocusSample>,
-                    best: &mut Option<(AutofocusSample, LensBlur)>| {
+                samples: &mut Vec<AutofocusSample>,
+                best: &mut Option<(AutofocusSample, LensBlur)>| {
         samples.push(r.0);
         if best.as_ref().is_none_or(|b| r.0.contrast > b.0.contrast) {
             *best = Some(r);

@@ -975,7 +975,10 @@ fn blur_from_file(
         ("lens_file", b.lens_file.is_some()),
         ("focus_distance_m", b.focus_distance_m.is_some()),
         ("focus_criterion", b.focus_criterion.is_some()),
-        ("focus_frequency_cyc_per_mm", b.focus_frequency_cyc_per_mm.is_some()),
+        (
+            "focus_frequency_cyc_per_mm",
+            b.focus_frequency_cyc_per_mm.is_some(),
+        ),
         ("focus_group_surfaces", b.focus_group_surfaces.is_some()),
     ];
     for (k, p) in present {
@@ -1044,11 +1047,9 @@ fn blur_from_file(
             // (camsim_lens::focus_model; merit frequency default half the pixel Nyquist).
             opts.object_distance_mm = object_distance_m.map(|d| d * 1e3);
             if let Some(fd) = b.focus_distance_m {
-                opts.focus = camsim_optics::LensFocus::At(Some(positive(
-                    path,
-                    "optics.blur.focus_distance_m",
-                    fd,
-                )? * 1e3));
+                opts.focus = camsim_optics::LensFocus::At(Some(
+                    positive(path, "optics.blur.focus_distance_m", fd)? * 1e3,
+                ));
             }
             let mut method = camsim_lens::FocusMethod::from_keys(
                 b.focus_criterion.as_deref(),

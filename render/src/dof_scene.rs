@@ -253,7 +253,11 @@ pub fn render_dof(
                 let mut m = o.focus_method.clone();
                 let (lo, hi) = o.band_nm;
                 m.wavelengths_nm = m.wavelengths_nm.or_else(|| {
-                    Some((0..5).map(|k| lo + (hi - lo) * (k as f64 + 0.5) / 5.0).collect())
+                    Some(
+                        (0..5)
+                            .map(|k| lo + (hi - lo) * (k as f64 + 0.5) / 5.0)
+                            .collect(),
+                    )
                 });
                 m
             },

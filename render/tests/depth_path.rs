@@ -423,10 +423,15 @@ fn lens_depth_path_matches_the_real_lens_render() {
     // Both paths share the focus model's best focus; the object vergence it images paraxially
     // (Gauss, Δv = Δs'/s'², s' the image distance of 2 m from the principal plane) centres
     // the expected defocus discs below.
-    let efl = r.focus.lens.first_order(r.focus.lens.primary_nm).unwrap().efl_mm;
+    let efl = r
+        .focus
+        .lens
+        .first_order(r.focus.lens.primary_nm)
+        .unwrap()
+        .efl_mm;
     let s_img = 1.0 / (1.0 / efl - 1.0 / 2000.0);
-    let v_focus =
-        0.5 + (r.focus.image_distance_mm - r.focus.paraxial_image_distance_mm) * 1e3 / (s_img * s_img);
+    let v_focus = 0.5
+        + (r.focus.image_distance_mm - r.focus.paraxial_image_distance_mm) * 1e3 / (s_img * s_img);
     eprintln!(
         "focus: image plane {:+.4} mm from paraxial, images 1/z = {v_focus:.4}/m paraxially; merit {:.4} vs paraxial {:.4}",
         r.focus.image_distance_mm - r.focus.paraxial_image_distance_mm,

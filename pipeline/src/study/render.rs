@@ -411,7 +411,10 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
     out.put("pixel_pitch_um", out_r.pixel_pitch_mm * 1e3);
     // Focus (camsim_lens::focus_model), shared by both paths.
     let fz = &out_r.focus;
-    out.put("focus_image_shift_mm", fz.image_distance_mm - fz.paraxial_image_distance_mm);
+    out.put(
+        "focus_image_shift_mm",
+        fz.image_distance_mm - fz.paraxial_image_distance_mm,
+    );
     out.put("focus_group_shift_mm", fz.group_shift_mm);
     out.put("focus_mtf", fz.mtf);
     out.put("focus_mtf_paraxial", fz.mtf_paraxial);
@@ -421,7 +424,11 @@ fn evaluate_dof(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
     // focus from the principal plane). The depth of focus is ±N_w c with the circle of
     // confusion c the disc diameter at the DoF threshold, 2·0.3526/thr px (below), and the
     // working F-number N_w = N s'/f.
-    let efl_mm = fz.lens.first_order(fz.lens.primary_nm).map_err(|e| CliError::Other(e.to_string()))?.efl_mm;
+    let efl_mm = fz
+        .lens
+        .first_order(fz.lens.primary_nm)
+        .map_err(|e| CliError::Other(e.to_string()))?
+        .efl_mm;
     let s_img_mm = 1.0 / (1.0 / efl_mm - 1.0 / (d.focus_distance_m * 1e3));
     let coc_mm = 2.0 * 0.3526 / m.mtf50_threshold_cy_per_px * out_r.pixel_pitch_mm;
     out.put("depth_of_focus_mm", d.f_number * s_img_mm / efl_mm * coc_mm);
