@@ -1140,3 +1140,38 @@ pub fn magnitude(effect: Effect, st: &ModelState, believed: &ModelState) -> f64 
         Effect::LateralColor => st.rates.lateral_color_um.unwrap_or(0.0),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::lagrange;
+
+    /// The interpolation the linearised fits use is exact for a polynomial of the nodes'
+    /// degree: f(x) = fc + Σ l_k(x)(f_k − fc) and f'(x) = Σ l_k'(x)(f_k − fc), for a line
+    /// through two nodes and a parabola through three unevenly spaced ones, at and between
+    /// and beyond the nodes.
+    #[test]
+    fn lagrange_weights_reproduce_polynomials_and_their_slopes() {
+        let cases: [(&[f64], usize, fn(f64) -> f64, fn(f64) -> f64); 2] = [
+            (&[0.3, 1.1], 0, |x| 2.0 - 0.7 * x, |_| -0.7),
+            (
+                &[0.25, -0.4, 1.3],
+                1,
+                |x| 3.0 - 2.0 * x + 0.5 * x * x,
+                |x| -2.0 + x,
+            ),
+        ];
+        for (xs, c, f, df) in cases {
+            for x in [-1.0, -0.4, 0.0, 0.25, 0.7, 1.3, 2.5] {
+                let (w, dw) = lagrange(xs, c, x);
+                let others: Vec<f64> = (0..xs.len())
+                    .filter(|&k| k != c)
+                    .map(|k| f(xs[k]) - f(xs[c]))
+                    .collect();
+                let v = f(xs[c]) + w.iter().zip(&others).map(|(a, b)| a * b).sum::<f64>();
+                let d: f64 = dw.iter().zip(&others).map(|(a, b)| a * b).sum();
+                assert!((v - f(x)).abs() < 1e-12, "{xs:?} x {x}: {v} vs {}", f(x));
+                assert!((d - df(x)).abs() < 1e-12, "{xs:?} x {x}: {d} vs {}", df(x));
+            }
+        }
+    }
+}
