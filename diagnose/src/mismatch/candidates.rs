@@ -505,7 +505,11 @@ fn fit_surrogate_1d(
     let r0 = ctx.base_rates(&state.rates)?;
     // (x, rates, exact −lnL)
     let mut nodes: Vec<(f64, Arc<Rates>, f64)> = vec![(x0, r0, f0)];
-    let x1 = if x0 + step <= hi { x0 + step } else { x0 - step };
+    let x1 = if x0 + step <= hi {
+        x0 + step
+    } else {
+        x0 - step
+    };
     match rates_at(x1) {
         Ok(r1) => {
             let f1 = neg_ll_base(ctx, &at(x1), &r1);
@@ -529,7 +533,10 @@ fn fit_surrogate_1d(
         let basis: Vec<Rates> = (1..nodes.len())
             .map(|k| difference(ctx, &nodes[k].1, &rc))
             .collect();
-        let span = xs.iter().fold(0f64, |m, &x| m.max((x - xs[c]).abs())).max(step);
+        let span = xs
+            .iter()
+            .fold(0f64, |m, &x| m.max((x - xs[c]).abs()))
+            .max(step);
         let (a, b) = ((xs[c] - 3.0 * span).max(lo), (xs[c] + 3.0 * span).min(hi));
         let (x_star, f_sur) = newton_surrogate(
             ctx,

@@ -371,7 +371,12 @@ impl<'a> Ctx<'a> {
             Some(hb) => &hb.col,
             None => {
                 col_owned = if use_cols {
-                    self.column_stats_store(rates, &consts, sel, use_store.then_some(&mut store[..]))
+                    self.column_stats_store(
+                        rates,
+                        &consts,
+                        sel,
+                        use_store.then_some(&mut store[..]),
+                    )
                 } else {
                     Vec::new()
                 };
