@@ -29,7 +29,7 @@ one() {
   local bin=$1 name=$2
   local s e
   s=$(date +%s.%N)
-  RAYON_NUM_THREADS=$THREADS "$bin" --threads "$THREADS" diagnose "$OUT/set/captures.json" \
+  CAMSIM_PROFILE=1 RAYON_NUM_THREADS=$THREADS "$bin" --threads "$THREADS" diagnose "$OUT/set/captures.json" \
       --out "$OUT/out-$name" 2>"$OUT/diagnose-$name.log" || { cat "$OUT/diagnose-$name.log"; exit 1; }
   e=$(date +%s.%N)
   python3 - "$OUT/out-$name" "$name" "$s" "$e" <<'PY'

@@ -825,6 +825,9 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
                    "hot_pixels_classified": {"before": d.before.hot_pixels, "after": d.after.hot_pixels}},
         "settings": {"fit_pixels": d.fit_pixels, "observations": d.selection.n_obs,
                      "bic_threshold": d.bic_threshold},
+        "subsampled": {"fit_pixels": d.fit_pixels, "sensor_pixels": data.pixels(),
+                       "fits_subsampled": d.fit_pixels < data.pixels(),
+                       "rule": "candidate fits and selection use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels; the reported fit (fit_before/fit_after), locate, figures and the final fit check use every pixel"},
         "skipped_shots": skipped,
     })
 }

@@ -373,12 +373,115 @@ fn gauss_newton(
     (theta, f, st)
 }
 
+/// Weighted sum Σ w_k basis_k per shot (shared images stay shared; no clamp: a derivative
+/// image), on the rows of fit-row evaluations.
+fn weighted(ctx: &Ctx, basis: &[Rates], w: &[f64]) -> Rates {
+    let b0 = &basis[0];
+    let mut out: Rates = Vec::with_capacity(b0.len());
+    for s in 0..b0.len() {
+        if let Some(j) = (0..s).find(|&j| basis.iter().all(|b| Arc::ptr_eq(&b[j], &b[s]))) {
+            out.push(out[j].clone());
+            continue;
+        }
+        let v = on_calc_rows(ctx, b0[s].len(), &|i| {
+            let mut x = 0.0;
+            for (k, t) in w.iter().enumerate() {
+                x += t * basis[k][s][i] as f64;
+            }
+            x as f32
+        });
+        out.push(Arc::new(v));
+    }
+    out
+}
+
+/// Lagrange interpolation weights at `x` of the nodes `xs` other than node `c` (whose weight
+/// is 1 − their sum: the rates are written rc + Σ_k l_k(x)(r_k − rc)), and their derivatives.
+fn lagrange(xs: &[f64], c: usize, x: f64) -> (Vec<f64>, Vec<f64>) {
+    let n = xs.len();
+    let mut w = Vec::new();
+    let mut dw = Vec::new();
+    for k in (0..n).filter(|&k| k != c) {
+        let mut den = 1.0;
+        for m in (0..n).filter(|&m| m != k) {
+            den *= xs[k] - xs[m];
+        }
+        // l_k(x) = Π_{m≠k}(x − x_m)/den; l_k'(x) = Σ_j Π_{m≠k,j}(x − x_m)/den
+        let mut num = 1.0;
+        let mut dnum = 0.0;
+        for m in (0..n).filter(|&m| m != k) {
+            dnum = dnum * (x - xs[m]) + num;
+            num *= x - xs[m];
+        }
+        w.push(num / den);
+        dw.push(dnum / den);
+    }
+    (w, dw)
+}
+
+/// Minimises the likelihood of the interpolated forward model
+/// `rates(x) = rc + Σ_k l_k(x) basis_k` over [lo, hi] by Gauss–Newton steps in x, starting at
+/// `x0`: the derivative image ∂rates/∂x = Σ_k l_k'(x) basis_k gives the weighted least-squares
+/// normal equations of the frame means ([`Ctx::normal_equations`], one pass over the
+/// pixels), and each step is kept only when the surrogate's likelihood improves (halving
+/// otherwise; Nocedal & Wright, *Numerical Optimization*, 2006, §10.3).
+#[allow(clippy::too_many_arguments)]
+fn newton_surrogate(
+    ctx: &Ctx,
+    at: &dyn Fn(f64) -> ModelState,
+    rc: &Rates,
+    basis: &[Rates],
+    weights: &dyn Fn(f64) -> (Vec<f64>, Vec<f64>),
+    x0: f64,
+    lo: f64,
+    hi: f64,
+    xtol: f64,
+) -> (f64, f64) {
+    let sur = |x: f64| neg_ll_base(ctx, &at(x), &combine(ctx, rc, basis, &weights(x).0));
+    let mut x = x0;
+    let mut f = sur(x);
+    for _ in 0..12 {
+        let st = at(x);
+        let (w, dw) = weights(x);
+        let rates = ctx.transform_fit(&combine(ctx, rc, basis, &w), &st);
+        let deriv = ctx.transform_fit(&weighted(ctx, basis, &dw), &st);
+        let (a, b) = ctx.normal_equations(&st, &rates, std::slice::from_ref(&deriv), RowSel::Fit);
+        if !(a[0] > 0.0) || !b[0].is_finite() {
+            break;
+        }
+        let step = b[0] / a[0];
+        let mut scale = 1.0;
+        let mut moved = false;
+        for _ in 0..6 {
+            let xt = (x + scale * step).clamp(lo, hi);
+            if (xt - x).abs() <= xtol {
+                break;
+            }
+            let ft = sur(xt);
+            if ft < f - 1e-9 {
+                moved = f - ft > 1e-3;
+                x = xt;
+                f = ft;
+                break;
+            }
+            scale *= 0.5;
+        }
+        if !moved {
+            break;
+        }
+    }
+    (x, f)
+}
+
 /// 1-D ML fit of a parameter that enters the forward model nonlinearly (each evaluation of
-/// the forward model is expensive): the rates are interpolated quadratically (Lagrange)
-/// through three forward evaluations around a centre, the likelihood of the interpolated
-/// rates is minimised by Brent's method, the minimum is checked with the exact forward
-/// model, and the centre moves there until it stays (trust-region style), then one refinement
-/// with a smaller step.
+/// the forward model is expensive), by a linearised forward model confirmed with full runs:
+/// one extra forward run at `x0 + step` gives the derivative images (finite difference);
+/// the likelihood of the interpolated rates is minimised by Gauss–Newton steps
+/// ([`newton_surrogate`]); the minimum is run through the exact forward model, which both
+/// confirms it and becomes a node of the interpolation (Lagrange through the three nodes
+/// nearest the best value: linear, then quadratic); until the interpolation predicts less
+/// than 0.5 in log-likelihood beyond the best confirmed value. Every forward run is used as
+/// a node, so a fit costs 2–5 forward runs.
 #[allow(clippy::too_many_arguments)]
 fn fit_surrogate_1d(
     ctx: &Ctx,
@@ -396,44 +499,58 @@ fn fit_surrogate_1d(
         st
     };
     let rates_at = |x: f64| -> Result<Arc<Rates>, String> { ctx.base_rates(&at(x).rates) };
-    let mut best = (state.clone(), f0);
-    let mut center = x0.clamp(lo, hi);
-    let mut h = step;
-    let mut refined = false;
-    for _ in 0..6 {
-        let (xm, xp) = if center - h < lo {
-            (lo, lo + 2.0 * h)
-        } else if center + h > hi {
-            (hi - 2.0 * h, hi)
-        } else {
-            (center - h, center + h)
-        };
-        let xc = 0.5 * (xm + xp);
+    let x0 = x0.clamp(lo, hi);
+    // Node 0 is the state itself (x0 is its value; an unset block and its zero value, e.g.
+    // no lateral colour and 0 µm of it, are one forward run).
+    let r0 = ctx.base_rates(&state.rates)?;
+    // (x, rates, exact −lnL)
+    let mut nodes: Vec<(f64, Arc<Rates>, f64)> = vec![(x0, r0, f0)];
+    let x1 = if x0 + step <= hi {
+        x0 + step
+    } else {
+        x0 - step
+    };
+    match rates_at(x1) {
+        Ok(r1) => {
+            let f1 = neg_ll_base(ctx, &at(x1), &r1);
+            nodes.push((x1, r1, f1));
+        }
         // A parameter value the forward model rejects (e.g. a distortion that folds the
         // image over) ends the search with the best value so far.
-        let (rm, rc, rp) = match (rates_at(xm), rates_at(xc), rates_at(xp)) {
-            (Ok(a), Ok(b), Ok(c)) => (a, b, c),
-            _ => break,
-        };
-        let dm = difference(ctx, &rm, &rc);
-        let dp = difference(ctx, &rp, &rc);
-        let basis = [dm, dp];
-        // Lagrange weights of the outer nodes at x (the centre's weight is 1 − their sum).
-        let lag = |x: f64| -> [f64; 2] {
-            let l0 = (x - xc) * (x - xp) / ((xm - xc) * (xm - xp));
-            let l2 = (x - xm) * (x - xc) / ((xp - xm) * (xp - xc));
-            [l0, l2]
-        };
-        let (a, b) = ((xc - 3.0 * h).max(lo), (xc + 3.0 * h).min(hi));
-        let (x_star, f_sur) = minimize_1d(
-            |x| neg_ll_base(ctx, &at(x), &combine(ctx, &rc, &basis, &lag(x))),
+        Err(_) => return Ok((state.clone(), f0)),
+    }
+    let mut best = (state.clone(), f0, x0);
+    if nodes[1].2 < f0 {
+        best = (at(x1), nodes[1].2, x1);
+    }
+    for _ in 0..6 {
+        // the three nodes nearest the best value, the best one the centre
+        nodes.sort_by(|a, b| (a.0 - best.2).abs().total_cmp(&(b.0 - best.2).abs()));
+        nodes.truncate(3);
+        let c = 0;
+        let xs: Vec<f64> = nodes.iter().map(|n| n.0).collect();
+        let rc = nodes[c].1.clone();
+        let basis: Vec<Rates> = (1..nodes.len())
+            .map(|k| difference(ctx, &nodes[k].1, &rc))
+            .collect();
+        let span = xs
+            .iter()
+            .fold(0f64, |m, &x| m.max((x - xs[c]).abs()))
+            .max(step);
+        let (a, b) = ((xs[c] - 3.0 * span).max(lo), (xs[c] + 3.0 * span).min(hi));
+        let (x_star, f_sur) = newton_surrogate(
+            ctx,
+            &at,
+            &rc,
+            &basis,
+            &|x| lagrange(&xs, c, x),
+            xs[c],
             a,
             b,
-            13,
-            1e-4 * h,
+            1e-4 * step,
         );
         // Not worth an exact evaluation when the interpolated improvement is negligible.
-        if best.1 - f_sur < 0.5 {
+        if best.1 - f_sur < 0.5 || xs.iter().any(|&x| (x - x_star).abs() <= 1e-4 * step) {
             break;
         }
         let st = at(x_star);
@@ -442,18 +559,11 @@ fn fit_surrogate_1d(
         };
         let f = neg_ll_base(ctx, &st, &rates);
         if f < best.1 {
-            best = (st, f);
+            best = (st, f, x_star);
         }
-        if (x_star - xc).abs() <= 0.6 * h {
-            if refined {
-                break;
-            }
-            refined = true;
-            h = (h / 4.0).max((x_star - xc).abs());
-        }
-        center = x_star;
+        nodes.push((x_star, rates, f));
     }
-    Ok(best)
+    Ok((best.0, best.1))
 }
 
 /// Fits `effect` starting from `state` (all other parameters held).
@@ -1035,5 +1145,40 @@ pub fn magnitude(effect: Effect, st: &ModelState, believed: &ModelState) -> f64 
         }),
         Effect::Distortion => st.rates.distortion.map_or(0.0, |[a, b]| a + b),
         Effect::LateralColor => st.rates.lateral_color_um.unwrap_or(0.0),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::lagrange;
+
+    /// The interpolation the linearised fits use is exact for a polynomial of the nodes'
+    /// degree: f(x) = fc + Σ l_k(x)(f_k − fc) and f'(x) = Σ l_k'(x)(f_k − fc), for a line
+    /// through two nodes and a parabola through three unevenly spaced ones, at and between
+    /// and beyond the nodes.
+    #[test]
+    fn lagrange_weights_reproduce_polynomials_and_their_slopes() {
+        let cases: [(&[f64], usize, fn(f64) -> f64, fn(f64) -> f64); 2] = [
+            (&[0.3, 1.1], 0, |x| 2.0 - 0.7 * x, |_| -0.7),
+            (
+                &[0.25, -0.4, 1.3],
+                1,
+                |x| 3.0 - 2.0 * x + 0.5 * x * x,
+                |x| -2.0 + x,
+            ),
+        ];
+        for (xs, c, f, df) in cases {
+            for x in [-1.0, -0.4, 0.0, 0.25, 0.7, 1.3, 2.5] {
+                let (w, dw) = lagrange(xs, c, x);
+                let others: Vec<f64> = (0..xs.len())
+                    .filter(|&k| k != c)
+                    .map(|k| f(xs[k]) - f(xs[c]))
+                    .collect();
+                let v = f(xs[c]) + w.iter().zip(&others).map(|(a, b)| a * b).sum::<f64>();
+                let d: f64 = dw.iter().zip(&others).map(|(a, b)| a * b).sum();
+                assert!((v - f(x)).abs() < 1e-12, "{xs:?} x {x}: {v} vs {}", f(x));
+                assert!((d - df(x)).abs() < 1e-12, "{xs:?} x {x}: {d} vs {}", df(x));
+            }
+        }
     }
 }

@@ -124,6 +124,23 @@ pub(crate) struct Ctx<'a> {
     memo: Mutex<Vec<(ModelState, RowSel, Arc<Eval>)>>,
     /// Reused buffer of the column pass's predictions.
     pred_buf: Mutex<Vec<Pred>>,
+    /// What a likelihood with hot pixels shares with every other hot-pixel parameter value
+    /// (the hot-pixel fit changes only the mixture's parameters).
+    hot_base: Mutex<Option<Arc<HotBase>>>,
+}
+
+/// The parts of a fit-row log-likelihood that do not depend on the hot-pixel mixture's
+/// parameters: the column statistics and term, and every pixel's normal-class
+/// log-likelihood. Keyed by the state without its hot pixels and the rate images.
+struct HotBase {
+    state: ModelState,
+    /// The rate images (held: compared by pointer, then by value).
+    rates: Rates,
+    sel: RowSel,
+    col: Vec<column::ColStat>,
+    logl_columns: f64,
+    /// Normal-class log-likelihood per pixel, in the pixel pass's order.
+    l0: Vec<f64>,
 }
 
 /// Evaluations kept in [`Ctx`]'s memo.
@@ -261,6 +278,7 @@ impl<'a> Ctx<'a> {
             stamp: std::sync::atomic::AtomicU64::new(0),
             memo: Mutex::new(Vec::new()),
             pred_buf: Mutex::new(Vec::new()),
+            hot_base: Mutex::new(None),
         }
     }
 
@@ -352,30 +370,62 @@ impl<'a> Ctx<'a> {
             });
         let use_cols = self.column_term(sel);
         let rows = self.rows(sel);
+        // A likelihood alone with hot pixels: reuse (or keep) what does not depend on the
+        // mixture's parameters. Same sums in the same order: the same value either way.
+        let hot_key = (hot.is_some() && !stats).then(|| {
+            let mut st = state.clone();
+            st.sensor.effects.hot_pixels = None;
+            st
+        });
+        let same_rates = |a: &Rates| {
+            a.len() == rates.len()
+                && a.iter()
+                    .zip(rates)
+                    .all(|(x, y)| Arc::ptr_eq(x, y) || x[..] == y[..])
+        };
+        let hot_base: Option<Arc<HotBase>> = hot_key.as_ref().and_then(|st| {
+            let hb = self.hot_base.lock().expect("hot base");
+            hb.as_ref()
+                .filter(|b| b.sel == sel && &b.state == st && same_rates(&b.rates))
+                .cloned()
+        });
+        let keep_l0 = hot_key.is_some() && hot_base.is_none();
         // The column pass keeps its predictions for the pixel pass (when they fit in
         // PRED_STORE pixel-shots, e.g. the fit rows of a large sensor).
         let n_ps = rows.len() * cols * ns;
         let mut store: Vec<Pred> = Vec::new();
-        let use_store = use_cols && n_ps <= PRED_STORE;
+        let use_store = use_cols && n_ps <= PRED_STORE && hot_base.is_none();
         if use_store {
             store = std::mem::take(&mut *self.pred_buf.lock().expect("pred buffer"));
             store.resize(n_ps, Pred::default());
         }
-        let col = if use_cols {
-            self.column_stats_store(rates, &consts, sel, use_store.then_some(&mut store[..]))
-        } else {
-            Vec::new()
+        let col_owned;
+        let col: &[column::ColStat] = match &hot_base {
+            Some(hb) => &hb.col,
+            None => {
+                col_owned = if use_cols {
+                    self.column_stats_store(
+                        rates,
+                        &consts,
+                        sel,
+                        use_store.then_some(&mut store[..]),
+                    )
+                } else {
+                    Vec::new()
+                };
+                &col_owned
+            }
         };
         let stored: Option<&[Pred]> = use_store.then_some(&store[..]);
         // Column term: per column, the S-vector of column-mean residuals.
-        let logl_columns = if use_cols {
-            self.column_logl(&col, sig_d, sig_p, sig_c)
-        } else {
-            0.0
+        let logl_columns = match &hot_base {
+            Some(hb) => hb.logl_columns,
+            None if use_cols => self.column_logl(col, sig_d, sig_p, sig_c),
+            None => 0.0,
         };
         // Pixel term (blocks of PIXEL_BLOCK_ROWS rows: enough pieces to balance the threads
         // on a few fit rows).
-        let blocks: Vec<(f64, Vec<ScStat>, usize)> = rows
+        let blocks: Vec<(f64, Vec<ScStat>, usize, Vec<f64>)> = rows
             .par_chunks(PIXEL_BLOCK_ROWS)
             .enumerate()
             .map(|(bi, blk)| {
@@ -392,6 +442,7 @@ impl<'a> Ctx<'a> {
                 // neither the column nor the fixed-pattern terms), which most pixels of a
                 // uniform shot share.
                 let mut hot_memo: HashMap<Vec<(u64, u16, u16)>, (f64, Vec<Pred>)> = HashMap::new();
+                let mut l0s: Vec<f64> = Vec::new();
                 for (ri, &r) in blk.iter().enumerate() {
                     for j in 0..cols {
                         let i = r * cols + j;
@@ -414,19 +465,25 @@ impl<'a> Ctx<'a> {
                             }
                         };
                         let cs = use_cols.then_some(ColView {
-                            stats: &col,
+                            stats: col,
                             cols,
                             j,
                         });
-                        let l0 = self.pixel_ll(
-                            px,
-                            preds,
-                            &consts,
-                            cs,
-                            sig_d,
-                            sig_p,
-                            if use_cols { 0.0 } else { sig_c },
-                        );
+                        let l0 = match &hot_base {
+                            Some(hb) => hb.l0[at / ns],
+                            None => self.pixel_ll(
+                                px,
+                                preds,
+                                &consts,
+                                cs,
+                                sig_d,
+                                sig_p,
+                                if use_cols { 0.0 } else { sig_c },
+                            ),
+                        };
+                        if keep_l0 {
+                            l0s.push(l0);
+                        }
                         let mut hot_class = false;
                         let li = match &hot {
                             None => l0,
@@ -530,13 +587,13 @@ impl<'a> Ctx<'a> {
                         }
                     }
                 }
-                (ll, sc, n_hot)
+                (ll, sc, n_hot, l0s)
             })
             .collect();
         let mut logl = logl_columns;
         let mut per_sc = vec![ScStat::default(); ns * nch];
         let mut hot_pixels = 0;
-        for (ll, sc, nh) in &blocks {
+        for (ll, sc, nh, _) in &blocks {
             logl += ll;
             for (t, x) in per_sc.iter_mut().zip(sc) {
                 t.add(x);
@@ -545,6 +602,19 @@ impl<'a> Ctx<'a> {
         }
         if use_store {
             *self.pred_buf.lock().expect("pred buffer") = store;
+        }
+        if keep_l0 {
+            if let Some(st) = hot_key {
+                let l0: Vec<f64> = blocks.iter().flat_map(|b| b.3.iter().copied()).collect();
+                *self.hot_base.lock().expect("hot base") = Some(Arc::new(HotBase {
+                    state: st,
+                    rates: rates.clone(),
+                    sel,
+                    col: col.to_vec(),
+                    logl_columns,
+                    l0,
+                }));
+            }
         }
         let chi2 = per_sc.iter().map(|x| x.chi2).sum();
         let dof = per_sc.iter().map(|x| x.dof).sum();
