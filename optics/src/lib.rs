@@ -11,7 +11,8 @@
 //! 3. the optical blur: the diffraction-limited OTF (Eq. 3, per wavelength band, by FFT,
 //!    Eqs. 4–6), a Gaussian or pillbox PSF (wavelength independent, applied to the planes of
 //!    the linear model), sampled per-wavelength PSFs ([`PsfSet`]) or a wavefront PSF with
-//!    Zernike defocus;
+//!    Zernike defocus, or a general pupil ([`WavefrontPupil`]: any OSA Zernike terms, a
+//!    measurement pupil, longitudinal chromatic aberration, polygonal apertures);
 //!    or, with [`Blur::Lens`], the ISET ray-trace method (§2.B.3) of a lens prescription, which
 //!    replaces steps 1–3 (distortion, traced relative illumination, the lens's working
 //!    F-number, shift-variant PSFs; see [`LensBlur`]);
@@ -34,6 +35,7 @@ mod formulas;
 mod kernels;
 mod lens_blur;
 mod psf_set;
+mod wavefront;
 
 pub use band_split::{split_into_bands, BandSplit};
 pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
@@ -51,6 +53,10 @@ pub use formulas::{
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
 pub use lens_blur::{LensBlur, LensBlurOptions, LensFocus};
 pub use psf_set::PsfSet;
+pub use wavefront::{
+    defocus_um_from_diopters, human_lca_diopters, polygon_area, zernike_osa, zernike_osa_nm,
+    ChromaticDefocus, PupilField, WavefrontPupil, ZernikeTerm,
+};
 
 use camsim_core::SpectralImage;
 use error::check_positive;
@@ -123,6 +129,10 @@ pub enum Blur {
         /// Pupil samples across the diameter (16..=4096; 128 is ample for |defocus| < λ).
         pupil_samples: usize,
     },
+    /// A pupil with arbitrary Zernike aberrations (OSA/ANSI j, µm RMS), a measurement pupil
+    /// separate from the aperture `f/N`, longitudinal chromatic aberration and an optional
+    /// polygonal (bladed) aperture ([`WavefrontPupil`]), per wavelength band.
+    Pupil(WavefrontPupil),
     /// A lens prescription's ray-trace field model (ISET ray-trace method, paper §2.B.3):
     /// distortion, traced relative illumination (replacing `relative_illumination`), the
     /// lens's working F-number in the camera equation and shift-variant, wavelength-dependent
@@ -195,6 +205,7 @@ impl OpticsModel {
         }
         match &self.blur {
             Blur::None | Blur::Diffraction | Blur::Psf(_) | Blur::Lens(_) => {}
+            Blur::Pupil(p) => p.validate()?,
             Blur::Gaussian { sigma_um } => check_positive("blur sigma_um", *sigma_um, true)?,
             Blur::Pillbox { width_um } => check_positive("blur width_um", *width_um, true)?,
             Blur::Wavefront {
@@ -263,7 +274,11 @@ pub fn form_image(
     if aperture_order > 1
         && !matches!(
             optics.blur,
-            Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pillbox { .. }
+            Blur::Diffraction
+                | Blur::Psf(_)
+                | Blur::Wavefront { .. }
+                | Blur::Pupil(_)
+                | Blur::Pillbox { .. }
         )
     {
         return Err(OpticsError::Scene(format!(
@@ -369,7 +384,7 @@ pub fn form_image(
     // wavelength of each plane once split.
     let per_band = matches!(
         optics.blur,
-        Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. }
+        Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pupil(_)
     ) || optics.effects.lateral_color.is_some();
     let mut band_wl: Option<Vec<f64>> = None;
     if per_band {
@@ -440,6 +455,19 @@ pub fn form_image(
             let psfs: Vec<SampledPsf> = band_wl
                 .iter()
                 .map(|&w| wavefront_psf(w, n_eff, *defocus_um, *pupil_samples, dx))
+                .collect::<Result<_, _>>()?;
+            let pad = optics.padding;
+            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
+                psfs[b].clone()
+            })?;
+        }
+        Blur::Pupil(wp) => {
+            // The aperture D = f/N (the camera equation's f-number); the PSF scale uses the
+            // working f-number.
+            let aperture_m = optics.focal_length_m / optics.f_number;
+            let psfs: Vec<SampledPsf> = band_wl
+                .par_iter()
+                .map(|&w| wp.psf(w, n_eff, aperture_m, dx))
                 .collect::<Result<_, _>>()?;
             let pad = optics.padding;
             convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
