@@ -250,6 +250,82 @@ pub fn form_image(
     scene: &SceneRadiance,
     bands: &WavelengthGrid,
 ) -> Result<SensorIrradiance, OpticsError> {
+    form_image_with(optics, scene, bands, true).map(|u| u.irradiance)
+}
+
+/// The optical image without ISETCam's final crop (`oiCompute` with `crop = false`): the
+/// scene is zero-padded by `round(rows/8)` rows and `round(cols/8)` columns each side
+/// (`oiPad`), the blur spreads light into that ring, and the whole padded image is returned,
+/// so a sensor larger than the scene sees the blurred light around it. The centre
+/// `rows × cols` is exactly [`form_image`]'s result. Needs the ISETCam padding
+/// ([`Padding::Zero`]), an FFT blur (none, diffraction, PSF set, wavefront) and no effect
+/// blocks.
+pub fn form_image_uncropped(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+) -> Result<UncroppedIrradiance, OpticsError> {
+    if optics.padding != Padding::Zero {
+        return Err(OpticsError::Scene(
+            "an uncropped optical image needs the ISETCam padding (Padding::Zero)".into(),
+        ));
+    }
+    if !matches!(
+        optics.blur,
+        Blur::None | Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pupil(_)
+    ) || !optics.effects.is_empty()
+    {
+        return Err(OpticsError::Scene(
+            "an uncropped optical image needs an FFT blur (none, diffraction, psf, wavefront) \
+             and no effect blocks"
+                .into(),
+        ));
+    }
+    form_image_with(optics, scene, bands, false)
+}
+
+/// [`form_image_uncropped`]'s result: the padded irradiance and the ring's width.
+#[derive(Debug, Clone)]
+pub struct UncroppedIrradiance {
+    /// `(rows + 2·pad_rows) × (cols + 2·pad_cols)` irradiance, the scene's pitch.
+    pub irradiance: SensorIrradiance,
+    /// Rows of the ring above (and below) the scene: `round(rows / 8)`.
+    pub pad_rows: usize,
+    /// Columns of the ring left (and right) of the scene: `round(cols / 8)`.
+    pub pad_cols: usize,
+}
+
+/// Zero-pad every plane by `pr` rows and `pc` columns each side.
+fn zero_pad_image(img: &SpectralImage, pr: usize, pc: usize) -> SpectralImage {
+    let (rows, cols) = (img.rows, img.cols);
+    let (nr, nc) = (rows + 2 * pr, cols + 2 * pc);
+    let planes = img
+        .planes
+        .iter()
+        .map(|p| {
+            let mut q = vec![0f32; nr * nc];
+            for i in 0..rows {
+                q[(i + pr) * nc + pc..(i + pr) * nc + pc + cols]
+                    .copy_from_slice(&p[i * cols..(i + 1) * cols]);
+            }
+            q
+        })
+        .collect();
+    SpectralImage {
+        rows: nr,
+        cols: nc,
+        basis: img.basis.clone(),
+        planes,
+    }
+}
+
+/// [`form_image`] (`crop`) or [`form_image_uncropped`] (`!crop`, checked by the caller).
+fn form_image_with(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+    crop: bool,
+) -> Result<UncroppedIrradiance, OpticsError> {
     optics.validate()?;
     let dx = scene.sample_pitch_m;
     check_positive("sample_pitch_m", dx, false)?;
@@ -308,9 +384,13 @@ pub fn form_image(
             }
             apply_defocus_and_glare(optics, &mut img, dx)?;
         }
-        return Ok(SensorIrradiance {
-            irradiance: img,
-            sample_pitch_m: dx,
+        return Ok(UncroppedIrradiance {
+            irradiance: SensorIrradiance {
+                irradiance: img,
+                sample_pitch_m: dx,
+            },
+            pad_rows: 0,
+            pad_cols: 0,
         });
     }
     let n = optics.f_number;
@@ -402,6 +482,17 @@ pub fn form_image(
     }
     let band_wl = band_wl.unwrap_or_default();
 
+    // Uncropped (ISETCam crop = false): blur on the zero-padded grid and keep all of it.
+    let (pad_rows, pad_cols) = if crop {
+        (0, 0)
+    } else {
+        (fft::isetcam_pad(rows), fft::isetcam_pad(cols))
+    };
+    if !crop {
+        img = zero_pad_image(&img, pad_rows, pad_cols);
+    }
+    let (rows, cols) = (img.rows, img.cols);
+
     // 3. Blur. The FFT blurs take samples of the scene's aperture (`aperture_order`) and give
     // cell averages of the blurred irradiance, which the sensor's box average over the pixel
     // turns into the exact pixel mean ([`camsim_core::sample_aperture`]).
@@ -415,7 +506,11 @@ pub fn form_image(
             let lmax = band_wl.iter().cloned().fold(0.0, f64::max) * 1e-9;
             // Airy tail: ~1 % of the energy lies beyond 20 λN.
             let margin = ((20.0 * lmax * n_eff / dx).ceil() as usize).clamp(2, 1024);
-            let mut conv = FftConvolver::new(rows, cols, dx, optics.padding, margin, margin);
+            let mut conv = if crop {
+                FftConvolver::new(rows, cols, dx, optics.padding, margin, margin)
+            } else {
+                FftConvolver::prepadded_zero(rows, cols, dx)
+            };
             conv.compensate_sample_aperture(aperture_order);
             img.planes
                 .par_iter_mut()
@@ -444,7 +539,7 @@ pub fn form_image(
         }
         Blur::Psf(set) => {
             let pad = optics.padding;
-            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
+            convolve_planes_impl(&mut img, pad, band_finish, aperture_order, !crop, |b| {
                 set.resampled(band_wl[b], dx)
             })?;
         }
@@ -457,7 +552,7 @@ pub fn form_image(
                 .map(|&w| wavefront_psf(w, n_eff, *defocus_um, *pupil_samples, dx))
                 .collect::<Result<_, _>>()?;
             let pad = optics.padding;
-            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
+            convolve_planes_impl(&mut img, pad, band_finish, aperture_order, !crop, |b| {
                 psfs[b].clone()
             })?;
         }
@@ -470,7 +565,7 @@ pub fn form_image(
                 .map(|&w| wp.psf(w, n_eff, aperture_m, dx))
                 .collect::<Result<_, _>>()?;
             let pad = optics.padding;
-            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
+            convolve_planes_impl(&mut img, pad, band_finish, aperture_order, !crop, |b| {
                 psfs[b].clone()
             })?;
         }
@@ -483,9 +578,13 @@ pub fn form_image(
     // 5. Defocus and veiling glare blocks.
     apply_defocus_and_glare(optics, &mut img, dx)?;
 
-    Ok(SensorIrradiance {
-        irradiance: img,
-        sample_pitch_m: dx,
+    Ok(UncroppedIrradiance {
+        irradiance: SensorIrradiance {
+            irradiance: img,
+            sample_pitch_m: dx,
+        },
+        pad_rows,
+        pad_cols,
     })
 }
 
@@ -558,11 +657,28 @@ pub(crate) fn convolve_planes_with_aperture(
     aperture_order: u32,
     psf_of: impl Fn(usize) -> SampledPsf + Sync,
 ) -> Result<(), OpticsError> {
+    convolve_planes_impl(img, padding, finish, aperture_order, false, psf_of)
+}
+
+/// [`convolve_planes_with_aperture`]; `prepadded`: the planes are already zero-padded the
+/// ISETCam way ([`FftConvolver::prepadded_zero`]).
+fn convolve_planes_impl(
+    img: &mut SpectralImage,
+    padding: Padding,
+    finish: Finish,
+    aperture_order: u32,
+    prepadded: bool,
+    psf_of: impl Fn(usize) -> SampledPsf + Sync,
+) -> Result<(), OpticsError> {
     let (rows, cols) = (img.rows, img.cols);
     let psfs: Vec<SampledPsf> = (0..img.planes.len()).into_par_iter().map(&psf_of).collect();
     let mr = psfs.iter().map(|p| p.half_rows).max().unwrap_or(0).max(1);
     let mc = psfs.iter().map(|p| p.half_cols).max().unwrap_or(0).max(1);
-    let mut conv = FftConvolver::new(rows, cols, psfs[0].pitch_m, padding, mr, mc);
+    let mut conv = if prepadded {
+        FftConvolver::prepadded_zero(rows, cols, psfs[0].pitch_m)
+    } else {
+        FftConvolver::new(rows, cols, psfs[0].pitch_m, padding, mr, mc)
+    };
     conv.compensate_sample_aperture(aperture_order);
     img.planes
         .par_iter_mut()
