@@ -1811,3 +1811,54 @@ pub fn captures_with_camera(
     crate::simulate::check_budget(&set)?;
     Ok(set)
 }
+
+#[cfg(test)]
+mod wavefront_keys_tests {
+    //! The `blur.kind = "wavefront"` keys beyond defocus (issue 17 §4): defocus alone keeps
+    //! the old blur; the new keys give the general pupil; bad values name their key.
+    use super::*;
+
+    fn camera(blur: Value) -> Result<Camera, CliError> {
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/table1/camera.json"));
+        let mut v: Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        v["optics"]["blur"] = blur;
+        let raw: CameraFile = serde_json::from_value(v).map_err(|e| CliError::input(path, e))?;
+        camera_from_file(path, raw)
+    }
+
+    #[test]
+    fn wavefront_keys_select_the_general_pupil_and_name_bad_values() {
+        let c = camera(serde_json::json!({"kind": "wavefront", "defocus_um": 0.1})).unwrap();
+        assert!(matches!(c.optics.blur, Blur::Wavefront { defocus_um, pupil_samples: 64 } if defocus_um == 0.1));
+        let c = camera(serde_json::json!({
+            "kind": "wavefront", "defocus_um": 0.1, "zernike_um": {"8": 0.05, "12": -0.02},
+            "zernike_pupil_diameter_mm": 3.0, "blades": 6,
+            "chromatic_defocus": {"model": "human", "reference_nm": 555.0}
+        }))
+        .unwrap();
+        let Blur::Pupil(p) = &c.optics.blur else { panic!("general pupil expected") };
+        let mut js: Vec<(usize, f64)> = p.zernike.iter().map(|t| (t.j, t.rms_um)).collect();
+        js.sort_by(|a, b| a.0.cmp(&b.0));
+        assert_eq!(js, vec![(4, 0.1), (8, 0.05), (12, -0.02)]);
+        assert_eq!(p.zernike_pupil_diameter_m, Some(3e-3));
+        assert_eq!(p.blades, Some(6));
+        assert_eq!(p.chromatic_defocus, camsim_optics::ChromaticDefocus::HumanEye { reference_nm: 555.0 });
+        // A bare polygonal aperture (no aberration) is valid.
+        let c = camera(serde_json::json!({"kind": "wavefront", "blades": 5})).unwrap();
+        assert!(matches!(&c.optics.blur, Blur::Pupil(p) if p.zernike.is_empty()));
+        for (blur, key) in [
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"x": 0.1}}), "optics.blur.zernike_um"),
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"99": 0.1}}), "optics.blur.zernike_um"),
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "blades": 2}), "optics.blur.blades"),
+            (serde_json::json!({"kind": "wavefront", "defocus_um": 0.1, "pupil_samples": 8}), "optics.blur.pupil_samples"),
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "zernike_pupil_diameter_mm": -1.0}), "optics.blur.zernike_pupil_diameter_mm"),
+            (serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"model": "human"}}), "optics.blur.chromatic_defocus"),
+            (serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"wavelength_nm": [500, 400], "defocus_um": [0, 1]}}), "optics.blur.chromatic_defocus.wavelength_nm"),
+            (serde_json::json!({"kind": "gaussian", "sigma_um": 1.0, "blades": 5}), "optics.blur.blades"),
+            (serde_json::json!({"kind": "wavefront"}), "optics.blur.defocus_um"),
+        ] {
+            let e = camera(blur.clone()).map(|_| ()).unwrap_err().one_line();
+            assert!(e.contains(key), "{blur}: {e}");
+        }
+    }
+}
