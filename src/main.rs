@@ -26,8 +26,35 @@ struct Cli {
     command: Command,
 }
 
+/// `camsim metric …`: image-quality metrics on image pairs.
+#[derive(Subcommand)]
+enum MetricCommand {
+    /// S-CIELAB ΔE between two pictures (PNG/TIFF codes) shown on a display at a viewing
+    /// distance (docs/isp.md#s-cielab).
+    Scielab {
+        /// First picture.
+        a: PathBuf,
+        /// Second picture (same size).
+        b: PathBuf,
+        /// Display model name (e.g. lcdExample, crt, OLED-Sony).
+        #[arg(long, default_value = "lcdExample")]
+        display: String,
+        /// Viewing distance (m).
+        #[arg(long)]
+        viewing_distance_m: f64,
+        /// camsim (published 1996 filters, ΔE*ab) or isetcam (ISETCam's scielab parameters).
+        #[arg(long, default_value = "camsim")]
+        parameters: String,
+    },
+}
+
 #[derive(Subcommand)]
 enum Command {
+    /// Image-quality metrics on any image pair (S-CIELAB).
+    Metric {
+        #[command(subcommand)]
+        cmd: MetricCommand,
+    },
     /// Run the whole pipeline on one scene and write a report (no CONFIG: the paper's §3
     /// setup — Table 1 camera, Macbeth chart under tungsten at 61 cd/m²).
     Run {
@@ -495,6 +522,26 @@ fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::StudyPoint { point, out } => {
             camsim_pipeline::study::run_point_file(&point, &out)?;
+            Ok(())
+        }
+        Command::Metric {
+            cmd:
+                MetricCommand::Scielab {
+                    a,
+                    b,
+                    display,
+                    viewing_distance_m,
+                    parameters,
+                },
+        } => {
+            let s = camsim_pipeline::metric_cmd::scielab_pictures(
+                &a,
+                &b,
+                &display,
+                viewing_distance_m,
+                &parameters,
+            )?;
+            println!("{s}");
             Ok(())
         }
         Command::Render(a) => {

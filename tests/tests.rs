@@ -9,6 +9,7 @@ mod hostile;
 mod lens_blur;
 mod lens_cli;
 mod lens_fields;
+mod metric_cli;
 mod oracles;
 mod pixel_area;
 mod raw_formats;

@@ -28,6 +28,43 @@ pub const XYZ_TO_OPPONENT: [[f64; 3]; 3] = [
     [0.0859513, -0.5899859, 0.5011089],
 ];
 
+/// XYZ (CIE 1964 10°) → opponent (O1, O2, O3): the 10° matrix distributed with S-CIELAB
+/// (X. Zhang, `cmatrix('xyz2opp', 10)`, 1996–98; ISETCam `metrics/scielab/cmatrix.m`), used by
+/// ISETCam's default `imageFormat = 'xyz10'` ([`ScielabOptions::isetcam`]).
+pub const XYZ10_TO_OPPONENT: [[f64; 3]; 3] = [
+    [0.2885613, 0.6597617, -0.1305654],
+    [-0.4648864, 0.3262702, 0.0624200],
+    [0.0798787, -0.5547976, 0.4814746],
+];
+
+/// The S-CIELAB filters as distributed with the S-CIELAB code and used by ISETCam by default
+/// (`scGaussianParameters`, version 'distribution', the parameters Johnson & Fairchild also
+/// print): per channel `(half-width at half maximum in degrees, weight)`, each Gaussian
+/// `exp(−ln 2 · r² / h²)`; returned as [`GaussianTerm`]s with `spread = h / √ln 2`.
+pub fn isetcam_distribution_filters() -> [Vec<GaussianTerm>; 3] {
+    let t = |hwhm_deg: f64, weight| GaussianTerm {
+        weight,
+        spread_deg: hwhm_deg / std::f64::consts::LN_2.sqrt(),
+    };
+    [
+        vec![t(0.05, 1.00327), t(0.225, 0.114416), t(7.0, -0.117686)],
+        vec![t(0.0685, 0.616725), t(0.826, 0.383275)],
+        vec![t(0.0920, 0.567885), t(0.6451, 0.432115)],
+    ]
+}
+
+/// How the channel filters meet the image borders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum ScielabBoundary {
+    /// Symmetric (mirror) extension; the map has the image's size (camsim's default).
+    Mirror,
+    /// ISETCam's `scApplyFilters`: circular (FFT) convolution over the image, or over the
+    /// image mirror-padded to the filter's size when the filter is larger; an even image side is
+    /// first cut by its last row/column (ISETCam keeps the filter centred that way), so the
+    /// ΔE map has odd sides unless a side equals the filter size.
+    IsetcamCircular,
+}
+
 /// One Gaussian of an S-CIELAB channel filter: `weight · k · exp(−r²/spread²)`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct GaussianTerm {
@@ -71,6 +108,16 @@ pub struct ScielabOptions {
     pub filters: [Vec<GaussianTerm>; 3],
     /// Each sampled Gaussian extends to ± this many spreads σ_i (then renormalised to sum 1).
     pub support_spreads: f64,
+    /// A fixed filter support instead: every Gaussian sampled on the same odd width (samples),
+    /// ISETCam's `filterSize` (one degree, `ceil(samples_per_degree)`, minus 1 if even).
+    pub fixed_support_samples: Option<usize>,
+    /// XYZ → opponent matrix (rows = O1, O2, O3): [`XYZ_TO_OPPONENT`] (2°) or
+    /// [`XYZ10_TO_OPPONENT`] (10°; the images and the white point must then be 10° XYZ).
+    pub opponent: [[f64; 3]; 3],
+    /// Border handling.
+    pub boundary: ScielabBoundary,
+    /// Clip each XYZ component to `[0, white]` before filtering (ISETCam `ClipXYZImage`).
+    pub clip_to_white: bool,
 }
 
 impl ScielabOptions {
@@ -81,6 +128,30 @@ impl ScielabOptions {
             formula: DeltaEFormula::Cie76,
             filters: published_filters_1996(),
             support_spreads: 3.0,
+            fixed_support_samples: None,
+            opponent: XYZ_TO_OPPONENT,
+            boundary: ScielabBoundary::Mirror,
+            clip_to_white: false,
+        }
+    }
+
+    /// ISETCam's S-CIELAB (`scielab` with `scParams`, ISETCam metrics/scielab): CIEDE2000, the
+    /// distributed filters ([`isetcam_distribution_filters`]), a fixed one-degree support
+    /// (`ceil(samples_per_degree)`, made odd), the 10° opponent matrix (`imageFormat = 'xyz10'`:
+    /// give 10° XYZ images and white point), circular filtering ([`ScielabBoundary`]) and XYZ
+    /// clipped to `[0, white]`. ISETCam rounds `samples_per_degree` of a display to an integer
+    /// (`scParams`); pass it rounded to match.
+    pub fn isetcam(samples_per_degree: f64) -> Self {
+        let s = samples_per_degree.ceil().max(1.0) as usize;
+        ScielabOptions {
+            samples_per_degree,
+            formula: DeltaEFormula::Ciede2000,
+            filters: isetcam_distribution_filters(),
+            support_spreads: 3.0,
+            fixed_support_samples: Some(if s % 2 == 1 { s } else { s - 1 }.max(1)),
+            opponent: XYZ10_TO_OPPONENT,
+            boundary: ScielabBoundary::IsetcamCircular,
+            clip_to_white: true,
         }
     }
 }
@@ -88,6 +159,10 @@ impl ScielabOptions {
 /// Result of an S-CIELAB comparison.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ScielabResult {
+    /// Rows of the map (the image's, or one fewer with [`ScielabBoundary::IsetcamCircular`]).
+    pub rows: usize,
+    /// Columns of the map.
+    pub cols: usize,
     /// Per-pixel ΔE, row-major `rows × cols`.
     pub delta_e_map: Vec<f64>,
     /// Mean of `delta_e_map`.
@@ -176,31 +251,66 @@ pub fn scielab_with_options(
             });
         }
     }
-    let inv = invert3(&XYZ_TO_OPPONENT);
+    if let Some(s) = options.fixed_support_samples {
+        if s == 0 || s % 2 == 0 {
+            return Err(MetricsError::InvalidParameter {
+                name: "fixed_support_samples",
+                value: s.to_string(),
+                reason: "must be odd (a centred filter)",
+            });
+        }
+    }
+    let det = {
+        let m = &options.opponent;
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    if !(det.is_finite() && det.abs() > 1e-12) {
+        return Err(MetricsError::InvalidParameter {
+            name: "opponent",
+            value: format!("{:?}", options.opponent),
+            reason: "must be an invertible 3×3 matrix",
+        });
+    }
+    let inv = invert3(&options.opponent);
+    // ISETCam cuts an even side by its last row/column (see ScielabBoundary).
+    let (orows, ocols) = match (options.boundary, options.fixed_support_samples) {
+        (ScielabBoundary::IsetcamCircular, s) => {
+            let cut = |m: usize| {
+                let odd_support = s.unwrap_or(1);
+                if m == odd_support || m % 2 == 1 || m == 1 {
+                    m
+                } else {
+                    m - 1
+                }
+            };
+            (cut(rows), cut(cols))
+        }
+        (ScielabBoundary::Mirror, _) => (rows, cols),
+    };
+    let on = orows * ocols;
     let filtered_lab = |img: &[Xyz]| -> Vec<camsim_core::colorimetry::Lab> {
+        let clip = |v: f64, w: f64| if options.clip_to_white { v.clamp(0.0, w) } else { v };
         let opp: Vec<Vec<f64>> = (0..3)
             .map(|ch| {
-                let m = XYZ_TO_OPPONENT[ch];
-                img.iter()
-                    .map(|p| m[0] * p.x + m[1] * p.y + m[2] * p.z)
+                let m = options.opponent[ch];
+                (0..on)
+                    .map(|i| {
+                        let p = img[(i / ocols) * cols + i % ocols];
+                        m[0] * clip(p.x, white_xyz.x)
+                            + m[1] * clip(p.y, white_xyz.y)
+                            + m[2] * clip(p.z, white_xyz.z)
+                    })
                     .collect()
             })
             .collect();
         let filt: Vec<Vec<f64>> = opp
             .into_par_iter()
             .enumerate()
-            .map(|(ch, plane)| {
-                filter_channel(
-                    &plane,
-                    rows,
-                    cols,
-                    &options.filters[ch],
-                    spd,
-                    options.support_spreads,
-                )
-            })
+            .map(|(ch, plane)| filter_opponent_plane(&plane, orows, ocols, ch, options))
             .collect();
-        (0..n)
+        (0..on)
             .map(|i| {
                 let o = [filt[0][i], filt[1][i], filt[2][i]];
                 let xyz = Xyz {
@@ -222,8 +332,10 @@ pub fn scielab_with_options(
             DeltaEFormula::Ciede2000 => delta_e_2000(*p, *q),
         })
         .collect();
-    let mean_delta_e = delta_e_map.iter().sum::<f64>() / n as f64;
+    let mean_delta_e = delta_e_map.iter().sum::<f64>() / on as f64;
     Ok(ScielabResult {
+        rows: orows,
+        cols: ocols,
         delta_e_map,
         mean_delta_e,
         formula: options.formula,
@@ -282,6 +394,48 @@ fn gaussian_kernel(spread_px: f64, support_spreads: f64) -> Vec<f64> {
     k
 }
 
+/// `exp(−r²/σ²)` (σ = `spread_px`) sampled on `support` (odd) samples centred on 0,
+/// normalised to unit sum (ISETCam `gauss`: `exp(−ln 2 x²/h²)` on `(1:S) − round(S/2)`).
+fn gaussian_kernel_fixed(spread_px: f64, support: usize) -> Vec<f64> {
+    let r = (support / 2) as f64;
+    if spread_px < 1e-6 {
+        let mut k = vec![0.0; support];
+        k[support / 2] = 1.0;
+        return k;
+    }
+    let mut k: Vec<f64> = (0..support)
+        .map(|i| (-((i as f64 - r) / spread_px).powi(2)).exp())
+        .collect();
+    let s: f64 = k.iter().sum();
+    k.iter_mut().for_each(|v| *v /= s);
+    k
+}
+
+/// ISETCam's 1-D filtering of `scApplyFilters` (odd kernel of length S centred): for
+/// `n ≥ S` the circular convolution over the n samples (the kernel zero-padded to n); for
+/// `n < S` the signal mirror-padded by `(S − n)/2` each side to S samples, convolved
+/// circularly over S and cut back to the centre n.
+fn isetcam_conv_1d(x: &[f64], k: &[f64], out: &mut [f64]) {
+    let n = x.len();
+    let s = k.len();
+    let r = (s / 2) as isize;
+    let (ext, pad): (Vec<f64>, usize) = if s > n {
+        let pad = (s - n) / 2;
+        ((0..s).map(|i| x[mirror(i as isize - pad as isize, n)]).collect(), pad)
+    } else {
+        (x.to_vec(), 0)
+    };
+    let m = ext.len() as isize;
+    for (i, o) in out.iter_mut().enumerate() {
+        let c = (i + pad) as isize;
+        *o = k
+            .iter()
+            .enumerate()
+            .map(|(j, w)| w * ext[(c - (j as isize - r)).rem_euclid(m) as usize])
+            .sum();
+    }
+}
+
 /// Index into a signal of length n under symmetric (half-sample) extension, period 2n.
 fn mirror(i: isize, n: usize) -> usize {
     let p = 2 * n as isize;
@@ -324,10 +478,21 @@ fn convolve_1d(x: &[f64], k: &[f64], out: &mut [f64]) {
 
 /// Separable convolution of a row-major plane with `kernel` along rows and columns.
 fn separable(plane: &[f64], rows: usize, cols: usize, kernel: &[f64]) -> Vec<f64> {
+    separable_with(plane, rows, cols, kernel, convolve_1d)
+}
+
+/// Separable filtering with the 1-D convolution `conv` along rows, then columns.
+fn separable_with(
+    plane: &[f64],
+    rows: usize,
+    cols: usize,
+    kernel: &[f64],
+    conv: fn(&[f64], &[f64], &mut [f64]),
+) -> Vec<f64> {
     let mut tmp = vec![0.0; rows * cols];
     tmp.par_chunks_mut(cols)
         .zip(plane.par_chunks(cols))
-        .for_each(|(o, x)| convolve_1d(x, kernel, o));
+        .for_each(|(o, x)| conv(x, kernel, o));
     // columns: transpose, filter, transpose back
     let mut t = vec![0.0; rows * cols];
     for r in 0..rows {
@@ -338,7 +503,7 @@ fn separable(plane: &[f64], rows: usize, cols: usize, kernel: &[f64]) -> Vec<f64
     let mut t2 = vec![0.0; rows * cols];
     t2.par_chunks_mut(rows)
         .zip(t.par_chunks(rows))
-        .for_each(|(o, x)| convolve_1d(x, kernel, o));
+        .for_each(|(o, x)| conv(x, kernel, o));
     for r in 0..rows {
         for c in 0..cols {
             tmp[r * cols + c] = t2[c * rows + r];
@@ -348,19 +513,31 @@ fn separable(plane: &[f64], rows: usize, cols: usize, kernel: &[f64]) -> Vec<f64
 }
 
 /// One opponent channel filtered by its normalised sum of Gaussians.
-fn filter_channel(
+/// Filter one opponent plane (`rows × cols`, channel `channel` = 0 O1, 1 O2, 2 O3) with the
+/// channel's filter of `options` and its border handling: the step between the opponent
+/// transform and the inverse transform of [`scielab_with_options`] (for tests of the filters;
+/// with [`ScielabBoundary::IsetcamCircular`] the sides must already be cut).
+pub fn filter_opponent_plane(
     plane: &[f64],
     rows: usize,
     cols: usize,
-    terms: &[GaussianTerm],
-    samples_per_degree: f64,
-    support_spreads: f64,
+    channel: usize,
+    options: &ScielabOptions,
 ) -> Vec<f64> {
+    let terms = &options.filters[channel];
+    let spd = options.samples_per_degree;
     let wsum: f64 = terms.iter().map(|t| t.weight).sum();
     let mut out = vec![0.0; rows * cols];
     for t in terms {
-        let k = gaussian_kernel(t.spread_deg * samples_per_degree, support_spreads);
-        let f = separable(plane, rows, cols, &k);
+        let spread_px = t.spread_deg * spd;
+        let k = match options.fixed_support_samples {
+            Some(s) => gaussian_kernel_fixed(spread_px, s),
+            None => gaussian_kernel(spread_px, options.support_spreads),
+        };
+        let f = match options.boundary {
+            ScielabBoundary::Mirror => separable(plane, rows, cols, &k),
+            ScielabBoundary::IsetcamCircular => separable_with(plane, rows, cols, &k, isetcam_conv_1d),
+        };
         let w = t.weight / wsum;
         out.iter_mut().zip(&f).for_each(|(o, v)| *o += w * v);
     }

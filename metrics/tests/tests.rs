@@ -2,3 +2,4 @@
 //! (`cargo test --release -p camsim-metrics --test tests <module>::`).
 
 mod scielab_oracle;
+mod scielab_isetcam;

@@ -136,6 +136,24 @@ impl FftConvolver {
                 (pr, pc, (pr - rows) / 2, (pc - cols) / 2, false)
             }
         };
+        Self::build(rows, cols, dx, (pr, pc, top, left, zero_pad))
+    }
+
+    /// Plan a convolution of planes already zero-padded the ISETCam way (the uncropped
+    /// optical image, [`crate::form_image_uncropped`]): the FFT at exactly `rows × cols` with
+    /// ISETCam's frequency grid and no further padding — the same transform as
+    /// `new(.., Padding::Zero, ..)` on the unpadded planes.
+    pub fn prepadded_zero(rows: usize, cols: usize, dx: f64) -> Self {
+        Self::build(rows, cols, dx, (rows, cols, 0, 0, true))
+    }
+
+    /// Plan on the padded grid `(pr, pc, top, left, zero_pad)`.
+    fn build(
+        rows: usize,
+        cols: usize,
+        dx: f64,
+        (pr, pc, top, left, zero_pad): (usize, usize, usize, usize, bool),
+    ) -> Self {
         let nfc = pc / 2 + 1;
         let mut rp = RealFftPlanner::<f32>::new();
         let mut cp = FftPlanner::<f32>::new();

@@ -200,7 +200,6 @@ pub fn wavefront_psf(
     let blur_m = 2.0 * 8.0 * 3f64.sqrt() * f_number * defocus_um.abs() * 1e-6;
     let radius_m = (10.0 * ln + blur_m).min(0.45 * ln * pupil_samples as f64);
     let h = ((radius_m / pitch_m).ceil() as usize).min(2048);
-    let n_out = 2 * h + 1;
     let np = pupil_samples;
     let xi: Vec<f64> = (0..np)
         .map(|k| -1.0 + (k as f64 + 0.5) * 2.0 / np as f64)
@@ -217,6 +216,29 @@ pub fn wavefront_psf(
             }
         }
     }
+    let data = pupil_mft_intensity(&pupil, np, &xi, ln, h, pitch_m);
+    let mut p = SampledPsf {
+        half_rows: h,
+        half_cols: h,
+        pitch_m,
+        data,
+    };
+    p.normalise();
+    Ok(p)
+}
+
+/// `|F{P}|²` of the `np × np` pupil `pupil` (coordinates `xi` across the unit diameter) at the
+/// `(2h+1)²` image samples `(i − h)·pitch_m`, by the matrix Fourier transform with the kernel
+/// `exp(−iπ x ξ / (λN))` (`ln` = λN in m). Unnormalised; row-major.
+pub(crate) fn pupil_mft_intensity(
+    pupil: &[Complex64],
+    np: usize,
+    xi: &[f64],
+    ln: f64,
+    h: usize,
+    pitch_m: f64,
+) -> Vec<f64> {
+    let n_out = 2 * h + 1;
     // DFT matrix E[x][k] = exp(−iπ x ξ_k / (λN)) for the output samples x = (i − h)·pitch.
     let e: Vec<Complex64> = (0..n_out)
         .flat_map(|i| {
@@ -239,7 +261,7 @@ pub fn wavefront_psf(
             })
         })
         .collect();
-    let data: Vec<f64> = (0..n_out)
+    (0..n_out)
         .into_par_iter()
         .flat_map_iter(|y| {
             let mut row = vec![Complex64::new(0.0, 0.0); n_out];
@@ -251,13 +273,5 @@ pub fn wavefront_psf(
             }
             row.into_iter().map(|f| f.norm_sqr())
         })
-        .collect();
-    let mut p = SampledPsf {
-        half_rows: h,
-        half_cols: h,
-        pitch_m,
-        data,
-    };
-    p.normalise();
-    Ok(p)
+        .collect()
 }

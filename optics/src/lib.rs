@@ -11,7 +11,8 @@
 //! 3. the optical blur: the diffraction-limited OTF (Eq. 3, per wavelength band, by FFT,
 //!    Eqs. 4–6), a Gaussian or pillbox PSF (wavelength independent, applied to the planes of
 //!    the linear model), sampled per-wavelength PSFs ([`PsfSet`]) or a wavefront PSF with
-//!    Zernike defocus;
+//!    Zernike defocus, or a general pupil ([`WavefrontPupil`]: any OSA Zernike terms, a
+//!    measurement pupil, longitudinal chromatic aberration, polygonal apertures);
 //!    or, with [`Blur::Lens`], the ISET ray-trace method (§2.B.3) of a lens prescription, which
 //!    replaces steps 1–3 (distortion, traced relative illumination, the lens's working
 //!    F-number, shift-variant PSFs; see [`LensBlur`]);
@@ -34,6 +35,7 @@ mod formulas;
 mod kernels;
 mod lens_blur;
 mod psf_set;
+mod wavefront;
 
 pub use band_split::{split_into_bands, BandSplit};
 pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
@@ -51,6 +53,10 @@ pub use formulas::{
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
 pub use lens_blur::{LensBlur, LensBlurOptions, LensFocus};
 pub use psf_set::PsfSet;
+pub use wavefront::{
+    defocus_um_from_diopters, human_lca_diopters, polygon_area, zernike_osa, zernike_osa_nm,
+    ChromaticDefocus, PupilField, WavefrontPupil, ZernikeTerm,
+};
 
 use camsim_core::SpectralImage;
 use error::check_positive;
@@ -123,6 +129,10 @@ pub enum Blur {
         /// Pupil samples across the diameter (16..=4096; 128 is ample for |defocus| < λ).
         pupil_samples: usize,
     },
+    /// A pupil with arbitrary Zernike aberrations (OSA/ANSI j, µm RMS), a measurement pupil
+    /// separate from the aperture `f/N`, longitudinal chromatic aberration and an optional
+    /// polygonal (bladed) aperture ([`WavefrontPupil`]), per wavelength band.
+    Pupil(WavefrontPupil),
     /// A lens prescription's ray-trace field model (ISET ray-trace method, paper §2.B.3):
     /// distortion, traced relative illumination (replacing `relative_illumination`), the
     /// lens's working F-number in the camera equation and shift-variant, wavelength-dependent
@@ -195,6 +205,7 @@ impl OpticsModel {
         }
         match &self.blur {
             Blur::None | Blur::Diffraction | Blur::Psf(_) | Blur::Lens(_) => {}
+            Blur::Pupil(p) => p.validate()?,
             Blur::Gaussian { sigma_um } => check_positive("blur sigma_um", *sigma_um, true)?,
             Blur::Pillbox { width_um } => check_positive("blur width_um", *width_um, true)?,
             Blur::Wavefront {
@@ -239,6 +250,82 @@ pub fn form_image(
     scene: &SceneRadiance,
     bands: &WavelengthGrid,
 ) -> Result<SensorIrradiance, OpticsError> {
+    form_image_with(optics, scene, bands, true).map(|u| u.irradiance)
+}
+
+/// The optical image without ISETCam's final crop (`oiCompute` with `crop = false`): the
+/// scene is zero-padded by `round(rows/8)` rows and `round(cols/8)` columns each side
+/// (`oiPad`), the blur spreads light into that ring, and the whole padded image is returned,
+/// so a sensor larger than the scene sees the blurred light around it. The centre
+/// `rows × cols` is exactly [`form_image`]'s result. Needs the ISETCam padding
+/// ([`Padding::Zero`]), an FFT blur (none, diffraction, PSF set, wavefront) and no effect
+/// blocks.
+pub fn form_image_uncropped(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+) -> Result<UncroppedIrradiance, OpticsError> {
+    if optics.padding != Padding::Zero {
+        return Err(OpticsError::Scene(
+            "an uncropped optical image needs the ISETCam padding (Padding::Zero)".into(),
+        ));
+    }
+    if !matches!(
+        optics.blur,
+        Blur::None | Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pupil(_)
+    ) || !optics.effects.is_empty()
+    {
+        return Err(OpticsError::Scene(
+            "an uncropped optical image needs an FFT blur (none, diffraction, psf, wavefront) \
+             and no effect blocks"
+                .into(),
+        ));
+    }
+    form_image_with(optics, scene, bands, false)
+}
+
+/// [`form_image_uncropped`]'s result: the padded irradiance and the ring's width.
+#[derive(Debug, Clone)]
+pub struct UncroppedIrradiance {
+    /// `(rows + 2·pad_rows) × (cols + 2·pad_cols)` irradiance, the scene's pitch.
+    pub irradiance: SensorIrradiance,
+    /// Rows of the ring above (and below) the scene: `round(rows / 8)`.
+    pub pad_rows: usize,
+    /// Columns of the ring left (and right) of the scene: `round(cols / 8)`.
+    pub pad_cols: usize,
+}
+
+/// Zero-pad every plane by `pr` rows and `pc` columns each side.
+fn zero_pad_image(img: &SpectralImage, pr: usize, pc: usize) -> SpectralImage {
+    let (rows, cols) = (img.rows, img.cols);
+    let (nr, nc) = (rows + 2 * pr, cols + 2 * pc);
+    let planes = img
+        .planes
+        .iter()
+        .map(|p| {
+            let mut q = vec![0f32; nr * nc];
+            for i in 0..rows {
+                q[(i + pr) * nc + pc..(i + pr) * nc + pc + cols]
+                    .copy_from_slice(&p[i * cols..(i + 1) * cols]);
+            }
+            q
+        })
+        .collect();
+    SpectralImage {
+        rows: nr,
+        cols: nc,
+        basis: img.basis.clone(),
+        planes,
+    }
+}
+
+/// [`form_image`] (`crop`) or [`form_image_uncropped`] (`!crop`, checked by the caller).
+fn form_image_with(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+    crop: bool,
+) -> Result<UncroppedIrradiance, OpticsError> {
     optics.validate()?;
     let dx = scene.sample_pitch_m;
     check_positive("sample_pitch_m", dx, false)?;
@@ -263,7 +350,11 @@ pub fn form_image(
     if aperture_order > 1
         && !matches!(
             optics.blur,
-            Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pillbox { .. }
+            Blur::Diffraction
+                | Blur::Psf(_)
+                | Blur::Wavefront { .. }
+                | Blur::Pupil(_)
+                | Blur::Pillbox { .. }
         )
     {
         return Err(OpticsError::Scene(format!(
@@ -293,9 +384,13 @@ pub fn form_image(
             }
             apply_defocus_and_glare(optics, &mut img, dx)?;
         }
-        return Ok(SensorIrradiance {
-            irradiance: img,
-            sample_pitch_m: dx,
+        return Ok(UncroppedIrradiance {
+            irradiance: SensorIrradiance {
+                irradiance: img,
+                sample_pitch_m: dx,
+            },
+            pad_rows: 0,
+            pad_cols: 0,
         });
     }
     let n = optics.f_number;
@@ -369,7 +464,7 @@ pub fn form_image(
     // wavelength of each plane once split.
     let per_band = matches!(
         optics.blur,
-        Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. }
+        Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pupil(_)
     ) || optics.effects.lateral_color.is_some();
     let mut band_wl: Option<Vec<f64>> = None;
     if per_band {
@@ -387,6 +482,17 @@ pub fn form_image(
     }
     let band_wl = band_wl.unwrap_or_default();
 
+    // Uncropped (ISETCam crop = false): blur on the zero-padded grid and keep all of it.
+    let (pad_rows, pad_cols) = if crop {
+        (0, 0)
+    } else {
+        (fft::isetcam_pad(rows), fft::isetcam_pad(cols))
+    };
+    if !crop {
+        img = zero_pad_image(&img, pad_rows, pad_cols);
+    }
+    let (rows, cols) = (img.rows, img.cols);
+
     // 3. Blur. The FFT blurs take samples of the scene's aperture (`aperture_order`) and give
     // cell averages of the blurred irradiance, which the sensor's box average over the pixel
     // turns into the exact pixel mean ([`camsim_core::sample_aperture`]).
@@ -400,7 +506,11 @@ pub fn form_image(
             let lmax = band_wl.iter().cloned().fold(0.0, f64::max) * 1e-9;
             // Airy tail: ~1 % of the energy lies beyond 20 λN.
             let margin = ((20.0 * lmax * n_eff / dx).ceil() as usize).clamp(2, 1024);
-            let mut conv = FftConvolver::new(rows, cols, dx, optics.padding, margin, margin);
+            let mut conv = if crop {
+                FftConvolver::new(rows, cols, dx, optics.padding, margin, margin)
+            } else {
+                FftConvolver::prepadded_zero(rows, cols, dx)
+            };
             conv.compensate_sample_aperture(aperture_order);
             img.planes
                 .par_iter_mut()
@@ -429,7 +539,7 @@ pub fn form_image(
         }
         Blur::Psf(set) => {
             let pad = optics.padding;
-            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
+            convolve_planes_impl(&mut img, pad, band_finish, aperture_order, !crop, |b| {
                 set.resampled(band_wl[b], dx)
             })?;
         }
@@ -442,7 +552,20 @@ pub fn form_image(
                 .map(|&w| wavefront_psf(w, n_eff, *defocus_um, *pupil_samples, dx))
                 .collect::<Result<_, _>>()?;
             let pad = optics.padding;
-            convolve_planes_with_aperture(&mut img, pad, band_finish, aperture_order, |b| {
+            convolve_planes_impl(&mut img, pad, band_finish, aperture_order, !crop, |b| {
+                psfs[b].clone()
+            })?;
+        }
+        Blur::Pupil(wp) => {
+            // The aperture D = f/N (the camera equation's f-number); the PSF scale uses the
+            // working f-number.
+            let aperture_m = optics.focal_length_m / optics.f_number;
+            let psfs: Vec<SampledPsf> = band_wl
+                .par_iter()
+                .map(|&w| wp.psf(w, n_eff, aperture_m, dx))
+                .collect::<Result<_, _>>()?;
+            let pad = optics.padding;
+            convolve_planes_impl(&mut img, pad, band_finish, aperture_order, !crop, |b| {
                 psfs[b].clone()
             })?;
         }
@@ -455,9 +578,13 @@ pub fn form_image(
     // 5. Defocus and veiling glare blocks.
     apply_defocus_and_glare(optics, &mut img, dx)?;
 
-    Ok(SensorIrradiance {
-        irradiance: img,
-        sample_pitch_m: dx,
+    Ok(UncroppedIrradiance {
+        irradiance: SensorIrradiance {
+            irradiance: img,
+            sample_pitch_m: dx,
+        },
+        pad_rows,
+        pad_cols,
     })
 }
 
@@ -530,11 +657,28 @@ pub(crate) fn convolve_planes_with_aperture(
     aperture_order: u32,
     psf_of: impl Fn(usize) -> SampledPsf + Sync,
 ) -> Result<(), OpticsError> {
+    convolve_planes_impl(img, padding, finish, aperture_order, false, psf_of)
+}
+
+/// [`convolve_planes_with_aperture`]; `prepadded`: the planes are already zero-padded the
+/// ISETCam way ([`FftConvolver::prepadded_zero`]).
+fn convolve_planes_impl(
+    img: &mut SpectralImage,
+    padding: Padding,
+    finish: Finish,
+    aperture_order: u32,
+    prepadded: bool,
+    psf_of: impl Fn(usize) -> SampledPsf + Sync,
+) -> Result<(), OpticsError> {
     let (rows, cols) = (img.rows, img.cols);
     let psfs: Vec<SampledPsf> = (0..img.planes.len()).into_par_iter().map(&psf_of).collect();
     let mr = psfs.iter().map(|p| p.half_rows).max().unwrap_or(0).max(1);
     let mc = psfs.iter().map(|p| p.half_cols).max().unwrap_or(0).max(1);
-    let mut conv = FftConvolver::new(rows, cols, psfs[0].pitch_m, padding, mr, mc);
+    let mut conv = if prepadded {
+        FftConvolver::prepadded_zero(rows, cols, psfs[0].pitch_m)
+    } else {
+        FftConvolver::new(rows, cols, psfs[0].pitch_m, padding, mr, mc)
+    };
     conv.compensate_sample_aperture(aperture_order);
     img.planes
         .par_iter_mut()

@@ -741,3 +741,127 @@ fn perf_diffraction_1024() {
     );
     assert_eq!(e.irradiance.planes.len(), 31);
 }
+
+/// Issue 17 §4, the uncropped optical image (ISETCam `oiCompute` with `crop = false`): on
+/// the ISETCam macbeth case the image grows by ISETCam's `oiPad` ring of `round(n/8)` each
+/// side (64×96 → 80×120), its centre is the cropped image (which still matches the oracle),
+/// the ring carries the blurred light, and the total power equals the unblurred power
+/// (OTF(0) = 1), which the cropped image loses.
+#[test]
+fn uncropped_optical_image_keeps_isetcams_padded_ring() {
+    let case = oracle_case("oi_diffraction_limited_default.json");
+    let (_, scene) = read_oracle_npy("data/scene_macbeth_default__photons.npy");
+    let (_, expected) = read_oracle_npy("data/oi_diffraction_limited_default__photons.npy");
+    let (rows, cols, nb) = (64, 96, 31);
+    let grid = WavelengthGrid::regular(400.0, 700.0, 10.0).unwrap();
+    let planes: Vec<Vec<f32>> = (0..nb)
+        .map(|b| (0..rows * cols).map(|p| scene[p * nb + b] as f32).collect())
+        .collect();
+    let o = &case["inputs"]["optics"];
+    let (n, f) = (o["f_number"].as_f64().unwrap(), o["focal_length_m"].as_f64().unwrap());
+    let d = case["inputs"]["scene_distance_m"].as_f64().unwrap();
+    let hfov = case["inputs"]["scene_hfov_deg"].as_f64().unwrap().to_radians();
+    let dx = 2.0 * thin_lens_image_distance_m(f, Some(d)) * (hfov / 2.0).tan() / cols as f64;
+    let mut sc = band_scene(rows, cols, &grid, dx, planes);
+    sc.object_distance_m = Some(d);
+    let optics = OpticsModel {
+        f_number: n,
+        focal_length_m: f,
+        transmittance: Spectrum::constant(1.0),
+        relative_illumination: RelativeIllumination::IsetCam,
+        camera_equation: CameraEquation::IsetCam,
+        blur: Blur::Diffraction,
+        diffuser: None,
+        padding: Padding::Zero,
+        effects: Default::default(),
+    };
+    let un = form_image_uncropped(&optics, &sc, &grid).unwrap();
+    let cropped = form_image(&optics, &sc, &grid).unwrap();
+    assert_eq!((un.pad_rows, un.pad_cols), (8, 12));
+    let e = &un.irradiance.irradiance;
+    assert_eq!((e.rows, e.cols), (80, 120));
+    let max = expected.iter().cloned().fold(0.0, f64::max);
+    let (mut centre, mut oracle) = (0.0f64, 0.0f64);
+    for b in 0..nb {
+        for i in 0..rows {
+            for j in 0..cols {
+                let u = e.planes[b][(i + 8) * 120 + j + 12] as f64;
+                let c = cropped.irradiance.planes[b][i * cols + j] as f64;
+                centre = centre.max((u - c).abs() / max);
+                oracle = oracle.max((u - expected[(i * cols + j) * nb + b]).abs() / max);
+            }
+        }
+    }
+    assert!(centre < 1e-6, "centre vs cropped: {centre}");
+    assert!(oracle < 5e-4, "centre vs ISETCam oracle: {oracle}");
+    // Light in the ring next to the scene (middle of the top edge).
+    let ring = e.planes[15][7 * 120 + 60] as f64;
+    assert!(ring > 1e-3 * max, "ring {ring}");
+    // Power: uncropped ≡ unblurred, per band; the cropped image loses the ring's share.
+    let none = form_image_uncropped(&OpticsModel { blur: Blur::None, ..optics.clone() }, &sc, &grid)
+        .unwrap();
+    for b in [0, 15, 30] {
+        let sum = |p: &Vec<f32>| p.iter().map(|v| *v as f64).sum::<f64>();
+        let (s_un, s_none) = (sum(&e.planes[b]), sum(&none.irradiance.irradiance.planes[b]));
+        let s_crop = sum(&cropped.irradiance.planes[b]);
+        assert!((s_un / s_none - 1.0).abs() < 1e-4, "band {b}: {s_un} vs {s_none}");
+        assert!(s_crop < s_none * (1.0 - 1e-3), "band {b}: cropped loses power");
+    }
+    // Refused without the ISETCam padding.
+    let err = form_image_uncropped(&OpticsModel { padding: Padding::Replicate, ..optics }, &sc, &grid)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("Padding::Zero"), "{err}");
+}
+
+/// The ring of a uniform scene falls as the blur's edge-spread: along the middle row, the
+/// FFT blur on ISETCam's padded grid (even sizes: the plain DFT grid) is the discrete
+/// convolution with the periodised Airy PSF sampled at the pitch (Poisson summation; the OTF
+/// vanishes beyond the grid's Nyquist frequency), so
+/// `E(r, c) = k Σ_{(i, j) ∈ scene} Σ_wraps airy_psf(|(r − i, c − j)| Δ) Δ²`
+/// (wraps ±3 periods each way); the rest of the lattice, whose sum converges only as 1/R, is
+/// added as its continuum: fill fraction × the Airy energy outside the equal-area circle of
+/// the included copies, `2 / (π v)` at `v = π R / (λN)` (the mean of `J₀² + J₁²`).
+#[test]
+fn uncropped_uniform_scene_edge_follows_the_edge_spread() {
+    let (rows, cols, dx, n, w) = (40, 48, 1e-6, 4.0, 550.0);
+    let grid = WavelengthGrid::regular(w, w, 10.0).unwrap();
+    let sc = band_scene(rows, cols, &grid, dx, vec![vec![1.0; rows * cols]]);
+    let optics = OpticsModel {
+        padding: Padding::Zero,
+        ..plain(Blur::Diffraction)
+    };
+    let un = form_image_uncropped(&optics, &sc, &grid).unwrap();
+    let (pr, pc) = (un.pad_rows, un.pad_cols);
+    assert_eq!((pr, pc), (5, 6));
+    let e = &un.irradiance.irradiance;
+    assert!(e.rows % 2 == 0 && e.cols % 2 == 0);
+    let k = camera_equation_factor(n, 0.0);
+    let (per_r, per_c) = (e.rows as isize, e.cols as isize);
+    let row = (pr + rows / 2) as isize;
+    let mut worst = 0.0f64;
+    for c in 0..(pc + 4) as isize {
+        let mut expect = 0.0;
+        for i in pr as isize..(pr + rows) as isize {
+            for j in pc as isize..(pc + cols) as isize {
+                for wr in -3..=3 {
+                    for wc in -3..=3 {
+                        let dy = (row - i + wr * per_r) as f64 * dx;
+                        let dxx = (c - j + wc * per_c) as f64 * dx;
+                        expect += airy_psf(dy.hypot(dxx), w, n) * dx * dx;
+                    }
+                }
+            }
+        }
+        let fill = (rows * cols) as f64 / (per_r * per_c) as f64;
+        let r_eq = ((7 * per_r) as f64 * (7 * per_c) as f64 / PI).sqrt() * dx;
+        expect += fill * 2.0 / (PI * PI * r_eq / (w * 1e-9 * n));
+        let got = e.planes[0][row as usize * e.cols + c as usize] as f64 / k;
+        worst = worst.max((got - expect).abs());
+        if c as usize + 1 == pc {
+            assert!(got > 0.05, "the ring next to the edge holds light: {got}");
+        }
+    }
+    eprintln!("uniform edge vs Airy sum: max |diff| = {worst:.2e} of the plateau");
+    assert!(worst < 1e-4, "{worst}");
+}

@@ -3,3 +3,4 @@
 
 mod lens_blur;
 mod narrow_band;
+mod wavefront;

@@ -379,6 +379,22 @@ pub struct BlurFile {
     /// wavefront: Zernike defocus coefficient (µm RMS)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub defocus_um: Option<f64>,
+    /// wavefront: Zernike terms, OSA/ANSI index j (as a string key) → µm RMS
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zernike_um: Option<BTreeMap<String, f64>>,
+    /// wavefront: diameter (mm) of the pupil the Zernike coefficients are given over
+    /// (default: the aperture focal_length / f_number)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zernike_pupil_diameter_mm: Option<f64>,
+    /// wavefront: longitudinal chromatic aberration
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chromatic_defocus: Option<ChromaticDefocusFile>,
+    /// wavefront: aperture blades (a regular polygon, ≥ 3; default a circle)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blades: Option<u32>,
+    /// wavefront: minimum pupil samples across the diameter (16–4096, default 64)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pupil_samples: Option<usize>,
     /// lens: a prescription (needs the lens ray tracer)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lens_file: Option<String>,
@@ -398,6 +414,25 @@ pub struct BlurFile {
     /// first ≥ 1); default: the lens moves as a unit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focus_group_surfaces: Option<[usize; 2]>,
+}
+
+/// `optics.blur.chromatic_defocus` as written: `{"model": "human", "reference_nm": λ}` or
+/// `{"wavelength_nm": [...], "defocus_um": [...]}`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChromaticDefocusFile {
+    /// `"human"` (Thibos et al. 1992 chromatic eye, as ISETCam) or absent for a table.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+    /// human: the wavelength in focus (nm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_nm: Option<f64>,
+    /// table: wavelengths (nm), strictly increasing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wavelength_nm: Option<Vec<f64>>,
+    /// table: Zernike defocus (µm RMS over the Zernike pupil) at each wavelength.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub defocus_um: Option<Vec<f64>>,
 }
 
 /// `optics.diffuser` as written.
@@ -952,7 +987,14 @@ fn blur_from_file(
         "gaussian" => &["sigma_um"],
         "pillbox" => &["width_um"],
         "psf" => &["psf_file"],
-        "wavefront" => &["defocus_um"],
+        "wavefront" => &[
+            "defocus_um",
+            "zernike_um",
+            "zernike_pupil_diameter_mm",
+            "chromatic_defocus",
+            "blades",
+            "pupil_samples",
+        ],
         "lens" => &[
             "lens_file",
             "focus_distance_m",
@@ -972,6 +1014,11 @@ fn blur_from_file(
         ("width_um", b.width_um.is_some()),
         ("psf_file", b.psf_file.is_some()),
         ("defocus_um", b.defocus_um.is_some()),
+        ("zernike_um", b.zernike_um.is_some()),
+        ("zernike_pupil_diameter_mm", b.zernike_pupil_diameter_mm.is_some()),
+        ("chromatic_defocus", b.chromatic_defocus.is_some()),
+        ("blades", b.blades.is_some()),
+        ("pupil_samples", b.pupil_samples.is_some()),
         ("lens_file", b.lens_file.is_some()),
         ("focus_distance_m", b.focus_distance_m.is_some()),
         ("focus_criterion", b.focus_criterion.is_some()),
@@ -1006,10 +1053,7 @@ fn blur_from_file(
         "pillbox" => Blur::Pillbox {
             width_um: positive(path, "optics.blur.width_um", need("width_um", b.width_um)?)?,
         },
-        "wavefront" => Blur::Wavefront {
-            defocus_um: need("defocus_um", b.defocus_um)?,
-            pupil_samples: 64,
-        },
+        "wavefront" => wavefront_from_file(path, b)?,
         "psf" => {
             let f = b.psf_file.as_ref().ok_or_else(|| {
                 CliError::input(path, "optics.blur.psf_file: required for blur kind \"psf\"")
@@ -1067,6 +1111,81 @@ fn blur_from_file(
             )
         }
     })
+}
+
+/// `blur.kind = "wavefront"`: Zernike defocus alone ([`Blur::Wavefront`], as before), or with
+/// any of the keys beyond defocus the general pupil ([`camsim_optics::WavefrontPupil`]).
+fn wavefront_from_file(path: &Path, b: &BlurFile) -> Result<Blur, CliError> {
+    let general = b.zernike_um.is_some()
+        || b.zernike_pupil_diameter_mm.is_some()
+        || b.chromatic_defocus.is_some()
+        || b.blades.is_some()
+        || b.pupil_samples.is_some();
+    let err = |k: &str, m: String| CliError::input(path, format!("optics.blur.{k}: {m}"));
+    if let Some(d) = b.defocus_um {
+        check(path, d.is_finite(), "optics.blur.defocus_um", format!("must be finite, got {d}"))?;
+    }
+    if !general {
+        let d = b.defocus_um.ok_or_else(|| {
+            err("defocus_um", "required for blur kind \"wavefront\" (or give zernike_um)".into())
+        })?;
+        return Ok(Blur::Wavefront {
+            defocus_um: d,
+            pupil_samples: 64,
+        });
+    }
+    let mut zernike = Vec::new();
+    if let Some(d) = b.defocus_um {
+        zernike.push(camsim_optics::ZernikeTerm { j: 4, rms_um: d });
+    }
+    for (k, &v) in b.zernike_um.iter().flatten() {
+        let j: usize = k.trim().parse().map_err(|_| {
+            err("zernike_um", format!("key \"{k}\" is not an OSA/ANSI index (0, 1, 2, …)"))
+        })?;
+        check(path, j <= 65, "optics.blur.zernike_um", format!("index {j} out of 0–65"))?;
+        check(path, v.is_finite(), "optics.blur.zernike_um", format!("\"{k}\": must be finite, got {v}"))?;
+        zernike.push(camsim_optics::ZernikeTerm { j, rms_um: v });
+    }
+    let zernike_pupil_diameter_m = match b.zernike_pupil_diameter_mm {
+        None => None,
+        Some(v) => Some(positive(path, "optics.blur.zernike_pupil_diameter_mm", v)? * 1e-3),
+    };
+    let chromatic_defocus = match &b.chromatic_defocus {
+        None => camsim_optics::ChromaticDefocus::None,
+        Some(c) => match (c.model.as_deref(), c.reference_nm, &c.wavelength_nm, &c.defocus_um) {
+            (Some("human"), Some(r), None, None) => {
+                check(path, r.is_finite() && r > 300.0, "optics.blur.chromatic_defocus.reference_nm", format!("must be a wavelength > 300 nm, got {r}"))?;
+                camsim_optics::ChromaticDefocus::HumanEye { reference_nm: r }
+            }
+            (None, None, Some(w), Some(d)) => {
+                check(path, !w.is_empty() && w.len() == d.len(), "optics.blur.chromatic_defocus", format!("wavelength_nm ({}) and defocus_um ({}) need the same, non-zero length", w.len(), d.len()))?;
+                check(path, w.iter().all(|x| x.is_finite()) && w.windows(2).all(|p| p[1] > p[0]), "optics.blur.chromatic_defocus.wavelength_nm", "must be finite and strictly increasing")?;
+                check(path, d.iter().all(|x| x.is_finite()), "optics.blur.chromatic_defocus.defocus_um", "must be finite")?;
+                camsim_optics::ChromaticDefocus::Table {
+                    wavelength_nm: w.clone(),
+                    defocus_um: d.clone(),
+                }
+            }
+            _ => {
+                return Err(err(
+                    "chromatic_defocus",
+                    "expected {\"model\": \"human\", \"reference_nm\": λ} or {\"wavelength_nm\": [...], \"defocus_um\": [...]}".into(),
+                ))
+            }
+        },
+    };
+    if let Some(n) = b.blades {
+        check(path, (3..=64).contains(&n), "optics.blur.blades", format!("must be 3–64, got {n}"))?;
+    }
+    let pupil_samples = b.pupil_samples.unwrap_or(64);
+    check(path, (16..=4096).contains(&pupil_samples), "optics.blur.pupil_samples", format!("must be 16–4096, got {pupil_samples}"))?;
+    Ok(Blur::Pupil(camsim_optics::WavefrontPupil {
+        zernike,
+        zernike_pupil_diameter_m,
+        chromatic_defocus,
+        blades: b.blades,
+        pupil_samples,
+    }))
 }
 
 fn sensor_from_file(path: &Path, s: &SensorFile) -> Result<SensorModel, CliError> {
@@ -1739,4 +1858,55 @@ pub fn captures_with_camera(
     };
     crate::simulate::check_budget(&set)?;
     Ok(set)
+}
+
+#[cfg(test)]
+mod wavefront_keys_tests {
+    //! The `blur.kind = "wavefront"` keys beyond defocus (issue 17 §4): defocus alone keeps
+    //! the old blur; the new keys give the general pupil; bad values name their key.
+    use super::*;
+
+    fn camera(blur: Value) -> Result<Camera, CliError> {
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/table1/camera.json"));
+        let mut v: Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        v["optics"]["blur"] = blur;
+        let raw: CameraFile = serde_json::from_value(v).map_err(|e| CliError::input(path, e))?;
+        camera_from_file(path, raw)
+    }
+
+    #[test]
+    fn wavefront_keys_select_the_general_pupil_and_name_bad_values() {
+        let c = camera(serde_json::json!({"kind": "wavefront", "defocus_um": 0.1})).unwrap();
+        assert!(matches!(c.optics.blur, Blur::Wavefront { defocus_um, pupil_samples: 64 } if defocus_um == 0.1));
+        let c = camera(serde_json::json!({
+            "kind": "wavefront", "defocus_um": 0.1, "zernike_um": {"8": 0.05, "12": -0.02},
+            "zernike_pupil_diameter_mm": 3.0, "blades": 6,
+            "chromatic_defocus": {"model": "human", "reference_nm": 555.0}
+        }))
+        .unwrap();
+        let Blur::Pupil(p) = &c.optics.blur else { panic!("general pupil expected") };
+        let mut js: Vec<(usize, f64)> = p.zernike.iter().map(|t| (t.j, t.rms_um)).collect();
+        js.sort_by(|a, b| a.0.cmp(&b.0));
+        assert_eq!(js, vec![(4, 0.1), (8, 0.05), (12, -0.02)]);
+        assert_eq!(p.zernike_pupil_diameter_m, Some(3e-3));
+        assert_eq!(p.blades, Some(6));
+        assert_eq!(p.chromatic_defocus, camsim_optics::ChromaticDefocus::HumanEye { reference_nm: 555.0 });
+        // A bare polygonal aperture (no aberration) is valid.
+        let c = camera(serde_json::json!({"kind": "wavefront", "blades": 5})).unwrap();
+        assert!(matches!(&c.optics.blur, Blur::Pupil(p) if p.zernike.is_empty()));
+        for (blur, key) in [
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"x": 0.1}}), "optics.blur.zernike_um"),
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"99": 0.1}}), "optics.blur.zernike_um"),
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "blades": 2}), "optics.blur.blades"),
+            (serde_json::json!({"kind": "wavefront", "defocus_um": 0.1, "pupil_samples": 8}), "optics.blur.pupil_samples"),
+            (serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "zernike_pupil_diameter_mm": -1.0}), "optics.blur.zernike_pupil_diameter_mm"),
+            (serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"model": "human"}}), "optics.blur.chromatic_defocus"),
+            (serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"wavelength_nm": [500, 400], "defocus_um": [0, 1]}}), "optics.blur.chromatic_defocus.wavelength_nm"),
+            (serde_json::json!({"kind": "gaussian", "sigma_um": 1.0, "blades": 5}), "optics.blur.blades"),
+            (serde_json::json!({"kind": "wavefront"}), "optics.blur.defocus_um"),
+        ] {
+            let e = camera(blur.clone()).map(|_| ()).unwrap_err().one_line();
+            assert!(e.contains(key), "{blur}: {e}");
+        }
+    }
 }

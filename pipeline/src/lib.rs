@@ -21,6 +21,7 @@ pub mod frames;
 pub mod guard;
 pub mod honest_color;
 pub mod lens_cmd;
+pub mod metric_cmd;
 pub mod noise_profiles_cmd;
 #[doc = include_str!("../../docs/physics.md")]
 pub mod physics {}

@@ -87,6 +87,14 @@ pub fn sampling_for(
             diffraction_os,
             diffraction_margin.saturating_add((16.0 * defocus_um.abs() * n / p_um).ceil() as usize),
         ),
+        Blur::Pupil(wp) => {
+            let aperture_m = optics.focal_length_m / n;
+            let reach_um = wp
+                .reach_m(&grid.wavelength_nm, n, aperture_m)
+                .unwrap_or(0.0)
+                * 1e6;
+            (diffraction_os, ((reach_um / p_um).ceil() as usize).saturating_add(2))
+        }
         // Resolve the field model's PSF detail; margin = PSF half-width + the inward shift of
         // the corner by (barrel) distortion, capped at the sensor's size.
         Blur::Lens(l) => {
@@ -136,7 +144,10 @@ pub fn sample_aperture_for(
     if choice == Some(crate::config::SampleApertureChoice::Cell) {
         return SampleAperture::Cell;
     }
-    let band_limited = matches!(optics.blur, Blur::Diffraction | Blur::Wavefront { .. })
+    let band_limited = matches!(
+        optics.blur,
+        Blur::Diffraction | Blur::Wavefront { .. } | Blur::Pupil(_)
+    )
         && optics.padding == camsim_optics::Padding::Replicate
         && !optics.effects.has_warp();
     // The OTF cutoff 1/(λ N) (the working f-number N(1+|m|) only lowers it) must lie within

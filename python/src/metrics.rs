@@ -224,9 +224,12 @@ fn delta_e_2000<'py>(
 
 /// S-CIELAB between two XYZ images (rows, cols, 3) viewed at `samples_per_degree`, CIELAB
 /// against `white_xyz`. `formula`: "cie76" (Zhang & Wandell 1996) or "ciede2000".
-/// Returns (ΔE map float64 (rows, cols), mean ΔE).
+/// `parameters`: "camsim" (the published 1996 filters, mirror borders) or "isetcam" (ISETCam's
+/// scielab: CIEDE2000 whatever `formula`, distributed filters, one-degree support, 10° opponent
+/// matrix — give 10° XYZ —, circular filtering, XYZ clipped to the white; even sides are cut by
+/// one). Returns (ΔE map float64 (rows', cols'), mean ΔE).
 #[pyfunction]
-#[pyo3(signature = (xyz_a, xyz_b, white_xyz, samples_per_degree, formula="cie76"))]
+#[pyo3(signature = (xyz_a, xyz_b, white_xyz, samples_per_degree, formula="cie76", parameters="camsim"))]
 fn scielab<'py>(
     py: Python<'py>,
     xyz_a: PyArrayLikeDyn<'py, f64, AllowTypeChange>,
@@ -234,6 +237,7 @@ fn scielab<'py>(
     white_xyz: [f64; 3],
     samples_per_degree: f64,
     formula: &str,
+    parameters: &str,
 ) -> PyResult<(Bound<'py, PyAny>, f64)> {
     let (a, sa) = triples("xyz_a", &xyz_a)?;
     let (b, sb) = triples("xyz_b", &xyz_b)?;
@@ -242,8 +246,22 @@ fn scielab<'py>(
             "xyz_a, xyz_b: expected two (rows, cols, 3) images of one shape, got {sa:?} and {sb:?}"
         )));
     }
-    let mut opts = camsim_metrics::ScielabOptions::new(samples_per_degree);
+    let isetcam = match parameters {
+        "camsim" => false,
+        "isetcam" => true,
+        p => {
+            return Err(err_msg(format!(
+                "parameters: expected \"camsim\" or \"isetcam\", got \"{p}\""
+            )))
+        }
+    };
+    let mut opts = if isetcam {
+        camsim_metrics::ScielabOptions::isetcam(samples_per_degree)
+    } else {
+        camsim_metrics::ScielabOptions::new(samples_per_degree)
+    };
     opts.formula = match formula {
+        _ if isetcam => camsim_metrics::DeltaEFormula::Ciede2000,
         "cie76" => camsim_metrics::DeltaEFormula::Cie76,
         "ciede2000" => camsim_metrics::DeltaEFormula::Ciede2000,
         f => {
@@ -259,7 +277,7 @@ fn scielab<'py>(
             camsim_metrics::scielab_with_options(&a, &b, sa[0], sa[1], xyz(white_xyz), &opts)
         })
         .map_err(err_msg)?;
-    Ok((arr(py, r.delta_e_map, &sa)?, r.mean_delta_e))
+    Ok((arr(py, r.delta_e_map, &[r.rows, r.cols])?, r.mean_delta_e))
 }
 
 /// ISO 12233 e-SFR of the edge in `roi` = (row0, row1, col0, col1) (end-exclusive) of a
