@@ -132,7 +132,7 @@ pub fn normal(surf: &Surface, point: Vec3) -> Option<Vec3> {
 /// and rayoptics do), or total internal reflection. Shared by the coaxial and the folded
 /// traces (`fold.rs`).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn surface_step(
+pub fn surface_step(
     s: &Surface,
     j: usize,
     t_mm: f64,

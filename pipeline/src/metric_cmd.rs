@@ -1,4 +1,4 @@
-//! `camsim metric scielab A B`: S-CIELAB (Zhang & Wandell 1996; [`camsim_metrics::scielab`])
+//! `camsim metric scielab A B`: S-CIELAB (Zhang & Wandell 1996; [`camsim_metrics::scielab()`])
 //! between any two pictures shown on a display at a viewing distance. Each 8/16-bit PNG or
 //! TIFF (grey, RGB or RGBA) is taken as the display's digital codes; a pixel's CIE 1931 XYZ is
 //! `Σ_p g_p(code_p) XYZ_p` (the display's gamma and primaries, black level included), the
