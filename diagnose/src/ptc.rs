@@ -1,7 +1,7 @@
 //! Photon transfer (EMVA 1288 style): conversion gain from the slope of temporal variance vs
 //! mean in the linear range, saturation, full well, linearity error.
 use crate::fit::weighted_line;
-use crate::stack::moments;
+use crate::stack::moments_by_channel;
 use crate::{Ctx, Estimate, Outcome, ShotKind};
 use serde::Serialize;
 
@@ -50,14 +50,18 @@ pub(crate) fn photon_transfer(ctx: &Ctx, pedestal: f64) -> PtcOut {
         let st = &ctx.stacks[i];
         let Some(var) = &st.var else { continue };
         let g = s.analog_gain;
-        for c in 0..ctx.map.n_channels {
-            let ch = &ctx.map.channel;
-            let keep = |p: usize| ch[p] as usize == c && !ex[p];
-            let (n, m, _, _) = moments(ctx.n_pix(), keep, |p| st.mean[p]);
+        let ch = &ctx.map.channel;
+        let nch = ctx.map.n_channels;
+        let chan = |p: usize| ch[p] as usize;
+        let keep = |p: usize| !ex[p];
+        let means = moments_by_channel(ctx.n_pix(), nch, chan, keep, |p| st.mean[p]);
+        let vars = moments_by_channel(ctx.n_pix(), nch, chan, keep, |p| var[p]);
+        for c in 0..nch {
+            let (n, m, _, _) = means[c];
             if n < 2 {
                 continue;
             }
-            let (_, v, vv, _) = moments(ctx.n_pix(), keep, |p| var[p]);
+            let (_, v, vv, _) = vars[c];
             points.push(PtcPoint {
                 shot_id: s.id.clone(),
                 channel: ctx

@@ -180,9 +180,97 @@ pub(crate) fn moments(
     (cnt, m, s2 / (cnt - 1) as f64, s4 / cnt as f64)
 }
 
+/// Per channel, the count and two sums that `g` adds into its channel's slot, over fixed
+/// chunks summed in order (as [`chunk_sums`]). Generic so that `g` inlines.
+fn channel_chunk_sums<G>(n_pix: usize, n_channels: usize, g: G) -> Vec<(usize, f64, f64)>
+where
+    G: Fn(usize, &mut [(usize, f64, f64)]) + Sync,
+{
+    (0..n_pix.div_ceil(MOMENT_CHUNK))
+        .into_par_iter()
+        .map(|k| {
+            let mut acc = vec![(0usize, 0.0f64, 0.0f64); n_channels];
+            for i in k * MOMENT_CHUNK..((k + 1) * MOMENT_CHUNK).min(n_pix) {
+                g(i, &mut acc);
+            }
+            acc
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold(vec![(0usize, 0.0f64, 0.0f64); n_channels], |mut t, c| {
+            for (a, b) in t.iter_mut().zip(c) {
+                *a = (a.0 + b.0, a.1 + b.1, a.2 + b.2);
+            }
+            t
+        })
+}
+
+/// Per channel, [`moments`] with `keep(i) && channel(i) == c`, all channels in one scan of the
+/// pixels per pass (the same chunks summed in the same order per channel, so each channel's
+/// result has exactly the bits of its own [`moments`] call).
+pub(crate) fn moments_by_channel(
+    n_pix: usize,
+    n_channels: usize,
+    channel: impl Fn(usize) -> usize + Sync,
+    keep: impl Fn(usize) -> bool + Sync,
+    f: impl Fn(usize) -> f64 + Sync,
+) -> Vec<(usize, f64, f64, f64)> {
+    let first = channel_chunk_sums(n_pix, n_channels, |i, acc| {
+        if keep(i) {
+            // A channel index out of range matches no channel, as in `moments`.
+            if let Some(a) = acc.get_mut(channel(i)) {
+                a.0 += 1;
+                a.1 += f(i);
+            }
+        }
+    });
+    let means: Vec<f64> = first.iter().map(|&(n, s, _)| s / n as f64).collect();
+    let second = channel_chunk_sums(n_pix, n_channels, |i, acc| {
+        if keep(i) {
+            let c = channel(i);
+            if let (Some(a), Some(&m)) = (acc.get_mut(c), means.get(c)) {
+                let d = f(i) - m;
+                let d2 = d * d;
+                a.1 += d2;
+                a.2 += d2 * d2;
+            }
+        }
+    });
+    first
+        .iter()
+        .zip(&second)
+        .zip(&means)
+        .map(|((&(cnt, _, _), &(_, s2, s4)), &m)| {
+            if cnt < 2 {
+                (cnt, f64::NAN, f64::NAN, f64::NAN)
+            } else {
+                (cnt, m, s2 / (cnt - 1) as f64, s4 / cnt as f64)
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn moments_by_channel_has_the_bits_of_moments_per_channel() {
+        let n = 3 * MOMENT_CHUNK + 517;
+        let v: Vec<f64> = (0..n)
+            .map(|i| ((i * 7919) % 1013) as f64 * 0.37 + (i as f64).sin())
+            .collect();
+        let ch = |i: usize| (i % 4 + i / 97) % 3;
+        let keep = |i: usize| i % 11 != 0;
+        let all = moments_by_channel(n, 3, ch, keep, |i| v[i]);
+        for (c, got) in all.iter().enumerate() {
+            let want = moments(n, |i| keep(i) && ch(i) == c, |i| v[i]);
+            assert_eq!(got.0, want.0);
+            for (a, b) in [(got.1, want.1), (got.2, want.2), (got.3, want.3)] {
+                assert_eq!(a.to_bits(), b.to_bits(), "channel {c}");
+            }
+        }
+    }
 
     #[test]
     fn stack_is_exact() {
