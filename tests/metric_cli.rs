@@ -19,7 +19,11 @@ fn write_rgb8(path: &Path, rows: u32, cols: u32, rgb: [u8; 3]) {
 
 fn display_xyz(d: &DisplayModel, rgb: [u8; 3]) -> Xyz {
     let prim = d.primaries_xyz();
-    let mut out = Xyz { x: 0.0, y: 0.0, z: 0.0 };
+    let mut out = Xyz {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+    };
     for p in 0..3 {
         let l = d.linear_from_digital(p, rgb[p] as u32, 8).unwrap();
         out.x += l * prim[p].x;
@@ -30,7 +34,10 @@ fn display_xyz(d: &DisplayModel, rgb: [u8; 3]) -> Xyz {
 }
 
 fn mean_delta_e(stdout: &str) -> f64 {
-    let t = stdout.split("mean ΔE ").nth(1).expect("a mean ΔE in the summary");
+    let t = stdout
+        .split("mean ΔE ")
+        .nth(1)
+        .expect("a mean ΔE in the summary");
     t.split(',').next().unwrap().trim().parse().unwrap()
 }
 
@@ -66,13 +73,23 @@ fn scielab_of_uniform_pictures_is_plain_cielab_and_hostile_input_is_one_line() {
     let (ok, out, err) = run(&["metric", "scielab", sa, sb, "--viewing-distance-m", "0.5"]);
     assert!(ok, "{err}");
     let m = mean_delta_e(&out);
-    assert!((m - expect).abs() < 2e-4 * expect.max(1.0), "{m} vs {expect}: {out}");
+    assert!(
+        (m - expect).abs() < 2e-4 * expect.max(1.0),
+        "{m} vs {expect}: {out}"
+    );
     let (ok, out, _) = run(&["metric", "scielab", sa, sa, "--viewing-distance-m", "0.5"]);
     assert!(ok && mean_delta_e(&out) == 0.0, "{out}");
     // ISETCam parameters: CIEDE2000 of the uniform colours (10° matrix inverts exactly); the
     // even 24×32 picture is cut to 23×31.
     let (ok, out, err) = run(&[
-        "metric", "scielab", sa, sb, "--viewing-distance-m", "0.5", "--parameters", "isetcam",
+        "metric",
+        "scielab",
+        sa,
+        sb,
+        "--viewing-distance-m",
+        "0.5",
+        "--parameters",
+        "isetcam",
     ]);
     assert!(ok, "{err}");
     assert!(out.contains("23×31 px"), "{out}");
@@ -81,14 +98,57 @@ fn scielab_of_uniform_pictures_is_plain_cielab_and_hostile_input_is_one_line() {
         xyz_to_lab(display_xyz(&d, cb), white),
     );
     let m = mean_delta_e(&out);
-    assert!((m - de00).abs() < 2e-4 * de00.max(1.0), "{m} vs {de00}: {out}");
+    assert!(
+        (m - de00).abs() < 2e-4 * de00.max(1.0),
+        "{m} vs {de00}: {out}"
+    );
     // Hostile input: one line naming the file or flag.
     for (args, needle) in [
-        (vec!["metric", "scielab", sa, sc, "--viewing-distance-m", "0.5"], "c.png"),
-        (vec!["metric", "scielab", sa, "/nonexistent/x.png", "--viewing-distance-m", "0.5"], "x.png"),
-        (vec!["metric", "scielab", sa, sb, "--viewing-distance-m=-1"], "--viewing-distance-m"),
-        (vec!["metric", "scielab", sa, sb, "--viewing-distance-m", "0.5", "--parameters", "x"], "--parameters"),
-        (vec!["metric", "scielab", sa, sb, "--viewing-distance-m", "0.5", "--display", "nope"], "--display"),
+        (
+            vec!["metric", "scielab", sa, sc, "--viewing-distance-m", "0.5"],
+            "c.png",
+        ),
+        (
+            vec![
+                "metric",
+                "scielab",
+                sa,
+                "/nonexistent/x.png",
+                "--viewing-distance-m",
+                "0.5",
+            ],
+            "x.png",
+        ),
+        (
+            vec!["metric", "scielab", sa, sb, "--viewing-distance-m=-1"],
+            "--viewing-distance-m",
+        ),
+        (
+            vec![
+                "metric",
+                "scielab",
+                sa,
+                sb,
+                "--viewing-distance-m",
+                "0.5",
+                "--parameters",
+                "x",
+            ],
+            "--parameters",
+        ),
+        (
+            vec![
+                "metric",
+                "scielab",
+                sa,
+                sb,
+                "--viewing-distance-m",
+                "0.5",
+                "--display",
+                "nope",
+            ],
+            "--display",
+        ),
     ] {
         let (ok, _, err) = run(&args);
         assert!(!ok, "{args:?} must fail");

@@ -291,7 +291,13 @@ pub fn scielab_with_options(
     };
     let on = orows * ocols;
     let filtered_lab = |img: &[Xyz]| -> Vec<camsim_core::colorimetry::Lab> {
-        let clip = |v: f64, w: f64| if options.clip_to_white { v.clamp(0.0, w) } else { v };
+        let clip = |v: f64, w: f64| {
+            if options.clip_to_white {
+                v.clamp(0.0, w)
+            } else {
+                v
+            }
+        };
         let opp: Vec<Vec<f64>> = (0..3)
             .map(|ch| {
                 let m = options.opponent[ch];
@@ -421,7 +427,12 @@ fn isetcam_conv_1d(x: &[f64], k: &[f64], out: &mut [f64]) {
     let r = (s / 2) as isize;
     let (ext, pad): (Vec<f64>, usize) = if s > n {
         let pad = (s - n) / 2;
-        ((0..s).map(|i| x[mirror(i as isize - pad as isize, n)]).collect(), pad)
+        (
+            (0..s)
+                .map(|i| x[mirror(i as isize - pad as isize, n)])
+                .collect(),
+            pad,
+        )
     } else {
         (x.to_vec(), 0)
     };
@@ -536,7 +547,9 @@ pub fn filter_opponent_plane(
         };
         let f = match options.boundary {
             ScielabBoundary::Mirror => separable(plane, rows, cols, &k),
-            ScielabBoundary::IsetcamCircular => separable_with(plane, rows, cols, &k, isetcam_conv_1d),
+            ScielabBoundary::IsetcamCircular => {
+                separable_with(plane, rows, cols, &k, isetcam_conv_1d)
+            }
         };
         let w = t.weight / wsum;
         out.iter_mut().zip(&f).for_each(|(o, v)| *o += w * v);

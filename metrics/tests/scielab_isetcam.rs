@@ -21,11 +21,16 @@ const DISTRIBUTION: [&[(f64, f64)]; 3] = [
 /// The documented 2-D filter of channel `ch` at `spd` samples per degree, support `s` (odd):
 /// row-major `s × s`, centre at (s/2, s/2).
 fn documented_filter(ch: usize, spd: f64, s: usize) -> Vec<f64> {
-    let xs: Vec<f64> = (1..=s).map(|i| i as f64 - (s as f64 / 2.0).round()).collect();
+    let xs: Vec<f64> = (1..=s)
+        .map(|i| i as f64 - (s as f64 / 2.0).round())
+        .collect();
     let mut g = vec![0.0; s * s];
     for &(hwhm_deg, w) in DISTRIBUTION[ch] {
         let h = hwhm_deg * spd;
-        let one: Vec<f64> = xs.iter().map(|x| (-(2f64.ln()) * x * x / (h * h)).exp()).collect();
+        let one: Vec<f64> = xs
+            .iter()
+            .map(|x| (-(2f64.ln()) * x * x / (h * h)).exp())
+            .collect();
         let sum1: f64 = one.iter().sum();
         for i in 0..s {
             for j in 0..s {
@@ -44,12 +49,17 @@ fn documented_apply(plane: &[f64], rows: usize, cols: usize, g: &[f64], s: usize
     let mirror = |i: isize, n: usize| {
         let p = 2 * n as isize;
         let m = i.rem_euclid(p);
-        if m < n as isize { m as usize } else { (p - 1 - m) as usize }
+        if m < n as isize {
+            m as usize
+        } else {
+            (p - 1 - m) as usize
+        }
     };
     let (pr, pc) = (rows.max(s), cols.max(s));
     let (or, oc) = ((pr - rows) / 2, (pc - cols) / 2);
     let ext = |i: usize, j: usize| {
-        plane[mirror(i as isize - or as isize, rows) * cols + mirror(j as isize - oc as isize, cols)]
+        plane
+            [mirror(i as isize - or as isize, rows) * cols + mirror(j as isize - oc as isize, cols)]
     };
     let r = (s / 2) as isize;
     let mut out = vec![0.0; rows * cols];
@@ -82,7 +92,11 @@ fn isetcam_filters_follow_the_documented_procedure() {
         let plane: Vec<f64> = (0..rows * cols)
             .map(|i| {
                 let (r, c) = (i / cols, i % cols);
-                if (r, c) == (1, 2) { 50.0 } else { ((r * 7 + c * 3) % 11) as f64 }
+                if (r, c) == (1, 2) {
+                    50.0
+                } else {
+                    ((r * 7 + c * 3) % 11) as f64
+                }
             })
             .collect();
         for ch in 0..3 {
@@ -100,7 +114,11 @@ fn isetcam_filters_follow_the_documented_procedure() {
                     ..opts.clone()
                 };
                 let m = filter_opponent_plane(&plane, rows, cols, ch, &mirror_opts);
-                let d = m.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+                let d = m
+                    .iter()
+                    .zip(&want)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
                 assert!(d > 1e-3, "channel {ch}: the circular wrap must show ({d})");
             }
         }
@@ -121,8 +139,16 @@ fn isetcam_scielab_crops_keeps_uniform_and_clips() {
     let (rows, cols) = (32, 40);
     let opts = ScielabOptions::isetcam(24.0);
     assert_eq!(opts.fixed_support_samples, Some(23));
-    let pa = Xyz { x: 30.0, y: 32.0, z: 25.0 };
-    let pb = Xyz { x: 33.0, y: 31.0, z: 29.0 };
+    let pa = Xyz {
+        x: 30.0,
+        y: 32.0,
+        z: 25.0,
+    };
+    let pb = Xyz {
+        x: 33.0,
+        y: 31.0,
+        z: 29.0,
+    };
     let a = vec![pa; rows * cols];
     let b = vec![pb; rows * cols];
     let r = scielab_with_options(&a, &b, rows, cols, D65_10, &opts).unwrap();
@@ -133,8 +159,22 @@ fn isetcam_scielab_crops_keeps_uniform_and_clips() {
         assert!((v - plain).abs() < 1e-9 * plain, "{v} vs {plain}");
     }
     // Above the white: ISETCam clips, camsim's default does not.
-    let hi_a = vec![Xyz { x: 120.0, y: 130.0, z: 140.0 }; rows * cols];
-    let hi_b = vec![Xyz { x: 150.0, y: 110.0, z: 200.0 }; rows * cols];
+    let hi_a = vec![
+        Xyz {
+            x: 120.0,
+            y: 130.0,
+            z: 140.0
+        };
+        rows * cols
+    ];
+    let hi_b = vec![
+        Xyz {
+            x: 150.0,
+            y: 110.0,
+            z: 200.0
+        };
+        rows * cols
+    ];
     let clipped = scielab_with_options(&hi_a, &hi_b, rows, cols, D65_10, &opts).unwrap();
     assert!(clipped.mean_delta_e < 1e-9, "{}", clipped.mean_delta_e);
     let plain_opts = ScielabOptions::new(24.0);

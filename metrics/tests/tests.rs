@@ -1,5 +1,5 @@
 //! Integration tests of camsim-metrics: one test binary for the crate, one module per topic
 //! (`cargo test --release -p camsim-metrics --test tests <module>::`).
 
-mod scielab_oracle;
 mod scielab_isetcam;
+mod scielab_oracle;

@@ -758,9 +758,15 @@ fn uncropped_optical_image_keeps_isetcams_padded_ring() {
         .map(|b| (0..rows * cols).map(|p| scene[p * nb + b] as f32).collect())
         .collect();
     let o = &case["inputs"]["optics"];
-    let (n, f) = (o["f_number"].as_f64().unwrap(), o["focal_length_m"].as_f64().unwrap());
+    let (n, f) = (
+        o["f_number"].as_f64().unwrap(),
+        o["focal_length_m"].as_f64().unwrap(),
+    );
     let d = case["inputs"]["scene_distance_m"].as_f64().unwrap();
-    let hfov = case["inputs"]["scene_hfov_deg"].as_f64().unwrap().to_radians();
+    let hfov = case["inputs"]["scene_hfov_deg"]
+        .as_f64()
+        .unwrap()
+        .to_radians();
     let dx = 2.0 * thin_lens_image_distance_m(f, Some(d)) * (hfov / 2.0).tan() / cols as f64;
     let mut sc = band_scene(rows, cols, &grid, dx, planes);
     sc.object_distance_m = Some(d);
@@ -798,19 +804,42 @@ fn uncropped_optical_image_keeps_isetcams_padded_ring() {
     let ring = e.planes[15][7 * 120 + 60] as f64;
     assert!(ring > 1e-3 * max, "ring {ring}");
     // Power: uncropped ≡ unblurred, per band; the cropped image loses the ring's share.
-    let none = form_image_uncropped(&OpticsModel { blur: Blur::None, ..optics.clone() }, &sc, &grid)
-        .unwrap();
+    let none = form_image_uncropped(
+        &OpticsModel {
+            blur: Blur::None,
+            ..optics.clone()
+        },
+        &sc,
+        &grid,
+    )
+    .unwrap();
     for b in [0, 15, 30] {
         let sum = |p: &Vec<f32>| p.iter().map(|v| *v as f64).sum::<f64>();
-        let (s_un, s_none) = (sum(&e.planes[b]), sum(&none.irradiance.irradiance.planes[b]));
+        let (s_un, s_none) = (
+            sum(&e.planes[b]),
+            sum(&none.irradiance.irradiance.planes[b]),
+        );
         let s_crop = sum(&cropped.irradiance.planes[b]);
-        assert!((s_un / s_none - 1.0).abs() < 1e-4, "band {b}: {s_un} vs {s_none}");
-        assert!(s_crop < s_none * (1.0 - 1e-3), "band {b}: cropped loses power");
+        assert!(
+            (s_un / s_none - 1.0).abs() < 1e-4,
+            "band {b}: {s_un} vs {s_none}"
+        );
+        assert!(
+            s_crop < s_none * (1.0 - 1e-3),
+            "band {b}: cropped loses power"
+        );
     }
     // Refused without the ISETCam padding.
-    let err = form_image_uncropped(&OpticsModel { padding: Padding::Replicate, ..optics }, &sc, &grid)
-        .unwrap_err()
-        .to_string();
+    let err = form_image_uncropped(
+        &OpticsModel {
+            padding: Padding::Replicate,
+            ..optics
+        },
+        &sc,
+        &grid,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("Padding::Zero"), "{err}");
 }
 

@@ -355,13 +355,18 @@ impl WavefrontPupil {
         let mut g: f64 = 0.0;
         for a in 0..=n {
             for b in 0..=n {
-                let (x, y) = (-1.0 + 2.0 * b as f64 / n as f64, -1.0 + 2.0 * a as f64 / n as f64);
+                let (x, y) = (
+                    -1.0 + 2.0 * b as f64 / n as f64,
+                    -1.0 + 2.0 * a as f64 / n as f64,
+                );
                 if x * x + y * y > 1.0 {
                     continue;
                 }
-                let gx = (self.wavefront_um(x + h, y, s, c4_um) - self.wavefront_um(x - h, y, s, c4_um))
+                let gx = (self.wavefront_um(x + h, y, s, c4_um)
+                    - self.wavefront_um(x - h, y, s, c4_um))
                     / (2.0 * h);
-                let gy = (self.wavefront_um(x, y + h, s, c4_um) - self.wavefront_um(x, y - h, s, c4_um))
+                let gy = (self.wavefront_um(x, y + h, s, c4_um)
+                    - self.wavefront_um(x, y - h, s, c4_um))
                     / (2.0 * h);
                 g = g.max(gx.hypot(gy));
             }
@@ -488,7 +493,8 @@ impl WavefrontPupil {
         let mut r: f64 = 0.0;
         for &w in wavelengths_nm {
             let c4 = self.chromatic_defocus.defocus_um(w, dz);
-            r = r.max(10.0 * w * 1e-9 * f_number + 2.0 * f_number * self.max_slope_um(s, c4) * 1e-6);
+            r = r
+                .max(10.0 * w * 1e-9 * f_number + 2.0 * f_number * self.max_slope_um(s, c4) * 1e-6);
         }
         Ok(r)
     }

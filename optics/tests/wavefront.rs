@@ -52,9 +52,18 @@ fn osa_index_and_closed_forms() {
         close(zernike_osa(2, r, t), 2.0 * r * t.cos());
         close(zernike_osa(3, r, t), 6f64.sqrt() * r * r * (2.0 * t).sin());
         close(zernike_osa(4, r, t), 3f64.sqrt() * (2.0 * r * r - 1.0));
-        close(zernike_osa(7, r, t), 8f64.sqrt() * (3.0 * r.powi(3) - 2.0 * r) * t.sin());
-        close(zernike_osa(9, r, t), 8f64.sqrt() * r.powi(3) * (3.0 * t).cos());
-        close(zernike_osa(12, r, t), 5f64.sqrt() * (6.0 * r.powi(4) - 6.0 * r * r + 1.0));
+        close(
+            zernike_osa(7, r, t),
+            8f64.sqrt() * (3.0 * r.powi(3) - 2.0 * r) * t.sin(),
+        );
+        close(
+            zernike_osa(9, r, t),
+            8f64.sqrt() * r.powi(3) * (3.0 * t).cos(),
+        );
+        close(
+            zernike_osa(12, r, t),
+            5f64.sqrt() * (6.0 * r.powi(4) - 6.0 * r * r + 1.0),
+        );
     }
 }
 
@@ -162,7 +171,10 @@ fn tilt_and_coma_move_the_centroid_by_the_closed_form() {
             m15.0, m30.0
         );
         let (e15, e30) = (expect - m15.0, expect - m30.0);
-        assert!(e30.abs() < e15.abs(), "j={j}: the moment must converge: {e15} {e30}");
+        assert!(
+            e30.abs() < e15.abs(),
+            "j={j}: the moment must converge: {e15} {e30}"
+        );
         assert!(
             e30 * expect.signum() >= 0.0 && e30.abs() < 0.09 * expect.abs(),
             "j={j}: {} vs {expect}",
@@ -185,7 +197,10 @@ fn tilt_and_coma_move_the_centroid_by_the_closed_form() {
         }
         let (along, across) = if j == 7 { (sy, sx) } else { (sx, sy) };
         eprintln!("sampled PSF j={j}: centroid {along:.4} µm");
-        assert!(along > 0.85 * k * c && along < k * c && across.abs() < 1e-6, "j={j}: {along}");
+        assert!(
+            along > 0.85 * k * c && along < k * c && across.abs() < 1e-6,
+            "j={j}: {along}"
+        );
     }
 }
 
@@ -204,7 +219,11 @@ fn psf_symmetry_per_term() {
             let angles: Vec<f64> = (0..16).map(|k| 0.1 + k as f64 * PI / 8.0).collect();
             let ring: Vec<f64> = angles.iter().map(|&t| i_at(r, t)).collect();
             let max = ring.iter().cloned().fold(0.0, f64::max);
-            let rot = if m == 0 { 0.7 } else { 2.0 * PI / m.unsigned_abs() as f64 };
+            let rot = if m == 0 {
+                0.7
+            } else {
+                2.0 * PI / m.unsigned_abs() as f64
+            };
             for (&t, &v) in angles.iter().zip(&ring) {
                 worst = worst.max((i_at(r, t + rot) - v).abs() / max);
                 // mirror: cos terms about the x axis (θ → −θ), sin terms about the y axis
@@ -218,14 +237,23 @@ fn psf_symmetry_per_term() {
     }
     // Negative controls.
     let coma = pupil(&[(8, 0.15)]).pupil_field(550.0, D_M, 128).unwrap();
-    let (a, b) = (coma.intensity_at(2.0 * ln, 0.0, ln), coma.intensity_at(-2.0 * ln, 0.0, ln));
-    assert!((a - b).abs() / a.max(b) > 0.1, "coma is not centro-symmetric: {a} {b}");
+    let (a, b) = (
+        coma.intensity_at(2.0 * ln, 0.0, ln),
+        coma.intensity_at(-2.0 * ln, 0.0, ln),
+    );
+    assert!(
+        (a - b).abs() / a.max(b) > 0.1,
+        "coma is not centro-symmetric: {a} {b}"
+    );
     let tre = pupil(&[(9, 0.15)]).pupil_field(550.0, D_M, 128).unwrap();
     let (a, b) = (
         tre.intensity_at(2.0 * ln, 0.0, ln),
         tre.intensity_at(2.0 * ln * (PI / 3.0).cos(), 2.0 * ln * (PI / 3.0).sin(), ln),
     );
-    assert!((a - b).abs() / a.max(b) > 0.1, "trefoil is 3-fold, not 6-fold: {a} {b}");
+    assert!(
+        (a - b).abs() / a.max(b) > 0.1,
+        "trefoil is 3-fold, not 6-fold: {a} {b}"
+    );
 }
 
 /// Stopping a pure defocus down: coefficients measured over `D_z = D / s` act on the
@@ -288,17 +316,25 @@ fn longitudinal_chromatic_aberration() {
     // Human LCA: in focus at the reference, defocused elsewhere by the converted amount.
     let (n, dx) = (4.0, 0.25e-6);
     let mut eye = pupil(&[]);
-    eye.chromatic_defocus = ChromaticDefocus::HumanEye { reference_nm: 580.0 };
+    eye.chromatic_defocus = ChromaticDefocus::HumanEye {
+        reference_nm: 580.0,
+    };
     eye.zernike_pupil_diameter_m = Some(D_M);
     let same = |a: &camsim_optics::SampledPsf, b: &camsim_optics::SampledPsf| {
         a.data.len() == b.data.len()
-            && a.data.iter().zip(&b.data).all(|(x, y)| (x - y).abs() < 1e-9)
+            && a.data
+                .iter()
+                .zip(&b.data)
+                .all(|(x, y)| (x - y).abs() < 1e-9)
     };
     let at_ref = eye.psf(580.0, n, D_M, dx).unwrap();
     assert!(same(&at_ref, &pupil(&[]).psf(580.0, n, D_M, dx).unwrap()));
     let c450 = defocus_um_from_diopters(-human_lca_diopters(580.0, 450.0), 1.0);
     let blue = eye.psf(450.0, n, D_M, dx).unwrap();
-    assert!(same(&blue, &pupil(&[(4, c450)]).psf(450.0, n, D_M, dx).unwrap()));
+    assert!(same(
+        &blue,
+        &pupil(&[(4, c450)]).psf(450.0, n, D_M, dx).unwrap()
+    ));
     // Table: linear between entries.
     let mut tab = pupil(&[]);
     tab.chromatic_defocus = ChromaticDefocus::Table {
@@ -306,7 +342,10 @@ fn longitudinal_chromatic_aberration() {
         defocus_um: vec![0.2, -0.2],
     };
     let p = tab.psf(500.0, n, D_M, dx).unwrap();
-    assert!(same(&p, &pupil(&[(4, 0.1)]).psf(500.0, n, D_M, dx).unwrap()));
+    assert!(same(
+        &p,
+        &pupil(&[(4, 0.1)]).psf(500.0, n, D_M, dx).unwrap()
+    ));
 }
 
 /// Polygonal apertures: open area `(N/2) R² sin(2π/N)`; PSF symmetry 2N-fold for odd N and
@@ -321,7 +360,10 @@ fn polygonal_apertures() {
         p.blades = Some(blades);
         let f = p.pupil_field(550.0, D_M, 256).unwrap();
         let (area, closed) = (f.area(), polygon_area(blades, 1.0));
-        assert!((area - closed).abs() < 1e-3 * closed, "N={blades}: {area} vs {closed}");
+        assert!(
+            (area - closed).abs() < 1e-3 * closed,
+            "N={blades}: {area} vs {closed}"
+        );
     }
     assert!((pupil(&[]).pupil_field(550.0, D_M, 256).unwrap().area() - PI).abs() < 1e-3 * PI);
     for blades in [5u32, 6] {
@@ -342,7 +384,10 @@ fn polygonal_apertures() {
         }
         eprintln!("N={blades}: {fold}-fold residual {worst:.2e}, half-step {finer:.2e}");
         assert!(worst < 3e-2, "N={blades}: {worst}");
-        assert!(finer > 0.2, "N={blades}: spikes must break the finer symmetry, {finer}");
+        assert!(
+            finer > 0.2,
+            "N={blades}: spikes must break the finer symmetry, {finer}"
+        );
         // Parseval: ∫ PSF = (2λN)² / Δξ⁴ · Σ|P|² Δξ².
         let pitch = 0.5 * ln;
         let h = 48isize;
@@ -377,7 +422,9 @@ fn uniform_scene_through_an_aberrated_hexagonal_pupil() {
     };
     let mut wp = pupil(&[(8, 0.1), (12, 0.05)]);
     wp.blades = Some(6);
-    wp.chromatic_defocus = ChromaticDefocus::HumanEye { reference_nm: 550.0 };
+    wp.chromatic_defocus = ChromaticDefocus::HumanEye {
+        reference_nm: 550.0,
+    };
     let optics = OpticsModel {
         relative_illumination: RelativeIllumination::None,
         blur: Blur::Pupil(wp),

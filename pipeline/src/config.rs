@@ -1015,7 +1015,10 @@ fn blur_from_file(
         ("psf_file", b.psf_file.is_some()),
         ("defocus_um", b.defocus_um.is_some()),
         ("zernike_um", b.zernike_um.is_some()),
-        ("zernike_pupil_diameter_mm", b.zernike_pupil_diameter_mm.is_some()),
+        (
+            "zernike_pupil_diameter_mm",
+            b.zernike_pupil_diameter_mm.is_some(),
+        ),
         ("chromatic_defocus", b.chromatic_defocus.is_some()),
         ("blades", b.blades.is_some()),
         ("pupil_samples", b.pupil_samples.is_some()),
@@ -1123,11 +1126,19 @@ fn wavefront_from_file(path: &Path, b: &BlurFile) -> Result<Blur, CliError> {
         || b.pupil_samples.is_some();
     let err = |k: &str, m: String| CliError::input(path, format!("optics.blur.{k}: {m}"));
     if let Some(d) = b.defocus_um {
-        check(path, d.is_finite(), "optics.blur.defocus_um", format!("must be finite, got {d}"))?;
+        check(
+            path,
+            d.is_finite(),
+            "optics.blur.defocus_um",
+            format!("must be finite, got {d}"),
+        )?;
     }
     if !general {
         let d = b.defocus_um.ok_or_else(|| {
-            err("defocus_um", "required for blur kind \"wavefront\" (or give zernike_um)".into())
+            err(
+                "defocus_um",
+                "required for blur kind \"wavefront\" (or give zernike_um)".into(),
+            )
         })?;
         return Ok(Blur::Wavefront {
             defocus_um: d,
@@ -1140,10 +1151,23 @@ fn wavefront_from_file(path: &Path, b: &BlurFile) -> Result<Blur, CliError> {
     }
     for (k, &v) in b.zernike_um.iter().flatten() {
         let j: usize = k.trim().parse().map_err(|_| {
-            err("zernike_um", format!("key \"{k}\" is not an OSA/ANSI index (0, 1, 2, …)"))
+            err(
+                "zernike_um",
+                format!("key \"{k}\" is not an OSA/ANSI index (0, 1, 2, …)"),
+            )
         })?;
-        check(path, j <= 65, "optics.blur.zernike_um", format!("index {j} out of 0–65"))?;
-        check(path, v.is_finite(), "optics.blur.zernike_um", format!("\"{k}\": must be finite, got {v}"))?;
+        check(
+            path,
+            j <= 65,
+            "optics.blur.zernike_um",
+            format!("index {j} out of 0–65"),
+        )?;
+        check(
+            path,
+            v.is_finite(),
+            "optics.blur.zernike_um",
+            format!("\"{k}\": must be finite, got {v}"),
+        )?;
         zernike.push(camsim_optics::ZernikeTerm { j, rms_um: v });
     }
     let zernike_pupil_diameter_m = match b.zernike_pupil_diameter_mm {
@@ -1175,10 +1199,20 @@ fn wavefront_from_file(path: &Path, b: &BlurFile) -> Result<Blur, CliError> {
         },
     };
     if let Some(n) = b.blades {
-        check(path, (3..=64).contains(&n), "optics.blur.blades", format!("must be 3–64, got {n}"))?;
+        check(
+            path,
+            (3..=64).contains(&n),
+            "optics.blur.blades",
+            format!("must be 3–64, got {n}"),
+        )?;
     }
     let pupil_samples = b.pupil_samples.unwrap_or(64);
-    check(path, (16..=4096).contains(&pupil_samples), "optics.blur.pupil_samples", format!("must be 16–4096, got {pupil_samples}"))?;
+    check(
+        path,
+        (16..=4096).contains(&pupil_samples),
+        "optics.blur.pupil_samples",
+        format!("must be 16–4096, got {pupil_samples}"),
+    )?;
     Ok(Blur::Pupil(camsim_optics::WavefrontPupil {
         zernike,
         zernike_pupil_diameter_m,
@@ -1867,7 +1901,10 @@ mod wavefront_keys_tests {
     use super::*;
 
     fn camera(blur: Value) -> Result<Camera, CliError> {
-        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/table1/camera.json"));
+        let path = Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/table1/camera.json"
+        ));
         let mut v: Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
         v["optics"]["blur"] = blur;
         let raw: CameraFile = serde_json::from_value(v).map_err(|e| CliError::input(path, e))?;
@@ -1877,33 +1914,69 @@ mod wavefront_keys_tests {
     #[test]
     fn wavefront_keys_select_the_general_pupil_and_name_bad_values() {
         let c = camera(serde_json::json!({"kind": "wavefront", "defocus_um": 0.1})).unwrap();
-        assert!(matches!(c.optics.blur, Blur::Wavefront { defocus_um, pupil_samples: 64 } if defocus_um == 0.1));
+        assert!(
+            matches!(c.optics.blur, Blur::Wavefront { defocus_um, pupil_samples: 64 } if defocus_um == 0.1)
+        );
         let c = camera(serde_json::json!({
             "kind": "wavefront", "defocus_um": 0.1, "zernike_um": {"8": 0.05, "12": -0.02},
             "zernike_pupil_diameter_mm": 3.0, "blades": 6,
             "chromatic_defocus": {"model": "human", "reference_nm": 555.0}
         }))
         .unwrap();
-        let Blur::Pupil(p) = &c.optics.blur else { panic!("general pupil expected") };
+        let Blur::Pupil(p) = &c.optics.blur else {
+            panic!("general pupil expected")
+        };
         let mut js: Vec<(usize, f64)> = p.zernike.iter().map(|t| (t.j, t.rms_um)).collect();
         js.sort_by(|a, b| a.0.cmp(&b.0));
         assert_eq!(js, vec![(4, 0.1), (8, 0.05), (12, -0.02)]);
         assert_eq!(p.zernike_pupil_diameter_m, Some(3e-3));
         assert_eq!(p.blades, Some(6));
-        assert_eq!(p.chromatic_defocus, camsim_optics::ChromaticDefocus::HumanEye { reference_nm: 555.0 });
+        assert_eq!(
+            p.chromatic_defocus,
+            camsim_optics::ChromaticDefocus::HumanEye {
+                reference_nm: 555.0
+            }
+        );
         // A bare polygonal aperture (no aberration) is valid.
         let c = camera(serde_json::json!({"kind": "wavefront", "blades": 5})).unwrap();
         assert!(matches!(&c.optics.blur, Blur::Pupil(p) if p.zernike.is_empty()));
         for (blur, key) in [
-            (serde_json::json!({"kind": "wavefront", "zernike_um": {"x": 0.1}}), "optics.blur.zernike_um"),
-            (serde_json::json!({"kind": "wavefront", "zernike_um": {"99": 0.1}}), "optics.blur.zernike_um"),
-            (serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "blades": 2}), "optics.blur.blades"),
-            (serde_json::json!({"kind": "wavefront", "defocus_um": 0.1, "pupil_samples": 8}), "optics.blur.pupil_samples"),
-            (serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "zernike_pupil_diameter_mm": -1.0}), "optics.blur.zernike_pupil_diameter_mm"),
-            (serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"model": "human"}}), "optics.blur.chromatic_defocus"),
-            (serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"wavelength_nm": [500, 400], "defocus_um": [0, 1]}}), "optics.blur.chromatic_defocus.wavelength_nm"),
-            (serde_json::json!({"kind": "gaussian", "sigma_um": 1.0, "blades": 5}), "optics.blur.blades"),
-            (serde_json::json!({"kind": "wavefront"}), "optics.blur.defocus_um"),
+            (
+                serde_json::json!({"kind": "wavefront", "zernike_um": {"x": 0.1}}),
+                "optics.blur.zernike_um",
+            ),
+            (
+                serde_json::json!({"kind": "wavefront", "zernike_um": {"99": 0.1}}),
+                "optics.blur.zernike_um",
+            ),
+            (
+                serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "blades": 2}),
+                "optics.blur.blades",
+            ),
+            (
+                serde_json::json!({"kind": "wavefront", "defocus_um": 0.1, "pupil_samples": 8}),
+                "optics.blur.pupil_samples",
+            ),
+            (
+                serde_json::json!({"kind": "wavefront", "zernike_um": {"7": 0.1}, "zernike_pupil_diameter_mm": -1.0}),
+                "optics.blur.zernike_pupil_diameter_mm",
+            ),
+            (
+                serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"model": "human"}}),
+                "optics.blur.chromatic_defocus",
+            ),
+            (
+                serde_json::json!({"kind": "wavefront", "chromatic_defocus": {"wavelength_nm": [500, 400], "defocus_um": [0, 1]}}),
+                "optics.blur.chromatic_defocus.wavelength_nm",
+            ),
+            (
+                serde_json::json!({"kind": "gaussian", "sigma_um": 1.0, "blades": 5}),
+                "optics.blur.blades",
+            ),
+            (
+                serde_json::json!({"kind": "wavefront"}),
+                "optics.blur.defocus_um",
+            ),
         ] {
             let e = camera(blur.clone()).map(|_| ()).unwrap_err().one_line();
             assert!(e.contains(key), "{blur}: {e}");

@@ -67,7 +67,11 @@ fn picture_xyz(path: &Path, display: &DisplayModel) -> Result<(usize, usize, Vec
     let ch = pic.channels;
     let xyz = (0..pic.rows * pic.cols)
         .map(|i| {
-            let mut out = Xyz { x: 0.0, y: 0.0, z: 0.0 };
+            let mut out = Xyz {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+            };
             for p in 0..3 {
                 let code = pic.codes[i * ch + if ch == 1 { 0 } else { p }] as usize;
                 let l = lut[p][code.min(n_codes - 1)];

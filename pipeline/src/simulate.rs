@@ -93,7 +93,10 @@ pub fn sampling_for(
                 .reach_m(&grid.wavelength_nm, n, aperture_m)
                 .unwrap_or(0.0)
                 * 1e6;
-            (diffraction_os, ((reach_um / p_um).ceil() as usize).saturating_add(2))
+            (
+                diffraction_os,
+                ((reach_um / p_um).ceil() as usize).saturating_add(2),
+            )
         }
         // Resolve the field model's PSF detail; margin = PSF half-width + the inward shift of
         // the corner by (barrel) distortion, capped at the sensor's size.
@@ -147,8 +150,7 @@ pub fn sample_aperture_for(
     let band_limited = matches!(
         optics.blur,
         Blur::Diffraction | Blur::Wavefront { .. } | Blur::Pupil(_)
-    )
-        && optics.padding == camsim_optics::Padding::Replicate
+    ) && optics.padding == camsim_optics::Padding::Replicate
         && !optics.effects.has_warp();
     // The OTF cutoff 1/(λ N) (the working f-number N(1+|m|) only lowers it) must lie within
     // the grid's Nyquist frequency os/(2p).
