@@ -25,7 +25,7 @@
 //!   ray).
 use crate::error::LensError;
 use crate::prescription::{LensPrescription, Medium, Surface};
-use crate::trace::{intersect, surface_step, Clipping, Ray, Vec3};
+use crate::trace::{intersect, secant_root, surface_step, Clipping, Ray, Vec3};
 use rayon::prelude::*;
 
 /// Axis-aligned box on the rear-vertex plane (mm, film point on +x).
@@ -304,33 +304,15 @@ impl SensorSideLens {
         out
     }
 
-    /// Rear-plane x of the chief ray (through the stop centre) from (r, 0), by secant steps.
+    /// Rear-plane x of the chief ray (through the stop centre) from (r, 0), by secant steps
+    /// ([`crate::trace::secant_root`]) to a stop height below 1e-10 mm.
     fn solve_chief(&self, r: f64, guess: f64, wavelength_nm: f64) -> Option<f64> {
         let f = |a: f64| {
             self.trace_through([r, 0.0], [a, 0.0], wavelength_nm, Clipping::None)
                 .map(|e| e.stop_mm[0])
         };
-        let mut a0 = guess;
-        let mut f0 = f(a0)?;
-        if f0.abs() < 1e-10 {
-            return Some(a0);
-        }
-        let mut a1 = guess + 1e-3 * (1.0 + guess.abs());
-        let mut f1 = f(a1)?;
-        for _ in 0..60 {
-            if (f1 - f0).abs() < 1e-300 {
-                return None;
-            }
-            let a2 = a1 - f1 * (a1 - a0) / (f1 - f0);
-            a0 = a1;
-            f0 = f1;
-            a1 = a2;
-            f1 = f(a1)?;
-            if f1.abs() < 1e-10 {
-                return Some(a1);
-            }
-        }
-        None
+        let f0 = f(guess)?;
+        secant_root(&f, guess, f0, 1e-3 * (1.0 + guess.abs()), 1e-10)
     }
 }
 

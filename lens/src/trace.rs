@@ -434,14 +434,28 @@ impl LensPrescription {
 /// offset), from `a0` (with `f(a0) = f0`) and `a0 + da`, to |f| < 1e-9 mm; a step whose ray is
 /// lost is halved back towards the last good point. `None` if it does not converge in 60 steps.
 fn aim_secant(f: &dyn Fn(f64) -> Option<f64>, a0: f64, f0: f64, da: f64) -> Option<f64> {
-    if f0.abs() < 1e-9 {
+    secant_root(f, a0, f0, da, 1e-9)
+}
+
+/// Secant search for a root of `f` from `a0` (with `f(a0) = f0`) and `a0 + da`, to
+/// |f| < `tol`; a step where `f` is undefined (a lost ray) is halved back towards the last good
+/// point. `None` if it does not converge in 60 steps. The one root finder of the ray-aiming
+/// searches (the chief ray from the object side here, from the sensor in [`crate::pupil`]).
+pub(crate) fn secant_root(
+    f: &dyn Fn(f64) -> Option<f64>,
+    a0: f64,
+    f0: f64,
+    da: f64,
+    tol: f64,
+) -> Option<f64> {
+    if f0.abs() < tol {
         return Some(a0);
     }
     let (mut a0, mut f0) = (a0, f0);
     let mut a1 = a0 + da;
     let mut f1 = f(a1)?;
     for _ in 0..60 {
-        if f1.abs() < 1e-9 {
+        if f1.abs() < tol {
             return Some(a1);
         }
         if (f1 - f0).abs() < 1e-300 {
@@ -461,5 +475,5 @@ fn aim_secant(f: &dyn Fn(f64) -> Option<f64>, a0: f64, f0: f64, da: f64) -> Opti
         a1 = a2;
         f1 = f2;
     }
-    (f1.abs() < 1e-9).then_some(a1)
+    (f1.abs() < tol).then_some(a1)
 }
