@@ -45,7 +45,24 @@ pub fn relative_illumination_cos4(r_m: f64, focal_length_m: f64) -> f64 {
 #[inline]
 pub fn relative_illumination_cos4_r2(r2_m2: f64, focal_length_m: f64) -> f64 {
     let f2 = focal_length_m * focal_length_m;
-    let c2 = f2 / (f2 + r2_m2);
+    cos4_from_f2(f2, f2 + r2_m2)
+}
+
+/// [`relative_illumination_cos4`] along one row of pixels at squared height `y2_m2`: the
+/// returned function maps a pixel's squared column offset x² to `(f² / ((f² + y²) + x²))²`,
+/// with `f² + y²` formed once per row (one addition per pixel in the caller's loop, which
+/// then vectorises).
+#[inline]
+pub fn relative_illumination_cos4_row(y2_m2: f64, focal_length_m: f64) -> impl Fn(f64) -> f64 {
+    let f2 = focal_length_m * focal_length_m;
+    let f2_y2 = f2 + y2_m2;
+    move |x2_m2: f64| cos4_from_f2(f2, f2_y2 + x2_m2)
+}
+
+/// cos⁴θ = (cos²θ)² with cos²θ = f² / (f² + r²).
+#[inline(always)]
+fn cos4_from_f2(f2: f64, f2_plus_r2: f64) -> f64 {
+    let c2 = f2 / f2_plus_r2;
     c2 * c2
 }
 

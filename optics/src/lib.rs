@@ -47,8 +47,8 @@ pub use error::OpticsError;
 pub use formulas::{
     airy_first_zero_m, airy_first_zero_rad, airy_psf, bessel_j1, camera_equation_factor,
     camera_equation_factor_isetcam, diffraction_otf, magnification, relative_illumination_cos4,
-    relative_illumination_cos4_r2, relative_illumination_isetcam, sigma_from_fwhm,
-    thin_lens_image_distance_m,
+    relative_illumination_cos4_r2, relative_illumination_cos4_row, relative_illumination_isetcam,
+    sigma_from_fwhm, thin_lens_image_distance_m,
 };
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
 pub use lens_blur::{LensBlur, LensBlurOptions, LensFocus};

@@ -256,6 +256,24 @@ fn camera_equation_closed_form() {
 }
 
 #[test]
+fn cos4_by_row_is_cos4_of_the_pixel_angle() {
+    // The row form (f² + y² formed once) against cos⁴ of the angle tan θ = √(x² + y²)/f.
+    let f = 0.004;
+    for y_m in [0.0, 1e-4, 1.7e-3, 4e-3] {
+        let row = relative_illumination_cos4_row(y_m * y_m, f);
+        for x_m in [0.0, 3e-5, 2.2e-3, 6e-3] {
+            let t = (x_m as f64).hypot(y_m).atan2(f);
+            assert_relative_eq!(row(x_m * x_m), t.cos().powi(4), max_relative = 1e-13);
+            assert_relative_eq!(
+                row(x_m * x_m),
+                relative_illumination_cos4_r2(x_m * x_m + y_m * y_m, f),
+                max_relative = 1e-15
+            );
+        }
+    }
+}
+
+#[test]
 fn cos4_values() {
     let f = 0.01;
     assert_eq!(relative_illumination_cos4(0.0, f), 1.0);

@@ -435,11 +435,12 @@ fn uniform_electron_rate(
             let k = &k_rows[r % k_rows.len()];
             if cos4 {
                 let y2 = ((r as f64 - yc) * dx).powi(2);
-                // The focal length as a local value: read through the closure's capture it is
-                // re-loaded for every pixel and the loop does not vectorise.
-                let f_m = f;
+                // f² + y² once per row, and held in the returned function's locals: read
+                // through this closure's capture, the focal length is re-loaded for every pixel
+                // and the loop does not vectorise.
+                let cos4_of_x2 = camsim_optics::relative_illumination_cos4_row(y2, f);
                 for ((o, &k), &x2) in row.iter_mut().zip(k).zip(&x2) {
-                    *o = (k * camsim_optics::relative_illumination_cos4_r2(x2 + y2, f_m)) as f32;
+                    *o = (k * cos4_of_x2(x2)) as f32;
                 }
             } else {
                 for (o, &k) in row.iter_mut().zip(k) {

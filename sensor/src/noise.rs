@@ -419,9 +419,9 @@ impl Kernel {
                     dc += ch.t * h.dark_voltage_v_per_s as f64 / ch.g;
                 }
                 let v = match (sw.shot, sw.dark) {
-                    (true, true) => pois.sample(rng, *e + dc),
-                    (true, false) => pois.sample(rng, *e) + dc,
-                    (false, true) => *e + pois.sample(rng, dc),
+                    (true, true) => pois.sample_saturating(rng, *e + dc),
+                    (true, false) => pois.sample_saturating(rng, *e) + dc,
+                    (false, true) => *e + pois.sample_saturating(rng, dc),
                     (false, false) => *e + dc,
                 };
                 *e = v.min(well);
@@ -430,13 +430,13 @@ impl Kernel {
             match (sw.shot, sw.dark) {
                 (true, true) => n
                     .iter_mut()
-                    .for_each(|e| *e = pois.sample(rng, *e + d).min(well)),
+                    .for_each(|e| *e = pois.sample_saturating(rng, *e + d).min(well)),
                 (true, false) => n
                     .iter_mut()
-                    .for_each(|e| *e = (pois.sample(rng, *e) + d).min(well)),
+                    .for_each(|e| *e = (pois.sample_saturating(rng, *e) + d).min(well)),
                 (false, true) => n
                     .iter_mut()
-                    .for_each(|e| *e = (*e + pois.sample(rng, d)).min(well)),
+                    .for_each(|e| *e = (*e + pois.sample_saturating(rng, d)).min(well)),
                 (false, false) => n.iter_mut().for_each(|e| *e = (*e + d).min(well)),
             }
         }
@@ -553,16 +553,17 @@ pub fn nonlinearity_magnitude(sensor: &SensorModel, analog_gain: f64) -> f64 {
     1.0 - (dn(n80) - dn0) / (0.8 * full_scale)
 }
 
-/// Mean photo-electrons of a pixel from its rate × time (× PRNU gain): never negative, and
-/// light that overflowed upstream (a rate of +∞, or NaN from ∞·0 or ∞ − ∞ in a blur) is
-/// saturating light, +∞ — which the shot-noise draw passes through and the full-well clip
-/// turns into a full well — never black.
+/// Mean photo-electrons of a pixel from its rate × time (× PRNU gain): never negative. A NaN
+/// (light that overflowed upstream, ∞·0 or ∞ − ∞ in a blur) stays NaN, and the kernel's draw
+/// ([`PoissonSampler::sample_saturating`]) or, with shot noise off, the full-well clip
+/// (`NaN.min(well) = well`) turns it into a full well — never black. Written as a compare
+/// and select, not `f64::max` (which maps NaN to 0), so that it is one vector instruction.
 #[inline(always)]
 fn mean_electrons(x: f64) -> f64 {
-    if x.is_nan() {
-        f64::INFINITY
+    if x < 0.0 {
+        0.0
     } else {
-        x.max(0.0)
+        x
     }
 }
 
@@ -620,6 +621,36 @@ mod tests {
         let e = expected_dn(&s, &rate, &shot);
         for (a, b) in f.dn.iter().zip(&e) {
             assert_eq!(*a as f32, b.round());
+        }
+    }
+
+    #[test]
+    fn overflowed_light_saturates_and_negative_light_is_dark() {
+        // A NaN rate (∞·0 upstream) or +∞ reads like a huge finite rate (full well → clipped
+        // DN) under every shot/dark/PRNU switch and with hot pixels; a negative rate like 0.
+        let rates = [f32::NAN, f32::INFINITY, 1e30, -5.0, 0.0];
+        for (shot_on, dark_on, prnu_on) in (0..8).map(|i| (i & 1 == 1, i & 2 == 2, i & 4 == 4)) {
+            let mut s = mono(1, rates.len());
+            s.noise = NoiseSwitches::none();
+            s.noise.shot = shot_on;
+            s.noise.dark = dark_on;
+            s.noise.prnu = prnu_on;
+            s.prnu_sigma_percent = 1.0;
+            let rate = ElectronRate {
+                rows: 1,
+                cols: rates.len(),
+                electrons_per_s: rates.to_vec(),
+            };
+            let shot = Shot::new(&s, 0.01);
+            let fp = fixed_pattern(&s, 3);
+            let f = expose(&s, &rate, &shot, &fp, 3, &[0, 0]);
+            let tag = format!("shot {shot_on} dark {dark_on} prnu {prnu_on}");
+            assert_eq!(f.dn[0], f.dn[2], "NaN vs huge rate, {tag}");
+            assert_eq!(f.dn[1], f.dn[2], "+inf vs huge rate, {tag}");
+            assert!(f.dn[2] > f.dn[4], "huge rate above dark, {tag}");
+            if !dark_on {
+                assert_eq!(f.dn[3], f.dn[4], "negative rate vs 0, {tag}");
+            }
         }
     }
 

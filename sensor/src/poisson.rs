@@ -139,31 +139,50 @@ impl Hat {
 
 impl PoissonSampler {
     /// One exact Poisson(mean) draw, returned as f64 (0 for mean ≤ 0 or NaN).
-    #[inline(always)]
     ///
     /// A mean of +∞ (light that overflowed) gives +∞, which the caller clips at the full well.
     /// Above [`EXACT_MEAN_MAX`] f64 no longer holds consecutive integers, so no draw can be
     /// exact; there the draw is the normal limit `⌊μ + √μ·T⌋` (the relative error of its
     /// probabilities is O(1/√μ) < 2e-8), which also keeps the algorithm's integer arithmetic
     /// (|K| < 2⁶³) in range.
+    #[inline(always)]
     pub fn sample<R: Rng + Clone>(&mut self, rng: &mut R, mean: f64) -> f64 {
-        if !(mean > 0.0) {
-            return 0.0;
+        self.draw::<R, false>(rng, mean)
+    }
+
+    /// As [`PoissonSampler::sample`], except that a NaN mean is light that overflowed upstream
+    /// (∞·0 or ∞ − ∞ in a blur) and gives +∞, like a mean of +∞: the sensor kernel's draw, so
+    /// such a pixel saturates instead of reading black.
+    #[inline(always)]
+    pub fn sample_saturating<R: Rng + Clone>(&mut self, rng: &mut R, mean: f64) -> f64 {
+        self.draw::<R, true>(rng, mean)
+    }
+
+    /// The draw behind both public methods. The tests are ordered so that an ordinary mean
+    /// meets two comparisons (μ < 10, then μ > 0 or μ < 2⁵²); NaN fails both range tests and
+    /// is sorted out in the rare branch.
+    #[inline(always)]
+    fn draw<R: Rng + Clone, const NAN_IS_LIGHT: bool>(&mut self, rng: &mut R, mean: f64) -> f64 {
+        if mean < 10.0 {
+            if !(mean > 0.0) {
+                return 0.0;
+            }
+            if mean != self.mean {
+                self.mean = mean;
+                self.exp_neg = (-mean).exp();
+            }
+            return self.inversion(rng, mean);
         }
         if !(mean < EXACT_MEAN_MAX) {
+            if mean.is_nan() {
+                return if NAN_IS_LIGHT { f64::INFINITY } else { 0.0 };
+            }
             if mean == f64::INFINITY {
                 return f64::INFINITY;
             }
             return (mean + mean.sqrt() * self.normal.sample(rng))
                 .floor()
                 .max(0.0);
-        }
-        if mean < 10.0 {
-            if mean != self.mean {
-                self.mean = mean;
-                self.exp_neg = (-mean).exp();
-            }
-            return self.inversion(rng, mean);
         }
         // Case μ ≥ 10: set-up s = √μ, L = ⌊μ − 1.1484⌋, d = 6μ².
         let s = mean.sqrt();
