@@ -55,6 +55,7 @@ fn default_run_writes_every_product_and_real_figures() {
     assert_eq!(s["sensor"]["pixel_pitch_um"].as_f64().unwrap(), 2.2);
     let de = s["delta_e_2000"]["mean"].as_f64().unwrap();
     assert!(de > 0.3 && de < 8.0, "mean ΔE2000 {de}");
+    headline_delta_e_is_the_noise_free_value_within_its_noise(&s, d.path());
     // The headline recomputed from the reported patch values (desired and rendered linear
     // sRGB) by an independent colour path (IEC 61966-2-1 matrix at its published 4 digits,
     // CIE 15 Lab with the exact constants, D65 white = M·(1, 1, 1)) and Sharma's CIEDE2000.
@@ -94,6 +95,99 @@ fn default_run_writes_every_product_and_real_figures() {
     // per-patch SNR rises with the patch signal (shot-noise limited): white > black patch
     let g = &s["patch_snr"]["g"];
     assert!(g[18]["snr_db"].as_f64().unwrap() > g[23]["snr_db"].as_f64().unwrap() + 6.0);
+}
+
+/// The §3 headline against the same run without temporal noise and fixed-pattern noise
+/// (shot, read, DSNU and PRNU off; the dark current's mean kept, its shot noise is
+/// < 0.1 e here), so that its tolerance is the noise's: per patch, the difference of the two
+/// ΔE2000 is, to first order, `g · (r_noisy − r_free)` with `g = ∂ΔE2000/∂r` (central
+/// differences of [`delta_e_2000_reference`] at the noise-free value) and `r` the patch's mean
+/// rendered linear sRGB, whose standard errors each run reports (from 8 × 8 block means,
+/// `rendered_linear_srgb_standard_error`). Besides the noise, each mean carries the 8-bit
+/// output's rounding, a bias of at most half a code (in encoded sRGB) per run, bounded by
+/// `b_c = ½·decode′(code)/255` in linear units, twice for the two runs. So the mean over the 24
+/// patches must satisfy `|ΔE_noisy − ΔE_free| ≤ 4·σ_D + B`, `σ_D = √(Σ_p σ_p²)/24`,
+/// `σ_p² = Σ_c g_c²·(SE²_noisy + SE²_free)`, `B = Σ_p Σ_c |g_c|·2·b_c / 24` (false-failure rate
+/// 6e-5 for the noise part; the rounding part is a worst-case bound), and every patch its own
+/// `5·σ_p + Σ_c |g_c|·2·b_c` (24 × 5.7e-7). Half the noise-free run's ΔE is also required to
+/// exceed that tolerance: the noise may not be what makes the headline.
+fn headline_delta_e_is_the_noise_free_value_within_its_noise(noisy: &Value, dir: &Path) {
+    let mut cam: Value = serde_json::from_str(camsim_pipeline::run::TABLE1_CAMERA).unwrap();
+    cam["sensor"]["noise"] =
+        json!({"shot": false, "dark": true, "read": false, "dsnu": false, "prnu": false});
+    let mut cfg: Value = serde_json::from_str(camsim_pipeline::run::DEFAULT_CONFIG).unwrap();
+    cfg["camera"] = cam;
+    std::fs::write(dir.join("noise_free.json"), cfg.to_string()).unwrap();
+    let free = run_ok(&["run", "noise_free.json", "--out", "free"], dir);
+    let rgb = |v: &Value| -> [f64; 3] { [0, 1, 2].map(|k| v[k].as_f64().unwrap()) };
+    let (pn, pf) = (
+        noisy["patches"].as_array().unwrap(),
+        free["patches"].as_array().unwrap(),
+    );
+    assert_eq!((pn.len(), pf.len()), (24, 24));
+    // Half an 8-bit code of the sRGB encoding, in linear units, at linear value v.
+    let half_code = |v: f64| {
+        let e = camsim_isp::srgb_encode(v.clamp(0.0, 1.0));
+        let dec = |e: f64| camsim_isp::srgb_decode(e.clamp(0.0, 1.0));
+        0.5 * (dec(e + 0.5 / 255.0) - dec(e - 0.5 / 255.0)).abs()
+    };
+    let (mut d_sum, mut var_sum, mut bias_sum, mut de_free) = (0.0, 0.0, 0.0, 0.0);
+    for (i, (a, b)) in pn.iter().zip(pf).enumerate() {
+        let want = rgb(&a["desired_linear_srgb"]);
+        assert_eq!(want, rgb(&b["desired_linear_srgb"]), "patch {i}: targets");
+        let (rn, rf) = (
+            rgb(&a["rendered_linear_srgb"]),
+            rgb(&b["rendered_linear_srgb"]),
+        );
+        let (sn, sf) = (
+            rgb(&a["rendered_linear_srgb_standard_error"]),
+            rgb(&b["rendered_linear_srgb_standard_error"]),
+        );
+        let (en, ef) = (
+            delta_e_2000_reference(want, rn),
+            delta_e_2000_reference(want, rf),
+        );
+        let h = 1e-6;
+        let g = [0, 1, 2].map(|c| {
+            let (mut up, mut dn) = (rf, rf);
+            up[c] += h;
+            dn[c] -= h;
+            (delta_e_2000_reference(want, up) - delta_e_2000_reference(want, dn)) / (2.0 * h)
+        });
+        let var_p: f64 = (0..3)
+            .map(|c| g[c] * g[c] * (sn[c] * sn[c] + sf[c] * sf[c]))
+            .sum();
+        let bias_p: f64 = (0..3).map(|c| g[c].abs() * 2.0 * half_code(rf[c])).sum();
+        assert!(
+            (en - ef).abs() <= 5.0 * var_p.sqrt() + bias_p,
+            "patch {i}: ΔE2000 noisy {en:.4} vs noise-free {ef:.4} (σ {:.4}, rounding {bias_p:.4})",
+            var_p.sqrt()
+        );
+        d_sum += en - ef;
+        var_sum += var_p;
+        bias_sum += bias_p;
+        de_free += ef;
+    }
+    let (d, sigma_d, bias, de_free) = (
+        d_sum / 24.0,
+        var_sum.sqrt() / 24.0,
+        bias_sum / 24.0,
+        de_free / 24.0,
+    );
+    eprintln!(
+        "mean ΔE2000 noisy − noise-free = {d:+.4} (σ {sigma_d:.4}, rounding bound {bias:.4}); noise-free {de_free:.3}"
+    );
+    assert!(
+        d.abs() <= 4.0 * sigma_d + bias,
+        "mean ΔE2000 noisy − noise-free = {d:+.4} beyond 4σ {:.4} + rounding {bias:.4}",
+        4.0 * sigma_d
+    );
+    assert!(
+        0.5 * de_free > 4.0 * sigma_d + bias,
+        "noise-free ΔE2000 {de_free} is within the noise tolerance"
+    );
+    let de_free_reported = free["delta_e_2000"]["mean"].as_f64().unwrap();
+    assert!((de_free_reported - de_free).abs() <= 0.01);
 }
 
 /// ΔE2000 between two linear-sRGB colours by a path independent of camsim's colour code:

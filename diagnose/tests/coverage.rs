@@ -229,9 +229,19 @@ fn estimates_cover_truth_in_20_trials() {
 
 /// Calibration of the reported errors over 60 further trials: rms of z within
 /// [0.75, 1.3] (≈ 3 standard errors of an rms from 60 draws around 1) and ≥ 90 % within 2σ.
+///
+/// Joint false-failure rate. The statistical verdict is [`pooled_z_checks`] over the 60
+/// trials (≤ 10⁻³, POOLED_ALPHA). The count and rms checks are kept as regression checks on
+/// these fixed seeds (they pass here); for a calibrated estimator on a fresh seed set each
+/// passes with probability: ≥ 54/60 within 2σ 0.981, ≥ 57/60 within the 99 % interval 0.997
+/// (binomial), rms in [0.75, 1.3] 0.997 (60·rms² ~ χ²(60)); all three for all six estimators
+/// ≈ 0.975⁶ ≈ 0.86 if independent (the checks are positively correlated, so the joint rate of
+/// ≈ 14 % is an upper bound). A fresh seed set that fails only a count is therefore not by
+/// itself evidence of a defect.
 #[test]
 fn reported_errors_are_calibrated_over_60_trials() {
     let zs = z_table(21..=80, false);
+    pooled_z_checks(&zs);
     for ((inside, inside99, rms), name) in summary(&zs).into_iter().zip(NAMES) {
         assert!(inside >= 54, "{name}: only {inside}/60 within 2σ");
         assert!(

@@ -186,3 +186,38 @@ fn filters_scaled_two_times_fail_the_oracle() {
         );
     }
 }
+
+/// The filter table itself against a second, independent transcription: the S-CIELAB code
+/// distributed by Zhang & Wandell (`separableFilters`, the constants `x1`, `x2`, `x3`) lists
+/// the same three channels with each channel's weights normalised to sum 1 and with the
+/// spreads as half-widths. Its weights are these literals; the library's published-table
+/// weights, normalised, must reproduce them to the 4–5 digits both are printed with (1e-3
+/// relative), and each of its spreads must be the library's times the stated factor of about
+/// 1.7 (all lie within 1.60–1.78; a spread typed 2× too large or too small lands outside).
+/// So a typo in `published_filters_1996`, which the closed-form oracle above would share,
+/// fails here.
+#[test]
+fn published_table_matches_the_distributed_code_constants() {
+    // (weight, half-width in degrees) per channel, from the distributed code.
+    let code: [&[(f64, f64)]; 3] = [
+        &[(1.00327, 0.05), (0.114416, 0.225), (-0.117686, 7.0)],
+        &[(0.616725, 0.0685), (0.383275, 0.826)],
+        &[(0.567885, 0.0920), (0.432115, 0.6451)],
+    ];
+    for (ch, (lib, code)) in published_filters_1996().iter().zip(code).enumerate() {
+        assert_eq!(lib.len(), code.len(), "channel {ch}: number of terms");
+        let sum: f64 = lib.iter().map(|t| t.weight).sum();
+        for (i, (t, &(w, hw))) in lib.iter().zip(code).enumerate() {
+            let wn = t.weight / sum;
+            assert!(
+                ((wn - w) / w).abs() < 1e-3,
+                "channel {ch} term {i}: normalised weight {wn} vs the code's {w}"
+            );
+            let ratio = hw / t.spread_deg;
+            assert!(
+                (1.60..=1.78).contains(&ratio),
+                "channel {ch} term {i}: code half-width / spread = {ratio}"
+            );
+        }
+    }
+}

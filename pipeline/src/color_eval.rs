@@ -30,6 +30,32 @@ pub fn linear_srgb_to_lab(v: [f64; 3]) -> Lab {
 
 /// Mean R, G, B over the sampled part of each of the chart's patches (row-major).
 pub fn patch_means(img: &RgbImage, layout: &ChartLayout) -> Vec<[f64; 3]> {
+    patch_stats(img, layout)
+        .into_iter()
+        .map(|p| p.mean)
+        .collect()
+}
+
+/// One chart patch's pixel statistics over its sampled part, per channel R, G, B.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PatchStats {
+    /// Mean value.
+    pub mean: [f64; 3],
+    /// Standard error of the mean, from the spread of the means of the patch's whole
+    /// [`SE_BLOCK_PX`]² blocks: `sd(block means) / √blocks` (0 below two blocks). Blocks, not
+    /// pixels, because a demosaicked image's pixels are correlated over a few pixels, which
+    /// the pixel spread would not see.
+    pub standard_error: [f64; 3],
+    /// Number of pixels sampled.
+    pub pixels: usize,
+}
+
+/// Side of the blocks behind [`PatchStats::standard_error`], pixels: wider than the support of
+/// the demosaicking kernels (5 × 5 at most), so block means are nearly independent.
+pub const SE_BLOCK_PX: usize = 8;
+
+/// [`PatchStats`] of each of the chart's patches (row-major).
+pub fn patch_stats(img: &RgbImage, layout: &ChartLayout) -> Vec<PatchStats> {
     let n_patches = layout.chart_rows * layout.chart_cols;
     (0..n_patches)
         .map(|i| {
@@ -40,18 +66,43 @@ pub fn patch_means(img: &RgbImage, layout: &ChartLayout) -> Vec<[f64; 3]> {
                 i / layout.chart_cols,
                 i % layout.chart_cols,
             );
-            let mut s = [0.0f64; 3];
-            let mut n = 0.0f64;
-            for y in rect.row0..rect.row1 {
-                for x in rect.col0..rect.col1 {
-                    let v = img.at(y, x);
-                    for c in 0..3 {
-                        s[c] += v[c] as f64;
+            let mean_over = |rows: std::ops::Range<usize>, cols: std::ops::Range<usize>| {
+                let mut s = [0.0f64; 3];
+                let mut n = 0.0f64;
+                for y in rows {
+                    for x in cols.clone() {
+                        let v = img.at(y, x);
+                        for c in 0..3 {
+                            s[c] += v[c] as f64;
+                        }
+                        n += 1.0;
                     }
-                    n += 1.0;
                 }
+                (s.map(|v| v / n.max(1.0)), n as usize)
+            };
+            let (mean, pixels) = mean_over(rect.row0..rect.row1, rect.col0..rect.col1);
+            let b = SE_BLOCK_PX;
+            let (br, bc) = ((rect.row1 - rect.row0) / b, (rect.col1 - rect.col0) / b);
+            let blocks: Vec<[f64; 3]> = (0..br * bc)
+                .map(|k| {
+                    let (y0, x0) = (rect.row0 + (k / bc) * b, rect.col0 + (k % bc) * b);
+                    mean_over(y0..y0 + b, x0..x0 + b).0
+                })
+                .collect();
+            let k = blocks.len() as f64;
+            let standard_error = [0, 1, 2].map(|c| {
+                if blocks.len() < 2 {
+                    return 0.0;
+                }
+                let m = blocks.iter().map(|v| v[c]).sum::<f64>() / k;
+                let ss: f64 = blocks.iter().map(|v| (v[c] - m).powi(2)).sum();
+                (ss / (k - 1.0) / k).sqrt()
+            });
+            PatchStats {
+                mean,
+                standard_error,
+                pixels,
             }
-            s.map(|v| v / n.max(1.0))
         })
         .collect()
 }

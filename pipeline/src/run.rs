@@ -6,7 +6,7 @@
 //! correction fitted to the chart's D65 sRGB targets, sRGB) → display (Eq. 8), then metrics:
 //! per-patch SNR, ΔE76/ΔE2000 between desired and rendered sRGB, and figures.
 use crate::chain::{shot_scene, wavelength_grid};
-use crate::color_eval::{self, patch_means};
+use crate::color_eval;
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure, SimulationFile};
 use crate::error::CliError;
 use crate::honest_color::{self, CaptureStats, WbMethod};
@@ -899,7 +899,8 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         ));
         // ΔE between desired (D65 sRGB targets) and rendered (output codes decoded), paper Figs. 5–6
         let rendered_lin = camsim_isp::from_srgb8(&rendered8, rgb.rows, rgb.cols);
-        let rendered_means = patch_means(&rendered_lin, layout);
+        let rendered_stats = color_eval::patch_stats(&rendered_lin, layout);
+        let rendered_means: Vec<[f64; 3]> = rendered_stats.iter().map(|p| p.mean).collect();
         let de = color_eval::patch_delta_e(&targets, &rendered_means)?;
         let (de2000, s2000) = (&de.de2000, &de.stats2000);
         report["delta_e_2000"] = de.json_2000();
@@ -958,7 +959,14 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
             "srgb_scatter.png",
             "Desired (D65 targets) vs rendered sRGB values (paper Fig. 5)",
         ));
-        report["patches"] = json!((0..24).map(|i| json!({"desired_linear_srgb": targets[i], "rendered_linear_srgb": rendered_means[i]})).collect::<Vec<_>>());
+        report["patches"] = json!((0..24)
+            .map(|i| json!({
+                "desired_linear_srgb": targets[i],
+                "rendered_linear_srgb": rendered_means[i],
+                "rendered_linear_srgb_standard_error": rendered_stats[i].standard_error,
+                "pixels": rendered_stats[i].pixels,
+            }))
+            .collect::<Vec<_>>());
     }
     bar.inc(1);
 
