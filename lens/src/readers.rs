@@ -332,8 +332,8 @@ struct ZSurf {
 /// `CURV` (curvature, mm⁻¹), `DISZ` (thickness, `INFINITY` allowed for the object), `GLAS`
 /// (catalogue name, or `___BLANK` with n_d, V_d in fields 4–5 = the model glass), `DIAM`
 /// (semi-diameter), `CONI`, `PARM` 2…8 (even-asphere r⁴…r¹⁶ coefficients; `PARM 1`, the r²
-/// term, must be 0), `TYPE ODDASPHE` (odd asphere: `PARM k` = β_k of r^k, k = 1, 2, …;
-/// Zemax's classic surface has k ≤ 8, later versions more, every `PARM` given is read), `STOP`; the aperture lines `ENPD` (EPD), `FNUM` (image-space F/# at
+/// term, must be 0), `TYPE ODDASPHE` (odd asphere: `PARM k` = β_k of r^k; every `PARM k`
+/// given, k = 1…240, is read), `STOP`; the aperture lines `ENPD` (EPD), `FNUM` (image-space F/# at
 /// infinity), `OBNA` (object-space NA, finite objects) and `FLOA` (float by stop size: the
 /// stop's `DIAM` is filled); `FTYP` (field type 0 = angle, 1 = object height, 2 = paraxial
 /// image height, 3 = real image height, used as paraxial; number of fields; number of
