@@ -169,7 +169,10 @@ fn uncropped_image_key_gives_isetcams_blurred_ring_around_a_small_scene() {
     // (OTF(0) = 1), which the grid holds whole: the irradiance's luminous power equals the
     // unblurred one (a one-sample PSF on the same band path: the band image's luminance
     // differs from the linear-model scene's by ~1e-3, issue 17 §1).
-    assert!((p_on / p_delta - 1.0).abs() < 1e-5, "power {p_on} vs {p_delta}");
+    assert!(
+        (p_on / p_delta - 1.0).abs() < 1e-5,
+        "power {p_on} vs {p_delta}"
+    );
     let (s_on, s_none) = (on.iter().sum::<f64>(), none.iter().sum::<f64>());
     eprintln!("Σ rates: uncropped / unblurred = {:.6}", s_on / s_none);
 }
@@ -188,7 +191,10 @@ fn uncropped_image_key_off_is_the_default_and_refuses_non_fft_blurs() {
     for k in [0, 5] {
         // ≥ 12 µm = 8σ from the edge, beyond the PSF file's ±8 µm: zero up to FFT round-off
         let v = off[24 * N_PX + k] / plateau;
-        assert!(v.abs() < 1e-6, "pixel (24, {k}) far from the scene image: {v}");
+        assert!(
+            v.abs() < 1e-6,
+            "pixel (24, {k}) far from the scene image: {v}"
+        );
     }
     let diff = off
         .iter()

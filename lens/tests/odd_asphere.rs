@@ -103,7 +103,10 @@ fn odd_asphere_derivatives_match_finite_differences() {
     assert_eq!(n0, [0.0, 0.0, 1.0]);
     let [m, a] = s.principal_curvatures_per_mm(0.0).unwrap();
     let want = s.curvature_per_mm + 2.0 * s.odd_aspheric_coeffs[1];
-    assert!((m - want).abs() < 1e-12 && (a - want).abs() < 1e-12, "{m} {a} vs {want}");
+    assert!(
+        (m - want).abs() < 1e-12 && (a - want).abs() < 1e-12,
+        "{m} {a} vs {want}"
+    );
 }
 
 fn zmx(unit: &str, parm: &str) -> String {
@@ -153,13 +156,9 @@ fn zmx_oddasphe_parms_are_read_in_mm() {
 #[test]
 fn zmx_oddasphe_hostile_parm_is_one_clear_error() {
     let opts = ZmxOptions::default();
-    let e = read_zmx(
-        zmx("MM", "  PARM 100000000 1\n").as_bytes(),
-        "t",
-        &opts,
-    )
-    .unwrap_err()
-    .to_string();
+    let e = read_zmx(zmx("MM", "  PARM 100000000 1\n").as_bytes(), "t", &opts)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("ODDASPHE PARM 100000000") && e.contains("1…240"),
         "{e}"

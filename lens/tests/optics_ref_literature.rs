@@ -157,7 +157,11 @@ fn literature_inputs_and_glasses_match() {
             if i + 1 < s_in.len() {
                 // (abs ≤ rel × |b|: the phone lens's stop has thickness 0)
                 let t = num(&b["thickness_mm"]);
-                assert!((a.thickness_mm - t).abs() <= 1e-13 * t.abs(), "{} {i}", c.name);
+                assert!(
+                    (a.thickness_mm - t).abs() <= 1e-13 * t.abs(),
+                    "{} {i}",
+                    c.name
+                );
             }
             assert_eq!(i == c.lens.stop_index, b["stop"].as_bool().unwrap_or(false));
             let conic = b["conic"].as_f64().unwrap_or(0.0);
@@ -174,7 +178,12 @@ fn literature_inputs_and_glasses_match() {
                 // the (n_d, V_d) model glass: both backends were given camsim's Cauchy law
                 (Medium::Glass(g), None) if m["glass"].is_null() => {
                     let (nd, vd) = (num(&m["nd"]), num(&m["vd"]));
-                    assert_eq!(c.input["model_glass"].as_str(), Some("cauchy"), "{}", c.name);
+                    assert_eq!(
+                        c.input["model_glass"].as_str(),
+                        Some("cauchy"),
+                        "{}",
+                        c.name
+                    );
                     // ref_lens.py keys a glass without a name by Python's str() of its dict
                     let key = format!("{{'nd': {nd}, 'vd': {vd}}}");
                     for be in ["optiland", "rayoptics"] {

@@ -27,7 +27,11 @@ pub fn centred_window(n: usize, extent_samples: f64) -> (usize, usize) {
 }
 
 /// Copy rows `r0..r1`, columns `c0..c1` of every plane.
-fn window(img: &SpectralImage, (r0, r1): (usize, usize), (c0, c1): (usize, usize)) -> SpectralImage {
+fn window(
+    img: &SpectralImage,
+    (r0, r1): (usize, usize),
+    (c0, c1): (usize, usize),
+) -> SpectralImage {
     let (nr, nc) = (r1 - r0, c1 - c0);
     let planes = img
         .planes
