@@ -27,8 +27,8 @@
 //!   and optiland's misses n_d itself by up to 3.8e-4), and builds the odd aspheres as
 //!   optiland `odd_asphere` and rayoptics `RadialPolynomial` surfaces. With the same inputs the
 //!   two tools agree with each other as closely as with camsim (paraxial data to 1e-9, chief
-//!   rays to ~3e-7 mm); they differ only in the exit pupil position optiland reports, which no
-//!   test uses.
+//!   rays to ~3e-7 mm); their exit-pupil distances differ by exactly the BFL (Optiland measures
+//!   from the image plane, rayoptics from the last surface), which no test uses.
 //!
 //! Which backend each quantity is tested against (the reasons are those of
 //! optics_ref_zmx.rs): first order, chief rays and distortion against both; lateral colour
