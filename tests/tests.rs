@@ -20,6 +20,7 @@ mod run;
 mod run_cfa;
 mod statistics;
 mod study;
+mod uncropped_image;
 mod util;
 mod validate;
 mod world;

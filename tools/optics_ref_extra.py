@@ -32,9 +32,12 @@ same packages (Optiland, rayoptics) through their public APIs. ref_lens.py is im
       ref_lens.py itself, both backends, with even aspheres built in optiland AND rayoptics, and
       the glasses listed in INPUT's "rayoptics_glass_from_optiland" (absent from opticalglass,
       where rayoptics would silently build air) given to rayoptics as optiland's material of
-      that name. The output gains a "patches" entry listing what was applied.
+      that name; odd aspheres ("odd_aspheric_coeffs") in both; with "model_glass": "cauchy",
+      camsim's (nd, Vd) Cauchy model glass in both. The output gains a "patches" entry listing
+      what was applied.
 
   optics_ref_extra.py mtf INPUT.json -o OUT.json [--opd-grid 512] [--optiland-aiming paraxial]
+      (an INPUT with "ref_lens_runner": "patched" gets the patches of `patched` first)
       On-axis diffraction MTF at the primary wavelength of a strongly aberrated lens from
       optiland's OPD map on an n x n pupil grid (default 512, fine enough for ~20 waves p-v),
       through ref_lens.py's mtf_from_opd, at three image planes: the paraxial focus, the RMS
@@ -294,30 +297,56 @@ def asphere(lens_json, out, extra_args):
         f.write(json.dumps(doc, indent=1) + "\n")
 
 
-def patched(lens_json, out, extra_args):
-    """ref_lens.py's main on LENS_JSON, both backends, with what ref_lens.py cannot express
-    patched into the lenses it builds (after each backend's constructor, before any analysis):
-      * surfaces with "conic" / "aspheric_coeffs": optiland "even_asphere" surfaces (as
-        `asphere`) and rayoptics EvenPolynomial profiles (coefs [0, A4, A6, ...]: its list
-        starts at r^2, like optiland's);
-      * glasses named in the input's "rayoptics_glass_from_optiland" (absent from rayoptics'
-        opticalglass catalogue, which then silently builds AIR): rayoptics gets a medium whose
-        n(lambda) is optiland's material of that name (the refractiveindex.info data that camsim
-        embeds), so both backends trace the same glass.
-    Neither patch changes the paraxial data of a lens with no r^2 term, but each backend
-    re-solves its paraxial focus afterwards."""
-    with open(lens_json) as f:
-        lens = json.load(f)
+def cauchy_nd_vd(nd, vd):
+    """(A, B) of n(lambda) = A + B / lambda^2 (lambda in um) with n(d) = nd and
+    n(F) - n(C) = (nd - 1) / vd: camsim's (nd, Vd) model glass (camsim_lens::glass)."""
+    lf, ld, lc = 0.4861327, 0.5875618, 0.6562725
+    b = (nd - 1.0) / vd / (1.0 / lf**2 - 1.0 / lc**2)
+    return nd - b / ld**2, b
+
+
+def install_patches(lens):
+    """Patch optiland's Optic and ref_lens.py's RayopticsBackend for LENS (see `patched`);
+    returns (undo, record)."""
     asph = {}
     for i, s in enumerate(lens["surfaces"], start=1):
         k = float(s.get("conic", 0.0))
         a = [float(x) for x in s.get("aspheric_coeffs", [])]
-        if k != 0.0 or any(x != 0.0 for x in a):
-            asph[i] = (k, a)
+        b = [float(x) for x in s.get("odd_aspheric_coeffs", [])]
+        if b:
+            # one r^1, r^2, ... list: the odd-asphere terms plus any even A4, A6, ... (r^(2m+4))
+            n = max(len(b), 2 * len(a) + 2)
+            full = b + [0.0] * (n - len(b))
+            for m, x in enumerate(a):
+                full[2 * m + 3] += x
+            asph[i] = ("odd", k, full)
+        elif k != 0.0 or any(x != 0.0 for x in a):
+            asph[i] = ("even", k, a)
     ro_glass = set(lens.get("rayoptics_glass_from_optiland", []))
+    cauchy = {}
+    if lens.get("model_glass") == "cauchy":
+        for i, s in enumerate(lens["surfaces"], start=1):
+            m = s.get("material", "air")
+            if isinstance(m, dict) and "vd" in m and "glass" not in m:
+                cauchy[i] = (float(m["nd"]), float(m["vd"]))
     import optiland.optic as optic_mod
+    import optiland.backend as obe
+    from optiland.materials import IdealMaterial
     base_optic = optic_mod.Optic
     base_ro = R.RayopticsBackend
+
+    class CauchyMaterial(IdealMaterial):
+        """optiland material n = A + B / lambda^2 (lambda in um), k = 0."""
+        def __init__(self, nd, vd):
+            super().__init__(n=nd)
+            self.cauchy = cauchy_nd_vd(nd, vd)
+
+        def _cache_state(self):
+            return self._state_key((obe.array(list(self.cauchy)),))
+
+        def _calculate_n(self, wavelength, **kwargs):
+            a, b = self.cauchy
+            return a + b / obe.asarray(wavelength) ** 2
 
     class AsphericOptic(base_optic):
         def __init__(self, *args, **kw):
@@ -326,9 +355,14 @@ def patched(lens_json, out, extra_args):
 
             def add_asph(*a, index=None, **k):
                 if index in asph:
-                    conic, coeffs = asph[index]
-                    k.update(surface_type="even_asphere", conic=conic,
-                             coefficients=[0.0] + coeffs)
+                    kind, conic, coeffs = asph[index]
+                    if kind == "odd":
+                        k.update(surface_type="odd_asphere", conic=conic, coefficients=coeffs)
+                    else:
+                        k.update(surface_type="even_asphere", conic=conic,
+                                 coefficients=[0.0] + coeffs)
+                if index in cauchy:
+                    k["material"] = CauchyMaterial(*cauchy[index])
                 return add(*a, index=index, **k)
             self.surfaces.add = add_asph
 
@@ -351,24 +385,85 @@ def patched(lens_json, out, extra_args):
         def meas_rindex(self, wv_nm):
             return self.rindex(wv_nm)
 
+    class CauchyMedium:
+        """A rayoptics medium n = A + B / lambda^2 (lambda in um) from (nd, vd)."""
+        def __init__(self, nd, vd):
+            self.label = f"{nd}:{vd} cauchy"
+            self.cauchy = cauchy_nd_vd(nd, vd)
+
+        def name(self):
+            return self.label
+
+        def catalog_name(self):
+            return "cauchy"
+
+        def rindex(self, wv_nm):
+            a, b = self.cauchy
+            return a + b / (float(wv_nm) / 1000.0) ** 2
+
+        def meas_rindex(self, wv_nm):
+            return self.rindex(wv_nm)
+
     class PatchedRayoptics(base_ro):
         def __init__(self, lens, clip=False):
             super().__init__(lens, clip)
-            from rayoptics.elem.profiles import EvenPolynomial
+            from rayoptics.elem.profiles import EvenPolynomial, RadialPolynomial
             sm = self.opm["seq_model"]
             for i, s in enumerate(lens["surfaces"], start=1):
                 m = s.get("material", "air")
                 if isinstance(m, dict) and m.get("glass") in ro_glass:
                     sm.gaps[i].medium = OptilandMedium(m["glass"],
                                                        m.get("catalog", "schott").split("/")[0])
-            for i, (k, a) in asph.items():
+                if i in cauchy:
+                    sm.gaps[i].medium = CauchyMedium(*cauchy[i])
+            for i, (kind, k, a) in asph.items():
                 ifc = sm.ifcs[i]
-                ifc.profile = EvenPolynomial(c=ifc.profile.cv, cc=k, coefs=[0.0] + a)
+                if kind == "odd":
+                    ifc.profile = RadialPolynomial(c=ifc.profile.cv, cc=k, coefs=list(a))
+                else:
+                    ifc.profile = EvenPolynomial(c=ifc.profile.cv, cc=k, coefs=[0.0] + a)
             self.opm.update_model()
             self.solve_paraxial_focus()
 
     optic_mod.Optic = AsphericOptic
     R.RayopticsBackend = PatchedRayoptics
+
+    def undo():
+        optic_mod.Optic = base_optic
+        R.RayopticsBackend = base_ro
+    record = {"aspheres": [{"surface": i, "kind": kind, "conic": k,
+                            ("odd_aspheric_coeffs" if kind == "odd" else "aspheric_coeffs"): a}
+                           for i, (kind, k, a) in sorted(asph.items())],
+              "rayoptics_glass_from_optiland": sorted(ro_glass)}
+    if cauchy:
+        record["model_glass_cauchy"] = [
+            {"surface": i, "nd": nd, "vd": vd, "A": cauchy_nd_vd(nd, vd)[0],
+             "B_um2": cauchy_nd_vd(nd, vd)[1]} for i, (nd, vd) in sorted(cauchy.items())]
+    return undo, record
+
+
+def patched(lens_json, out, extra_args):
+    """ref_lens.py's main on LENS_JSON, both backends, with what ref_lens.py cannot express
+    patched into the lenses it builds (after each backend's constructor, before any analysis):
+      * surfaces with "conic" / "aspheric_coeffs": optiland "even_asphere" surfaces (as
+        `asphere`) and rayoptics EvenPolynomial profiles (coefs [0, A4, A6, ...]: its list
+        starts at r^2, like optiland's);
+      * surfaces with "odd_aspheric_coeffs" ([b1, b2, ...], sag terms b_i r^i, the Zemax
+        ODDASPHE convention): optiland "odd_asphere" surfaces (coefficients[0] is r^1) and
+        rayoptics RadialPolynomial profiles (coefs from r^1, cc = conic);
+      * glasses named in the input's "rayoptics_glass_from_optiland" (absent from rayoptics'
+        opticalglass catalogue, which then silently builds AIR): rayoptics gets a medium whose
+        n(lambda) is optiland's material of that name (the refractiveindex.info data that camsim
+        embeds), so both backends trace the same glass;
+      * with "model_glass": "cauchy", every {"nd", "vd"} material is camsim's model glass
+        n = A + B / lambda^2 with n(d) = nd, n(F) - n(C) = (nd - 1)/vd in both backends
+        (ref_lens.py alone would build optiland's AbbeMaterial and opticalglass' ModelGlass,
+        two other dispersion models).
+    Neither patch changes the paraxial data of a lens with no r^2 term, but each backend
+    re-solves its paraxial focus afterwards."""
+    with open(lens_json) as f:
+        lens = json.load(f)
+    undo, record = install_patches(lens)
     try:
         argv = sys.argv
         sys.argv = ["ref_lens.py", lens_json, "-o", out] + extra_args
@@ -378,14 +473,10 @@ def patched(lens_json, out, extra_args):
             R.main()
     finally:
         sys.argv = argv
-        optic_mod.Optic = base_optic
-        R.RayopticsBackend = base_ro
+        undo()
     with open(out) as f:
         doc = json.load(f)
-    doc["patches"] = {"runner": "tools/optics_ref_extra.py patched",
-                      "aspheres": [{"surface": i, "conic": k, "aspheric_coeffs": a}
-                                   for i, (k, a) in sorted(asph.items())],
-                      "rayoptics_glass_from_optiland": sorted(ro_glass)}
+    doc["patches"] = {"runner": "tools/optics_ref_extra.py patched", **record}
     with open(out, "w") as f:
         f.write(json.dumps(doc, indent=1) + "\n")
 
@@ -479,8 +570,16 @@ def main():
         res = field_curvature(lens)
     elif a.what == "mtf":
         lens = R.load_lens(a.lens_json)
-        res = mtf_focus(lens, a.opd_grid, a.optiland_aiming)
+        # an input run through `patched` gets the same patches (aspheres, model glasses)
+        patched_input = lens.get("ref_lens_runner") == "patched"
+        undo, record = install_patches(lens) if patched_input else (lambda: None, None)
+        try:
+            res = mtf_focus(lens, a.opd_grid, a.optiland_aiming)
+        finally:
+            undo()
         res["optiland_aiming"] = a.optiland_aiming
+        if patched_input and (record["aspheres"] or record.get("model_glass_cauchy")):
+            res["patches"] = {"runner": "tools/optics_ref_extra.py mtf", **record}
     else:
         with open(a.lens_json) as f:
             lens = json.load(f)

@@ -252,6 +252,7 @@ fn intersect_local(s: &Surface, p: Vec3, d: Vec3) -> Option<(f64, Vec3)> {
     let mut m = s.clone();
     m.curvature_per_mm = -s.curvature_per_mm;
     m.aspheric_coeffs = s.aspheric_coeffs.iter().map(|a| -a).collect();
+    m.odd_aspheric_coeffs = s.odd_aspheric_coeffs.iter().map(|b| -b).collect();
     let (t, q) = intersect(
         &m,
         0.0,

@@ -8,7 +8,7 @@
 //!   (n_d, V_d) model;
 //! * [`paraxial`]: y–nu trace (Smith, "Modern Optical Engineering"): EFL, BFL, FFL, principal
 //!   planes, pupils, F/#, working F/#, focusing;
-//! * [`trace`]: exact rays in f64 through spheres, conics and even aspheres, vector Snell law,
+//! * [`trace`]: exact rays in f64 through spheres, conics, even and odd aspheres, vector Snell law,
 //!   TIR, vignetting, optical path length, chief-ray aiming at the stop centre;
 //! * [`batch`]: the same exact trace for many rays at once (structure of arrays, vectorised,
 //!   rayon), used by the analyses and the field model;
@@ -63,7 +63,9 @@
 //! * `semi_diameter_mm` (optional) is the clear semi-aperture, used for vignetting when tracing
 //!   with [`trace::Clipping::SemiDiameters`].
 //! * `conic` (k, default 0) and `aspheric_coeffs` (A4, A6, …, default none) give the even
-//!   asphere sag z = c r²/(1 + √(1 − (1+k)c²r²)) + A4 r⁴ + A6 r⁶ + ….
+//!   asphere sag z = c r²/(1 + √(1 − (1+k)c²r²)) + A4 r⁴ + A6 r⁶ + …; `odd_aspheric_coeffs`
+//!   (β1, β2, β3, …, default none) add the Zemax odd-asphere terms β1 r + β2 r² + β3 r³ + …
+//!   (`TYPE ODDASPHE` in a `.zmx`).
 //! * `"material": "mirror"` makes a surface a mirror (light goes back towards −z, so the
 //!   following thicknesses are negative); `"coordinate_breaks": [{"surface": j,
 //!   "decenter_y_mm": …, "tilt_x_deg": …}]` makes flat surface j a decentre/tilt of the local

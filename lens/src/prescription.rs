@@ -61,6 +61,10 @@ pub struct SurfaceFile {
     /// Even-asphere coefficients A4, A6, A8, … (sag terms A4·r⁴ + A6·r⁶ + …, r in mm).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub aspheric_coeffs: Vec<f64>,
+    /// Odd-asphere (Zemax `ODDASPHE`) coefficients β1, β2, β3, … (sag terms β1·r + β2·r² +
+    /// β3·r³ + …, r in mm), added to the conic and the even terms.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub odd_aspheric_coeffs: Vec<f64>,
     /// This surface is the aperture stop.
     #[serde(default, skip_serializing_if = "is_false")]
     pub stop: bool,
@@ -176,11 +180,15 @@ pub struct Surface {
     pub conic: f64,
     /// Even-asphere coefficients A4, A6, ….
     pub aspheric_coeffs: Vec<f64>,
+    /// Odd-asphere coefficients β1, β2, β3, … of r¹, r², r³, … (Zemax `ODDASPHE`).
+    pub odd_aspheric_coeffs: Vec<f64>,
 }
 
 impl Surface {
     /// Sag z(r²) of the surface: c r²/(1 + √(1 − (1+k)c²r²)) + Σ A_{2i+4} r^{2i+4}
-    /// (standard even asphere, e.g. Smith §13). `None` outside the conic's domain.
+    /// (standard even asphere, e.g. Smith §13) + Σ β_i r^i, i = 1, 2, … (the Zemax odd
+    /// asphere, `ODDASPHE`, OpticStudio manual "Odd Asphere"; Optiland `OddAsphere`).
+    /// `None` outside the conic's domain.
     pub fn sag_mm(&self, r2: f64) -> Option<f64> {
         let c = self.curvature_per_mm;
         let arg = 1.0 - (1.0 + self.conic) * c * c * r2;
@@ -193,10 +201,20 @@ impl Surface {
             z += a * p;
             p *= r2;
         }
+        if !self.odd_aspheric_coeffs.is_empty() {
+            let r = r2.sqrt();
+            let mut p = r;
+            for b in &self.odd_aspheric_coeffs {
+                z += b * p;
+                p *= r;
+            }
+        }
         Some(z)
     }
 
     /// dz/d(r²) of the sag (so ∂z/∂x = 2x·dz/d(r²)). `None` outside the conic's domain.
+    /// An odd-asphere β1·r term (a cone at the vertex) contributes β1/(2r), which is infinite
+    /// on the axis: there it is left out (the axial normal, the limit of the symmetric cone).
     pub fn dsag_dr2(&self, r2: f64) -> Option<f64> {
         let c = self.curvature_per_mm;
         let arg = 1.0 - (1.0 + self.conic) * c * c * r2;
@@ -211,11 +229,24 @@ impl Surface {
             d += a * m * p;
             p *= r2;
         }
+        // β_i r^i = β_i (r²)^(i/2): d/d(r²) = (i/2) β_i r^(i−2).
+        if !self.odd_aspheric_coeffs.is_empty() {
+            let r = r2.sqrt();
+            for (k, b) in self.odd_aspheric_coeffs.iter().enumerate() {
+                let i = (k + 1) as i32;
+                if *b == 0.0 || (i == 1 && r == 0.0) {
+                    continue;
+                }
+                d += b * 0.5 * i as f64 * r.powi(i - 2);
+            }
+        }
         Some(d)
     }
 
     /// d²z/d(r²)² of the sag (so ∂²z/∂y² on the meridian = 2·dz/d(r²) + 4y²·d²z/d(r²)²).
-    /// `None` outside the conic's domain.
+    /// `None` outside the conic's domain. Odd-asphere terms β1·r and β3·r³ have a d²z/d(r²)²
+    /// that is infinite on the axis (their d²z/dr² is finite: 0 and 6β3·r); there they are
+    /// left out, which keeps 2·dz/d(r²) + 4r²·d²z/d(r²)² right at r = 0.
     pub fn d2sag_dr2(&self, r2: f64) -> Option<f64> {
         let c = self.curvature_per_mm;
         let k1 = 1.0 + self.conic;
@@ -230,6 +261,18 @@ impl Surface {
             let m = (i + 2) as f64; // term a·(r²)^m
             d += a * m * (m - 1.0) * p;
             p *= r2;
+        }
+        // d²/d(r²)² of β_i (r²)^(i/2) = (i/2)(i/2 − 1) β_i r^(i−4).
+        if !self.odd_aspheric_coeffs.is_empty() {
+            let r = r2.sqrt();
+            for (k, b) in self.odd_aspheric_coeffs.iter().enumerate() {
+                let i = (k + 1) as i32;
+                if *b == 0.0 || i == 2 || (i < 4 && r == 0.0) {
+                    continue;
+                }
+                let h = 0.5 * i as f64;
+                d += b * h * (h - 1.0) * r.powi(i - 4);
+            }
         }
         Some(d)
     }
@@ -252,6 +295,7 @@ impl Surface {
     /// True if the surface is a sphere or plane (closed-form intersection suffices).
     pub fn is_conic_only(&self) -> bool {
         self.aspheric_coeffs.iter().all(|a| *a == 0.0)
+            && self.odd_aspheric_coeffs.iter().all(|b| *b == 0.0)
     }
 }
 
@@ -379,9 +423,12 @@ impl LensPrescription {
                     )));
                 }
             }
-            if !s.conic.is_finite() || s.aspheric_coeffs.iter().any(|a| !a.is_finite()) {
+            if !s.conic.is_finite()
+                || s.aspheric_coeffs.iter().any(|a| !a.is_finite())
+                || s.odd_aspheric_coeffs.iter().any(|b| !b.is_finite())
+            {
                 return Err(bad(format!(
-                    "surface {i}: conic / aspheric_coeffs must be finite"
+                    "surface {i}: conic / aspheric_coeffs / odd_aspheric_coeffs must be finite"
                 )));
             }
             let is_break = f.coordinate_breaks.iter().any(|c| c.surface == i);
@@ -416,7 +463,10 @@ impl LensPrescription {
                 )));
             }
             if is_break
-                && (curvature_per_mm != 0.0 || s.conic != 0.0 || !s.aspheric_coeffs.is_empty())
+                && (curvature_per_mm != 0.0
+                    || s.conic != 0.0
+                    || !s.aspheric_coeffs.is_empty()
+                    || !s.odd_aspheric_coeffs.is_empty())
             {
                 return Err(bad(format!(
                     "surface {i}: a coordinate break must be flat (radius_mm null, no conic or \
@@ -432,6 +482,7 @@ impl LensPrescription {
                 semi_diameter_mm: s.semi_diameter_mm,
                 conic: s.conic,
                 aspheric_coeffs: s.aspheric_coeffs.clone(),
+                odd_aspheric_coeffs: s.odd_aspheric_coeffs.clone(),
             });
         }
         let stop_index = stop.ok_or_else(|| bad("no surface is marked \"stop\": true".into()))?;
@@ -547,6 +598,7 @@ impl LensPrescription {
                     semi_diameter_mm: s.semi_diameter_mm,
                     conic: s.conic,
                     aspheric_coeffs: s.aspheric_coeffs.clone(),
+                    odd_aspheric_coeffs: s.odd_aspheric_coeffs.clone(),
                     stop: i == self.stop_index,
                 })
                 .collect(),

@@ -188,6 +188,7 @@ impl SensorSideLens {
             let mut m = s.clone();
             m.curvature_per_mm = -s.curvature_per_mm;
             m.aspheric_coeffs = s.aspheric_coeffs.iter().map(|a| -a).collect();
+            m.odd_aspheric_coeffs = s.odd_aspheric_coeffs.iter().map(|b| -b).collect();
             surfaces.push(MirroredSurface {
                 surface: m,
                 z_mm: image_z_mm - z[j],

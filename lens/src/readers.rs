@@ -77,6 +77,7 @@ pub fn read_iset_dat(text: &str, name: &str) -> Result<PrescriptionFile, LensErr
             semi_diameter_mm: Some(ap / 2.0),
             conic: 0.0,
             aspheric_coeffs: vec![],
+            odd_aspheric_coeffs: vec![],
             stop,
         });
     }
@@ -331,7 +332,8 @@ struct ZSurf {
 /// `CURV` (curvature, mm⁻¹), `DISZ` (thickness, `INFINITY` allowed for the object), `GLAS`
 /// (catalogue name, or `___BLANK` with n_d, V_d in fields 4–5 = the model glass), `DIAM`
 /// (semi-diameter), `CONI`, `PARM` 2…8 (even-asphere r⁴…r¹⁶ coefficients; `PARM 1`, the r²
-/// term, must be 0), `STOP`; the aperture lines `ENPD` (EPD), `FNUM` (image-space F/# at
+/// term, must be 0), `TYPE ODDASPHE` (odd asphere: `PARM k` = β_k of r^k; every `PARM k`
+/// given, k = 1…240, is read), `STOP`; the aperture lines `ENPD` (EPD), `FNUM` (image-space F/# at
 /// infinity), `OBNA` (object-space NA, finite objects) and `FLOA` (float by stop size: the
 /// stop's `DIAM` is filled); `FTYP` (field type 0 = angle, 1 = object height, 2 = paraxial
 /// image height, 3 = real image height, used as paraxial; number of fields; number of
@@ -647,19 +649,46 @@ pub fn read_zmx(
                 semi_diameter_mm: None,
                 conic: 0.0,
                 aspheric_coeffs: Vec::new(),
+                odd_aspheric_coeffs: Vec::new(),
                 stop: false,
             });
             continue;
         }
-        if kind != "STANDARD" && kind != "EVENASPH" {
+        // Zemax writes the odd asphere's type as ODDASPHE (8 characters).
+        let odd = kind == "ODDASPHE" || kind == "ODDASPH";
+        if kind != "STANDARD" && kind != "EVENASPH" && !odd {
             return Err(err(
                 s.line,
                 format!(
                     "surface {}: surface type {} is not supported (STANDARD, EVENASPH, \
-                     COORDBRK only)",
+                     ODDASPHE, COORDBRK only)",
                     s.number, s.kind
                 ),
             ));
+        }
+        let mut odd_coeffs = Vec::new();
+        if odd {
+            // PARM k multiplies r^k (k ≥ 1); unit scaling: β·r^k with r in file units.
+            let n = s.parm.iter().map(|&(k, _)| k).max().unwrap_or(0);
+            if n > 240 {
+                return Err(err(
+                    s.line,
+                    format!(
+                        "surface {}: ODDASPHE PARM {n}: expected a term index 1…240 (r^k)",
+                        s.number
+                    ),
+                ));
+            }
+            odd_coeffs = vec![0.0f64; n];
+            for &(k, v) in &s.parm {
+                if k == 0 {
+                    continue;
+                }
+                odd_coeffs[k - 1] = v * unit_scale.powi(1 - k as i32);
+            }
+            while odd_coeffs.last() == Some(&0.0) {
+                odd_coeffs.pop();
+            }
         }
         let mut coeffs = Vec::new();
         if kind == "EVENASPH" {
@@ -703,6 +732,7 @@ pub fn read_zmx(
             semi_diameter_mm: s.diam.filter(|d| *d > 0.0).map(|d| d * unit_scale),
             conic: s.conic,
             aspheric_coeffs: coeffs,
+            odd_aspheric_coeffs: odd_coeffs,
             stop: s.stop,
         });
     }

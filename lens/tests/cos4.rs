@@ -33,6 +33,7 @@ fn surf(radius_mm: Option<f64>, thickness_mm: f64, n: Option<f64>, sd: Option<f6
         semi_diameter_mm: sd,
         conic: 0.0,
         aspheric_coeffs: vec![],
+        odd_aspheric_coeffs: vec![],
         stop: false,
     }
 }

@@ -18,6 +18,7 @@ fn surf(radius_mm: Option<f64>, thickness_mm: f64, nd: Option<f64>) -> SurfaceFi
         semi_diameter_mm: None,
         conic: 0.0,
         aspheric_coeffs: vec![],
+        odd_aspheric_coeffs: vec![],
         stop: false,
     }
 }

@@ -42,6 +42,7 @@ fn perfect_lens(epd_mm: f64) -> LensPrescription {
             semi_diameter_mm: None,
             conic: -1.0 / (n * n),
             aspheric_coeffs: vec![],
+            odd_aspheric_coeffs: vec![],
             stop: true,
         }],
         object_distance_mm: None,
@@ -135,6 +136,7 @@ fn off_axis_huygens_psf_of_a_concentric_lens_is_the_projected_airy_pattern() {
                     semi_diameter_mm: None,
                     conic: 0.0,
                     aspheric_coeffs: vec![],
+                    odd_aspheric_coeffs: vec![],
                     stop: false,
                 },
                 SurfaceFile {
@@ -144,6 +146,7 @@ fn off_axis_huygens_psf_of_a_concentric_lens_is_the_projected_airy_pattern() {
                     semi_diameter_mm: None,
                     conic: 0.0,
                     aspheric_coeffs: vec![],
+                    odd_aspheric_coeffs: vec![],
                     stop: true,
                 },
             ],

@@ -63,6 +63,7 @@ fn reversed(l: &LensPrescription) -> (LensPrescription, f64) {
             semi_diameter_mm: s.semi_diameter_mm,
             conic: s.conic,
             aspheric_coeffs: s.aspheric_coeffs.iter().map(|a| -a).collect(),
+            odd_aspheric_coeffs: s.odd_aspheric_coeffs.iter().map(|b| -b).collect(),
         });
     }
     let r = LensPrescription {

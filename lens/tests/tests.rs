@@ -16,6 +16,7 @@ mod huygens;
 mod iset_json;
 mod lenses_dir;
 mod mtf_sampling;
+mod odd_asphere;
 mod optics_ref;
 mod optics_ref_finite;
 mod optics_ref_literature;

@@ -35,6 +35,7 @@ mod formulas;
 mod kernels;
 mod lens_blur;
 mod psf_set;
+mod uncropped;
 mod wavefront;
 
 pub use band_split::{split_into_bands, BandSplit};
@@ -53,6 +54,7 @@ pub use formulas::{
 pub use kernels::{gaussian_kernel_1d, pillbox_psf, wavefront_psf, SampledPsf};
 pub use lens_blur::{LensBlur, LensBlurOptions, LensFocus};
 pub use psf_set::PsfSet;
+pub use uncropped::{centred_window, form_image_uncropped_window};
 pub use wavefront::{
     defocus_um_from_diopters, human_lca_diopters, polygon_area, zernike_osa, zernike_osa_nm,
     ChromaticDefocus, PupilField, WavefrontPupil, ZernikeTerm,

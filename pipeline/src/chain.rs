@@ -5,7 +5,7 @@
 //! | step | function | stage call |
 //! |---|---|---|
 //! | scene radiance of a shot (field of view, distance, illuminant swap) | [`shot_scene`] | [`camsim_core::scene_view::render_target_in_view`], [`camsim_core::illuminant::swap_illuminant`] |
-//! | optics | [`shot_irradiance`], [`irradiance_of`] | [`camsim_optics::form_image`] |
+//! | optics | [`shot_irradiance`], [`irradiance_of`], [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
 //! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |
 //! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`] | [`camsim_sensor::time_averaged_rate`] |
@@ -24,14 +24,49 @@ pub use crate::simulate::{
 };
 
 /// The optics stage of the set's camera applied to a scene that does not come from a shot's
-/// target (a glTF render, an image): [`camsim_optics::form_image`] with the camera's optics.
+/// target (a glTF render, an image): [`optical_image`] with the sensor as the scene image.
 pub fn irradiance_of(
     set: &CaptureSet,
     scene: &SceneRadiance,
     grid: &WavelengthGrid,
 ) -> Result<SensorIrradiance, CliError> {
-    camsim_optics::form_image(&set.camera.optics, scene, grid)
-        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+    optical_image(set, scene, grid, None)
+}
+
+/// The optics stage: scene radiance (on the simulation grid: the sensor plus its margin) →
+/// sensor irradiance on the same grid.
+///
+/// * Default (`optics.uncropped_optical_image` false, the spec's optics):
+///   [`camsim_optics::form_image`] of the whole grid.
+/// * `optics.uncropped_optical_image: true` (ISETCam `oiCompute` with `crop = false`, issue 17
+///   §4): the scene image is the part of the grid the target covers, `extent_m` = (W, H) in
+///   the image plane (a target with `fov_deg`; `None`: the target fills the sensor, the scene
+///   image is the sensor), widened to whole samples ([`camsim_optics::centred_window`]). Its
+///   optical image is formed ISETCam's way — zero-padded by round(n/8) each side, FFT blur,
+///   the padded ring kept — and placed back on the grid
+///   ([`camsim_optics::form_image_uncropped_window`]), so a sensor larger than the scene
+///   image reads the blurred ring of light around it and zero beyond.
+pub fn optical_image(
+    set: &CaptureSet,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+    extent_m: Option<(f64, f64)>,
+) -> Result<SensorIrradiance, CliError> {
+    let optics = &set.camera.optics;
+    let result = if set.camera.uncropped_optical_image {
+        let s = &set.camera.sensor;
+        let (w, h) = extent_m.unwrap_or((
+            s.cols as f64 * s.pixel_pitch_m,
+            s.rows as f64 * s.pixel_pitch_m,
+        ));
+        let dx = scene.sample_pitch_m;
+        let (r0, r1) = camsim_optics::centred_window(scene.radiance.rows, h / dx);
+        let (c0, c1) = camsim_optics::centred_window(scene.radiance.cols, w / dx);
+        camsim_optics::form_image_uncropped_window(optics, scene, grid, r1 - r0, c1 - c0)
+    } else {
+        camsim_optics::form_image(optics, scene, grid)
+    };
+    result.map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
 }
 
 /// The exposure and gain of shot `shot_index`: its fixed exposure, or the auto exposure that

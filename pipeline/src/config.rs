@@ -73,6 +73,10 @@ pub struct OpticsFile {
     /// Effect block `lateral_color`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lateral_color: Option<LateralColorFile>,
+    /// Extension (ISETCam parity, issue 17 §4): keep the optical image uncropped, ISETCam's
+    /// `oiCompute` with `crop = false` (default false: the spec's optics, unchanged).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncropped_optical_image: Option<bool>,
 }
 
 /// `optics.relative_illumination`: the model name, or the object form with an extra
@@ -734,6 +738,10 @@ pub struct Camera {
     pub sensor: SensorModel,
     /// Readout timing (`sensor.readout`; default global shutter).
     pub readout: Readout,
+    /// `optics.uncropped_optical_image`: form the optical image of the scene image (the
+    /// target's extent) the ISETCam way with `crop = false`, ring of blurred light included
+    /// (`crate::chain::optical_image`). Default false.
+    pub uncropped_optical_image: bool,
 }
 
 /// A validated shot.
@@ -912,6 +920,21 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         padding: Padding::Replicate,
         effects: optics_effects_from_file(path, o, &raw.sensor)?,
     };
+    let uncropped_optical_image = o.uncropped_optical_image.unwrap_or(false);
+    if uncropped_optical_image {
+        let fft_blur = matches!(
+            optics.blur,
+            Blur::None | Blur::Diffraction | Blur::Psf(_) | Blur::Wavefront { .. } | Blur::Pupil(_)
+        );
+        check(
+            path,
+            fft_blur && optics.effects.is_empty() && optics.diffuser.is_none(),
+            "optics.uncropped_optical_image",
+            "true needs blur.kind none, diffraction, psf or wavefront, no diffuser and no effect \
+             blocks (ISETCam's FFT optical image)"
+                .to_string(),
+        )?;
+    }
     let sensor = sensor_from_file(path, &raw.sensor)?;
     let readout = readout_from_file(path, raw.sensor.readout.as_ref())?;
     Ok(Camera {
@@ -919,6 +942,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         optics,
         sensor,
         readout,
+        uncropped_optical_image,
     })
 }
 

@@ -430,6 +430,7 @@ fn check_lens_keys(v: &Value) -> Result<(), String> {
         "semi_diameter_mm",
         "conic",
         "aspheric_coeffs",
+        "odd_aspheric_coeffs",
         "stop",
     ];
     if let Some(m) = v.as_object() {

@@ -236,16 +236,7 @@ fn scene_on_grid(
             ));
         }
     }
-    let extent = world.fov_deg.map(|fov| {
-        let image_distance_m = camsim_optics::thin_lens_image_distance_m(f_m, world.distance_m);
-        let aspect = match &shot.target.target {
-            camsim_core::scene::Target::Image { radiance } => {
-                radiance.rows as f64 / radiance.cols as f64
-            }
-            _ => g.sensor_height_m / g.sensor_width_m,
-        };
-        camsim_core::scene_view::extent_in_image_plane_m(fov, aspect, image_distance_m)
-    });
+    let extent = target_extent_m(set, shot);
     let radiance = camsim_core::scene_view::render_target_in_view(&shot.target.target, g, extent)
         .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
     let mut scene = SceneRadiance {
@@ -297,8 +288,28 @@ pub fn shot_irradiance(
     grid: &WavelengthGrid,
 ) -> Result<SensorIrradiance, CliError> {
     let scene = shot_scene(set, shot_index, grid)?;
-    form_image(&set.camera.optics, &scene, grid)
-        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+    let shot = &set.shots[shot_index];
+    let extent = target_extent_m(set, shot);
+    crate::chain::optical_image(set, &scene, grid, extent)
+}
+
+/// Image-plane extent (W, H) of a shot's target with a field of view (`None`: the target
+/// fills the sensor), as [`camsim_core::scene_view::extent_in_image_plane_m`] with the optics'
+/// image distance; an image target keeps its own aspect, others the sensor's.
+fn target_extent_m(set: &CaptureSet, shot: &crate::config::Shot) -> Option<(f64, f64)> {
+    let world = &shot.target.world;
+    let f_m = set.camera.optics.focal_length_m;
+    let s = &set.camera.sensor;
+    world.fov_deg.map(|fov| {
+        let image_distance_m = camsim_optics::thin_lens_image_distance_m(f_m, world.distance_m);
+        let aspect = match &shot.target.target {
+            camsim_core::scene::Target::Image { radiance } => {
+                radiance.rows as f64 / radiance.cols as f64
+            }
+            _ => s.rows as f64 / s.cols as f64,
+        };
+        camsim_core::scene_view::extent_in_image_plane_m(fov, aspect, image_distance_m)
+    })
 }
 
 /// Mean electron rate of every pixel for one target (optics + pixel integration).
@@ -343,7 +354,10 @@ fn uniform_electron_rate(
     ) {
         return Ok(None);
     }
-    if !matches!(cam.optics.blur, Blur::None) || cam.optics.diffuser.is_some() {
+    if !matches!(cam.optics.blur, Blur::None)
+        || cam.optics.diffuser.is_some()
+        || cam.uncropped_optical_image
+    {
         return Ok(None);
     }
     // Effect blocks the fast path folds in: exposure_scale, fall-off and veiling glare
