@@ -69,7 +69,7 @@ use fft::{FftConvolver, Finish, Transfer};
 /// replicated to infinity (instead of the FFT's wrap): a border pixel's irradiance is within
 /// `FAR_TAIL_FRACTION · E_max` of blurring the replicated scene, per side of the image
 /// ([`crate::airy_edge_tail_fraction`]; issue 17 §5; docs/physics.md).
-pub const FAR_TAIL_FRACTION: f64 = 2e-4;
+pub const FAR_TAIL_FRACTION: f64 = 5e-4;
 use rayon::prelude::*;
 
 /// Off-axis relative illumination R(x).

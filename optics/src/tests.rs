@@ -417,7 +417,11 @@ fn uniform_scene_stays_uniform_with_replicate_padding() {
     uniform_blur_check(Blur::Psf(test_psf_set()), None);
 }
 
-/// A compact object far from the borders: every blur preserves the total irradiance.
+/// A compact object far from the borders: every blur preserves the total irradiance; with
+/// diffraction and replicated edges (the far-tail correction, issue 17 §5), the image keeps
+/// the total minus the Airy tail beyond its four sides — per sample `Σ_sides T(d)` minus the
+/// four quadrants `(a + b − √(a²+b²)) λN/(π³ab)` counted twice (the envelope's integrals;
+/// 0.55–0.8 % here) — within 1e-3 of the total.
 #[test]
 fn blur_conserves_energy() {
     let g = WavelengthGrid::regular(450.0, 650.0, 100.0).unwrap();
@@ -449,8 +453,40 @@ fn blur_conserves_energy() {
             } else {
                 1e-5
             };
-            for p in &e.planes {
+            for (p, &w) in e.planes.iter().zip(&g.wavelength_nm) {
                 let s: f64 = p.iter().map(|v| *v as f64).sum();
+                if blur == Blur::Diffraction && padding == Padding::Replicate {
+                    let ln = w * 1e-9 * 4.0;
+                    let quad = |a: f64, b: f64| {
+                        (a + b - (a * a + b * b).sqrt()) * ln / (PI.powi(3) * a * b)
+                    };
+                    let kept: f64 = (0..rows * cols)
+                        .map(|q| {
+                            let (i, j) = ((q / cols) as f64 + 0.5, (q % cols) as f64 + 0.5);
+                            let (t, b) = (i * 1e-6, (rows as f64 - i) * 1e-6);
+                            let (l, r) = (j * 1e-6, (cols as f64 - j) * 1e-6);
+                            let out = [t, b, l, r]
+                                .iter()
+                                .map(|&d| airy_edge_tail_fraction(d, w, 4.0))
+                                .sum::<f64>()
+                                - quad(t, l)
+                                - quad(t, r)
+                                - quad(b, l)
+                                - quad(b, r);
+                            plane[q] as f64 * (1.0 - out)
+                        })
+                        .sum::<f64>()
+                        * PI
+                        / 64.0;
+                    eprintln!(
+                        "{w} nm: kept {s:.6}, expected {kept:.6} (total {total_in:.6})"
+                    );
+                    assert!(
+                        (s - kept).abs() < 1e-3 * total_in,
+                        "{blur:?} {padding:?} {w} nm: {s} vs {kept} (total {total_in})"
+                    );
+                    continue;
+                }
                 assert!(
                     (s - total_in).abs() < tol * total_in,
                     "{blur:?} {padding:?}: {s} vs {total_in}"
@@ -936,14 +972,15 @@ fn airy_edge_tail_asymptote() {
 
 /// The ring-averaged envelope `λN/(π³r³)`: (1) the Airy PSF's energy in annuli of 4 λN at
 /// 20–100 λN (midpoint rule, 400 steps per λN) against the envelope's closed-form annulus
-/// integral `2λN/π² (1/r₀ − 1/r₁)`, within 0.5 %; (2) its half-plane integral at distance x
+/// integral `2λN/π² (1/r₀ − 1/r₁)`, within 2 % at 20 λN (measured 1.5 %), the next order of
+/// the Bessel asymptote falling as 1/r; (2) its half-plane integral at distance x
 /// (numerical, over y and then x' out to 10⁴ x with the analytic remainder) is the edge-spread
 /// tail `airy_edge_tail_fraction`.
 #[test]
 fn airy_tail_envelope_matches_ring_average() {
     let (w, n) = (650.0, 2.8);
     let ln = w * 1e-9 * n;
-    for r0_ln in [20.0, 50.0, 100.0] {
+    for (r0_ln, tol) in [(20.0, 2e-2), (50.0, 8e-3), (100.0, 4e-3)] {
         let (r0, r1) = (r0_ln * ln, (r0_ln + 4.0) * ln);
         let steps = 1600;
         let dr = (r1 - r0) / steps as f64;
@@ -963,7 +1000,7 @@ fn airy_tail_envelope_matches_ring_average() {
             .sum();
         assert_relative_eq!(env_num, env, max_relative = 1e-6);
         eprintln!("annulus at {r0_ln} λN: Airy {airy:.6e}, envelope {env:.6e}");
-        assert_relative_eq!(airy, env, max_relative = 5e-3);
+        assert_relative_eq!(airy, env, max_relative = tol);
     }
     // Half-plane x' > x: ∫ dy env = 2λN/(π³ x'²) exactly (substitution y = x' tan t); check
     // it numerically at one x', then integrate over x'.
