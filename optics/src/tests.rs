@@ -478,9 +478,7 @@ fn blur_conserves_energy() {
                         .sum::<f64>()
                         * PI
                         / 64.0;
-                    eprintln!(
-                        "{w} nm: kept {s:.6}, expected {kept:.6} (total {total_in:.6})"
-                    );
+                    eprintln!("{w} nm: kept {s:.6}, expected {kept:.6} (total {total_in:.6})");
                     assert!(
                         (s - kept).abs() < 1e-3 * total_in,
                         "{blur:?} {padding:?} {w} nm: {s} vs {kept} (total {total_in})"
