@@ -5,6 +5,9 @@
 //! optics ([`camsim_core::sample_aperture`]), bring the default sampling within 0.01 σ of a
 //! converged reference (12 cells per pixel).
 //!
+//! `edge_border_pixels_converge`: the blur margin (issue 17 §5) bounds the border pixels' error
+//! of a slanted edge against a converged reference.
+//!
 //! `pixel_area_experiment` (ignored) prints the before/after table and the blur-margin study:
 //! `cargo test --workspace --release --test tests pixel_area_experiment -- --ignored --nocapture`.
 use camsim_pipeline::config::{load_captures, CaptureSet};
@@ -194,4 +197,74 @@ fn pixel_area_experiment() {
             "margin +{k}: all rms {rms:.3} max {max:.3}; border cols rms {brms:.3} max {bmax:.3}"
         );
     }
+}
+
+/// Issue 17 §5, blur margin: the border pixels of a slanted edge (Table-1 camera, f/4, 2.2 µm,
+/// diffraction, 12×16 pixels) against the same pixels as the inner window of a sensor larger by
+/// `K = 120` px on every side (a converged reference: its window lies 120 px + its own margin
+/// inside the scene it renders). Bound: `BORDER_BOUND · E_max` (E_max the light side's
+/// electrons), from [`camsim_optics::FAR_TAIL_FRACTION`] per side (5e-4) plus the edge's slant
+/// beyond the rendered margin (`λN tan 5° / (π³ m) ≈ 3.6e-4` at m = 9 px; docs/physics.md, blur
+/// margin), and within 0.05 σ of single-frame noise. Measured: 8.6e-5 · E_max, max 0.023 σ.
+/// The margin of before (5 λN + 2 px rendered, 20 λN replicated, then the FFT's wrap) left
+/// 5.1e-4 · E_max, max 0.14 σ here (0.27 σ at the border columns of 48 × 64) and fails it.
+#[test]
+fn edge_border_pixels_converge() {
+    const BORDER_BOUND: f64 = 1e-3;
+    let dir = tempfile::tempdir().unwrap();
+    let (rows, cols) = (12, 16);
+    let target = json!({"kind": "slanted_edge", "dark": 0.002, "light": 0.02, "angle_deg": 5});
+    let set = load(dir.path(), &table1_camera(rows, cols), target.clone(), None);
+    let (e0, t) = electrons(&set, None);
+    let k = 120;
+    let big = load(
+        dir.path(),
+        &table1_camera(rows + 2 * k, cols + 2 * k),
+        target,
+        None,
+    );
+    let (eb, _) = electrons(&big, Some(t));
+    let c = cols + 2 * k;
+    let refi: Vec<f64> = (0..rows)
+        .flat_map(|r| (0..cols).map(move |cc| (r, cc)))
+        .map(|(r, cc)| eb[(r + k) * c + cc + k])
+        .collect();
+    let e_max = refi.iter().cloned().fold(0.0, f64::max);
+    let e_min = refi.iter().cloned().fold(f64::MAX, f64::min);
+    assert!(
+        e_max > 5.0 * e_min,
+        "an edge in the window: {e_min} .. {e_max}"
+    );
+    let border: Vec<usize> = (0..rows * cols)
+        .filter(|&i| {
+            let (r, cc) = (i / cols, i % cols);
+            r == 0 || r == rows - 1 || cc == 0 || cc == cols - 1
+        })
+        .collect();
+    let a: Vec<f64> = border.iter().map(|&i| e0[i]).collect();
+    let b: Vec<f64> = border.iter().map(|&i| refi[i]).collect();
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    let (rms, max) = stats(&set, &a, &b, t);
+    let all: Vec<usize> = (0..rows * cols).collect();
+    let (_, max_all) = stats(
+        &set,
+        &all.iter().map(|&i| e0[i]).collect::<Vec<_>>(),
+        &refi,
+        t,
+    );
+    eprintln!(
+        "border pixels: max |Δ| {worst:.3} e- = {:.2e} of the light level {e_max:.0} e-; \
+         rms {rms:.4} σ, max {max:.4} σ (all pixels max {max_all:.4} σ)",
+        worst / e_max
+    );
+    assert!(
+        worst <= BORDER_BOUND * e_max,
+        "border error {worst} e- = {:.2e} E_max over the bound {BORDER_BOUND:e}",
+        worst / e_max
+    );
+    assert!(max < 0.05, "border error {max} σ");
 }

@@ -59,6 +59,8 @@ pub(crate) struct Workspace {
     b: Vec<Complex32>,
     row_scratch: Vec<Complex32>,
     col_scratch: Vec<Complex32>,
+    /// Buffers of the far-tail correction (when planned).
+    far: Option<crate::far_tail::FarTailWorkspace>,
 }
 
 /// A planned convolution of `rows × cols` planes on a padded `pr × pc` grid.
@@ -84,6 +86,8 @@ pub(crate) struct FftConvolver {
     aperture_gain: Option<(Vec<f32>, Vec<f32>)>,
     /// Sample spacing (m).
     dx: f64,
+    /// Far-tail correction of the diffraction transfer ([`crate::far_tail`]), if planned.
+    far_tail: Option<crate::far_tail::FarTail>,
 }
 
 /// `sin(πx)/(πx)`.
@@ -139,6 +143,40 @@ impl FftConvolver {
         Self::build(rows, cols, dx, (pr, pc, top, left, zero_pad))
     }
 
+    /// Plan a `Padding::Replicate` convolution for the diffraction transfer with the far-tail
+    /// correction ([`crate::far_tail`]): the scene's edges replicated to infinity instead of
+    /// the FFT's wrap, up to the edge-spread tail `tail_fraction` of the longest wavelength
+    /// `wavelength_max_nm` at working f-number `f_number`. The padded size is rounded to whole
+    /// cells of the correction.
+    pub fn new_far_tail(
+        rows: usize,
+        cols: usize,
+        dx: f64,
+        margin: usize,
+        wavelength_max_nm: f64,
+        f_number: f64,
+        tail_fraction: f64,
+    ) -> Self {
+        let lambda_n_m = wavelength_max_nm * 1e-9 * f_number;
+        let c = crate::far_tail::cell_samples(dx, lambda_n_m);
+        let size = |n: usize| c * next_smooth((n + 2 * margin).div_ceil(c));
+        let (pr, pc) = (size(rows), size(cols));
+        let (top, left) = ((pr - rows) / 2, (pc - cols) / 2);
+        let mut conv = Self::build(rows, cols, dx, (pr, pc, top, left, false));
+        conv.far_tail = Some(crate::far_tail::FarTail::plan(
+            pr,
+            pc,
+            top,
+            left,
+            c,
+            dx,
+            wavelength_max_nm,
+            f_number,
+            tail_fraction,
+        ));
+        conv
+    }
+
     /// Plan a convolution of planes already zero-padded the ISETCam way (the uncropped
     /// optical image, [`crate::form_image_uncropped`]): the FFT at exactly `rows × cols` with
     /// ISETCam's frequency grid and no further padding — the same transform as
@@ -178,6 +216,7 @@ impl FftConvolver {
             fy2,
             aperture_gain: None,
             dx,
+            far_tail: None,
         }
     }
 
@@ -215,6 +254,7 @@ impl FftConvolver {
                     .get_inplace_scratch_len()
                     .max(self.col_inv.get_inplace_scratch_len())
             ],
+            far: self.far_tail.as_ref().map(|f| f.workspace()),
         }
     }
 
@@ -306,6 +346,15 @@ impl FftConvolver {
         out: &mut [f32],
     ) {
         self.fill_padded(plane, &mut ws.real);
+        // The far-tail correction of the diffraction transfer, from the padded grid's cells.
+        let far = match (&self.far_tail, transfer, ws.far.as_mut()) {
+            (Some(f), Transfer::Diffraction { lambda_n_m }, Some(fw)) => {
+                f.take_cells(&ws.real, fw);
+                f.correction(*lambda_n_m, fw);
+                Some(f)
+            }
+            _ => None,
+        };
         self.forward(ws);
         match transfer {
             Transfer::Diffraction { lambda_n_m } => {
@@ -340,8 +389,11 @@ impl FftConvolver {
         for (i, orow) in out.chunks_exact_mut(self.cols).enumerate() {
             let start = (self.top + i) * self.pc + self.left;
             let src = &ws.real[start..start + self.cols];
-            for (o, &s) in orow.iter_mut().zip(src) {
-                let v = s * norm;
+            for (j, (o, &s)) in orow.iter_mut().zip(src).enumerate() {
+                let mut v = s * norm;
+                if let (Some(f), Some(fw)) = (far, ws.far.as_ref()) {
+                    v += f.at(fw, self.top + i, self.left + j);
+                }
                 *o = match finish {
                     Finish::Keep => v,
                     Finish::NonNegative => v.max(0.0),
@@ -353,7 +405,7 @@ impl FftConvolver {
 }
 
 /// Blocked transpose of a `rows × cols` row-major matrix into `cols × rows`.
-fn transpose(src: &[Complex32], rows: usize, cols: usize, dst: &mut [Complex32]) {
+pub(crate) fn transpose(src: &[Complex32], rows: usize, cols: usize, dst: &mut [Complex32]) {
     const B: usize = 32;
     for rb in (0..rows).step_by(B) {
         let re = (rb + B).min(rows);

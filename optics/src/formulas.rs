@@ -125,6 +125,38 @@ pub fn airy_first_zero_rad(wavelength_nm: f64, pupil_diameter_m: f64) -> f64 {
     1.22 * wavelength_nm * 1e-9 / pupil_diameter_m
 }
 
+/// Fraction of a diffraction-limited (Airy) PSF's energy beyond a straight line at distance
+/// `distance_m` from its centre, i.e. the edge-spread tail `1 − ESF(x)`, by its large-`x`
+/// asymptote `T(x) = 2 λN / (π³ x)`.
+///
+/// Source: Eq. 3 has the slope `dH/du = −4/π` at `u = 0`, so near zero frequency the line
+/// spread function's spectrum is `1 − (4 λN / π) abs(ρ)`; the Fourier pair
+/// `abs(ρ) ↔ −1 / (2π² x²)` (Bracewell, *The Fourier Transform and its Applications*, table of
+/// generalised transforms) gives the LSF tail `2 λN / (π³ x²)`, whose integral beyond `x` is
+/// `T(x)`; equivalently the half-plane integral of [`airy_psf_tail_envelope`]. The exact tail
+/// `1/2 − (1/π) ∫₀^{1/λN} H(ρ) sin(2πρx)/ρ dρ` is within 0.6 % of `T` from `x = 5 λN` and
+/// within 0.1 % beyond `20 λN` (test `airy_edge_tail_asymptote`).
+pub fn airy_edge_tail_fraction(distance_m: f64, wavelength_nm: f64, f_number: f64) -> f64 {
+    2.0 * wavelength_nm * 1e-9 * f_number / (PI.powi(3) * distance_m.abs())
+}
+
+/// Distance (m) beyond which the Airy PSF's edge-spread tail [`airy_edge_tail_fraction`] is
+/// `tail_fraction`: `x = 2 λN / (π³ T)` (`≈ 64.5 λN` for `T = 10⁻³`).
+pub fn airy_edge_tail_distance_m(tail_fraction: f64, wavelength_nm: f64, f_number: f64) -> f64 {
+    2.0 * wavelength_nm * 1e-9 * f_number / (PI.powi(3) * tail_fraction)
+}
+
+/// The Airy PSF [`airy_psf`] averaged over its rings far from the centre (units 1/m²):
+/// `⟨I(r)⟩ = λN / (π³ r³)`, valid for `r ≫ λN`.
+///
+/// Source: the Bessel asymptote `J₁(v) ≈ √(2/(πv)) cos(v − 3π/4)` (Abramowitz & Stegun 9.2.1)
+/// in `I = π/(4λ²N²) [2J₁(v)/v]²`, `v = πr/(λN)`, with `⟨cos²⟩ = 1/2`. Its integral over a
+/// half-plane at distance `x` is [`airy_edge_tail_fraction`] (test
+/// `airy_tail_envelope_matches_ring_average`).
+pub fn airy_psf_tail_envelope(r_m: f64, wavelength_nm: f64, f_number: f64) -> f64 {
+    wavelength_nm * 1e-9 * f_number / (PI.powi(3) * r_m.abs().powi(3))
+}
+
 /// The Airy PSF (Fourier transform of Eq. 3) at distance `r_m` from its centre, normalised so
 /// that its integral over the image plane is 1 (units 1/m²):
 /// `I(r) = π / (4 λ² N²) · [2 J₁(v) / v]²`, `v = π r / (λ N)`. First zero at `v = 3.8317`,

@@ -30,6 +30,7 @@
 mod band_split;
 pub mod effects;
 mod error;
+mod far_tail;
 mod fft;
 mod formulas;
 mod kernels;
@@ -46,7 +47,8 @@ pub use effects::{
 };
 pub use error::OpticsError;
 pub use formulas::{
-    airy_first_zero_m, airy_first_zero_rad, airy_psf, bessel_j1, camera_equation_factor,
+    airy_edge_tail_distance_m, airy_edge_tail_fraction, airy_first_zero_m, airy_first_zero_rad,
+    airy_psf, airy_psf_tail_envelope, bessel_j1, camera_equation_factor,
     camera_equation_factor_isetcam, diffraction_otf, magnification, relative_illumination_cos4,
     relative_illumination_cos4_r2, relative_illumination_cos4_row, relative_illumination_isetcam,
     sigma_from_fwhm, thin_lens_image_distance_m,
@@ -63,6 +65,13 @@ pub use wavefront::{
 use camsim_core::SpectralImage;
 use error::check_positive;
 use fft::{FftConvolver, Finish, Transfer};
+
+/// Edge-spread tail of the diffraction PSF (at the longest wavelength) left beyond the region
+/// over which the FFT diffraction blur with replicated edges takes the scene's edges as
+/// replicated to infinity (instead of the FFT's wrap): a border pixel's irradiance is within
+/// `FAR_TAIL_FRACTION · E_max` of blurring the replicated scene, per side of the image
+/// ([`crate::airy_edge_tail_fraction`]; issue 17 §5; docs/physics.md).
+pub const FAR_TAIL_FRACTION: f64 = 5e-4;
 use rayon::prelude::*;
 
 /// Off-axis relative illumination R(x).
@@ -506,9 +515,21 @@ fn form_image_with(
         Blur::None => {}
         Blur::Diffraction => {
             let lmax = band_wl.iter().cloned().fold(0.0, f64::max) * 1e-9;
-            // Airy tail: ~1 % of the energy lies beyond 20 λN.
+            // Airy tail: ~1 % of the energy lies beyond 20 λN; with replicated edges, the
+            // far-tail correction takes the replicated scene on beyond the pad instead of the
+            // FFT's wrap (FAR_TAIL_FRACTION).
             let margin = ((20.0 * lmax * n_eff / dx).ceil() as usize).clamp(2, 1024);
-            let mut conv = if crop {
+            let mut conv = if crop && optics.padding == Padding::Replicate {
+                FftConvolver::new_far_tail(
+                    rows,
+                    cols,
+                    dx,
+                    margin,
+                    lmax * 1e9,
+                    n_eff,
+                    FAR_TAIL_FRACTION,
+                )
+            } else if crop {
                 FftConvolver::new(rows, cols, dx, optics.padding, margin, margin)
             } else {
                 FftConvolver::prepadded_zero(rows, cols, dx)

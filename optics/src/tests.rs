@@ -435,7 +435,11 @@ fn uniform_scene_stays_uniform_with_replicate_padding() {
     uniform_blur_check(Blur::Psf(test_psf_set()), None);
 }
 
-/// A compact object far from the borders: every blur preserves the total irradiance.
+/// A compact object far from the borders: every blur preserves the total irradiance; with
+/// diffraction and replicated edges (the far-tail correction, issue 17 §5), the image keeps
+/// the total minus the Airy tail beyond its four sides — per sample `Σ_sides T(d)` minus the
+/// four quadrants `(a + b − √(a²+b²)) λN/(π³ab)` counted twice (the envelope's integrals;
+/// 0.55–0.8 % here) — within 1e-3 of the total.
 #[test]
 fn blur_conserves_energy() {
     let g = WavelengthGrid::regular(450.0, 650.0, 100.0).unwrap();
@@ -467,8 +471,38 @@ fn blur_conserves_energy() {
             } else {
                 1e-5
             };
-            for p in &e.planes {
+            for (p, &w) in e.planes.iter().zip(&g.wavelength_nm) {
                 let s: f64 = p.iter().map(|v| *v as f64).sum();
+                if blur == Blur::Diffraction && padding == Padding::Replicate {
+                    let ln = w * 1e-9 * 4.0;
+                    let quad = |a: f64, b: f64| {
+                        (a + b - (a * a + b * b).sqrt()) * ln / (PI.powi(3) * a * b)
+                    };
+                    let kept: f64 = (0..rows * cols)
+                        .map(|q| {
+                            let (i, j) = ((q / cols) as f64 + 0.5, (q % cols) as f64 + 0.5);
+                            let (t, b) = (i * 1e-6, (rows as f64 - i) * 1e-6);
+                            let (l, r) = (j * 1e-6, (cols as f64 - j) * 1e-6);
+                            let out = [t, b, l, r]
+                                .iter()
+                                .map(|&d| airy_edge_tail_fraction(d, w, 4.0))
+                                .sum::<f64>()
+                                - quad(t, l)
+                                - quad(t, r)
+                                - quad(b, l)
+                                - quad(b, r);
+                            plane[q] as f64 * (1.0 - out)
+                        })
+                        .sum::<f64>()
+                        * PI
+                        / 64.0;
+                    eprintln!("{w} nm: kept {s:.6}, expected {kept:.6} (total {total_in:.6})");
+                    assert!(
+                        (s - kept).abs() < 1e-3 * total_in,
+                        "{blur:?} {padding:?} {w} nm: {s} vs {kept} (total {total_in})"
+                    );
+                    continue;
+                }
                 assert!(
                     (s - total_in).abs() < tol * total_in,
                     "{blur:?} {padding:?}: {s} vs {total_in}"
@@ -911,4 +945,169 @@ fn uncropped_uniform_scene_edge_follows_the_edge_spread() {
     }
     eprintln!("uniform edge vs Airy sum: max |diff| = {worst:.2e} of the plateau");
     assert!(worst < 1e-4, "{worst}");
+}
+
+/// The edge-spread tail of the Airy PSF beyond a line at distance x, computed from Eq. 3 by
+/// the edge-spread integral `1/2 − (1/π) ∫₀^{ρc} H(ρ) sin(2πρx)/ρ dρ` (composite Simpson on
+/// 2²⁰ intervals), against the asymptote `2 λN / (π³ x)` of `airy_edge_tail_fraction`; and the
+/// distance for a given tail inverts it (64.5 λN for 10⁻³).
+#[test]
+fn airy_edge_tail_asymptote() {
+    let (w, n) = (700.0, 4.0);
+    let ln = w * 1e-9 * n;
+    let exact = |x_ln: f64| -> f64 {
+        let m = 1usize << 20;
+        let h = 1.0 / m as f64;
+        let f = |u: f64| -> f64 {
+            let k = 2.0 * PI * x_ln;
+            if u == 0.0 {
+                k
+            } else {
+                diffraction_otf(u / ln, w, n) * (k * u).sin() / u
+            }
+        };
+        let mut sum = f(0.0) + f(1.0);
+        for i in 1..m {
+            sum += f(i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+        }
+        0.5 - sum * h / 3.0 / PI
+    };
+    for (x_ln, tol) in [(5.0, 6e-3), (20.0, 1e-3), (64.5, 1e-3), (100.0, 1e-3)] {
+        let t = airy_edge_tail_fraction(x_ln * ln, w, n);
+        let e = exact(x_ln);
+        eprintln!("x = {x_ln} λN: exact tail {e:.6e}, asymptote {t:.6e}");
+        assert_relative_eq!(e, t, max_relative = tol);
+    }
+    // Far from the asymptote near the core (the tail there is not 1/x): x = λN/2.
+    assert!((exact(0.5) - airy_edge_tail_fraction(0.5 * ln, w, n)).abs() > 0.01);
+    let d = airy_edge_tail_distance_m(1e-3, w, n);
+    assert_relative_eq!(d / ln, 2.0 / (PI.powi(3) * 1e-3), max_relative = 1e-12);
+    assert!((d / ln - 64.5).abs() < 0.01);
+    assert_relative_eq!(airy_edge_tail_fraction(d, w, n), 1e-3, max_relative = 1e-12);
+}
+
+/// The ring-averaged envelope `λN/(π³r³)`: (1) the Airy PSF's energy in annuli of 4 λN at
+/// 20–100 λN (midpoint rule, 400 steps per λN) against the envelope's closed-form annulus
+/// integral `2λN/π² (1/r₀ − 1/r₁)`, within 2 % at 20 λN (measured 1.5 %), the next order of
+/// the Bessel asymptote falling as 1/r; (2) its half-plane integral at distance x
+/// (numerical, over y and then x' out to 10⁴ x with the analytic remainder) is the edge-spread
+/// tail `airy_edge_tail_fraction`.
+#[test]
+fn airy_tail_envelope_matches_ring_average() {
+    let (w, n) = (650.0, 2.8);
+    let ln = w * 1e-9 * n;
+    for (r0_ln, tol) in [(20.0, 2e-2), (50.0, 8e-3), (100.0, 4e-3)] {
+        let (r0, r1) = (r0_ln * ln, (r0_ln + 4.0) * ln);
+        let steps = 1600;
+        let dr = (r1 - r0) / steps as f64;
+        let airy: f64 = (0..steps)
+            .map(|k| {
+                let r = r0 + (k as f64 + 0.5) * dr;
+                airy_psf(r, w, n) * 2.0 * PI * r * dr
+            })
+            .sum();
+        let env = 2.0 * ln / (PI * PI) * (1.0 / r0 - 1.0 / r1);
+        // The envelope function itself integrates to the same closed form.
+        let env_num: f64 = (0..steps)
+            .map(|k| {
+                let r = r0 + (k as f64 + 0.5) * dr;
+                airy_psf_tail_envelope(r, w, n) * 2.0 * PI * r * dr
+            })
+            .sum();
+        assert_relative_eq!(env_num, env, max_relative = 1e-6);
+        eprintln!("annulus at {r0_ln} λN: Airy {airy:.6e}, envelope {env:.6e}");
+        assert_relative_eq!(airy, env, max_relative = tol);
+    }
+    // Half-plane x' > x: ∫ dy env = 2λN/(π³ x'²) exactly (substitution y = x' tan t); check
+    // it numerically at one x', then integrate over x'.
+    let x = 30.0 * ln;
+    let line: f64 = {
+        let (m, ymax) = (200_000, 2000.0 * x);
+        let dy = ymax / m as f64;
+        2.0 * (0..m)
+            .map(|k| airy_psf_tail_envelope((x * x + ((k as f64 + 0.5) * dy).powi(2)).sqrt(), w, n))
+            .sum::<f64>()
+            * dy
+    };
+    assert_relative_eq!(line, 2.0 * ln / (PI.powi(3) * x * x), max_relative = 2e-3);
+    let tail: f64 = {
+        let (m, xmax) = (100_000, 1e4 * x);
+        // log-spaced x' for the 1/x'² integrand, plus the remainder beyond xmax
+        let (a, b) = (x.ln(), xmax.ln());
+        let du = (b - a) / m as f64;
+        (0..m)
+            .map(|k| {
+                let xp = (a + (k as f64 + 0.5) * du).exp();
+                2.0 * ln / (PI.powi(3) * xp * xp) * xp * du
+            })
+            .sum::<f64>()
+            + 2.0 * ln / (PI.powi(3) * xmax)
+    };
+    assert_relative_eq!(tail, airy_edge_tail_fraction(x, w, n), max_relative = 1e-6);
+}
+
+/// Issue 17 §5: the FFT diffraction blur with replicated edges takes the scene's edges as
+/// replicated to infinity, not the FFT's wrap. A slanted dark/light step (one band, 700 nm,
+/// f/4, 0.7 µm samples, 60 × 80) against the same scene with its edges replicated 300 samples
+/// (75 λN) further by hand and blurred, inner window: every sample within
+/// `FAR_TAIL_FRACTION · E_max` per side (two in a corner) plus 2 % of the correction's size
+/// (`T(pad) · E_max`), and the border samples well inside that (the wrap of before left
+/// `T(20 λN) ≈ 3·10⁻³ · E_max`).
+#[test]
+fn far_tail_correction_replicates_edges_instead_of_wrapping() {
+    let (w, n) = (700.0, 4.0);
+    let g = WavelengthGrid::new(vec![w]).unwrap();
+    let dx = 0.7e-6;
+    let (rows, cols) = (60, 80);
+    let (dark, light) = (0.1f32, 1.0f32);
+    let step = |i: f64, j: f64| -> f32 {
+        let (y, x) = (i - rows as f64 / 2.0, j - cols as f64 / 2.0);
+        if x + 0.09 * y > 0.0 {
+            light
+        } else {
+            dark
+        }
+    };
+    let plane: Vec<f32> = (0..rows * cols)
+        .map(|k| step((k / cols) as f64 + 0.5, (k % cols) as f64 + 0.5))
+        .collect();
+    let o = plain(Blur::Diffraction);
+    assert_eq!(o.padding, Padding::Replicate);
+    let e = form_image(&o, &band_scene(rows, cols, &g, dx, vec![plane.clone()]), &g)
+        .unwrap()
+        .irradiance;
+    let k = 300;
+    let (br, bc) = (rows + 2 * k, cols + 2 * k);
+    let big: Vec<f32> = (0..br * bc)
+        .map(|q| {
+            let i = (q / bc).saturating_sub(k).min(rows - 1);
+            let j = (q % bc).saturating_sub(k).min(cols - 1);
+            plane[i * cols + j]
+        })
+        .collect();
+    let eb = form_image(&o, &band_scene(br, bc, &g, dx, vec![big]), &g)
+        .unwrap()
+        .irradiance;
+    let k0 = (PI / 64.0) as f32; // camera equation factor π/(4N²)
+    let e_max = (light * k0) as f64;
+    let (mut worst, mut worst_border) = (0f64, 0f64);
+    for i in 0..rows {
+        for j in 0..cols {
+            let d = (e.planes[0][i * cols + j] - eb.planes[0][(i + k) * bc + j + k]).abs() as f64;
+            worst = worst.max(d);
+            if i == 0 || j == 0 || i == rows - 1 || j == cols - 1 {
+                worst_border = worst_border.max(d);
+            }
+        }
+    }
+    let pad_m = 20.0 * w * 1e-9 * n;
+    let bound = (2.0 * FAR_TAIL_FRACTION + 0.02 * airy_edge_tail_fraction(pad_m, w, n)) * e_max;
+    eprintln!(
+        "far tail: worst {:.2e}, border {:.2e} of E_max (bound {:.2e})",
+        worst / e_max,
+        worst_border / e_max,
+        bound / e_max
+    );
+    assert!(worst <= bound, "{worst} > {bound}");
+    assert!(worst_border < 0.1 * airy_edge_tail_fraction(pad_m, w, n) * e_max);
 }
