@@ -13,6 +13,9 @@
 //! 5. sRGB encoding (IEC 61966-2-1) and quantisation ([`srgb_encode`], [`to_srgb8`],
 //!    [`to_srgb16`]).
 //!
+//! 6. HDR merge of the readouts of split-pixel, dual-gain and bracketed sensors into one
+//!    linear image, inverse-variance weighted ([`hdr_merge`](mod@hdr_merge)).
+//!
 //! [`develop`] chains the steps for an [`IspPipeline`]. The [`isetcam`] module holds the
 //! ISETCam-compatible "MCC optimized" sensor → XYZ → display transform used by the oracle
 //! tests; it is never the default.
@@ -24,6 +27,7 @@ pub mod cfa_generic;
 mod channel_color;
 mod color;
 mod demosaic;
+pub mod hdr_merge;
 pub mod dng_color;
 pub mod isetcam;
 mod mosaic;
@@ -40,6 +44,7 @@ pub use color::{
     fit_color_correction, illuminant_gains, macbeth_sensor_rgb, macbeth_target_linear_srgb,
     macbeth_xyz, ColorMatrix, WhiteBalance, MACBETH_WHITE_INDEX, XYZ_TO_LINEAR_SRGB,
 };
+pub use hdr_merge::{hdr_merge, merge_weights, merged_variance};
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
 pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};

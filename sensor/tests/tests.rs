@@ -5,3 +5,4 @@ mod effects;
 mod isetcam_oracle;
 mod statistics;
 mod temporal;
+mod hdr;
