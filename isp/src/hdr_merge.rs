@@ -3,38 +3,60 @@
 //! (photo-electrons of the camera's pixel).
 //!
 //! Each unsaturated readout gives an unbiased estimate `x_i` of `H`
-//! ([`HdrReadoutModel::estimate_h_e`]); the merge is their weighted mean with
-//! inverse-variance weights `w_i = 1 / Var_i(H)` from the readouts' shot-plus-read noise model
-//! ([`HdrReadoutModel::estimate_variance`]), the minimum-variance combination of independent
-//! unbiased estimates (Granados, Ajdin, Wand, Theobalt, Seidel & Lensch, "Optimal HDR
+//! ([`HdrReadoutModel::estimate_h_e`]); the merge is their weighted mean with weights from
+//! the readouts' shot-plus-read noise model ([`HdrReadoutModel::estimate_variance`]):
+//! inverse-variance weights across independent charge packets, the minimum-variance
+//! combination of independent unbiased estimates (Granados, Ajdin, Wand, Theobalt, Seidel & Lensch, "Optimal HDR
 //! reconstruction with linear digital cameras", CVPR 2010; Hasinoff, Durand & Freeman,
 //! "Noise-optimal capture for high dynamic range photography", CVPR 2010). The variances are
 //! evaluated at a first estimate `Ĥ₀`: that of the usable readout with the largest
 //! sensitivity `s_i` (lowest relative read noise). Saturation-aware: a readout whose value is
 //! above [`camsim_sensor::USABLE_FRACTION`] of its clipping signal gets weight 0; a pixel
 //! with every readout saturated takes the least sensitive readout's (clipped) estimate.
-//! Readouts of one charge packet share its shot noise, so the weights are optimal for the
-//! read noise only; the variance of the merged value, with that covariance, is
+//! Readouts of one charge packet share its shot noise: within a packet the weights are
+//! inverse read variances, which makes the whole combination the best linear unbiased one
+//! for this covariance (Aitken 1935; [`merge_weights`]). The variance of the merged value is
 //! [`merged_variance`].
 use crate::IspError;
 use camsim_core::image::Plane;
 use camsim_sensor::{HdrFrame, HdrReadoutModel};
 use rayon::prelude::*;
 
-/// Inverse-variance weights `w_i = 1/Var_i(h_e)` of the readouts marked `usable` (0 for the
-/// others) at exposure `h_e` (photo-electrons of the camera's pixel).
+/// Merge weights of the readouts marked `usable` (0 for the others) at exposure `h_e`
+/// (photo-electrons of the camera's pixel): the best linear unbiased combination (Aitken's
+/// generalised least squares) for the readouts' covariance, in which the readouts of one
+/// charge packet share its shot noise and the packets are independent. Within packet `p`,
+/// `w_i ∝ s_p²/σ_e,i²` (inverse read variance: the shared shot noise does not depend on the
+/// choice); the packets' combined estimates, of variance
+/// `V_p = (s_p H + d_p)/s_p² + 1/Σ_{i∈p} (s_p²/σ_e,i²)`, are weighted `1/V_p` (inverse
+/// variance). For one readout per packet (bracketing) these are the plain inverse-variance
+/// weights `1/Var_i(H)` of [`HdrReadoutModel::estimate_variance`].
 pub fn merge_weights(models: &[HdrReadoutModel], usable: &[bool], h_e: f64) -> Vec<f64> {
-    models
-        .iter()
-        .zip(usable)
-        .map(|(m, &u)| {
-            if u {
-                1.0 / m.estimate_variance(h_e.max(0.0))
-            } else {
-                0.0
+    let h = h_e.max(0.0);
+    let n_packets = models.iter().map(|m| m.packet + 1).max().unwrap_or(0);
+    let mut w = vec![0.0; models.len()];
+    for p in 0..n_packets {
+        // Σ_{i∈p} s²/σ_i² over the usable readouts of the packet.
+        let mut precision = 0.0;
+        let mut shot_var = 0.0;
+        for (m, &u) in models.iter().zip(usable) {
+            if u && m.packet == p {
+                precision += m.gain_over_pixel.powi(2) / m.read_variance_e2;
+                shot_var = (m.estimate_variance(h) - m.read_variance_e2 / m.gain_over_pixel.powi(2))
+                    .max(0.0);
             }
-        })
-        .collect()
+        }
+        if !(precision > 0.0) {
+            continue;
+        }
+        let packet_var = shot_var + 1.0 / precision;
+        for (i, (m, &u)) in models.iter().zip(usable).enumerate() {
+            if u && m.packet == p {
+                w[i] = (m.gain_over_pixel.powi(2) / m.read_variance_e2) / precision / packet_var;
+            }
+        }
+    }
+    w
 }
 
 /// Variance of the merged estimate `Σ w_i x_i / Σ w_i` at exposure `h_e` with weights `w`:

@@ -3,3 +3,4 @@
 
 mod scielab_isetcam;
 mod scielab_oracle;
+mod hdr_snr;
