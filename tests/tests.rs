@@ -16,6 +16,7 @@ mod raw_formats;
 mod real_data;
 mod render;
 mod rolling_shutter;
+mod split_pixel;
 mod run;
 mod run_cfa;
 mod statistics;
