@@ -10,7 +10,8 @@
 //! | `log10_exposure_e` | required | log₁₀ of the exposure H: mean photo-electrons of the camera's pixel (the flat field's electron rate is H/t) |
 //!
 //! Metrics (one row of the study table): `exposure_e` (H), `snr_db` (merged signal of the
-//! simulated frame: mean / standard deviation over the pixels), `snr_model_db` (closed form),
+//! simulated frame: mean / standard deviation over the pixels; empty beyond the largest usable
+//! exposure, where every readout clips), `snr_model_db` (closed form),
 //! `snr_z` (z of the measured variance against the closed form, standard error from the
 //! sample fourth moment; empty within 6 σ of a readout's saturation threshold, where the
 //! readout in use is random and the closed form does not apply), `snr_<readout>_db` (each
@@ -138,11 +139,15 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
     let model_snr = merged_snr(&models, h);
     let model_var = (h / model_snr).powi(2);
     out.put("exposure_e", h);
-    out.put("snr_db", db(m.mean / m.var.sqrt()));
+    // Beyond the largest usable exposure every readout clips: no SNR to measure.
+    out.put_opt(
+        "snr_db",
+        (model_snr > 0.0).then(|| db(m.mean / m.var.sqrt())),
+    );
     out.put("snr_model_db", db(model_snr));
     out.put_opt(
         "snr_z",
-        (!near_knee(&models, h)).then(|| (m.var - model_var) / m.var_se),
+        (model_snr > 0.0 && !near_knee(&models, h)).then(|| (m.var - model_var) / m.var_se),
     );
     for r in &models {
         out.put(&format!("snr_{}_db", r.name), db(r.snr(h)));
