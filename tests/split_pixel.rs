@@ -54,19 +54,30 @@ fn split_pixel_study_reports_snr_curves_and_dynamic_range() {
             assert!(dr > dr_standard + 40.0, "{dr}");
             assert!(num(r, "snr_hole_max_db") > 15.0);
             let z = num(r, "snr_hole_z");
-            assert!(z.abs() < 4.5, "SNR hole measured {} vs closed form {} (z {z})",
-                num(r, "snr_hole_measured_db"), num(r, "snr_hole_model_db"));
+            assert!(
+                z.abs() < 4.5,
+                "SNR hole measured {} vs closed form {} (z {z})",
+                num(r, "snr_hole_measured_db"),
+                num(r, "snr_hole_model_db")
+            );
             assert_eq!(num(r, "crossovers"), 3.0);
         }
         // Merged SNR of the simulated field against the closed form (away from the knees).
         if let Some(z) = r["snr_z"].as_f64() {
-            assert!(z.abs() < 4.5, "{pixel} at H = {}: z {z} ({r})", num(r, "exposure_e"));
+            assert!(
+                z.abs() < 4.5,
+                "{pixel} at H = {}: z {z} ({r})",
+                num(r, "exposure_e")
+            );
             checked += 1;
         }
     }
     assert!(checked >= 10, "only {checked} levels compared");
     let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
-    assert!(html.contains("dynamic_range_db"), "report table lacks dynamic_range_db");
+    assert!(
+        html.contains("dynamic_range_db"),
+        "report table lacks dynamic_range_db"
+    );
     let figs: Vec<_> = std::fs::read_dir(dir.path().join("figures"))
         .unwrap()
         .filter_map(|e| e.ok())
@@ -104,8 +115,10 @@ fn hdr_keys_are_checked_and_default_to_the_standard_pixel() {
     let h = c.hdr.unwrap();
     assert_eq!(h.readouts[2].packet, 1, "spd_hcg reads spd");
     // Defaults: the sensor's well and read noise.
-    let c = load(camera(json!({"photodiodes": [{"name": "a", "sensitivity": 1}],
-        "readouts": [{"name": "r", "photodiode": "a", "conversion_gain_v_per_e": 1e-4}]})))
+    let c = load(camera(
+        json!({"photodiodes": [{"name": "a", "sensitivity": 1}],
+        "readouts": [{"name": "r", "photodiode": "a", "conversion_gain_v_per_e": 1e-4}]}),
+    ))
     .unwrap();
     let h = c.hdr.unwrap();
     assert_eq!(h.packets[0].well_capacity_e, 40000.0);
@@ -113,13 +126,22 @@ fn hdr_keys_are_checked_and_default_to_the_standard_pixel() {
     let mut bad = split.clone();
     bad["readouts"][1]["photodiode"] = json!("mpd");
     let e = load(camera(bad)).unwrap_err();
-    assert!(e.contains("sensor.hdr.readouts[1].photodiode") && e.contains("mpd"), "{e}");
+    assert!(
+        e.contains("sensor.hdr.readouts[1].photodiode") && e.contains("mpd"),
+        "{e}"
+    );
     let mut bad = split.clone();
     bad["photodiodes"][1]["sensitivity"] = json!(0.0);
     let e = load(camera(bad)).unwrap_err();
-    assert!(e.contains("sensor.hdr.photodiodes[1].sensitivity") && e.contains('0'), "{e}");
+    assert!(
+        e.contains("sensor.hdr.photodiodes[1].sensitivity") && e.contains('0'),
+        "{e}"
+    );
     let mut bad = split;
     bad["readouts"][3]["name"] = json!("lpd_hcg");
     let e = load(camera(bad)).unwrap_err();
-    assert!(e.contains("sensor.hdr.readouts[3].name") && e.contains("twice"), "{e}");
+    assert!(
+        e.contains("sensor.hdr.readouts[3].name") && e.contains("twice"),
+        "{e}"
+    );
 }

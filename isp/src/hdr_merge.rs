@@ -42,8 +42,9 @@ pub fn merge_weights(models: &[HdrReadoutModel], usable: &[bool], h_e: f64) -> V
         for (m, &u) in models.iter().zip(usable) {
             if u && m.packet == p {
                 precision += m.gain_over_pixel.powi(2) / m.read_variance_e2;
-                shot_var = (m.estimate_variance(h) - m.read_variance_e2 / m.gain_over_pixel.powi(2))
-                    .max(0.0);
+                shot_var = (m.estimate_variance(h)
+                    - m.read_variance_e2 / m.gain_over_pixel.powi(2))
+                .max(0.0);
             }
         }
         if !(precision > 0.0) {
@@ -115,7 +116,11 @@ pub fn hdr_merge(frame: &HdrFrame, models: &[HdrReadoutModel]) -> Result<Plane, 
         models[b]
             .gain_over_pixel
             .total_cmp(&models[a].gain_over_pixel)
-            .then(models[a].read_variance_e2.total_cmp(&models[b].read_variance_e2))
+            .then(
+                models[a]
+                    .read_variance_e2
+                    .total_cmp(&models[b].read_variance_e2),
+            )
     });
     let least = *by_sens.last().expect("non-empty");
     let data: Vec<f32> = (0..rows * cols)

@@ -27,8 +27,8 @@ pub mod cfa_generic;
 mod channel_color;
 mod color;
 mod demosaic;
-pub mod hdr_merge;
 pub mod dng_color;
+pub mod hdr_merge;
 pub mod isetcam;
 mod mosaic;
 mod pipeline;
@@ -44,8 +44,8 @@ pub use color::{
     fit_color_correction, illuminant_gains, macbeth_sensor_rgb, macbeth_target_linear_srgb,
     macbeth_xyz, ColorMatrix, WhiteBalance, MACBETH_WHITE_INDEX, XYZ_TO_LINEAR_SRGB,
 };
-pub use hdr_merge::{hdr_merge, merge_weights, merged_variance};
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
+pub use hdr_merge::{hdr_merge, merge_weights, merged_variance};
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
 pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};
 pub use srgb::{from_srgb8, srgb_decode, srgb_encode, to_srgb16, to_srgb8};

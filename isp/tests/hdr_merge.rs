@@ -102,14 +102,16 @@ fn snr_drop_at_the_lpd_to_spd_crossover_matches_its_closed_form() {
     let (b, _) = merged_at(hi, 8);
     let snr = |m: &Measured| m.mean / m.var.sqrt();
     let measured_db = 20.0 * (snr(&a) / snr(&b)).log10();
-    let model_db =
-        20.0 * ((lo / model_variance(&models, lo).sqrt()) / (hi / model_variance(&models, hi).sqrt())).log10();
-    let var_ln = |m: &Measured| {
-        (m.var_se / m.var).powi(2) / 4.0 + m.var / (m.mean * m.mean * m.n)
-    };
+    let model_db = 20.0
+        * ((lo / model_variance(&models, lo).sqrt()) / (hi / model_variance(&models, hi).sqrt()))
+            .log10();
+    let var_ln = |m: &Measured| (m.var_se / m.var).powi(2) / 4.0 + m.var / (m.mean * m.mean * m.n);
     let se_db = 20.0 / std::f64::consts::LN_10 * (var_ln(&a) + var_ln(&b)).sqrt();
     let z = (measured_db - model_db) / se_db;
-    assert!(model_db > 15.0, "a split pixel has a deep hole here: {model_db} dB");
+    assert!(
+        model_db > 15.0,
+        "a split pixel has a deep hole here: {model_db} dB"
+    );
     assert!(
         z.abs() < Z_MAX,
         "SNR drop measured {measured_db:.3} dB vs closed form {model_db:.3} dB (se {se_db:.3}, z {z:.2})"

@@ -20,7 +20,11 @@ fn standard_pixel_dynamic_range_is_the_closed_form() {
     let floor = (1.0 + (1.0 + 4.0 * c).sqrt()) / 2.0;
     let h_max = 0.95 * m[0].saturation_e - m[0].dark_e;
     let dr = dynamic_range(&m);
-    assert!((dr.noise_floor_e - floor).abs() < 1e-9 * floor, "{} vs {floor}", dr.noise_floor_e);
+    assert!(
+        (dr.noise_floor_e - floor).abs() < 1e-9 * floor,
+        "{} vs {floor}",
+        dr.noise_floor_e
+    );
     assert!((dr.max_signal_e - h_max).abs() < 1e-9 * h_max);
     assert!((dr.dynamic_range_db - 20.0 * (h_max / floor).log10()).abs() < 1e-9);
     // No second readout: no crossover.
@@ -50,7 +54,11 @@ fn dual_gain_hole_is_the_closed_form() {
         e / (s * s) + 1.0 / (s * s * (1.0 / hi.read_variance_e2 + 1.0 / lo.read_variance_e2));
     let below = h / var_below.sqrt();
     let drop = 20.0 * (below / above).log10();
-    assert!((holes[0].drop_db - drop).abs() < 1e-9, "{} vs {drop}", holes[0].drop_db);
+    assert!(
+        (holes[0].drop_db - drop).abs() < 1e-9,
+        "{} vs {drop}",
+        holes[0].drop_db
+    );
     assert!(drop > 0.0);
 }
 
@@ -69,14 +77,21 @@ fn split_pixel_range_holes_and_noise_floor() {
     // The LPD → SPD hole: 20 log₁₀ √(s_L/s_S) in the shot-noise limit (100× less charge);
     // the read noise of the SPD deepens it a little.
     let shot_limit = 10.0 * (0.9f64 / 0.009).log10();
-    assert!(holes[1].drop_db > shot_limit - 1.0 && holes[1].drop_db < shot_limit + 1.0, "{}", holes[1].drop_db);
+    assert!(
+        holes[1].drop_db > shot_limit - 1.0 && holes[1].drop_db < shot_limit + 1.0,
+        "{}",
+        holes[1].drop_db
+    );
     // Curves: the merged SNR is never below a usable readout's (the merge is the best linear
     // unbiased combination).
     let hs: Vec<f64> = (0..=70).map(|k| 10f64.powf(k as f64 / 10.0)).collect();
     let c = snr_curves(&m, &hs);
     for (j, &h) in hs.iter().enumerate() {
         for r in &c.readout_snr_db {
-            assert!(c.merged_snr_db[j] >= r[j] - 1e-9 || !r[j].is_finite(), "at {h}");
+            assert!(
+                c.merged_snr_db[j] >= r[j] - 1e-9 || !r[j].is_finite(),
+                "at {h}"
+            );
         }
     }
 
@@ -103,6 +118,14 @@ fn split_pixel_range_holes_and_noise_floor() {
     let m4 = x.iter().map(|a| (a - mean).powi(4)).sum::<f64>() / n;
     // At the floor the variance is H² (SNR = 1).
     let z = (var - h * h) / ((m4 - var * var) / n).sqrt();
-    assert!(z.abs() < 4.5, "variance at the floor {var} vs H² = {} (z {z:.2}), H = {h}", h * h);
-    assert!(dr.dynamic_range_db > 115.0 && dr.dynamic_range_db < 130.0, "{}", dr.dynamic_range_db);
+    assert!(
+        z.abs() < 4.5,
+        "variance at the floor {var} vs H² = {} (z {z:.2}), H = {h}",
+        h * h
+    );
+    assert!(
+        dr.dynamic_range_db > 115.0 && dr.dynamic_range_db < 130.0,
+        "{}",
+        dr.dynamic_range_db
+    );
 }

@@ -12,7 +12,7 @@
 //! | expected frame (DN) | [`expected_frame`] | [`camsim_sensor::expected_dn`] |
 //! | noisy frame (DN) | [`simulate_frame`] | [`camsim_sensor::expose_with`] |
 //! | HDR readouts (split pixel, DCG, bracketing; DN) | [`hdr_model`], [`hdr_readout_models`], [`simulate_hdr_frame`] | [`camsim_sensor::expose_hdr`] |
-//! | HDR merge (linear exposure, e⁻) | [`merge_hdr`] | [`camsim_isp::hdr_merge`] |
+//! | HDR merge (linear exposure, e⁻) | [`merge_hdr`] | [`camsim_isp::hdr_merge()`] |
 //! | contrast autofocus (lens position of the sharpest region) | [`crate::autofocus::contrast_autofocus`] | the steps above per position |
 use crate::config::{Camera, CaptureSet, Exposure};
 use crate::error::CliError;
@@ -135,7 +135,7 @@ pub fn simulate_hdr_frame(
 }
 
 /// The ISP's HDR merge of `frame` into one linear plane of the exposure (photo-electrons of
-/// the camera's pixel; [`camsim_isp::hdr_merge`]).
+/// the camera's pixel; [`camsim_isp::hdr_merge()`]).
 pub fn merge_hdr(
     camera_path: &std::path::Path,
     models: &[HdrReadoutModel],

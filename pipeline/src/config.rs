@@ -9,8 +9,9 @@ use camsim_optics::{
     OpticsEffects, OpticsModel, Padding, RelativeIllumination,
 };
 use camsim_sensor::{
-    ChargePacket, HdrModel, HdrReadout, Cfa, ColumnFpn, Crosstalk, HotPixels, IrLeakage, Motion, NoiseSwitches, Nonlinearity, PwmLight,
-    QeShift, Readout, ResetNoise, SensorEffects, SensorModel, ShutterMode,
+    Cfa, ChargePacket, ColumnFpn, Crosstalk, HdrModel, HdrReadout, HotPixels, IrLeakage, Motion,
+    NoiseSwitches, Nonlinearity, PwmLight, QeShift, Readout, ResetNoise, SensorEffects,
+    SensorModel, ShutterMode,
 };
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -1005,7 +1006,10 @@ fn hdr_from_file(path: &Path, h: &HdrFile, sensor: &SensorModel) -> Result<HdrMo
         if h.photodiodes[..i].iter().any(|q| q.name == p.name) {
             return Err(CliError::input(
                 path,
-                format!("sensor.hdr.photodiodes[{i}].name: \"{}\" is used twice", p.name),
+                format!(
+                    "sensor.hdr.photodiodes[{i}].name: \"{}\" is used twice",
+                    p.name
+                ),
             ));
         }
         packets.push(ChargePacket {
@@ -1020,7 +1024,10 @@ fn hdr_from_file(path: &Path, h: &HdrFile, sensor: &SensorModel) -> Result<HdrMo
         if h.readouts[..i].iter().any(|q| q.name == r.name) {
             return Err(CliError::input(
                 path,
-                format!("sensor.hdr.readouts[{i}].name: \"{}\" is used twice", r.name),
+                format!(
+                    "sensor.hdr.readouts[{i}].name: \"{}\" is used twice",
+                    r.name
+                ),
             ));
         }
         let packet = packets

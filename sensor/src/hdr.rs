@@ -235,15 +235,25 @@ impl HdrModel {
             }
         };
         if self.packets.is_empty() {
-            return Err(bad("hdr.photodiodes".into(), "[]", "at least one is required"));
+            return Err(bad(
+                "hdr.photodiodes".into(),
+                "[]",
+                "at least one is required",
+            ));
         }
         if self.readouts.is_empty() {
             return Err(bad("hdr.readouts".into(), "[]", "at least one is required"));
         }
         for (i, p) in self.packets.iter().enumerate() {
             pos(format!("hdr.photodiodes[{i}].sensitivity"), p.sensitivity)?;
-            pos(format!("hdr.photodiodes[{i}].exposure_ratio"), p.exposure_ratio)?;
-            pos(format!("hdr.photodiodes[{i}].well_capacity_e"), p.well_capacity_e)?;
+            pos(
+                format!("hdr.photodiodes[{i}].exposure_ratio"),
+                p.exposure_ratio,
+            )?;
+            pos(
+                format!("hdr.photodiodes[{i}].well_capacity_e"),
+                p.well_capacity_e,
+            )?;
         }
         for (i, r) in self.readouts.iter().enumerate() {
             if r.packet >= self.packets.len() {
@@ -426,7 +436,10 @@ mod tests {
         let mut h = HdrModel::standard(&s);
         h.packets[0].sensitivity = -1.0;
         let e = h.validate().unwrap_err().to_string();
-        assert!(e.contains("hdr.photodiodes[0].sensitivity") && e.contains("-1"), "{e}");
+        assert!(
+            e.contains("hdr.photodiodes[0].sensitivity") && e.contains("-1"),
+            "{e}"
+        );
         let mut h = HdrModel::standard(&s);
         h.readouts[0].packet = 3;
         let e = h.validate().unwrap_err().to_string();

@@ -88,7 +88,12 @@ fn readouts_of_one_photodiode_share_its_shot_noise() {
     let n = x.len() as f64;
     let (mx, vx, _) = moments(&x);
     let (my, vy, _) = moments(&y);
-    let cov = x.iter().zip(&y).map(|(a, b)| (a - mx) * (b - my)).sum::<f64>() / (n - 1.0);
+    let cov = x
+        .iter()
+        .zip(&y)
+        .map(|(a, b)| (a - mx) * (b - my))
+        .sum::<f64>()
+        / (n - 1.0);
     let m = &models[0];
     let expected = m.mean_e(h) / m.gain_over_pixel.powi(2);
     let z = (cov - expected) / ((vx * vy + cov * cov) / n).sqrt();
@@ -96,7 +101,12 @@ fn readouts_of_one_photodiode_share_its_shot_noise() {
     // Readouts of different photodiodes are independent.
     let w = estimates(&frame, &models[2], 2);
     let (mw, vw, _) = moments(&w);
-    let cov_xw = x.iter().zip(&w).map(|(a, b)| (a - mx) * (b - mw)).sum::<f64>() / (n - 1.0);
+    let cov_xw = x
+        .iter()
+        .zip(&w)
+        .map(|(a, b)| (a - mx) * (b - mw))
+        .sum::<f64>()
+        / (n - 1.0);
     let z = cov_xw / (vx * vw / n).sqrt();
     assert!(z.abs() < Z_MAX, "LPD/SPD covariance {cov_xw} (z {z:.2})");
 }
@@ -113,8 +123,16 @@ fn saturated_readouts_clip_where_the_model_says() {
         let m = &models[i];
         assert!(!m.usable_at(m.mean_e(h)));
         let top = frame.readouts[i].dn.iter().copied().max().unwrap() as f64;
-        assert!((m.electrons_of_dn(top) - m.saturation_e).abs() <= 1.0 / m.dn_per_e, "{}", m.name);
-        assert!(frame.readouts[i].dn.iter().all(|&d| d as f64 == top), "{} not clipped", m.name);
+        assert!(
+            (m.electrons_of_dn(top) - m.saturation_e).abs() <= 1.0 / m.dn_per_e,
+            "{}",
+            m.name
+        );
+        assert!(
+            frame.readouts[i].dn.iter().all(|&d| d as f64 == top),
+            "{} not clipped",
+            m.name
+        );
     }
     assert!((models[1].saturation_e - (4095.0 - 64.0) / (2.5e-5 * 4095.0)).abs() < 1e-6);
     // Same seed, same frames; another stream, other frames.

@@ -180,7 +180,8 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
         let measured = db((a.mean / a.var.sqrt()) / (b.mean / b.var.sqrt()));
         let model = db(merged_snr(&models, lo) / merged_snr(&models, hi));
         // Delta method: Var(ln SNR) ≈ Var(s²)/(4 s⁴) + s²/(mean² n).
-        let var_ln = |m: &Moments| (m.var_se / m.var).powi(2) / 4.0 + m.var / (m.mean * m.mean * m.n);
+        let var_ln =
+            |m: &Moments| (m.var_se / m.var).powi(2) / 4.0 + m.var / (m.mean * m.mean * m.n);
         let se = 20.0 / std::f64::consts::LN_10 * (var_ln(&a) + var_ln(&b)).sqrt();
         out.put("snr_hole_measured_db", measured);
         out.put("snr_hole_model_db", model);
