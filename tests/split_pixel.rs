@@ -36,7 +36,7 @@ fn split_pixel_study_reports_snr_curves_and_dynamic_range() {
     // over 1 V with black 64 DN: clips at (4095 − 64)/(4095 · 5e-5) e⁻; dark 1 mV/s · 10 ms
     // / 50 µV/e⁻ = 0.2 e⁻. Dynamic range 20 log₁₀(H_max/H₀) with H_max = 0.95 · clip − d and
     // H₀ = (1 + √(1 + 4(d + σ² + q²)))/2 (SNR = 1), q² = 1/(12 k²) the quantisation.
-    let k = 4095.0 * 5e-5;
+    let k: f64 = 4095.0 * 5e-5;
     let clip = (4095.0 - 64.0) / k;
     let d = 0.2;
     let c = d + 9.0 + 1.0 / (12.0 * k * k);
