@@ -13,6 +13,9 @@
 //! 5. sRGB encoding (IEC 61966-2-1) and quantisation ([`srgb_encode`], [`to_srgb8`],
 //!    [`to_srgb16`]).
 //!
+//! 6. HDR merge of the readouts of split-pixel, dual-gain and bracketed sensors into one
+//!    linear image, inverse-variance weighted ([`hdr_merge`](mod@hdr_merge)).
+//!
 //! [`develop`] chains the steps for an [`IspPipeline`]. The [`isetcam`] module holds the
 //! ISETCam-compatible "MCC optimized" sensor → XYZ → display transform used by the oracle
 //! tests; it is never the default.
@@ -25,6 +28,7 @@ mod channel_color;
 mod color;
 mod demosaic;
 pub mod dng_color;
+pub mod hdr_merge;
 pub mod isetcam;
 mod mosaic;
 mod pipeline;
@@ -41,6 +45,7 @@ pub use color::{
     macbeth_xyz, ColorMatrix, WhiteBalance, MACBETH_WHITE_INDEX, XYZ_TO_LINEAR_SRGB,
 };
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
+pub use hdr_merge::{hdr_merge, merge_weights, merged_variance};
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
 pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};
 pub use srgb::{from_srgb8, srgb_decode, srgb_encode, to_srgb16, to_srgb8};

@@ -10,6 +10,8 @@
 //! * [`sfr`]: ISO 12233 slanted-edge spatial frequency response (e-SFR) and MTF50;
 //! * [`patches`]: per-patch mean, noise and SNR of test charts laid out as in the capture-format
 //!   spec (target kind `patches`), per CFA channel;
+//! * [`hdr_snr`]: SNR-versus-exposure curves, dynamic range and SNR holes of HDR pixels
+//!   (split pixel, dual gain, bracketing) in closed form;
 //! * [`rolling_shutter`]: edge skew per row and flicker band period of rolling-shutter frames;
 //! * [`summary`]: PSNR and ΔE distribution statistics.
 //!
@@ -18,6 +20,7 @@
 
 pub mod color_difference;
 pub mod error;
+pub mod hdr_snr;
 pub mod patches;
 pub mod rolling_shutter;
 pub mod scielab;

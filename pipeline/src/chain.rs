@@ -11,12 +11,16 @@
 //! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`] | [`camsim_sensor::time_averaged_rate`] |
 //! | expected frame (DN) | [`expected_frame`] | [`camsim_sensor::expected_dn`] |
 //! | noisy frame (DN) | [`simulate_frame`] | [`camsim_sensor::expose_with`] |
+//! | HDR readouts (split pixel, DCG, bracketing; DN) | [`hdr_model`], [`hdr_readout_models`], [`simulate_hdr_frame`] | [`camsim_sensor::expose_hdr`] |
+//! | HDR merge (linear exposure, e⁻) | [`merge_hdr`] | [`camsim_isp::hdr_merge()`] |
 //! | contrast autofocus (lens position of the sharpest region) | [`crate::autofocus::contrast_autofocus`] | the steps above per position |
-use crate::config::{CaptureSet, Exposure};
+use crate::config::{Camera, CaptureSet, Exposure};
 use crate::error::CliError;
 use camsim_core::image::{Plane, RawFrame, SceneRadiance, SensorIrradiance};
 use camsim_core::spectrum::WavelengthGrid;
-use camsim_sensor::{ElectronRate, PatternSource, SensorModel, Shot, TimeModel};
+use camsim_sensor::{
+    ElectronRate, HdrFrame, HdrModel, HdrReadoutModel, PatternSource, SensorModel, Shot, TimeModel,
+};
 use std::borrow::Cow;
 
 pub use crate::simulate::{
@@ -137,4 +141,41 @@ pub fn simulate_frame(
     stream: &[u64],
 ) -> RawFrame {
     camsim_sensor::expose_with(sensor, rate, shot, pattern, seed, stream)
+}
+
+/// The camera's HDR pixel (`sensor.hdr`), or its standard pixel as a one-readout HDR model
+/// ([`HdrModel::standard`]) when it has none.
+pub fn hdr_model(camera: &Camera) -> HdrModel {
+    camera
+        .hdr
+        .clone()
+        .unwrap_or_else(|| HdrModel::standard(&camera.sensor))
+}
+
+/// The noise model of every readout of the camera's HDR pixel under `shot`.
+pub fn hdr_readout_models(camera: &Camera, shot: &Shot) -> Vec<HdrReadoutModel> {
+    hdr_model(camera).readout_models(&camera.sensor, shot)
+}
+
+/// The readouts (DN) of one HDR shot of `rate` ([`camsim_sensor::expose_hdr`]), temporal
+/// noise from the stream `(seed, stream)`.
+pub fn simulate_hdr_frame(
+    camera: &Camera,
+    rate: &ElectronRate,
+    shot: &Shot,
+    seed: u64,
+    stream: &[u64],
+) -> HdrFrame {
+    camsim_sensor::expose_hdr(&camera.sensor, &hdr_model(camera), rate, shot, seed, stream)
+}
+
+/// The ISP's HDR merge of `frame` into one linear plane of the exposure (photo-electrons of
+/// the camera's pixel; [`camsim_isp::hdr_merge()`]).
+pub fn merge_hdr(
+    camera_path: &std::path::Path,
+    models: &[HdrReadoutModel],
+    frame: &HdrFrame,
+) -> Result<Plane, CliError> {
+    camsim_isp::hdr_merge(frame, models)
+        .map_err(|e| CliError::input(camera_path, format!("sensor.hdr: {e}")))
 }

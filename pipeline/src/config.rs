@@ -9,8 +9,9 @@ use camsim_optics::{
     OpticsEffects, OpticsModel, Padding, RelativeIllumination,
 };
 use camsim_sensor::{
-    Cfa, ColumnFpn, Crosstalk, HotPixels, IrLeakage, Motion, NoiseSwitches, Nonlinearity, PwmLight,
-    QeShift, Readout, ResetNoise, SensorEffects, SensorModel, ShutterMode,
+    Cfa, ChargePacket, ColumnFpn, Crosstalk, HdrModel, HdrReadout, HotPixels, IrLeakage, Motion,
+    NoiseSwitches, Nonlinearity, PwmLight, QeShift, Readout, ResetNoise, SensorEffects,
+    SensorModel, ShutterMode,
 };
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -531,6 +532,75 @@ pub struct SensorFile {
     /// Extension: temperature step (°C) over which the dark current doubles.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dark_doubling_temperature_c: Option<f64>,
+    /// Extension: HDR pixel (split pixel, dual conversion gain, bracketing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hdr: Option<HdrFile>,
+}
+
+/// `sensor.hdr` (extension): an HDR pixel of charge packets (photodiodes, or exposures of
+/// one) read at one or more conversion gains ([`camsim_sensor::hdr`]). Absent: the standard
+/// pixel, and every output is the baseline chain's.
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `photodiodes` | required | list of charge packets (below), ≥ 1 |
+/// | `readouts` | required | list of readouts (below), ≥ 1 |
+///
+/// A photodiode:
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `name` | required | unique name (`lpd`, `spd`, `long`, …) |
+/// | `sensitivity` | required | electrons it collects per photo-electron of the camera's pixel (its share of the light), > 0 |
+/// | `exposure_ratio` | 1 | its exposure time over the shot's (bracketing), > 0 |
+/// | `well_capacity_e` | the sensor's | full well (electrons) |
+///
+/// A readout:
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `name` | required | unique name (`lpd_hcg`, …) |
+/// | `photodiode` | required | name of the photodiode it reads |
+/// | `conversion_gain_v_per_e` | required | conversion gain (V/e⁻) |
+/// | `read_noise_v` | the sensor's | read noise σ (V) |
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HdrFile {
+    /// Charge packets.
+    pub photodiodes: Vec<HdrPhotodiodeFile>,
+    /// Readouts.
+    pub readouts: Vec<HdrReadoutFile>,
+}
+
+/// One `sensor.hdr.photodiodes[i]`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HdrPhotodiodeFile {
+    /// Name.
+    pub name: String,
+    /// Electrons per photo-electron of the camera's pixel.
+    pub sensitivity: f64,
+    /// Exposure time over the shot's (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_ratio: Option<f64>,
+    /// Full well (electrons; default the sensor's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub well_capacity_e: Option<f64>,
+}
+
+/// One `sensor.hdr.readouts[i]`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HdrReadoutFile {
+    /// Name.
+    pub name: String,
+    /// Name of the photodiode read.
+    pub photodiode: String,
+    /// Conversion gain (V/e⁻).
+    pub conversion_gain_v_per_e: f64,
+    /// Read noise σ (V; default the sensor's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub read_noise_v: Option<f64>,
 }
 
 /// `sensor.readout` (extension): when the rows expose.
@@ -742,6 +812,8 @@ pub struct Camera {
     /// target's extent) the ISETCam way with `crop = false`, ring of blurred light included
     /// (`crate::chain::optical_image`). Default false.
     pub uncropped_optical_image: bool,
+    /// HDR pixel (`sensor.hdr`; None: the standard pixel).
+    pub hdr: Option<HdrModel>,
 }
 
 /// A validated shot.
@@ -937,13 +1009,76 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
     }
     let sensor = sensor_from_file(path, &raw.sensor)?;
     let readout = readout_from_file(path, raw.sensor.readout.as_ref())?;
+    let hdr = match &raw.sensor.hdr {
+        None => None,
+        Some(h) => Some(hdr_from_file(path, h, &sensor)?),
+    };
     Ok(Camera {
         name: raw.name.unwrap_or_else(|| "camera".into()),
         optics,
         sensor,
         readout,
         uncropped_optical_image,
+        hdr,
     })
+}
+
+/// `sensor.hdr` → [`HdrModel`] (names resolved, defaults from the sensor, fields checked).
+fn hdr_from_file(path: &Path, h: &HdrFile, sensor: &SensorModel) -> Result<HdrModel, CliError> {
+    let mut packets = Vec::with_capacity(h.photodiodes.len());
+    for (i, p) in h.photodiodes.iter().enumerate() {
+        if h.photodiodes[..i].iter().any(|q| q.name == p.name) {
+            return Err(CliError::input(
+                path,
+                format!(
+                    "sensor.hdr.photodiodes[{i}].name: \"{}\" is used twice",
+                    p.name
+                ),
+            ));
+        }
+        packets.push(ChargePacket {
+            name: p.name.clone(),
+            sensitivity: p.sensitivity,
+            exposure_ratio: p.exposure_ratio.unwrap_or(1.0),
+            well_capacity_e: p.well_capacity_e.unwrap_or(sensor.well_capacity_e),
+        });
+    }
+    let mut readouts = Vec::with_capacity(h.readouts.len());
+    for (i, r) in h.readouts.iter().enumerate() {
+        if h.readouts[..i].iter().any(|q| q.name == r.name) {
+            return Err(CliError::input(
+                path,
+                format!(
+                    "sensor.hdr.readouts[{i}].name: \"{}\" is used twice",
+                    r.name
+                ),
+            ));
+        }
+        let packet = packets
+            .iter()
+            .position(|p| p.name == r.photodiode)
+            .ok_or_else(|| {
+                CliError::input(
+                    path,
+                    format!(
+                        "sensor.hdr.readouts[{i}].photodiode: \"{}\" is not a photodiode (have: {})",
+                        r.photodiode,
+                        packets.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", ")
+                    ),
+                )
+            })?;
+        readouts.push(HdrReadout {
+            name: r.name.clone(),
+            packet,
+            conversion_gain_v_per_e: r.conversion_gain_v_per_e,
+            read_noise_v: r.read_noise_v.unwrap_or(sensor.read_noise_v),
+        });
+    }
+    let model = HdrModel { packets, readouts };
+    model
+        .validate()
+        .map_err(|e| CliError::input(path, e.to_string()))?;
+    Ok(model)
 }
 
 /// `sensor.readout` → [`Readout`] (absent: global shutter).

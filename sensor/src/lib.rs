@@ -16,6 +16,8 @@
 //! and hot pixels. The optional effect blocks of `spec/effects.md` (hot pixels,
 //! nonlinearity, crosstalk, IR leakage, QE shift) live in [`effects`] and
 //! [`SensorModel::effects`]; absent, they cost nothing.
+//! The [`hdr`] module holds HDR pixels (split pixel, dual conversion gain, exposure
+//! bracketing): several charge packets and readouts per pixel ([`expose_hdr`]).
 //! The [`isetcam`] module holds documented ISETCam-compatible variants (bilinear pixel
 //! sampling, Riemann spectral sums, ISETCam auto-exposure, SNR components) used only for
 //! oracle tests; they are never the default.
@@ -24,6 +26,7 @@
 #![deny(missing_docs)]
 
 pub mod effects;
+pub mod hdr;
 mod integrate;
 pub mod isetcam;
 mod noise;
@@ -39,6 +42,9 @@ pub use camsim_core::{RawFrame, SensorIrradiance};
 pub use effects::{
     apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map, Crosstalk, HotPixel,
     HotPixels, IrLeakage, Nonlinearity, QeShift, SensorEffects,
+};
+pub use hdr::{
+    expose_hdr, ChargePacket, HdrFrame, HdrModel, HdrReadout, HdrReadoutModel, USABLE_FRACTION,
 };
 pub use integrate::{
     box_weights, electron_rate, electron_rate_from_term_planes, pixel_term_planes, PixelTermPlanes,

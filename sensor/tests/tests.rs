@@ -2,6 +2,7 @@
 //! (`cargo test --release -p camsim-sensor --test tests <module>::`).
 
 mod effects;
+mod hdr;
 mod isetcam_oracle;
 mod statistics;
 mod temporal;

@@ -12,6 +12,8 @@
 //! * [`capture`]: the sensor-level evaluator (MTF50, SNR, vSNR, ΔE2000, dynamic range);
 //! * [`render`]: the renderer-based evaluator (depth of field: real-lens camera vs depth path);
 //! * [`rolling`]: the rolling-shutter evaluator (skew of a moving edge, LED flicker bands);
+//! * [`hdr`](mod@hdr): the HDR pixel evaluator (split pixel, DCG, bracketing vs a standard pixel:
+//!   merged SNR against exposure, dynamic range, SNR holes);
 //! * [`table`] and [`report`]: CSV + JSON tables in spec order, HTML report with plots and
 //!   image strips;
 //! * [`ray`]: the Ray engine: the same points, each run by `camsim study-point` on a Ray
@@ -21,6 +23,7 @@
 //! which other points run, in which order, on how many threads or on which machine.
 pub mod capture;
 pub mod hash;
+pub mod hdr;
 pub mod output;
 pub mod point;
 pub mod ray;

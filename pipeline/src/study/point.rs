@@ -27,6 +27,10 @@ pub enum PointKind {
     /// A moving edge under a PWM light through a rolling shutter: skew and flicker band
     /// period against their closed forms ([`super::rolling`]).
     RollingShutter,
+    /// One HDR pixel design (split pixel, DCG, bracketing, or the standard pixel) at one
+    /// exposure: merged SNR simulated and in closed form, dynamic range, SNR holes
+    /// ([`super::hdr`]).
+    Hdr,
 }
 
 impl PointKind {
@@ -36,8 +40,9 @@ impl PointKind {
             Some("capture") => Ok(PointKind::Capture),
             Some("render") => Ok(PointKind::Render),
             Some("rolling_shutter") => Ok(PointKind::RollingShutter),
+            Some("hdr") => Ok(PointKind::Hdr),
             Some(other) => Err(format!(
-                "kind: unknown point kind \"{other}\" (expected \"capture\", \"render\" or \"rolling_shutter\")"
+                "kind: unknown point kind \"{other}\" (expected \"capture\", \"render\", \"rolling_shutter\" or \"hdr\")"
             )),
             None => Err("kind: required (a string)".into()),
         }
@@ -50,6 +55,7 @@ pub fn validate(doc: &Value) -> Result<(), String> {
         PointKind::Capture => capture::validate(doc),
         PointKind::Render => render::validate(doc),
         PointKind::RollingShutter => super::rolling::validate(doc),
+        PointKind::Hdr => super::hdr::validate(doc),
     }
 }
 
@@ -124,6 +130,8 @@ pub fn evaluate_into(
         PointKind::Render => render::evaluate(doc, seed, dir)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
         PointKind::RollingShutter => super::rolling::evaluate(doc, seed, dir)
+            .map_err(|e| CliError::input(&point_path, e.one_line()))?,
+        PointKind::Hdr => super::hdr::evaluate(doc, seed, dir)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
     };
     let metrics: serde_json::Map<String, Value> = out
