@@ -35,6 +35,7 @@ mod pipeline;
 mod srgb;
 mod tone;
 
+pub use camsim_core::hdr::{merge_weights, merged_variance};
 pub use cfa_generic::{demosaic_cokriging, demosaic_planes, ChannelPlanes, CoKrigingModel};
 pub use channel_color::{
     fit_channel_matrix, illuminant_channel_gains, macbeth_channel_responses, reference_channel,
@@ -45,7 +46,7 @@ pub use color::{
     macbeth_xyz, ColorMatrix, WhiteBalance, MACBETH_WHITE_INDEX, XYZ_TO_LINEAR_SRGB,
 };
 pub use demosaic::{demosaic, demosaic_channels, DemosaicMethod};
-pub use hdr_merge::{hdr_merge, merge_weights, merged_variance};
+pub use hdr_merge::hdr_merge;
 pub use mosaic::{BayerLayout, Mosaic, RgbImage};
 pub use pipeline::{clip_below_zero, develop, IspPipeline, RenderedImage};
 pub use srgb::{from_srgb8, srgb_decode, srgb_encode, to_srgb16, to_srgb8};

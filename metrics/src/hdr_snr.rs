@@ -1,14 +1,14 @@
 //! SNR of HDR pixels (split pixel, dual conversion gain, bracketing) against exposure, their
 //! dynamic range and the SNR drop ("SNR hole") where the merge hands over from one readout
 //! to the next, in closed form from the readouts' shot-plus-read noise model
-//! ([`camsim_sensor::HdrReadoutModel`]) and the ISP merge's weights
-//! ([`camsim_isp::merge_weights`], [`camsim_isp::merged_variance`]).
+//! ([`HdrReadoutModel`]) and the ISP merge's weights
+//! ([`merge_weights`], [`merged_variance`], in the core so that ISP and metrics share them).
 //!
 //! Exposure `H` is in photo-electrons of the camera's own pixel (a standard pixel with the
 //! sensor's QE and fill factor collects `H`). Definitions:
 //!
 //! * SNR of readout i: `H / √Var_i(H)` while it is usable (mean packet electrons at most
-//!   [`camsim_sensor::USABLE_FRACTION`] of its clipping signal), else 0;
+//!   [`camsim_core::hdr::USABLE_FRACTION`] of its clipping signal), else 0;
 //! * merged SNR: `H / √Var_merged(H)` with the usable readouts at their expected signal;
 //! * dynamic range (dB) = `20 log₁₀(H_max / H_floor)`: `H_max` the largest exposure at which
 //!   some readout is still usable (largest unsaturated signal), `H_floor` the exposure at
@@ -17,8 +17,7 @@
 //! * SNR hole at a crossover `H_c` (the last usable exposure of a readout that drops out
 //!   while others remain): `20 log₁₀(SNR_below / SNR_above)`, both at `H_c`, with and without
 //!   the readout (Solhusvik et al., IISW 2019, "SNR drop at the transition").
-use camsim_isp::{merge_weights, merged_variance};
-use camsim_sensor::HdrReadoutModel;
+use camsim_core::hdr::{merge_weights, merged_variance, HdrReadoutModel};
 
 /// The readouts used by the merge at exposure `h_e` (expected signal; see the module docs).
 pub fn usable_mask(models: &[HdrReadoutModel], h_e: f64) -> Vec<bool> {

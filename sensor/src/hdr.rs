@@ -43,11 +43,6 @@ use rayon::prelude::*;
 /// Stream tag of the HDR readout draws: `stream(seed, &[HDR_TAG, stream…, row])`.
 pub const HDR_TAG: u64 = 0x4844_525F_5245_4144; // "HDR_READ"
 
-/// Fraction of a readout's saturation signal up to which its value is used by the merge
-/// (above it the readout counts as saturated): values within 5 % of clipping are left to the
-/// less sensitive readouts.
-pub const USABLE_FRACTION: f64 = 0.95;
-
 /// One charge packet of an HDR pixel: a photodiode (split pixel) or one exposure of it
 /// (bracketing).
 #[derive(Debug, Clone, PartialEq)]
@@ -94,80 +89,7 @@ pub struct HdrModel {
     pub readouts: Vec<HdrReadout>,
 }
 
-/// What a readout's value means, and its noise: everything the ISP merge and the SNR
-/// metrics need of one readout, for one shot.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HdrReadoutModel {
-    /// Readout name.
-    pub name: String,
-    /// Index of its charge packet (readouts of one packet share the shot noise).
-    pub packet: usize,
-    /// s_i: mean packet electrons per photo-electron of the camera's pixel.
-    pub gain_over_pixel: f64,
-    /// d_p: mean dark electrons of the packet.
-    pub dark_e: f64,
-    /// k_i: DN per packet electron.
-    pub dn_per_e: f64,
-    /// DN of zero electrons (black level + analog offset).
-    pub zero_dn: f64,
-    /// σ_e,i²: read noise plus quantisation, in packet electrons².
-    pub read_variance_e2: f64,
-    /// Packet electrons at which the readout clips: min(well, swing, ADC full scale).
-    pub saturation_e: f64,
-}
-
-impl HdrReadoutModel {
-    /// Mean packet electrons (photo + dark) at exposure `h_e` (photo-electrons of the
-    /// camera's pixel).
-    pub fn mean_e(&self, h_e: f64) -> f64 {
-        self.gain_over_pixel * h_e + self.dark_e
-    }
-
-    /// Whether the readout is used at mean packet electrons `packet_e`: at most
-    /// [`USABLE_FRACTION`] of its saturation signal.
-    pub fn usable_at(&self, packet_e: f64) -> bool {
-        packet_e <= USABLE_FRACTION * self.saturation_e
-    }
-
-    /// The exposure (photo-electrons of the camera's pixel) above which the readout is no
-    /// longer used.
-    pub fn last_usable_h_e(&self) -> f64 {
-        (USABLE_FRACTION * self.saturation_e - self.dark_e) / self.gain_over_pixel
-    }
-
-    /// The readout's estimate of H from a DN value: `(DN − zero)/(k s) − d/s`.
-    pub fn estimate_h_e(&self, dn: f64) -> f64 {
-        ((dn - self.zero_dn) / self.dn_per_e - self.dark_e) / self.gain_over_pixel
-    }
-
-    /// Packet electrons of a DN value: `(DN − zero)/k`.
-    pub fn electrons_of_dn(&self, dn: f64) -> f64 {
-        (dn - self.zero_dn) / self.dn_per_e
-    }
-
-    /// Variance of the estimate of H (shot + dark + read + quantisation, no clipping) at
-    /// exposure `h_e`: `(s H + d + σ_e²)/s²` — the shot-plus-read model of the module docs.
-    pub fn estimate_variance(&self, h_e: f64) -> f64 {
-        (self.mean_e(h_e).max(0.0) + self.read_variance_e2) / self.gain_over_pixel.powi(2)
-    }
-
-    /// SNR of the readout alone at exposure `h_e`: `H / √var` (0 when saturated).
-    pub fn snr(&self, h_e: f64) -> f64 {
-        if !self.usable_at(self.mean_e(h_e)) {
-            return 0.0;
-        }
-        h_e / self.estimate_variance(h_e).sqrt()
-    }
-}
-
-/// The readouts of one HDR shot, each a raw frame in DN (same order as the model's).
-#[derive(Debug, Clone, PartialEq)]
-pub struct HdrFrame {
-    /// Readout names.
-    pub names: Vec<String>,
-    /// One frame per readout.
-    pub readouts: Vec<RawFrame>,
-}
+pub use camsim_core::hdr::{HdrFrame, HdrReadoutModel, USABLE_FRACTION};
 
 fn bad(field: String, value: impl std::fmt::Display, reason: &str) -> SensorError {
     SensorError::InvalidField {
