@@ -900,6 +900,9 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         // ΔE between desired (D65 sRGB targets) and rendered (output codes decoded), paper Figs. 5–6
         let rendered_lin = camsim_isp::from_srgb8(&rendered8, rgb.rows, rgb.cols);
         let rendered_stats = color_eval::patch_stats(&rendered_lin, layout);
+        // The same patches before the output's clipping to [0, 1] and 8-bit rounding: the
+        // noise of the patch means without their bias.
+        let before_output = color_eval::patch_stats(&rgb, layout);
         let rendered_means: Vec<[f64; 3]> = rendered_stats.iter().map(|p| p.mean).collect();
         let de = color_eval::patch_delta_e(&targets, &rendered_means)?;
         let (de2000, s2000) = (&de.de2000, &de.stats2000);
@@ -964,6 +967,8 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                 "desired_linear_srgb": targets[i],
                 "rendered_linear_srgb": rendered_means[i],
                 "rendered_linear_srgb_standard_error": rendered_stats[i].standard_error,
+                "before_output_linear_srgb": before_output[i].mean,
+                "before_output_linear_srgb_standard_error": before_output[i].standard_error,
                 "pixels": rendered_stats[i].pixels,
             }))
             .collect::<Vec<_>>());
