@@ -207,6 +207,29 @@ pub fn defocus_layered(
             .collect();
         let ker = kernel(mid);
         let a_blur = convolve(&alpha, w, h, &ker);
+        // Under this layer's blurred edge, pixels no farther layer reached still see the
+        // background through the rest of the aperture: continue the composite so far there by
+        // its normalised convolution over the disc of the kernel's support (the mean of the
+        // background visible within that disc).
+        let partial = |k: usize| !cover[k] && a_blur[k] > 1e-6 && a_blur[k] < 1.0 - 1e-6;
+        if ker.radius > 0 && cover.iter().any(|c| *c) && (0..w * h).any(partial) {
+            let fill = Kernel::pillbox(ker.radius as f64);
+            let covf: Vec<f32> = cover.iter().map(|c| *c as u8 as f32).collect();
+            let wsum = convolve(&covf, w, h, &fill);
+            let filled: Vec<bool> = (0..w * h).map(|k| partial(k) && wsum[k] > 1e-6).collect();
+            acc.par_iter_mut().for_each(|acc_b| {
+                let masked: Vec<f32> = acc_b.iter().zip(&covf).map(|(v, c)| v * c).collect();
+                let num = convolve(&masked, w, h, &fill);
+                for k in 0..w * h {
+                    if filled[k] {
+                        acc_b[k] = num[k] / wsum[k];
+                    }
+                }
+            });
+            for (c, f) in cover.iter_mut().zip(&filled) {
+                *c |= *f;
+            }
+        }
         acc.par_iter_mut().zip(bands).for_each(|(acc_b, band)| {
             let premul: Vec<f32> = band.iter().zip(&alpha).map(|(l, a)| l * a).collect();
             let c_blur = convolve(&premul, w, h, &ker);
@@ -389,7 +412,7 @@ impl LensDefocus {
 }
 
 /// An `n × n` PSF (centre at n/2) → a normalised kernel cropped to its non-zero extent.
-fn trim_kernel(psf: &[f64], n: usize) -> Kernel {
+pub(crate) fn trim_kernel(psf: &[f64], n: usize) -> Kernel {
     let c = n / 2;
     let mut r = 0;
     for j in 0..n {
