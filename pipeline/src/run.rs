@@ -618,7 +618,11 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     let (os, margin) =
         crate::chain::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
     let scene = match &r.render {
-        Some(rf) => render_scene(rf, r.seed, sensor, os, margin, &grid)?,
+        Some(rf) => {
+            let depth_aware = cam.thin_lens_focus_m.is_some()
+                || matches!(&cam.optics.blur, camsim_optics::Blur::Lens(l) if l.focus.is_some());
+            render_scene(rf, r.seed, sensor, os, margin, &grid, depth_aware)?
+        }
         None => shot_scene(set, 0, &grid)?,
     };
     let window = (
@@ -1131,6 +1135,9 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 /// Path-trace the glTF scene of a `render` section on the scene sampling grid of the sensor
 /// ((rows + 2·margin)·os × (cols + 2·margin)·os samples of pitch pixel_pitch/os; the glTF
 /// camera's field of view spans the whole grid), bands centred on the run's wavelengths.
+/// With `depth_aware` optics (the camera defocuses by depth) the render is a pinhole one
+/// unless `render.camera` says otherwise, and a thin-lens render camera is refused (it would
+/// defocus twice).
 fn render_scene(
     rf: &RenderRunFile,
     seed: u64,
@@ -1138,6 +1145,7 @@ fn render_scene(
     os: usize,
     margin: usize,
     grid: &WavelengthGrid,
+    depth_aware: bool,
 ) -> Result<camsim_core::SceneRadiance, CliError> {
     use camsim_render::job::{prepare, CameraChoice, RenderJob};
     let step = grid
@@ -1147,11 +1155,18 @@ fn render_scene(
     let bands = camsim_render::Bands::new(w0 - step / 2.0, wn + step / 2.0, step)
         .map_err(|e| CliError::input(&rf.scene, format!("render bands: {e}")))?;
     let camera: CameraChoice = match &rf.camera {
+        None if depth_aware => CameraChoice::Pinhole,
         None => CameraChoice::Auto,
         Some(c) => c
             .parse()
             .map_err(|e: String| CliError::input(&rf.scene, e))?,
     };
+    if depth_aware && matches!(camera, CameraChoice::ThinLens) {
+        return Err(CliError::input(
+            &rf.scene,
+            "render.camera \"thinlens\": the camera's optics already defocus by depth (optics.focus_distance_m or blur kind \"lens\"); render with \"pinhole\"",
+        ));
+    }
     let job = RenderJob {
         scene: rf.scene.clone(),
         camera_name: rf.camera_name.clone(),

@@ -26,7 +26,7 @@
 //!
 //! Both give, besides the defocused planes, the blur size per pixel: the RMS radius of the PSF
 //! applied to the pixel's slab (about the PSF centroid), [`kernel_rms_radius_px`].
-use crate::depth_path::{defocus_layered, slabs, trim_kernel, Kernel, ThinLensDefocus};
+use crate::depth_path::{defocus_layered_with, slabs, trim_kernel, Kernel, ThinLensDefocus};
 
 /// The thin-lens defocus of a camera (see the module docs): focal length `focal_length_m`,
 /// F-number `f_number`, focused on `focus_distance_m` (`None` = infinity), samples of
@@ -284,9 +284,10 @@ pub struct DepthDefocused {
 
 /// Defocus `planes` (`w × h`, wavelength `band_wavelengths_nm[b]` each) with planar depth
 /// `depth_m` (∞ or ≤ 0 = escaped) by depth-layered compositing over `layers` slabs
-/// ([`defocus_layered`]) with the PSFs of `kernels`: per field tile (the tile plus a margin of
+/// ([`crate::depth_path::defocus_layered`]) with the PSFs of `kernels`: per field tile (the tile plus a margin of
 /// the largest kernel radius is composited, its interior kept) and per group of bands sharing
-/// a tabulated wavelength.
+/// a tabulated wavelength. The background is continued under blurred foreground edges
+/// ([`defocus_layered_with`], `continue_background`).
 pub fn defocus_by_depth(
     planes: &[Vec<f32>],
     band_wavelengths_nm: &[f64],
@@ -299,7 +300,7 @@ pub fn defocus_by_depth(
     let layers = layers.max(1);
     match kernels {
         DepthKernels::Thin(t) => {
-            let out = defocus_layered(planes, depth_m, w, h, layers, |iz| t.kernel(iz));
+            let out = defocus_layered_with(planes, depth_m, w, h, layers, true, |iz| t.kernel(iz));
             let (index, mean) = slabs(depth_m, layers);
             let rms: Vec<f32> = mean
                 .iter()
@@ -350,7 +351,7 @@ pub fn defocus_by_depth(
                         let idx: Vec<usize> =
                             (0..planes.len()).filter(|b| groups[*b] == g).collect();
                         let sub: Vec<Vec<f32>> = idx.iter().map(|b| crop(&planes[*b])).collect();
-                        let res = defocus_layered(&sub, &dcrop, cw, ch, layers, |iz| {
+                        let res = defocus_layered_with(&sub, &dcrop, cw, ch, layers, true, |iz| {
                             lk.kernel(tile, g, iz)
                         });
                         for (b, pl) in idx.iter().zip(&res) {

@@ -191,6 +191,27 @@ pub fn defocus_layered(
     layers: usize,
     kernel: impl Fn(f64) -> Kernel + Sync,
 ) -> Vec<Vec<f32>> {
+    defocus_layered_with(bands, depth_m, w, h, layers, false, kernel)
+}
+
+/// [`defocus_layered`], optionally continuing the background under blurred foreground edges
+/// across depth jumps (`continue_background`): where a layer's blurred coverage is partial
+/// and no farther layer reached the pixel, the rest of the aperture sees the background,
+/// taken as the mean of the composite so far over the covered pixels (more than 10 % farther
+/// in 1/z) within the layer kernel's support. Exact for a straight occluding edge over a
+/// background uniform along it (`render/tests/depth_crosscheck.rs`); without it the near side
+/// of such an edge keeps the foreground colour and its blur is too narrow. On the Mitsuba
+/// thin-lens scene (lit boxes, floor, wall) it raises the RMS error near depth edges
+/// (docs/render_validation.md), so [`defocus_layered`] (the DoF study) does not use it.
+pub fn defocus_layered_with(
+    bands: &[Vec<f32>],
+    depth_m: &[f32],
+    w: usize,
+    h: usize,
+    layers: usize,
+    continue_background: bool,
+    kernel: impl Fn(f64) -> Kernel + Sync,
+) -> Vec<Vec<f32>> {
     use rayon::prelude::*;
     let layers = layers.max(1);
     let (index, mean) = slabs(depth_m, layers);
@@ -198,6 +219,8 @@ pub fn defocus_layered(
     // pixel yet
     let mut acc = vec![vec![0f32; w * h]; bands.len()];
     let mut cover = vec![false; w * h];
+    // the mean 1/z of the nearest slab that reached each pixel so far
+    let mut cover_inv = vec![0f64; w * h];
     // back to front: small 1/z first
     for (k, mean_k) in mean.iter().enumerate() {
         let Some(mid) = *mean_k else { continue };
@@ -211,10 +234,17 @@ pub fn defocus_layered(
         // background through the rest of the aperture: continue the composite so far there by
         // its normalised convolution over the disc of the kernel's support (the mean of the
         // background visible within that disc).
-        let partial = |k: usize| !cover[k] && a_blur[k] > 1e-6 && a_blur[k] < 1.0 - 1e-6;
-        if ker.radius > 0 && cover.iter().any(|c| *c) && (0..w * h).any(partial) {
+        // Only across a depth jump: the background must lie more than 10 % farther in 1/z (a
+        // continuous surface crossing slabs keeps the layer's own normalised colour).
+        let partial = |q: usize| !cover[q] && a_blur[q] > 1e-6 && a_blur[q] < 1.0 - 1e-6;
+        let source = |q: usize| cover[q] && cover_inv[q] < 0.9 * mid;
+        if continue_background
+            && ker.radius > 0
+            && (0..w * h).any(source)
+            && (0..w * h).any(partial)
+        {
             let fill = Kernel::pillbox(ker.radius as f64);
-            let covf: Vec<f32> = cover.iter().map(|c| *c as u8 as f32).collect();
+            let covf: Vec<f32> = (0..w * h).map(|q| source(q) as u8 as f32).collect();
             let wsum = convolve(&covf, w, h, &fill);
             let filled: Vec<bool> = (0..w * h).map(|k| partial(k) && wsum[k] > 1e-6).collect();
             acc.par_iter_mut().for_each(|acc_b| {
@@ -226,8 +256,11 @@ pub fn defocus_layered(
                     }
                 }
             });
-            for (c, f) in cover.iter_mut().zip(&filled) {
-                *c |= *f;
+            for (q, f) in filled.iter().enumerate() {
+                if *f {
+                    cover[q] = true;
+                    cover_inv[q] = 0.0;
+                }
             }
         }
         acc.par_iter_mut().zip(bands).for_each(|(acc_b, band)| {
@@ -243,8 +276,11 @@ pub fn defocus_layered(
                 }
             }
         });
-        for (cov, a) in cover.iter_mut().zip(&a_blur) {
-            *cov |= *a > 1e-6;
+        for ((cov, a), ci) in cover.iter_mut().zip(&a_blur).zip(cover_inv.iter_mut()) {
+            if *a > 1e-6 {
+                *cov = true;
+                *ci = mid;
+            }
         }
     }
     acc
