@@ -49,7 +49,9 @@ impl Kernel {
     }
 
     /// A uniform disc of radius `r_px` pixels, each pixel weighted by the disc area it covers
-    /// (8×8 sub-samples); the identity below 1/16 px.
+    /// (8×8 sub-samples); the identity below 1/16 px, and also where the disc is too small to
+    /// hold any sub-sample (r < √2/16 px, the nearest sub-sample's distance from the centre:
+    /// normalising an empty kernel would give 0/0).
     pub fn pillbox(r_px: f64) -> Kernel {
         if !(r_px > 1.0 / 16.0) {
             return Kernel::delta();
@@ -74,6 +76,9 @@ impl Kernel {
             }
         }
         let s: f32 = values.iter().sum();
+        if !(s > 0.0) {
+            return Kernel::delta();
+        }
         values.iter_mut().for_each(|v| *v /= s);
         Kernel { radius: r, values }
     }
