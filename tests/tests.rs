@@ -18,6 +18,7 @@ mod render;
 mod rolling_shutter;
 mod run;
 mod run_cfa;
+mod run_depth;
 mod split_pixel;
 mod statistics;
 mod study;

@@ -5,7 +5,7 @@
 //! | step | function | stage call |
 //! |---|---|---|
 //! | scene radiance of a shot (field of view, distance, illuminant swap) | [`shot_scene`] | [`camsim_core::scene_view::render_target_in_view`], [`camsim_core::illuminant::swap_illuminant`] |
-//! | optics | [`shot_irradiance`], [`irradiance_of`], [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`] |
+//! | optics | [`shot_irradiance`], [`irradiance_of`], [`irradiance_and_blur_of`] (depth-aware for scenes with depth), [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`]; [`camsim_render::depth_optics::defocus_by_depth`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
 //! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |
 //! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`] | [`camsim_sensor::time_averaged_rate`] |
@@ -28,13 +28,13 @@ pub use crate::simulate::{
 };
 
 /// The optics stage of the set's camera applied to a scene that does not come from a shot's
-/// target (a glTF render, an image): [`optical_image`] with the sensor as the scene image.
+/// target (a glTF render, an image): [`irradiance_and_blur_of`] without the blur map.
 pub fn irradiance_of(
     set: &CaptureSet,
     scene: &SceneRadiance,
     grid: &WavelengthGrid,
 ) -> Result<SensorIrradiance, CliError> {
-    optical_image(set, scene, grid, None)
+    irradiance_and_blur_of(set, scene, grid).map(|o| o.irradiance)
 }
 
 /// The optics stage: scene radiance (on the simulation grid: the sensor plus its margin) →
@@ -71,6 +71,163 @@ pub fn optical_image(
         camsim_optics::form_image(optics, scene, grid)
     };
     result.map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+}
+
+/// Depth-layered compositing slabs of the depth-aware optics (uniform in 1/z).
+pub const DEPTH_LAYERS: usize = 16;
+/// Field tiles per side of the real-lens depth-aware optics (PSF of each tile's centre).
+pub const DEPTH_FIELD_TILES: usize = 3;
+
+/// What the optics stage did with a scene's depth.
+#[derive(Debug, Clone)]
+pub struct DepthOptics {
+    /// `"thin_lens"` or `"lens"`.
+    pub kernels: &'static str,
+    /// Focus distance (m; thin lens: from the lens; real lens: from the first vertex;
+    /// `None` = infinity).
+    pub focus_distance_m: Option<f64>,
+    /// Compositing slabs.
+    pub layers: usize,
+    /// Field tiles per side (1: one PSF per depth for the whole frame).
+    pub field_tiles: usize,
+    /// PSF RMS radius (µm on the sensor) applied at every scene sample.
+    pub blur_rms_radius_um: Plane,
+}
+
+/// The optics stage's result: the irradiance, and the depth-aware blur when one was applied.
+#[derive(Debug, Clone)]
+pub struct OpticsOutcome {
+    /// Sensor irradiance on the scene's grid.
+    pub irradiance: SensorIrradiance,
+    /// `Some` when the scene's depth was used.
+    pub depth: Option<DepthOptics>,
+}
+
+/// The optics stage: [`camsim_optics::form_image`] with the camera's optics, made
+/// **depth-aware** when the scene has depth (`SceneRadiance::depth_m`: a glTF render) and the
+/// camera has a lens that defocuses by depth:
+/// * `optics.focus_distance_m` (thin lens): every slab of depth is blurred with the pillbox of
+///   its circle of confusion ([`camsim_render::depth_optics::thin_lens_for_camera`]), then the
+///   camera's own optics (camera equation, relative illumination, its blur, e.g. diffraction)
+///   apply as for any scene;
+/// * `blur.kind = "lens"`: the lens's geometric PSFs by field tile × wavelength × object
+///   distance, focused by the camera's focus settings
+///   ([`camsim_render::depth_optics::LensDepthKernels`]), on the scene split into the grid's
+///   bands, then the lens's distortion and relative illumination (its field model without
+///   PSFs).
+///
+/// Both defocus by depth-layered compositing ([`camsim_render::depth_optics::defocus_by_depth`],
+/// [`DEPTH_LAYERS`] slabs). Any other case (no depth, or a camera without focus) is the
+/// shift-invariant path, unchanged.
+pub fn irradiance_and_blur_of(
+    set: &CaptureSet,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<OpticsOutcome, CliError> {
+    use camsim_render::depth_optics::{
+        defocus_by_depth, thin_lens_for_camera, DepthKernels, LensDepthKernels, LensDepthOptions,
+    };
+    let optics_err =
+        |e: &dyn std::fmt::Display| CliError::input(&set.camera_path, format!("optics: {e}"));
+    let cam = &set.camera;
+    let lens_focus = match &cam.optics.blur {
+        camsim_optics::Blur::Lens(lb) => lb.focus.clone(),
+        _ => None,
+    };
+    let depth = match &scene.depth_m {
+        Some(d) if cam.thin_lens_focus_m.is_some() || lens_focus.is_some() => d,
+        _ => {
+            return Ok(OpticsOutcome {
+                irradiance: optical_image(set, scene, grid, None)?,
+                depth: None,
+            })
+        }
+    };
+    let (w, h) = (scene.radiance.cols, scene.radiance.rows);
+    if depth.rows != h || depth.cols != w {
+        return Err(optics_err(&format!(
+            "the scene's depth is {}×{} but its radiance {h}×{w}",
+            depth.rows, depth.cols
+        )));
+    }
+    let dx = scene.sample_pitch_m;
+    let mut optics = cam.optics.clone();
+    let (kernels, radiance, focus_distance_m, tiles) = match &lens_focus {
+        None => {
+            let f = cam.thin_lens_focus_m;
+            let t = thin_lens_for_camera(optics.focal_length_m, optics.f_number, f, dx)
+                .map_err(|e| optics_err(&e))?;
+            (DepthKernels::Thin(t), scene.radiance.clone(), f, 1)
+        }
+        Some(focus) => {
+            let camsim_optics::Blur::Lens(lb) = &mut optics.blur else {
+                unreachable!("lens_focus comes from a lens blur")
+            };
+            let bands = scene.radiance.to_bands(grid);
+            let lk = LensDepthKernels::new(
+                focus,
+                &LensDepthOptions {
+                    sample_pitch_mm: dx * 1e3,
+                    width: w,
+                    height: h,
+                    wavelengths_nm: lb.model.wavelengths_nm.clone(),
+                    pupil_n: 32,
+                    tiles: DEPTH_FIELD_TILES,
+                },
+                &camsim_render::depth_path::slab_inverse_depths(&depth.data, DEPTH_LAYERS),
+            )
+            .map_err(|e| optics_err(&e))?;
+            // the PSFs are applied here; the lens model keeps distortion and illumination
+            lb.apply_psf = false;
+            (
+                DepthKernels::Lens(lk),
+                bands,
+                focus.focus_distance_mm.map(|d| d * 1e-3),
+                DEPTH_FIELD_TILES,
+            )
+        }
+    };
+    let band_nm: Vec<f64> = match &radiance.basis {
+        camsim_core::image::SpectralBasis::Bands(g) => g.wavelength_nm.clone(),
+        _ => vec![550.0; radiance.planes.len()],
+    };
+    let d = defocus_by_depth(
+        &radiance.planes,
+        &band_nm,
+        &depth.data,
+        w,
+        h,
+        DEPTH_LAYERS,
+        &kernels,
+    );
+    let mut defocused = scene.clone();
+    defocused.radiance = camsim_core::image::SpectralImage {
+        planes: d.planes,
+        ..radiance
+    };
+    let irradiance =
+        camsim_optics::form_image(&optics, &defocused, grid).map_err(|e| optics_err(&e))?;
+    Ok(OpticsOutcome {
+        irradiance,
+        depth: Some(DepthOptics {
+            kernels: match kernels {
+                DepthKernels::Thin(_) => "thin_lens",
+                DepthKernels::Lens(_) => "lens",
+            },
+            focus_distance_m,
+            layers: DEPTH_LAYERS,
+            field_tiles: tiles,
+            blur_rms_radius_um: Plane {
+                rows: h,
+                cols: w,
+                data: d
+                    .blur_rms_radius_px
+                    .iter()
+                    .map(|r| (*r as f64 * dx * 1e6) as f32)
+                    .collect(),
+            },
+        }),
+    })
 }
 
 /// The exposure and gain of shot `shot_index`: its fixed exposure, or the auto exposure that

@@ -78,6 +78,12 @@ pub struct OpticsFile {
     /// `oiCompute` with `crop = false` (default false: the spec's optics, unchanged).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncropped_optical_image: Option<bool>,
+    /// Extension: thin-lens focus distance (m). With it, a scene with depth (a glTF render)
+    /// is defocused by depth as a thin lens of `focal_length_mm` and `f_number` focused there
+    /// (docs/run.md, depth-aware optics); not with `blur.kind = "lens"`, which focuses by
+    /// `blur.focus_distance_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_distance_m: Option<f64>,
 }
 
 /// `optics.relative_illumination`: the model name, or the object form with an extra
@@ -814,6 +820,9 @@ pub struct Camera {
     pub uncropped_optical_image: bool,
     /// HDR pixel (`sensor.hdr`; None: the standard pixel).
     pub hdr: Option<HdrModel>,
+    /// Thin-lens focus distance (m, `optics.focus_distance_m`): scenes with depth are
+    /// defocused by depth as a thin lens focused there ([`crate::chain::irradiance_of`]).
+    pub thin_lens_focus_m: Option<f64>,
 }
 
 /// A validated shot.
@@ -1013,6 +1022,25 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         None => None,
         Some(h) => Some(hdr_from_file(path, h, &sensor)?),
     };
+    let thin_lens_focus_m = match o.focus_distance_m {
+        None => None,
+        Some(_) if matches!(optics.blur, Blur::Lens(_)) => {
+            return Err(CliError::input(
+                path,
+                "optics.focus_distance_m: a thin-lens key; with blur kind \"lens\" the lens is focused by optics.blur.focus_distance_m",
+            ))
+        }
+        Some(d) => {
+            let d = positive(path, "optics.focus_distance_m", d)?;
+            if !(d.is_finite() && d > focal_length_m) {
+                return Err(CliError::input(
+                    path,
+                    format!("optics.focus_distance_m: must be finite and beyond the focal length ({} m), got {d}", focal_length_m),
+                ));
+            }
+            Some(d)
+        }
+    };
     Ok(Camera {
         name: raw.name.unwrap_or_else(|| "camera".into()),
         optics,
@@ -1020,6 +1048,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         readout,
         uncropped_optical_image,
         hdr,
+        thin_lens_focus_m,
     })
 }
 

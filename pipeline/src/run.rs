@@ -525,6 +525,38 @@ fn to_sensor_pixels(
     }
 }
 
+/// One plane of the scene grid (`grid_cols` wide, `os` samples per pixel side, `margin`
+/// pixels around the sensor) → one value per sensor pixel: the mean of the pixel's samples
+/// (`mean`) or its centre sample.
+fn plane_to_sensor_pixels(
+    p: &[f32],
+    grid_cols: usize,
+    os: usize,
+    margin: usize,
+    rows: usize,
+    cols: usize,
+    mean: bool,
+) -> Vec<f32> {
+    let mut out = vec![0f32; rows * cols];
+    for r in 0..rows {
+        for c in 0..cols {
+            let (y0, x0) = ((r + margin) * os, (c + margin) * os);
+            out[r * cols + c] = if mean {
+                let mut s = 0f32;
+                for dy in 0..os {
+                    for dx in 0..os {
+                        s += p[(y0 + dy) * grid_cols + x0 + dx];
+                    }
+                }
+                s / (os * os) as f32
+            } else {
+                p[(y0 + os / 2) * grid_cols + x0 + os / 2]
+            };
+        }
+    }
+    out
+}
+
 /// Mean channel values of every chart patch (row-major).
 fn planes_patch_means(p: &ChannelPlanes, layout: &ChartLayout) -> Vec<Vec<f64>> {
     let n = layout.chart_rows * layout.chart_cols;
@@ -586,7 +618,11 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     let (os, margin) =
         crate::chain::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
     let scene = match &r.render {
-        Some(rf) => render_scene(rf, r.seed, sensor, os, margin, &grid)?,
+        Some(rf) => {
+            let depth_aware = cam.thin_lens_focus_m.is_some()
+                || matches!(&cam.optics.blur, camsim_optics::Blur::Lens(l) if l.focus.is_some());
+            render_scene(rf, r.seed, sensor, os, margin, &grid, depth_aware)?
+        }
         None => shot_scene(set, 0, &grid)?,
     };
     let window = (
@@ -606,12 +642,107 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 
     // 2. Optics
     bar.set_message("optics");
-    let irr = crate::chain::irradiance_of(set, &scene, &grid)?;
+    let optics_out = crate::chain::irradiance_and_blur_of(set, &scene, &grid)?;
+    let irr = optics_out.irradiance;
     let mut irr_w =
         to_sensor_pixels(&irr.irradiance, os, margin, sensor.rows, sensor.cols).to_bands(&exr_grid);
     bands_energy_to_photons(&mut irr_w, &SI, true);
     let p = put("sensor_irradiance.exr");
     write_spectral_exr(&p, &irr_w, IRRADIANCE_UNITS, None).map_err(|e| out_err(&p, &e))?;
+    // Depth-aware optics: the depth map and the blur-size map, per sensor pixel.
+    let mut depth_files: Vec<&str> = Vec::new();
+    let mut depth_figures: Vec<(&str, &str)> = Vec::new();
+    let depth_report = match (&optics_out.depth, &scene.depth_m) {
+        (Some(d), Some(z)) => {
+            let px = |p: &[f32], mean: bool| {
+                plane_to_sensor_pixels(
+                    p,
+                    scene.radiance.cols,
+                    os,
+                    margin,
+                    sensor.rows,
+                    sensor.cols,
+                    mean,
+                )
+            };
+            // depth: the sample at each pixel's centre (an average would mix the two sides of
+            // a depth edge); blur: the mean over the pixel's samples
+            let z_px = px(&z.data, false);
+            let b_px = px(&d.blur_rms_radius_um.data, true);
+            let write = |p: PathBuf, channel: &str, v: &[f32], units: &str| {
+                camsim_render::output::write_planes_exr(
+                    &p,
+                    sensor.cols,
+                    sensor.rows,
+                    vec![(channel.to_string(), v.to_vec())],
+                    units,
+                )
+                .map_err(|e| out_err(&p, &e))
+            };
+            write(put("depth.exr"), "Z", &z_px, "m")?;
+            write(
+                put("blur_rms_radius.exr"),
+                "blur_rms_radius_um",
+                &b_px,
+                "um",
+            )?;
+            let finite: Vec<f32> = z_px
+                .iter()
+                .copied()
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .collect();
+            let (zmin, zmax) = finite
+                .iter()
+                .fold((f32::INFINITY, 0f32), |(a, b), v| (a.min(*v), b.max(*v)));
+            // previews: depth as 1/z (near = bright), blur linear from 0 to its maximum
+            let bmax = b_px.iter().copied().fold(0f32, f32::max);
+            let grey = |v: &[f32], f: &dyn Fn(f32) -> f32| -> Vec<u8> {
+                v.iter()
+                    .flat_map(|x| {
+                        let g = (f(*x).clamp(0.0, 1.0) * 255.0).round() as u8;
+                        [g, g, g]
+                    })
+                    .collect()
+            };
+            let zinv = |x: f32| {
+                if x.is_finite() && x > 0.0 && zmin.is_finite() {
+                    zmin / x
+                } else {
+                    0.0
+                }
+            };
+            let p = put("depth_preview.png");
+            plots::rgb8_png(&p, &grey(&z_px, &zinv), sensor.rows, sensor.cols)?;
+            let p = put("blur_rms_radius.png");
+            plots::rgb8_png(
+                &p,
+                &grey(&b_px, &|x| if bmax > 0.0 { x / bmax } else { 0.0 }),
+                sensor.rows,
+                sensor.cols,
+            )?;
+            depth_files = vec!["depth.exr", "blur_rms_radius.exr"];
+            depth_figures = vec![
+                ("depth_preview.png", "Depth map (brightness ∝ 1/z, nearest = white; depth.exr holds metres)"),
+                ("blur_rms_radius.png", "Blur size: PSF RMS radius per pixel (0 = black, white = the maximum; blur_rms_radius.exr holds µm)"),
+            ];
+            let bmean = b_px.iter().map(|v| *v as f64).sum::<f64>() / b_px.len().max(1) as f64;
+            Some(json!({
+                "kernels": d.kernels,
+                "focus_distance_m": d.focus_distance_m,
+                "focus_distance_from": if d.kernels == "lens" { "first vertex" } else { "lens (thin)" },
+                "layers": d.layers,
+                "field_tiles": d.field_tiles,
+                "depth_map": {"file": "depth.exr", "channel": "Z", "units": "m", "meaning": "planar depth from the render camera, sample at each pixel centre (inf = nothing hit)",
+                              "min_m": if finite.is_empty() { Value::Null } else { json!(zmin) },
+                              "max_m": if finite.is_empty() { Value::Null } else { json!(zmax) }},
+                "blur_map": {"file": "blur_rms_radius.exr", "channel": "blur_rms_radius_um", "units": "um",
+                             "meaning": "RMS radius of the PSF applied to each pixel's depth slab (before diffraction or a diffuser), pixel mean",
+                             "pixel_pitch_um": sensor.pixel_pitch_m * 1e6,
+                             "mean_um": bmean, "max_um": bmax},
+            }))
+        }
+        _ => None,
+    };
     bar.inc(1);
 
     // 3. Sensor
@@ -844,6 +975,9 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                        "output_bits": r.output_bits},
         "display": {"name": r.display.name, "samples_per_pixel": r.samples_per_pixel},
     });
+    if let Some(d) = depth_report {
+        report["depth_optics"] = d;
+    }
     let mut figures: Vec<(&str, &str)> = vec![
         (
             "scene_preview.png",
@@ -852,6 +986,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         ("raw_preview.png", "Raw mosaic (square-root display of DN)"),
         ("rendered.png", "Rendered sRGB"),
     ];
+    figures.extend(depth_figures);
     if let Some(layout) = &chart {
         // per-patch SNR of the raw data, per channel (paper Fig. 4)
         let tile_strings: Vec<String> = sensor
@@ -977,15 +1112,17 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 
     // 7. Report
     bar.set_message("report");
-    report["files"] = json!([
+    let mut listed = vec![
         "scene_radiance.exr",
         "sensor_irradiance.exr",
         "raw.png",
         "rendered.png",
         "display_radiance.exr",
         "summary.json",
-        "report.html"
-    ]);
+        "report.html",
+    ];
+    listed.extend(depth_files);
+    report["files"] = json!(listed);
     report["figures"] = json!(figures.iter().map(|f| f.0).collect::<Vec<_>>());
     let text = serde_json::to_string_pretty(&report).expect("json");
     let p = put("summary.json");
@@ -1011,6 +1148,9 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 /// Path-trace the glTF scene of a `render` section on the scene sampling grid of the sensor
 /// ((rows + 2·margin)·os × (cols + 2·margin)·os samples of pitch pixel_pitch/os; the glTF
 /// camera's field of view spans the whole grid), bands centred on the run's wavelengths.
+/// With `depth_aware` optics (the camera defocuses by depth) the render is a pinhole one
+/// unless `render.camera` says otherwise, and a thin-lens render camera is refused (it would
+/// defocus twice).
 fn render_scene(
     rf: &RenderRunFile,
     seed: u64,
@@ -1018,6 +1158,7 @@ fn render_scene(
     os: usize,
     margin: usize,
     grid: &WavelengthGrid,
+    depth_aware: bool,
 ) -> Result<camsim_core::SceneRadiance, CliError> {
     use camsim_render::job::{prepare, CameraChoice, RenderJob};
     let step = grid
@@ -1027,11 +1168,18 @@ fn render_scene(
     let bands = camsim_render::Bands::new(w0 - step / 2.0, wn + step / 2.0, step)
         .map_err(|e| CliError::input(&rf.scene, format!("render bands: {e}")))?;
     let camera: CameraChoice = match &rf.camera {
+        None if depth_aware => CameraChoice::Pinhole,
         None => CameraChoice::Auto,
         Some(c) => c
             .parse()
             .map_err(|e: String| CliError::input(&rf.scene, e))?,
     };
+    if depth_aware && matches!(camera, CameraChoice::ThinLens) {
+        return Err(CliError::input(
+            &rf.scene,
+            "render.camera \"thinlens\": the camera's optics already defocus by depth (optics.focus_distance_m or blur kind \"lens\"); render with \"pinhole\"",
+        ));
+    }
     let job = RenderJob {
         scene: rf.scene.clone(),
         camera_name: rf.camera_name.clone(),

@@ -49,7 +49,9 @@ impl Kernel {
     }
 
     /// A uniform disc of radius `r_px` pixels, each pixel weighted by the disc area it covers
-    /// (8×8 sub-samples); the identity below 1/16 px.
+    /// (8×8 sub-samples); the identity below 1/16 px, and also where the disc is too small to
+    /// hold any sub-sample (r < √2/16 px, the nearest sub-sample's distance from the centre:
+    /// normalising an empty kernel would give 0/0).
     pub fn pillbox(r_px: f64) -> Kernel {
         if !(r_px > 1.0 / 16.0) {
             return Kernel::delta();
@@ -74,6 +76,9 @@ impl Kernel {
             }
         }
         let s: f32 = values.iter().sum();
+        if !(s > 0.0) {
+            return Kernel::delta();
+        }
         values.iter_mut().for_each(|v| *v /= s);
         Kernel { radius: r, values }
     }
@@ -191,6 +196,27 @@ pub fn defocus_layered(
     layers: usize,
     kernel: impl Fn(f64) -> Kernel + Sync,
 ) -> Vec<Vec<f32>> {
+    defocus_layered_with(bands, depth_m, w, h, layers, false, kernel)
+}
+
+/// [`defocus_layered`], optionally continuing the background under blurred foreground edges
+/// across depth jumps (`continue_background`): where a layer's blurred coverage is partial
+/// and no farther layer reached the pixel, the rest of the aperture sees the background,
+/// taken as the mean of the composite so far over the covered pixels (more than 10 % farther
+/// in 1/z) within the layer kernel's support. Exact for a straight occluding edge over a
+/// background uniform along it (`render/tests/depth_crosscheck.rs`); without it the near side
+/// of such an edge keeps the foreground colour and its blur is too narrow. On the Mitsuba
+/// thin-lens scene (lit boxes, floor, wall) it raises the RMS error near depth edges
+/// (docs/render_validation.md), so [`defocus_layered`] (the DoF study) does not use it.
+pub fn defocus_layered_with(
+    bands: &[Vec<f32>],
+    depth_m: &[f32],
+    w: usize,
+    h: usize,
+    layers: usize,
+    continue_background: bool,
+    kernel: impl Fn(f64) -> Kernel + Sync,
+) -> Vec<Vec<f32>> {
     use rayon::prelude::*;
     let layers = layers.max(1);
     let (index, mean) = slabs(depth_m, layers);
@@ -198,6 +224,8 @@ pub fn defocus_layered(
     // pixel yet
     let mut acc = vec![vec![0f32; w * h]; bands.len()];
     let mut cover = vec![false; w * h];
+    // the mean 1/z of the nearest slab that reached each pixel so far
+    let mut cover_inv = vec![0f64; w * h];
     // back to front: small 1/z first
     for (k, mean_k) in mean.iter().enumerate() {
         let Some(mid) = *mean_k else { continue };
@@ -207,6 +235,39 @@ pub fn defocus_layered(
             .collect();
         let ker = kernel(mid);
         let a_blur = convolve(&alpha, w, h, &ker);
+        // Under this layer's blurred edge, pixels no farther layer reached still see the
+        // background through the rest of the aperture: continue the composite so far there by
+        // its normalised convolution over the disc of the kernel's support (the mean of the
+        // background visible within that disc).
+        // Only across a depth jump: the background must lie more than 10 % farther in 1/z (a
+        // continuous surface crossing slabs keeps the layer's own normalised colour).
+        let partial = |q: usize| !cover[q] && a_blur[q] > 1e-6 && a_blur[q] < 1.0 - 1e-6;
+        let source = |q: usize| cover[q] && cover_inv[q] < 0.9 * mid;
+        if continue_background
+            && ker.radius > 0
+            && (0..w * h).any(source)
+            && (0..w * h).any(partial)
+        {
+            let fill = Kernel::pillbox(ker.radius as f64);
+            let covf: Vec<f32> = (0..w * h).map(|q| source(q) as u8 as f32).collect();
+            let wsum = convolve(&covf, w, h, &fill);
+            let filled: Vec<bool> = (0..w * h).map(|k| partial(k) && wsum[k] > 1e-6).collect();
+            acc.par_iter_mut().for_each(|acc_b| {
+                let masked: Vec<f32> = acc_b.iter().zip(&covf).map(|(v, c)| v * c).collect();
+                let num = convolve(&masked, w, h, &fill);
+                for k in 0..w * h {
+                    if filled[k] {
+                        acc_b[k] = num[k] / wsum[k];
+                    }
+                }
+            });
+            for (q, f) in filled.iter().enumerate() {
+                if *f {
+                    cover[q] = true;
+                    cover_inv[q] = 0.0;
+                }
+            }
+        }
         acc.par_iter_mut().zip(bands).for_each(|(acc_b, band)| {
             let premul: Vec<f32> = band.iter().zip(&alpha).map(|(l, a)| l * a).collect();
             let c_blur = convolve(&premul, w, h, &ker);
@@ -220,8 +281,11 @@ pub fn defocus_layered(
                 }
             }
         });
-        for (cov, a) in cover.iter_mut().zip(&a_blur) {
-            *cov |= *a > 1e-6;
+        for ((cov, a), ci) in cover.iter_mut().zip(&a_blur).zip(cover_inv.iter_mut()) {
+            if *a > 1e-6 {
+                *cov = true;
+                *ci = mid;
+            }
         }
     }
     acc
@@ -389,7 +453,7 @@ impl LensDefocus {
 }
 
 /// An `n × n` PSF (centre at n/2) → a normalised kernel cropped to its non-zero extent.
-fn trim_kernel(psf: &[f64], n: usize) -> Kernel {
+pub(crate) fn trim_kernel(psf: &[f64], n: usize) -> Kernel {
     let c = n / 2;
     let mut r = 0;
     for j in 0..n {

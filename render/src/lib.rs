@@ -20,6 +20,7 @@ pub mod bsdf;
 pub mod bvh4;
 mod bvh8_flat;
 pub mod camera;
+pub mod depth_optics;
 pub mod depth_path;
 pub mod dof_scene;
 pub mod error;

@@ -65,6 +65,16 @@ fn circle_of_confusion_matches_traced_thin_lens_rays() {
         .map(|v| (*v as f64 > 0.0) as u8 as f64)
         .sum();
     assert!(nonzero_area > std::f64::consts::PI * 3.3 * 3.3);
+    // Every radius gives a normalised, finite kernel: discs too small to hold a sub-sample
+    // (1/16 < r < √2/16 px) are the identity, not 0/0.
+    for r in [0.0, 0.05, 0.0625, 0.07, 0.0883, 0.089, 0.2, 0.5, 1.0, 1.7] {
+        let k = Kernel::pillbox(r);
+        let sum: f32 = k.values.iter().sum();
+        assert!(
+            k.values.iter().all(|v| v.is_finite()) && (sum - 1.0).abs() < 1e-6,
+            "pillbox({r}): sum {sum}"
+        );
+    }
 }
 
 /// A fronto-parallel plane with a sinusoidal texture (10 px period): the thin lens blurs it by

@@ -1,0 +1,387 @@
+//! Depth-aware image formation for the camera chain: a pinhole scene radiance with planar
+//! depth (a glTF render, or a spectral EXR with a `Z` channel) is defocused by the camera's
+//! lens at every object distance, by the depth-layered compositing of [`crate::depth_path`]
+//! (occlusion handled: a blurred foreground spreads over the background, which is continued
+//! under it).
+//!
+//! Two kernel sources ([`DepthKernels`]):
+//! * **Thin lens** ([`thin_lens_for_camera`]): a lens of focal length f and F-number N focused
+//!   on D, the sensor at the image distance v = 1/(1/f − 1/D) (Gauss). A point at depth z
+//!   images at v_z with 1/v_z = 1/f − 1/z, so the cone of half-aperture f/(2N) meets the
+//!   sensor in a disc of radius c(z) = (f/(2N))·v·|1/z − 1/D| (the same law as
+//!   [`ThinLensDefocus::coc_radius_px`], with v/pitch in place of H/(2 tan(θ_y/2))); its
+//!   kernel is the pillbox of that radius, the same at every wavelength and field position.
+//! * **Real lens** ([`LensDepthKernels`]): the geometric PSFs of a focused `camsim-lens`
+//!   prescription ([`camsim_lens::FocusedLens`], focused by the camera's focus settings) at
+//!   every slab's object distance, from the lens field model tabulated over object distance
+//!   ([`camsim_lens::field_model::FieldModel`]), per tabulated wavelength (each band uses the
+//!   nearest) and per **field tile**: the image is cut into `tiles × tiles` equal rectangles
+//!   and each uses the PSF of its centre's paraxial image position
+//!   ([`camsim_lens::field_model::FieldTable::psf_at`]: the +y PSF at that height rotated to
+//!   the tile's azimuth). Limits: the PSF is piecewise constant over a tile (seams where
+//!   neighbouring tiles differ); the rotation does not mirror the PSF for the image inversion,
+//!   so a comatic off-axis PSF may point radially the wrong way; the geometric PSF omits
+//!   diffraction. Planar depth is taken from the lens's paraxial entrance pupil (the pinhole
+//!   of the render), as by the real-lens camera ([`crate::camera::real_lens`]).
+//!
+//! Both give, besides the defocused planes, the blur size per pixel: the RMS radius of the PSF
+//! applied to the pixel's slab (about the PSF centroid), [`kernel_rms_radius_px`].
+use crate::depth_path::{defocus_layered_with, slabs, trim_kernel, Kernel, ThinLensDefocus};
+
+/// The thin-lens defocus of a camera (see the module docs): focal length `focal_length_m`,
+/// F-number `f_number`, focused on `focus_distance_m` (`None` = infinity), samples of
+/// `sample_pitch_m` on the sensor. Errors when the focus distance is not beyond the focal
+/// length (no real image).
+pub fn thin_lens_for_camera(
+    focal_length_m: f64,
+    f_number: f64,
+    focus_distance_m: Option<f64>,
+    sample_pitch_m: f64,
+) -> Result<ThinLensDefocus, String> {
+    let inv_d = focus_distance_m.map_or(0.0, |d| 1.0 / d);
+    let inv_v = 1.0 / focal_length_m - inv_d;
+    if !(focal_length_m > 0.0 && f_number > 0.0 && sample_pitch_m > 0.0 && inv_v > 0.0) {
+        return Err(format!(
+            "thin lens: focal length {focal_length_m} m, f/{f_number}, focus distance {:?} m and \
+             sample pitch {sample_pitch_m} m must be positive, the focus beyond the focal length",
+            focus_distance_m
+        ));
+    }
+    let v = 1.0 / inv_v;
+    // c = R |Δ(1/z)| · H/(2 tan(θ/2)) with H = 1 px and tan(θ/2) = pitch/(2v): H/(2tan) = v/pitch.
+    Ok(ThinLensDefocus {
+        aperture_radius_m: focal_length_m / (2.0 * f_number),
+        focus_distance_m: focus_distance_m.unwrap_or(f64::INFINITY),
+        yfov_rad: 2.0 * (0.5 * sample_pitch_m / v).atan(),
+        height_px: 1,
+    })
+}
+
+/// RMS radius (px) of a kernel about its centroid: √(Σ w·((x − x̄)² + (y − ȳ)²)) (for a uniform
+/// disc of radius c it tends to c/√2).
+pub fn kernel_rms_radius_px(k: &Kernel) -> f64 {
+    let n = 2 * k.radius + 1;
+    let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    for (i, v) in k.values.iter().enumerate() {
+        let (x, y) = ((i % n) as f64, (i / n) as f64);
+        s += *v as f64;
+        sx += *v as f64 * x;
+        sy += *v as f64 * y;
+    }
+    if !(s > 0.0) {
+        return 0.0;
+    }
+    let (mx, my) = (sx / s, sy / s);
+    let m2: f64 = k
+        .values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let (x, y) = ((i % n) as f64 - mx, (i / n) as f64 - my);
+            *v as f64 * (x * x + y * y)
+        })
+        .sum();
+    (m2 / s).sqrt()
+}
+
+/// Options of [`LensDepthKernels::new`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct LensDepthOptions {
+    /// Scene sample pitch on the sensor (mm): the PSF bin size.
+    pub sample_pitch_mm: f64,
+    /// Image width (samples).
+    pub width: usize,
+    /// Image height (samples).
+    pub height: usize,
+    /// Tabulated wavelengths (nm); each band uses the nearest.
+    pub wavelengths_nm: Vec<f64>,
+    /// Pupil rays per side of the geometric PSFs.
+    pub pupil_n: usize,
+    /// Field tiles per side (1 = the on-axis PSF everywhere).
+    pub tiles: usize,
+}
+
+/// Real-lens PSFs by field tile × wavelength × object distance (see the module docs).
+#[derive(Debug, Clone)]
+pub struct LensDepthKernels {
+    /// Field tiles per side.
+    pub tiles: usize,
+    /// Tabulated wavelengths (nm, increasing).
+    pub wavelengths_nm: Vec<f64>,
+    /// `[tile (row-major)][wavelength]` → (1/z in 1/m, kernel) by increasing 1/z.
+    table: Vec<Vec<Vec<(f64, Kernel)>>>,
+    /// Entrance-pupil radius (m) of the lens.
+    pub entrance_pupil_radius_m: f64,
+}
+
+impl LensDepthKernels {
+    /// Tabulate the PSFs of `focus.lens` (as focused) at the planar inverse depths
+    /// `inv_depths_per_m` (1/m from the entrance pupil, 0 = infinity; e.g.
+    /// [`crate::depth_path::slab_inverse_depths`]).
+    pub fn new(
+        focus: &camsim_lens::FocusedLens,
+        opts: &LensDepthOptions,
+        inv_depths_per_m: &[f64],
+    ) -> Result<Self, camsim_lens::LensError> {
+        use camsim_lens::field_model::{FieldModel, FieldModelOptions, Focus, PsfKind};
+        let bad = |m: String| camsim_lens::LensError::Prescription(format!("depth optics: {m}"));
+        if !(opts.sample_pitch_mm > 0.0)
+            || opts.wavelengths_nm.is_empty()
+            || opts.width == 0
+            || opts.height == 0
+            || opts.tiles == 0
+        {
+            return Err(bad(
+                "sample pitch > 0, an image, one tile and at least one wavelength are needed"
+                    .into(),
+            ));
+        }
+        let lens = &focus.lens;
+        let fo = lens.first_order(lens.primary_nm)?;
+        let z_ep_mm = fo.entrance_pupil_z_mm;
+        let r_ep_mm = 0.5 * fo.entrance_pupil_diameter_mm;
+        let to_vertex = |inv: f64| -> Result<Option<f64>, camsim_lens::LensError> {
+            if inv <= 0.0 {
+                return Ok(None);
+            }
+            let d = 1e3 / inv - z_ep_mm;
+            if !(d > 0.0) {
+                return Err(bad(format!(
+                    "depth {:.4} m lies behind the lens's first vertex",
+                    1.0 / inv
+                )));
+            }
+            Ok(Some(d))
+        };
+        let per_tan_mm =
+            (lens.paraxial_chief_height_mm(1.0, lens.primary_nm)? / 1f64.to_radians().tan()).abs();
+        let p = opts.sample_pitch_mm;
+        let half_diag_mm = 0.5 * p * (opts.width as f64).hypot(opts.height as f64);
+        let max_field_deg = (1.05 * half_diag_mm / per_tan_mm)
+            .atan()
+            .to_degrees()
+            .max(0.05);
+        let v_focus = focus.focus_distance_mm.map_or(0.0, |d| 1e3 / (d + z_ep_mm));
+        let mut invs: Vec<f64> = inv_depths_per_m.iter().map(|v| v.max(0.0)).collect();
+        invs.sort_by(|a, b| a.total_cmp(b));
+        invs.dedup();
+        if invs.is_empty() {
+            invs.push(v_focus);
+        }
+        let max_dv = invs.iter().map(|v| (v - v_focus).abs()).fold(0.0, f64::max);
+        // thin-lens disc radius (samples) + margin for aberrations (off axis too)
+        let c_max = r_ep_mm * 1e-3 * max_dv * per_tan_mm / p;
+        let psf_n = 2 * ((1.5 * c_max + 8.0).ceil() as usize) + 1;
+        let distances = invs
+            .iter()
+            .map(|v| to_vertex(*v))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut wls = opts.wavelengths_nm.clone();
+        wls.sort_by(|a, b| a.total_cmp(b));
+        wls.dedup();
+        let model = FieldModel::compute(
+            lens,
+            &FieldModelOptions {
+                n_fields: (opts.tiles + 1).max(2),
+                max_field_deg: Some(max_field_deg),
+                wavelengths_nm: Some(wls.clone()),
+                kind: PsfKind::Geometric,
+                psf_n,
+                psf_pitch_um: p * 1e3,
+                pupil_n: opts.pupil_n.max(8),
+                pad: 1,
+                ri_grid_n: 8,
+                focus: Focus::Focused(Box::new(focus.clone())),
+                object_distances_mm: distances.clone(),
+            },
+        )?;
+        let tables: Vec<_> = distances.iter().map(|d| model.at_distance(*d)).collect();
+        let n = opts.tiles;
+        let (yc, xc) = (
+            (opts.height as f64 - 1.0) / 2.0,
+            (opts.width as f64 - 1.0) / 2.0,
+        );
+        let mut table = Vec::with_capacity(n * n);
+        for ty in 0..n {
+            for tx in 0..n {
+                // tile centre (samples) → paraxial image position (mm)
+                let (r0, r1) = tile_span(opts.height, n, ty);
+                let (c0, c1) = tile_span(opts.width, n, tx);
+                let yi = 0.5 * (r0 + r1) as f64 - 0.5;
+                let xj = 0.5 * (c0 + c1) as f64 - 0.5;
+                let (x_mm, y_mm) = ((xj - xc) * p, (yi - yc) * p);
+                let per_wl = wls
+                    .iter()
+                    .map(|wl| {
+                        invs.iter()
+                            .zip(&tables)
+                            .map(|(v, t)| {
+                                let psf = if n == 1 {
+                                    t.psf_on_y(0.0, *wl)
+                                } else {
+                                    t.psf_at(x_mm, y_mm, *wl)
+                                };
+                                (*v, trim_kernel(&psf, t.psf_n))
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                table.push(per_wl);
+            }
+        }
+        Ok(LensDepthKernels {
+            tiles: n,
+            wavelengths_nm: wls,
+            table,
+            entrance_pupil_radius_m: r_ep_mm * 1e-3,
+        })
+    }
+
+    /// The tabulated PSF of tile `tile`, wavelength index `wl`, nearest in 1/z to `inv_z`.
+    pub fn kernel(&self, tile: usize, wl: usize, inv_z: f64) -> Kernel {
+        self.table[tile][wl]
+            .iter()
+            .min_by(|a, b| (a.0 - inv_z).abs().total_cmp(&(b.0 - inv_z).abs()))
+            .map(|t| t.1.clone())
+            .unwrap_or_else(Kernel::delta)
+    }
+
+    /// Index of the tabulated wavelength nearest `wavelength_nm`.
+    pub fn nearest_wavelength(&self, wavelength_nm: f64) -> usize {
+        (0..self.wavelengths_nm.len())
+            .min_by(|a, b| {
+                (self.wavelengths_nm[*a] - wavelength_nm)
+                    .abs()
+                    .total_cmp(&(self.wavelengths_nm[*b] - wavelength_nm).abs())
+            })
+            .unwrap_or(0)
+    }
+}
+
+/// Rows (or columns) `[lo, hi)` of tile `k` of `n` over `len` samples.
+fn tile_span(len: usize, n: usize, k: usize) -> (usize, usize) {
+    (k * len / n, (k + 1) * len / n)
+}
+
+/// Where the depth-dependent PSFs come from.
+#[derive(Debug, Clone)]
+pub enum DepthKernels {
+    /// A thin lens: pillbox of the circle of confusion ([`thin_lens_for_camera`]).
+    Thin(ThinLensDefocus),
+    /// A real lens's PSFs by field tile × wavelength × distance.
+    Lens(LensDepthKernels),
+}
+
+/// Result of [`defocus_by_depth`].
+#[derive(Debug, Clone)]
+pub struct DepthDefocused {
+    /// The defocused planes (same order as the input bands).
+    pub planes: Vec<Vec<f32>>,
+    /// PSF RMS radius (samples) applied to each pixel's depth slab (for a lens: at the
+    /// tabulated wavelength nearest 550 nm).
+    pub blur_rms_radius_px: Vec<f32>,
+}
+
+/// Defocus `planes` (`w × h`, wavelength `band_wavelengths_nm[b]` each) with planar depth
+/// `depth_m` (∞ or ≤ 0 = escaped) by depth-layered compositing over `layers` slabs
+/// ([`crate::depth_path::defocus_layered`]) with the PSFs of `kernels`: per field tile (the tile plus a margin of
+/// the largest kernel radius is composited, its interior kept) and per group of bands sharing
+/// a tabulated wavelength. The background is continued under blurred foreground edges
+/// ([`defocus_layered_with`], `continue_background`).
+pub fn defocus_by_depth(
+    planes: &[Vec<f32>],
+    band_wavelengths_nm: &[f64],
+    depth_m: &[f32],
+    w: usize,
+    h: usize,
+    layers: usize,
+    kernels: &DepthKernels,
+) -> DepthDefocused {
+    let layers = layers.max(1);
+    match kernels {
+        DepthKernels::Thin(t) => {
+            let out = defocus_layered_with(planes, depth_m, w, h, layers, true, |iz| t.kernel(iz));
+            let (index, mean) = slabs(depth_m, layers);
+            let rms: Vec<f32> = mean
+                .iter()
+                .map(|m| m.map_or(0.0, |v| kernel_rms_radius_px(&t.kernel(v)) as f32))
+                .collect();
+            DepthDefocused {
+                planes: out,
+                blur_rms_radius_px: index.iter().map(|k| rms[*k]).collect(),
+            }
+        }
+        DepthKernels::Lens(lk) => {
+            let n = lk.tiles;
+            let mut out = vec![vec![0f32; w * h]; planes.len()];
+            let mut rms_map = vec![0f32; w * h];
+            let groups: Vec<usize> = band_wavelengths_nm
+                .iter()
+                .map(|wl| lk.nearest_wavelength(*wl))
+                .collect();
+            let wl_ref = lk.nearest_wavelength(550.0);
+            for ty in 0..n {
+                for tx in 0..n {
+                    let tile = ty * n + tx;
+                    let (r0, r1) = tile_span(h, n, ty);
+                    let (c0, c1) = tile_span(w, n, tx);
+                    if r0 == r1 || c0 == c1 {
+                        continue;
+                    }
+                    let margin = lk.table[tile]
+                        .iter()
+                        .flatten()
+                        .map(|(_, k)| k.radius)
+                        .max()
+                        .unwrap_or(0)
+                        + 1;
+                    let (er0, er1) = (r0.saturating_sub(margin), (r1 + margin).min(h));
+                    let (ec0, ec1) = (c0.saturating_sub(margin), (c1 + margin).min(w));
+                    let (cw, ch) = (ec1 - ec0, er1 - er0);
+                    let crop = |p: &[f32]| -> Vec<f32> {
+                        (er0..er1)
+                            .flat_map(|r| p[r * w + ec0..r * w + ec1].iter().copied())
+                            .collect()
+                    };
+                    let dcrop = crop(depth_m);
+                    let mut gl: Vec<usize> = groups.clone();
+                    gl.sort_unstable();
+                    gl.dedup();
+                    for g in gl {
+                        let idx: Vec<usize> =
+                            (0..planes.len()).filter(|b| groups[*b] == g).collect();
+                        let sub: Vec<Vec<f32>> = idx.iter().map(|b| crop(&planes[*b])).collect();
+                        let res = defocus_layered_with(&sub, &dcrop, cw, ch, layers, true, |iz| {
+                            lk.kernel(tile, g, iz)
+                        });
+                        for (b, pl) in idx.iter().zip(&res) {
+                            for r in r0..r1 {
+                                let src = (r - er0) * cw + (c0 - ec0);
+                                out[*b][r * w + c0..r * w + c1]
+                                    .copy_from_slice(&pl[src..src + (c1 - c0)]);
+                            }
+                        }
+                    }
+                    let (index, mean) = slabs(&dcrop, layers);
+                    let rms: Vec<f32> = mean
+                        .iter()
+                        .map(|m| {
+                            m.map_or(0.0, |v| {
+                                kernel_rms_radius_px(&lk.kernel(tile, wl_ref, v)) as f32
+                            })
+                        })
+                        .collect();
+                    for r in r0..r1 {
+                        for c in c0..c1 {
+                            rms_map[r * w + c] = rms[index[(r - er0) * cw + (c - ec0)]];
+                        }
+                    }
+                }
+            }
+            DepthDefocused {
+                planes: out,
+                blur_rms_radius_px: rms_map,
+            }
+        }
+    }
+}
