@@ -22,6 +22,7 @@ use camsim_sensor::{
     ElectronRate, HdrFrame, HdrModel, HdrReadoutModel, PatternSource, SensorModel, Shot, TimeModel,
 };
 use std::borrow::Cow;
+use std::path::Path;
 
 pub use crate::simulate::{
     sampling_for, shot_electron_rate, shot_irradiance, shot_scene, wavelength_grid,
@@ -56,9 +57,21 @@ pub fn optical_image(
     grid: &WavelengthGrid,
     extent_m: Option<(f64, f64)>,
 ) -> Result<SensorIrradiance, CliError> {
-    let optics = &set.camera.optics;
-    let result = if set.camera.uncropped_optical_image {
-        let s = &set.camera.sensor;
+    camera_optical_image(&set.camera, &set.camera_path, scene, grid, extent_m)
+}
+
+/// [`optical_image`] for a camera on its own (`camera_path` names its file in errors): what
+/// the Python package's stage-by-stage `irradiance` calls.
+pub fn camera_optical_image(
+    camera: &Camera,
+    camera_path: &Path,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+    extent_m: Option<(f64, f64)>,
+) -> Result<SensorIrradiance, CliError> {
+    let optics = &camera.optics;
+    let result = if camera.uncropped_optical_image {
+        let s = &camera.sensor;
         let (w, h) = extent_m.unwrap_or((
             s.cols as f64 * s.pixel_pitch_m,
             s.rows as f64 * s.pixel_pitch_m,
@@ -70,7 +83,7 @@ pub fn optical_image(
     } else {
         camsim_optics::form_image(optics, scene, grid)
     };
-    result.map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+    result.map_err(|e| CliError::input(camera_path, format!("optics: {e}")))
 }
 
 /// Depth-layered compositing slabs of the depth-aware optics (uniform in 1/z).
@@ -124,12 +137,22 @@ pub fn irradiance_and_blur_of(
     scene: &SceneRadiance,
     grid: &WavelengthGrid,
 ) -> Result<OpticsOutcome, CliError> {
+    camera_irradiance_and_blur(&set.camera, &set.camera_path, scene, grid)
+}
+
+/// [`irradiance_and_blur_of`] for a camera on its own (`camera_path` names its file in
+/// errors): what the Python package's stage-by-stage `irradiance` calls.
+pub fn camera_irradiance_and_blur(
+    cam: &Camera,
+    camera_path: &Path,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<OpticsOutcome, CliError> {
     use camsim_render::depth_optics::{
         defocus_by_depth, thin_lens_for_camera, DepthKernels, LensDepthKernels, LensDepthOptions,
     };
     let optics_err =
-        |e: &dyn std::fmt::Display| CliError::input(&set.camera_path, format!("optics: {e}"));
-    let cam = &set.camera;
+        |e: &dyn std::fmt::Display| CliError::input(camera_path, format!("optics: {e}"));
     let lens_focus = match &cam.optics.blur {
         camsim_optics::Blur::Lens(lb) => lb.focus.clone(),
         _ => None,
@@ -138,7 +161,7 @@ pub fn irradiance_and_blur_of(
         Some(d) if cam.thin_lens_focus_m.is_some() || lens_focus.is_some() => d,
         _ => {
             return Ok(OpticsOutcome {
-                irradiance: optical_image(set, scene, grid, None)?,
+                irradiance: camera_optical_image(cam, camera_path, scene, grid, None)?,
                 depth: None,
             })
         }

@@ -330,11 +330,19 @@ impl Camera {
     /// The optics stage: sensor irradiance (photons/(s·m²·nm)) of `scene` through this
     /// camera's optics, on the scene's wavelength bands.
     fn irradiance(&self, py: Python<'_>, scene: &Scene) -> PyResult<Irradiance> {
-        let optics = &self.cam.optics;
-        let irr = py
-            .detach(|| camsim_optics::form_image(optics, &scene.scene, &scene.grid))
-            .map_err(|e| err(CliError::input(&self.path, format!("optics: {e}"))))?;
-        Ok(Irradiance::new(irr, scene.grid.clone()))
+        // The library's one optics stage (depth-aware for a scene with depth, the uncropped
+        // optical image when the camera asks for it).
+        let out = py
+            .detach(|| {
+                camsim_pipeline::chain::camera_irradiance_and_blur(
+                    &self.cam,
+                    &self.path,
+                    &scene.scene,
+                    &scene.grid,
+                )
+            })
+            .map_err(err)?;
+        Ok(Irradiance::new(out.irradiance, scene.grid.clone()))
     }
 
     /// Mean electron rate (electrons/s, float32, (rows, cols)) of every pixel for `irradiance`

@@ -140,19 +140,8 @@ impl LensDepthKernels {
         let fo = lens.first_order(lens.primary_nm)?;
         let z_ep_mm = fo.entrance_pupil_z_mm;
         let r_ep_mm = 0.5 * fo.entrance_pupil_diameter_mm;
-        let to_vertex = |inv: f64| -> Result<Option<f64>, camsim_lens::LensError> {
-            if inv <= 0.0 {
-                return Ok(None);
-            }
-            let d = 1e3 / inv - z_ep_mm;
-            if !(d > 0.0) {
-                return Err(bad(format!(
-                    "depth {:.4} m lies behind the lens's first vertex",
-                    1.0 / inv
-                )));
-            }
-            Ok(Some(d))
-        };
+        let to_vertex =
+            |inv: f64| crate::depth_path::vertex_distance_mm(inv, z_ep_mm, "depth optics");
         let per_tan_mm =
             (lens.paraxial_chief_height_mm(1.0, lens.primary_nm)? / 1f64.to_radians().tan()).abs();
         let p = opts.sample_pitch_mm;

@@ -333,6 +333,28 @@ pub struct LensDefocusOptions {
     pub focus_method: camsim_lens::FocusMethod,
 }
 
+/// The object distance from a lens's first vertex (mm) of a planar inverse depth `inv_z`
+/// (1/m) measured from its entrance pupil at `entrance_pupil_z_mm` (the real-lens camera's
+/// frame): `1000/inv_z − z_ep`; `None` at infinity (`inv_z ≤ 0`), an error naming `what` for a
+/// depth behind the first vertex.
+pub(crate) fn vertex_distance_mm(
+    inv_z: f64,
+    entrance_pupil_z_mm: f64,
+    what: &str,
+) -> Result<Option<f64>, camsim_lens::LensError> {
+    if inv_z <= 0.0 {
+        return Ok(None);
+    }
+    let d = 1e3 / inv_z - entrance_pupil_z_mm;
+    if !(d > 0.0) {
+        return Err(camsim_lens::LensError::Prescription(format!(
+            "{what}: depth {:.4} m lies behind the lens's first vertex",
+            1.0 / inv_z
+        )));
+    }
+    Ok(Some(d))
+}
+
 impl LensDefocus {
     /// Tabulate the PSFs of the planar inverse depths `inv_depths_per_m` (1/m, 0 = infinity;
     /// e.g. [`slab_inverse_depths`]).
@@ -357,19 +379,7 @@ impl LensDefocus {
         let z_ep_mm = fo.entrance_pupil_z_mm;
         let r_ep_mm = 0.5 * fo.entrance_pupil_diameter_mm;
         // planar depth from the entrance pupil → distance from the first vertex
-        let to_vertex = |inv: f64| -> Result<Option<f64>, camsim_lens::LensError> {
-            if inv <= 0.0 {
-                return Ok(None);
-            }
-            let d = 1e3 / inv - z_ep_mm;
-            if !(d > 0.0) {
-                return Err(bad(format!(
-                    "depth {:.4} m lies behind the lens's first vertex",
-                    1.0 / inv
-                )));
-            }
-            Ok(Some(d))
-        };
+        let to_vertex = |inv: f64| vertex_distance_mm(inv, z_ep_mm, "depth path");
         let focus_mm = to_vertex(opts.focus_distance_m.map_or(0.0, |d| 1.0 / d))?;
         let mut method = opts.focus_method.clone();
         method.frequency_cyc_per_mm = method
