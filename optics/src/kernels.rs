@@ -198,8 +198,6 @@ pub fn wavefront_psf(
     let lambda_m = wavelength_nm * 1e-9;
     let ln = lambda_m * f_number;
     let blur_m = 2.0 * 8.0 * 3f64.sqrt() * f_number * defocus_um.abs() * 1e-6;
-    let radius_m = (10.0 * ln + blur_m).min(0.45 * ln * pupil_samples as f64);
-    let h = ((radius_m / pitch_m).ceil() as usize).min(2048);
     let np = pupil_samples;
     let xi: Vec<f64> = (0..np)
         .map(|k| -1.0 + (k as f64 + 0.5) * 2.0 / np as f64)
@@ -216,7 +214,23 @@ pub fn wavefront_psf(
             }
         }
     }
-    let data = pupil_mft_intensity(&pupil, np, &xi, ln, h, pitch_m);
+    Ok(pupil_psf(&pupil, np, &xi, ln, 10.0 * ln + blur_m, pitch_m))
+}
+
+/// The normalised PSF `|F{P}|²` of a sampled pupil (`np × np`, coordinates `xi` across the
+/// unit diameter, `ln` = λN in m) over a radius of `reach_m`, capped at `0.45 λN · np` (inside
+/// the alias-free period of the sampled pupil) and at 2048 samples of `pitch_m`.
+pub(crate) fn pupil_psf(
+    pupil: &[Complex64],
+    np: usize,
+    xi: &[f64],
+    ln: f64,
+    reach_m: f64,
+    pitch_m: f64,
+) -> SampledPsf {
+    let radius_m = reach_m.min(0.45 * ln * np as f64);
+    let h = ((radius_m / pitch_m).ceil() as usize).min(2048);
+    let data = pupil_mft_intensity(pupil, np, xi, ln, h, pitch_m);
     let mut p = SampledPsf {
         half_rows: h,
         half_cols: h,
@@ -224,7 +238,7 @@ pub fn wavefront_psf(
         data,
     };
     p.normalise();
-    Ok(p)
+    p
 }
 
 /// `|F{P}|²` of the `np × np` pupil `pupil` (coordinates `xi` across the unit diameter) at the

@@ -24,7 +24,7 @@
 //! * A polygonal aperture of `N` blades is the regular N-gon inscribed in the aperture circle
 //!   (circumradius `D/2`, one vertex straight up), area `(N/2) R² sin(2π/N)`.
 use crate::error::{check_positive, OpticsError};
-use crate::kernels::{pupil_mft_intensity, SampledPsf};
+use crate::kernels::{pupil_psf, SampledPsf};
 use rustfft::num_complex::Complex64;
 use std::f64::consts::PI;
 
@@ -469,17 +469,14 @@ impl WavefrontPupil {
         let c4 = self.chromatic_defocus.defocus_um(wavelength_nm, dz);
         let ln = wavelength_nm * 1e-9 * f_number;
         let ray_m = 2.0 * f_number * self.max_slope_um(s, c4) * 1e-6;
-        let radius_m = (10.0 * ln + ray_m).min(0.45 * ln * np as f64);
-        let h = ((radius_m / pitch_m).ceil() as usize).min(2048);
-        let data = pupil_mft_intensity(&field.data, np, &field.coord, ln, h, pitch_m);
-        let mut p = SampledPsf {
-            half_rows: h,
-            half_cols: h,
+        Ok(pupil_psf(
+            &field.data,
+            np,
+            &field.coord,
+            ln,
+            10.0 * ln + ray_m,
             pitch_m,
-            data,
-        };
-        p.normalise();
-        Ok(p)
+        ))
     }
 
     /// Largest PSF half-width (m) over `wavelengths_nm` for the blur margin: `10 λN + 2N |∇W|max`.

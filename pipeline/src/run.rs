@@ -495,27 +495,10 @@ fn to_sensor_pixels(
     if os == 1 && margin == 0 && img.rows == rows && img.cols == cols {
         return img.clone();
     }
-    let inv = 1.0 / (os * os) as f32;
     let planes = img
         .planes
         .iter()
-        .map(|p| {
-            let mut out = vec![0f32; rows * cols];
-            for r in 0..rows {
-                for c in 0..cols {
-                    let mut s = 0f32;
-                    for dy in 0..os {
-                        let y = (r + margin) * os + dy;
-                        let row = &p[y * img.cols..(y + 1) * img.cols];
-                        for dx in 0..os {
-                            s += row[(c + margin) * os + dx];
-                        }
-                    }
-                    out[r * cols + c] = s * inv;
-                }
-            }
-            out
-        })
+        .map(|p| plane_to_sensor_pixels(p, img.cols, os, margin, rows, cols, true))
         .collect();
     SpectralImage {
         rows,
@@ -537,6 +520,7 @@ fn plane_to_sensor_pixels(
     cols: usize,
     mean: bool,
 ) -> Vec<f32> {
+    let inv = 1.0 / (os * os) as f32;
     let mut out = vec![0f32; rows * cols];
     for r in 0..rows {
         for c in 0..cols {
@@ -544,11 +528,12 @@ fn plane_to_sensor_pixels(
             out[r * cols + c] = if mean {
                 let mut s = 0f32;
                 for dy in 0..os {
+                    let row = &p[(y0 + dy) * grid_cols..(y0 + dy + 1) * grid_cols];
                     for dx in 0..os {
-                        s += p[(y0 + dy) * grid_cols + x0 + dx];
+                        s += row[x0 + dx];
                     }
                 }
-                s / (os * os) as f32
+                s * inv
             } else {
                 p[(y0 + os / 2) * grid_cols + x0 + os / 2]
             };
