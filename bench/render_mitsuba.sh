@@ -10,17 +10,21 @@
 #
 # Usage: bench/render_mitsuba.sh            Env: CAMSIM_SHARED, SPP (64), WIDTH (256),
 #        BANDS (380:780:10), VARIANT, CARGO_TARGET_DIR, RR_DEPTH (camsim --rr-depth; default:
-#        camsim's default)
+#        camsim's default), SCENE (another glTF, e.g. bench/render_mesh.sh's 10⁶-triangle
+#        scene), SCENE_DESC (its description in the report), OUT_MD (the report's path),
+#        TARGET (the target sentence)
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 SHARED="${CAMSIM_SHARED:-$ROOT/../shared}"
 HARNESS="$SHARED/tools/mitsuba_ref"
-SCENE="$HARNESS/cornell.gltf"
+SCENE="${SCENE:-$HARNESS/cornell.gltf}"
+SCENE_DESC="${SCENE_DESC:-the shared Cornell box (\`shared/tools/mitsuba_ref/cornell.gltf\`)}"
+TARGET="${TARGET:-target of issue 7: ≥ 2×}"
 SPP="${SPP:-64}"
 WIDTH="${WIDTH:-256}"
 BANDS="${BANDS:-380:780:10}"
-OUT_MD="$ROOT/docs/benchmarks/render.md"
+OUT_MD="${OUT_MD:-$ROOT/docs/benchmarks/render.md}"
 [[ -f "$SCENE" ]] || { echo "render_mitsuba.sh: $SCENE not found (set CAMSIM_SHARED)" >&2; exit 1; }
 
 if [[ -z "${VARIANT:-}" ]]; then
@@ -51,11 +55,11 @@ done
 "$PY" "$HARNESS/compare.py" "$TMP/cs_s0.exr" "$TMP/mi_s0.exr" --test2 "$TMP/cs_s1.exr" --ref2 "$TMP/mi_s1.exr" \
     --channels 'band_*' --fail-frac 0.02 >"$TMP/compare.txt" || true
 
-"$PY" - "$TMP" "$OUT_MD" "$VARIANT" "$SPP" "$WIDTH" "$BANDS" "${RR_DEPTH:-default}" <<'PY'
+"$PY" - "$TMP" "$OUT_MD" "$VARIANT" "$SPP" "$WIDTH" "$BANDS" "${RR_DEPTH:-default}" "$SCENE_DESC" "$TARGET" <<'PY'
 import json, os, platform, subprocess, sys, time
 import numpy as np
 import mitsuba as mi
-tmp, out_md, variant, spp, width, bands, rr_depth = sys.argv[1:8]
+tmp, out_md, variant, spp, width, bands, rr_depth, scene_desc, target = sys.argv[1:10]
 mi.set_variant("scalar_rgb")
 
 def read(p):
@@ -97,6 +101,9 @@ def runs(prefix, key_s, key_sps):
 
 mi_t, mi_sps = runs("mi", "render_s", "samples_per_s")
 cs_t, cs_sps = runs("cs", "render_s", "samples_per_s")
+mi_load, _ = runs("mi", "load_s", "samples_per_s")
+cs_load, _ = runs("cs", "load_s", "samples_per_s")
+tris = json.load(open(os.path.join(tmp, "cs_s0.json"))).get("triangles")
 mi_noise, cs_noise = noise("mi"), noise("cs")
 mi_noise_t, cs_noise_t = noise("mi", emitter), noise("cs", emitter)
 mi_best, cs_best = max(mi_sps), max(cs_sps)
@@ -116,21 +123,22 @@ ncpu = os.cpu_count()
 load = os.getloadavg()
 md = f"""# Renderer benchmark: camsim vs Mitsuba 3 (written by bench/render_mitsuba.sh)
 
-Scene: the shared Cornell box (`shared/tools/mitsuba_ref/cornell.gltf`), {width}×{width} px,
+Scene: {scene_desc}, {tris} triangles, {width}×{width} px,
 {spp} spp, bands {bands} nm, path tracing with unlimited depth (Russian roulette from depth 5
 in Mitsuba, from depth {rr_text} in camsim), box pixel filter. Same run, same machine: {model}, {ncpu} logical CPUs, load average
 {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min) at the end of the run
 ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Render times exclude scene loading for
 both renderers; Mitsuba ran one warm-up render first (Dr.Jit kernel compilation).
 
-| renderer | render s (seed 0 / 1) | camera paths / s (best) | per-pixel noise (rel., 10 nm bands): all pixels / without emitter pixels | paths / s at Mitsuba's noise: all / without emitter pixels |
-| --- | --- | --- | --- | --- |
-| Mitsuba 3 `{variant}` | {mi_t[0]:.2f} / {mi_t[1]:.2f} | {mi_best/1e6:.2f} M | {mi_noise:.3f} / {mi_noise_t:.3f} | {mi_best/1e6:.2f} M / {mi_best/1e6:.2f} M |
-| camsim `render` (`--rr-depth` {rr_depth}) | {cs_t[0]:.2f} / {cs_t[1]:.2f} | {cs_best/1e6:.2f} M | {cs_noise:.3f} / {cs_noise_t:.3f} | {cs_equal/1e6:.2f} M / {cs_equal_t/1e6:.2f} M |
+| renderer | load s (seed 0 / 1) | render s (seed 0 / 1) | camera paths / s (best) | per-pixel noise (rel., 10 nm bands): all pixels / without emitter pixels | paths / s at Mitsuba's noise: all / without emitter pixels |
+| --- | --- | --- | --- | --- | --- |
+| Mitsuba 3 `{variant}` | {mi_load[0]:.2f} / {mi_load[1]:.2f} | {mi_t[0]:.2f} / {mi_t[1]:.2f} | {mi_best/1e6:.2f} M | {mi_noise:.3f} / {mi_noise_t:.3f} | {mi_best/1e6:.2f} M / {mi_best/1e6:.2f} M |
+| camsim `render` (`--rr-depth` {rr_depth}) | {cs_load[0]:.2f} / {cs_load[1]:.2f} | {cs_t[0]:.2f} / {cs_t[1]:.2f} | {cs_best/1e6:.2f} M | {cs_noise:.3f} / {cs_noise_t:.3f} | {cs_equal/1e6:.2f} M / {cs_equal_t/1e6:.2f} M |
 
 Speed ratio camsim / Mitsuba: {cs_best/mi_best:.2f}× in paths per second; at equal noise
 {cs_equal/mi_best:.2f}× (all pixels) and {cs_equal_t/mi_best:.2f}× (without the {emitter.mean()*100:.1f} % of pixels that see the
-emitter) (target of issue 7: ≥ 2×).
+emitter) ({target}). Including scene loading (parse + BVH build), seed 0:
+{(mi_load[0] + mi_t[0]) / (cs_load[0] + cs_t[0]):.2f}× in wall time at equal spp.
 
 Noise: from the two seeds, sqrt(mean((x₁ − x₂)²/2)) / mean per band, averaged over the bands
 (the same estimator for both renderers). "Without emitter pixels" leaves out the pixels whose
