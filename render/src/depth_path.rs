@@ -30,6 +30,8 @@
 //! surfaces hidden behind foreground edges, which a finite aperture partly sees, and blurred
 //! foreground edges over a sharp background are approximated by the layer composite.
 
+use crate::plane_fft::PlaneConvolver;
+
 /// A normalised, odd-sized square kernel (row-major, centre at (r, r)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Kernel {
@@ -116,30 +118,10 @@ impl ThinLensDefocus {
     }
 }
 
-/// Convolve a `w × h` plane with `k` (edge replication).
+/// Convolve a `w × h` plane with `k` (edge replication): the direct sum, or the FFT for
+/// large kernels ([`crate::plane_fft::PlaneConvolver`]).
 pub fn convolve(img: &[f32], w: usize, h: usize, k: &Kernel) -> Vec<f32> {
-    if k.radius == 0 {
-        return img.iter().map(|v| v * k.values[0]).collect();
-    }
-    let r = k.radius as isize;
-    let n = 2 * k.radius + 1;
-    let mut out = vec![0f32; w * h];
-    for y in 0..h as isize {
-        for x in 0..w as isize {
-            let mut s = 0f32;
-            for dy in -r..=r {
-                let yy = (y - dy).clamp(0, h as isize - 1) as usize;
-                let row = &img[yy * w..(yy + 1) * w];
-                let krow = &k.values[((dy + r) as usize) * n..((dy + r) as usize + 1) * n];
-                for dx in -r..=r {
-                    let xx = (x - dx).clamp(0, w as isize - 1) as usize;
-                    s += row[xx] * krow[(dx + r) as usize];
-                }
-            }
-            out[y as usize * w + x as usize] = s;
-        }
-    }
-    out
+    PlaneConvolver::new(w, h, k).apply(img)
 }
 
 /// The slab (0..`layers`) of every pixel and the mean inverse depth (1/m) of each slab's
@@ -234,7 +216,8 @@ pub fn defocus_layered_with(
             .map(|s| if *s == k { 1.0 } else { 0.0 })
             .collect();
         let ker = kernel(mid);
-        let a_blur = convolve(&alpha, w, h, &ker);
+        let conv = PlaneConvolver::new(w, h, &ker);
+        let a_blur = conv.apply(&alpha);
         // Under this layer's blurred edge, pixels no farther layer reached still see the
         // background through the rest of the aperture: continue the composite so far there by
         // its normalised convolution over the disc of the kernel's support (the mean of the
@@ -248,13 +231,13 @@ pub fn defocus_layered_with(
             && (0..w * h).any(source)
             && (0..w * h).any(partial)
         {
-            let fill = Kernel::pillbox(ker.radius as f64);
+            let fill = PlaneConvolver::new(w, h, &Kernel::pillbox(ker.radius as f64));
             let covf: Vec<f32> = (0..w * h).map(|q| source(q) as u8 as f32).collect();
-            let wsum = convolve(&covf, w, h, &fill);
+            let wsum = fill.apply(&covf);
             let filled: Vec<bool> = (0..w * h).map(|k| partial(k) && wsum[k] > 1e-6).collect();
             acc.par_iter_mut().for_each(|acc_b| {
                 let masked: Vec<f32> = acc_b.iter().zip(&covf).map(|(v, c)| v * c).collect();
-                let num = convolve(&masked, w, h, &fill);
+                let num = fill.apply(&masked);
                 for k in 0..w * h {
                     if filled[k] {
                         acc_b[k] = num[k] / wsum[k];
@@ -270,7 +253,7 @@ pub fn defocus_layered_with(
         }
         acc.par_iter_mut().zip(bands).for_each(|(acc_b, band)| {
             let premul: Vec<f32> = band.iter().zip(&alpha).map(|(l, a)| l * a).collect();
-            let c_blur = convolve(&premul, w, h, &ker);
+            let c_blur = conv.apply(&premul);
             for (((o, a), c), cov) in acc_b.iter_mut().zip(&a_blur).zip(&c_blur).zip(&cover) {
                 if *cov {
                     // "over" the (hole-filled) background

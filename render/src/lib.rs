@@ -29,6 +29,7 @@ pub mod gltf_write;
 pub mod integrator;
 pub mod job;
 pub mod output;
+pub mod plane_fft;
 pub mod sampling;
 pub mod scene;
 pub mod spectral;
