@@ -30,7 +30,7 @@
 //! surfaces hidden behind foreground edges, which a finite aperture partly sees, and blurred
 //! foreground edges over a sharp background are approximated by the layer composite.
 
-use crate::plane_fft::PlaneConvolver;
+use crate::plane_fft::{convolve_window, grown_support, PlaneConvolver};
 
 /// A normalised, odd-sized square kernel (row-major, centre at (r, r)).
 #[derive(Debug, Clone, PartialEq)]
@@ -216,8 +216,13 @@ pub fn defocus_layered_with(
             .map(|s| if *s == k { 1.0 } else { 0.0 })
             .collect();
         let ker = kernel(mid);
-        let conv = PlaneConvolver::new(w, h, &ker);
-        let a_blur = conv.apply(&alpha);
+        // The slab's coverage and premultiplied radiance vanish outside its pixels: convolve
+        // only the window of their bounding box grown by the kernel radius (exact).
+        let Some(bbox) = grown_support(&alpha, w, h, ker.radius) else {
+            continue;
+        };
+        let conv = PlaneConvolver::new(bbox.3 - bbox.2, bbox.1 - bbox.0, &ker);
+        let a_blur = convolve_window(&alpha, w, h, bbox, &conv);
         // Under this layer's blurred edge, pixels no farther layer reached still see the
         // background through the rest of the aperture: continue the composite so far there by
         // its normalised convolution over the disc of the kernel's support (the mean of the
@@ -253,7 +258,7 @@ pub fn defocus_layered_with(
         }
         acc.par_iter_mut().zip(bands).for_each(|(acc_b, band)| {
             let premul: Vec<f32> = band.iter().zip(&alpha).map(|(l, a)| l * a).collect();
-            let c_blur = conv.apply(&premul);
+            let c_blur = convolve_window(&premul, w, h, bbox, &conv);
             for (((o, a), c), cov) in acc_b.iter_mut().zip(&a_blur).zip(&c_blur).zip(&cover) {
                 if *cov {
                     // "over" the (hole-filled) background

@@ -181,27 +181,91 @@ impl FftGrid {
     }
 }
 
-/// The direct sum (edge replication).
+/// The direct sum (edge replication) over an edge-replicated copy of the plane, row by row
+/// (each kernel tap adds a scaled row slice: vectorisable). Every output sums its taps in
+/// the same (dy, dx) order as a per-pixel loop, so the result is that loop's to the bit.
 fn direct(img: &[f32], w: usize, h: usize, k: &Kernel) -> Vec<f32> {
-    let r = k.radius as isize;
-    let n = 2 * k.radius + 1;
+    let r = k.radius;
+    let n = 2 * r + 1;
+    let pw = w + 2 * r;
+    let mut padded = vec![0f32; pw * (h + 2 * r)];
+    for y in 0..h + 2 * r {
+        let sy = (y as isize - r as isize).clamp(0, h as isize - 1) as usize;
+        let src = &img[sy * w..(sy + 1) * w];
+        for (x, v) in padded[y * pw..(y + 1) * pw].iter_mut().enumerate() {
+            *v = src[(x as isize - r as isize).clamp(0, w as isize - 1) as usize];
+        }
+    }
     let mut out = vec![0f32; w * h];
-    for y in 0..h as isize {
-        for x in 0..w as isize {
-            let mut s = 0f32;
-            for dy in -r..=r {
-                let yy = (y - dy).clamp(0, h as isize - 1) as usize;
-                let row = &img[yy * w..(yy + 1) * w];
-                let krow = &k.values[((dy + r) as usize) * n..((dy + r) as usize + 1) * n];
-                for dx in -r..=r {
-                    let xx = (x - dx).clamp(0, w as isize - 1) as usize;
-                    s += row[xx] * krow[(dx + r) as usize];
+    for (y, acc) in out.chunks_mut(w).enumerate() {
+        // tap (dy, dx) reads img[y − dy][x − dx] = padded[y + r − dy][x + r − dx]
+        for j in 0..n {
+            let prow = &padded[(y + 2 * r - j) * pw..(y + 2 * r - j + 1) * pw];
+            for i in 0..n {
+                let kv = k.values[j * n + i];
+                let src = &prow[2 * r - i..2 * r - i + w];
+                for (a, p) in acc.iter_mut().zip(src) {
+                    *a += p * kv;
                 }
             }
-            out[y as usize * w + x as usize] = s;
         }
     }
     out
+}
+
+/// The plane `img` (`w × h`) convolved with `k` where it is non-zero only inside
+/// `bbox = (row0, row1, col0, col1)` (half-open): only the window of the box grown by the
+/// kernel radius (clamped to the plane) is convolved, the rest of the output is exactly 0.
+/// Equal to the whole-plane convolution: outside the grown box every tap reads a zero (or,
+/// through edge replication, a border sample outside the box), and inside the window the
+/// samples beyond it are zero, as are the window's own replicated edges where it is interior.
+pub fn convolve_window(
+    img: &[f32],
+    w: usize,
+    h: usize,
+    bbox: (usize, usize, usize, usize),
+    conv: &PlaneConvolver,
+) -> Vec<f32> {
+    let (r0, r1, c0, c1) = bbox;
+    let (ww, wh) = (c1 - c0, r1 - r0);
+    debug_assert_eq!((conv.w, conv.h), (ww, wh));
+    let crop: Vec<f32> = (r0..r1)
+        .flat_map(|r| img[r * w + c0..r * w + c1].iter().copied())
+        .collect();
+    let res = conv.apply(&crop);
+    let mut out = vec![0f32; w * h];
+    for (r, row) in (r0..r1).zip(res.chunks(ww)) {
+        out[r * w + c0..r * w + c1].copy_from_slice(row);
+    }
+    out
+}
+
+/// The bounding box (row0, row1, col0, col1; half-open) of the non-zero samples of a `w × h`
+/// plane grown by `margin` and clamped to the plane; `None` when all are zero.
+pub fn grown_support(
+    img: &[f32],
+    w: usize,
+    h: usize,
+    margin: usize,
+) -> Option<(usize, usize, usize, usize)> {
+    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+    for (r, row) in img.chunks(w).enumerate().take(h) {
+        if let Some(a) = row.iter().position(|v| *v != 0.0) {
+            let b = row.iter().rposition(|v| *v != 0.0).unwrap_or(a);
+            r0 = r0.min(r);
+            r1 = r;
+            c0 = c0.min(a);
+            c1 = c1.max(b);
+        }
+    }
+    (r0 != usize::MAX).then(|| {
+        (
+            r0.saturating_sub(margin),
+            (r1 + 1 + margin).min(h),
+            c0.saturating_sub(margin),
+            (c1 + 1 + margin).min(w),
+        )
+    })
 }
 
 #[cfg(test)]
@@ -253,6 +317,57 @@ mod tests {
                 .fold(0f32, f32::max);
             assert!(far < 1e-9, "{w}×{h}, r {r}: leakage {far}");
         }
+    }
+
+    /// The per-pixel loop the row-slice direct sum must equal to the bit.
+    fn per_pixel(img: &[f32], w: usize, h: usize, k: &Kernel) -> Vec<f32> {
+        let r = k.radius as isize;
+        let n = 2 * k.radius + 1;
+        let mut out = vec![0f32; w * h];
+        for y in 0..h as isize {
+            for x in 0..w as isize {
+                let mut s = 0f32;
+                for dy in -r..=r {
+                    let yy = (y - dy).clamp(0, h as isize - 1) as usize;
+                    for dx in -r..=r {
+                        let xx = (x - dx).clamp(0, w as isize - 1) as usize;
+                        s += img[yy * w + xx] * k.values[(dy + r) as usize * n + (dx + r) as usize];
+                    }
+                }
+                out[y as usize * w + x as usize] = s;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn direct_sum_and_windows_equal_the_per_pixel_loop() {
+        let mut s = 99u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 33) as f64 / (1u64 << 31) as f64) as f32
+        };
+        for (w, h, r) in [(13, 9, 3), (40, 33, 6), (8, 21, 7)] {
+            let n = 2 * r + 1;
+            let values: Vec<f32> = (0..n * n).map(|_| rnd()).collect();
+            let k = Kernel { radius: r, values };
+            let img: Vec<f32> = (0..w * h).map(|_| rnd()).collect();
+            assert_eq!(direct(&img, w, h, &k), per_pixel(&img, w, h, &k));
+            // a sparse plane: a block touching the left border
+            let mut sparse = vec![0f32; w * h];
+            for y in h / 3..h / 2 + 1 {
+                for x in 0..w / 3 + 1 {
+                    sparse[y * w + x] = rnd();
+                }
+            }
+            let bb = grown_support(&sparse, w, h, r).unwrap();
+            let conv = PlaneConvolver::with_choice(bb.3 - bb.2, bb.1 - bb.0, &k, Some(false));
+            let a = convolve_window(&sparse, w, h, bb, &conv);
+            assert_eq!(a, per_pixel(&sparse, w, h, &k), "{w}×{h} r {r}");
+        }
+        assert_eq!(grown_support(&[0.0; 12], 4, 3, 1), None);
     }
 
     #[test]
