@@ -13,6 +13,7 @@
 # the speed-up at equal noise is the ratio of efficiencies. Writes docs/benchmarks/depth_optics.md.
 #
 # Usage: bench/depth_optics.sh     Env: SIZE (1024), SPP_PINHOLE (16), SPP_LENS (16),
+#                                  BIN (a camsim binary; default: build target/release/camsim),
 #                                  CARGO_TARGET_DIR
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -22,8 +23,12 @@ SPP_LENS="${SPP_LENS:-16}"
 OUT_MD="$ROOT/docs/benchmarks/depth_optics.md"
 "$ROOT/tools/mitsuba_setup.sh" --no-verify >/dev/null   # numpy + an EXR reader
 PY="$ROOT/.venv-mitsuba/bin/python"
-(cd "$ROOT" && cargo build --release --quiet --bin camsim)
-CAMSIM="${CARGO_TARGET_DIR:-$ROOT/target}/release/camsim"
+if [[ -n "${BIN:-}" ]]; then
+    CAMSIM="$BIN"
+else
+    (cd "$ROOT" && cargo build --release --quiet --bin camsim)
+    CAMSIM="${CARGO_TARGET_DIR:-$ROOT/target}/release/camsim"
+fi
 TMP="$(mktemp -d)"
 trap 'rm -rf "$TMP"' EXIT
 SCENE="$ROOT/scenes/mitsuba/thinlens.gltf"
