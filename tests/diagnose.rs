@@ -996,3 +996,44 @@ fn diagnosis_is_the_same_whatever_the_thread_count() {
     assert!(!findings(&r).is_empty(), "the set should give findings");
     assert_eq!(one, three, "report.json differs between 1 and 3 threads");
 }
+
+// Noise the field has measured since the paper (issue 21): row noise, RTN pixels, black-level
+// drift, dark current against temperature. Each is concealed next to its look-alike
+// (docs/diagnose.md: read_noise, hot_pixels, black_level, dark_current) and searched with the
+// CI candidates plus the four new ids; the same sets without the effect (magnitude 0: the
+// same shots, the believed camera) must give no finding at all.
+
+/// The issue-21 candidate ids, searched on top of the sensor-side ones.
+const NOISE_IDS: [&str; 4] = ["row_noise", "rtn", "black_level_drift", "dark_temperature"];
+
+fn noise_null(id: &str) {
+    let o = diagnose_generated_with(&[(id, 0.0)], Concealment::Mimicked, 1, Candidates::Ci(&NOISE_IDS));
+    let what = format!("{id}=0 (mimicked, the effect's shots without it)");
+    assert!(findings(&o.report).is_empty(), "{what}: findings {:?}", findings(&o.report));
+    assert!(undecided(&o.report).is_empty(), "{what}: undecided {:?}", undecided(&o.report));
+    assert_fit_after(&o, &what);
+}
+
+#[test]
+fn row_noise_mimicking_read_noise() {
+    single_with("row_noise", 4e-4, Concealment::Mimicked, 0.0, Candidates::Ci(&NOISE_IDS));
+    noise_null("row_noise");
+}
+
+#[test]
+fn rtn_mimicking_hot_pixels() {
+    single_with("rtn", 0.006, Concealment::Mimicked, 0.0, Candidates::Ci(&NOISE_IDS));
+    noise_null("rtn");
+}
+
+#[test]
+fn black_level_drift_mimicking_black_level() {
+    single_with("black_level_drift", 6.0, Concealment::Mimicked, 0.0, Candidates::Ci(&NOISE_IDS));
+    noise_null("black_level_drift");
+}
+
+#[test]
+fn dark_temperature_mimicking_dark_current() {
+    single_with("dark_temperature", 6.0, Concealment::Mimicked, 0.0, Candidates::Ci(&NOISE_IDS));
+    noise_null("dark_temperature");
+}

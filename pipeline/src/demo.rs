@@ -691,8 +691,15 @@ fn add_effect(cam: &mut Value, id: &str, m: f64, believed: &CameraFile) -> Resul
             // dn_per_frame is set once the set's frame count is known
             cam["sensor"]["black_level_drift"] = json!({"dn_per_frame": 0.0});
         }
+        // 0: the temperature series without a temperature law (a null set for it).
+        "dark_temperature" if m == 0.0 => {}
         "dark_temperature" => {
-            need(m >= 2.0 && m <= 50.0, id, m, "a doubling temperature in [2, 50] °C")?;
+            need(
+                (2.0..=50.0).contains(&m),
+                id,
+                m,
+                "a doubling temperature in [2, 50] °C (or 0: no law)",
+            )?;
             cam["sensor"]["temperature_c"] = json!(DEMO_TEMPERATURE_C);
             cam["sensor"]["dark_reference_temperature_c"] = json!(DEMO_TEMPERATURE_C);
             cam["sensor"]["dark_doubling_temperature_c"] = json!(m);
@@ -737,7 +744,7 @@ fn true_magnitude(
         "dark_temperature" => s
             .effects
             .dark_temperature
-            .map_or(f64::NAN, |d| d.doubling_temperature_c),
+            .map_or(0.0, |d| d.doubling_temperature_c),
         // The realised fraction of the drawn pattern.
         "hot_pixels" => hot_pixel_count(s) as f64 / (s.rows * s.cols) as f64,
         // The realised σ of the drawn column offsets (about their mean).
