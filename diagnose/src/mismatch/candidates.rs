@@ -1134,9 +1134,16 @@ fn fit_rtn(
             let d = ctx.data;
             let rates = ctx.transform_fit(base, state);
             let consts = ctx.consts(state);
-            let rep: Vec<usize> = (0..d.shots.len())
+            // the dark shots with repeats (where the temporal noise is the floor), else all
+            let rep_all: Vec<usize> = (0..d.shots.len())
                 .filter(|&s| d.shots[s].has_variance())
                 .collect();
+            let rep_dark: Vec<usize> = rep_all
+                .iter()
+                .copied()
+                .filter(|&s| !d.shots[s].target.is_light())
+                .collect();
+            let rep = if rep_dark.is_empty() { rep_all } else { rep_dark };
             let mut excess_v2: Vec<f64> = Vec::new();
             for &r in &ctx.fit_rows {
                 for j in 0..d.cols {
