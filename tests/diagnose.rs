@@ -1009,8 +1009,16 @@ const NOISE_IDS: [&str; 4] = ["row_noise", "rtn", "black_level_drift", "dark_tem
 fn noise_null(id: &str, c: Candidates) {
     let o = diagnose_generated_with(&[(id, 0.0)], Concealment::Mimicked, 1, c);
     let what = format!("{id}=0 (mimicked, the effect's shots without it)");
-    assert!(findings(&o.report).is_empty(), "{what}: findings {:?}", findings(&o.report));
-    assert!(undecided(&o.report).is_empty(), "{what}: undecided {:?}", undecided(&o.report));
+    assert!(
+        findings(&o.report).is_empty(),
+        "{what}: findings {:?}",
+        findings(&o.report)
+    );
+    assert!(
+        undecided(&o.report).is_empty(),
+        "{what}: undecided {:?}",
+        undecided(&o.report)
+    );
     assert_fit_after(&o, &what);
 }
 

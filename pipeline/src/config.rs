@@ -1801,7 +1801,11 @@ fn sensor_effects_from_file(
     }
     if let Some(d) = &s.black_level_drift {
         fx.black_level_drift = Some(camsim_sensor::BlackLevelDrift {
-            dn_per_frame: finite(path, "sensor.black_level_drift.dn_per_frame", d.dn_per_frame)?,
+            dn_per_frame: finite(
+                path,
+                "sensor.black_level_drift.dn_per_frame",
+                d.dn_per_frame,
+            )?,
         });
     }
     // The doubling law, once validated by `dark_voltage_at_temperature`: the dark voltage

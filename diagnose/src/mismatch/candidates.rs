@@ -847,8 +847,7 @@ pub(crate) fn fit_effect(
                 state,
                 f0,
                 &|st, x| {
-                    st.sensor.effects.row_noise =
-                        Some(camsim_sensor::RowNoise { sigma_v: x * x })
+                    st.sensor.effects.row_noise = Some(camsim_sensor::RowNoise { sigma_v: x * x })
                 },
                 0.0,
                 hi.sqrt(),
@@ -879,11 +878,18 @@ pub(crate) fn fit_effect(
         Effect::DarkTemperature => {
             // variable: 1/T_d (0 = no temperature dependence), T_d ≥ 2 °C; the reference is
             // the believed law's, else the mean temperature of the shots that give one.
-            let temps: Vec<f64> = ctx.data.shots.iter().filter_map(|s| s.temperature_c).collect();
-            let t_ref = s0.effects.dark_temperature.map_or(
-                temps.iter().sum::<f64>() / temps.len().max(1) as f64,
-                |d| d.reference_temperature_c,
-            );
+            let temps: Vec<f64> = ctx
+                .data
+                .shots
+                .iter()
+                .filter_map(|s| s.temperature_c)
+                .collect();
+            let t_ref = s0
+                .effects
+                .dark_temperature
+                .map_or(temps.iter().sum::<f64>() / temps.len().max(1) as f64, |d| {
+                    d.reference_temperature_c
+                });
             let x0 = s0
                 .effects
                 .dark_temperature
@@ -893,12 +899,11 @@ pub(crate) fn fit_effect(
                 state,
                 f0,
                 &|st, x| {
-                    st.sensor.effects.dark_temperature = (x > 1e-9).then_some(
-                        camsim_sensor::DarkTemperature {
+                    st.sensor.effects.dark_temperature =
+                        (x > 1e-9).then_some(camsim_sensor::DarkTemperature {
                             reference_temperature_c: t_ref,
                             doubling_temperature_c: 1.0 / x,
-                        },
-                    )
+                        })
                 },
                 0.0,
                 (2.0 * x0).max(0.5),
@@ -1143,7 +1148,11 @@ fn fit_rtn(
                 .copied()
                 .filter(|&s| !d.shots[s].target.is_light())
                 .collect();
-            let rep = if rep_dark.is_empty() { rep_all } else { rep_dark };
+            let rep = if rep_dark.is_empty() {
+                rep_all
+            } else {
+                rep_dark
+            };
             let mut excess_v2: Vec<f64> = Vec::new();
             for &r in &ctx.fit_rows {
                 for j in 0..d.cols {
@@ -1366,9 +1375,10 @@ pub fn magnitude(effect: Effect, st: &ModelState, believed: &ModelState) -> f64 
         Effect::LateralColor => st.rates.lateral_color_um.unwrap_or(0.0),
         Effect::RowNoise => s.effects.row_noise.map_or(0.0, |r| r.sigma_v),
         Effect::Rtn => s.effects.rtn.map_or(0.0, |r| r.fraction),
-        Effect::BlackLevelDrift => s.effects.black_level_drift.map_or(0.0, |d| {
-            d.magnitude_dn(st.frames_in_set as usize)
-        }),
+        Effect::BlackLevelDrift => s
+            .effects
+            .black_level_drift
+            .map_or(0.0, |d| d.magnitude_dn(st.frames_in_set as usize)),
         Effect::DarkTemperature => s
             .effects
             .dark_temperature

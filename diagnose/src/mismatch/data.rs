@@ -184,9 +184,10 @@ impl ShotAccumulator {
                 }
             });
         // Row means of this frame (exact integer sums per row).
-        self.row_means.extend(dn.chunks(cols).map(|row| {
-            row.iter().map(|&v| v as u64).sum::<u64>() as f64 / cols as f64
-        }));
+        self.row_means.extend(
+            dn.chunks(cols)
+                .map(|row| row.iter().map(|&v| v as u64).sum::<u64>() as f64 / cols as f64),
+        );
         self.frames += 1;
         Ok(())
     }

@@ -70,7 +70,10 @@ impl Ctx<'_> {
                 .map(|sv| (sv / (cf * cf) - (s2 + dd) / cf).max(1e-12))
                 .collect();
             let frame_mean = |fi: usize| -> f64 {
-                sh.row_means_dn[fi * rows..(fi + 1) * rows].iter().sum::<f64>() / rf
+                sh.row_means_dn[fi * rows..(fi + 1) * rows]
+                    .iter()
+                    .sum::<f64>()
+                    / rf
             };
             let means: Vec<f64> = (0..nfr).map(frame_mean).collect();
             let p_sum: f64 = p_row.iter().sum();
