@@ -11,6 +11,7 @@
 //! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`] | [`camsim_sensor::time_averaged_rate`] |
 //! | expected frame (DN) | [`expected_frame`] | [`camsim_sensor::expected_dn`] |
 //! | noisy frame (DN) | [`simulate_frame`] | [`camsim_sensor::expose_with`] |
+//! | frame of a capture set (drift, RTN by frame index; dark current at the shot's temperature) | [`simulate_frame_at`], [`frame_index`], [`shot_sensor`] | [`camsim_sensor::expose_frame`], [`camsim_sensor::dark_voltage_at`] |
 //! | HDR readouts (split pixel, DCG, bracketing; DN) | [`hdr_model`], [`hdr_readout_models`], [`simulate_hdr_frame`] | [`camsim_sensor::expose_hdr`] |
 //! | HDR merge (linear exposure, e⁻) | [`merge_hdr`] | [`camsim_isp::hdr_merge()`] |
 //! | contrast autofocus (lens position of the sharpest region) | [`crate::autofocus::contrast_autofocus`] | the steps above per position |
@@ -321,6 +322,47 @@ pub fn simulate_frame(
     stream: &[u64],
 ) -> RawFrame {
     camsim_sensor::expose_with(sensor, rate, shot, pattern, seed, stream)
+}
+
+/// [`simulate_frame`] for the frame with global index `frame_index` of its capture set
+/// ([`frame_index`]): black-level drift and the RTN trap states depend on it
+/// ([`camsim_sensor::expose_frame`]); without those blocks it is [`simulate_frame`].
+pub fn simulate_frame_at(
+    sensor: &SensorModel,
+    rate: &ElectronRate,
+    shot: &Shot,
+    pattern: PatternSource<'_>,
+    seed: u64,
+    stream: &[u64],
+    frame_index: u64,
+) -> RawFrame {
+    camsim_sensor::expose_frame(sensor, rate, shot, pattern, seed, stream, frame_index)
+}
+
+/// The global index of frame `frame` of shot `shot_index`: frames counted in capture order
+/// (the shots in captures.json order, each shot's frames in order), from 0.
+pub fn frame_index(set: &CaptureSet, shot_index: usize, frame: usize) -> u64 {
+    (set.shots[..shot_index]
+        .iter()
+        .map(|s| s.frames.len())
+        .sum::<usize>()
+        + frame) as u64
+}
+
+/// The sensor during shot `shot_index`: the camera's, with the dark voltage of the shot's
+/// `temperature_c` under the camera's doubling law ([`camsim_sensor::dark_voltage_at`];
+/// unchanged without either).
+pub fn shot_sensor(set: &CaptureSet, shot_index: usize) -> Cow<'_, SensorModel> {
+    let s = &set.camera.sensor;
+    let t = set.shots[shot_index].temperature_c;
+    match (s.effects.dark_temperature, t) {
+        (Some(_), Some(_)) => {
+            let mut x = s.clone();
+            x.dark_voltage_v_per_s = camsim_sensor::dark_voltage_at(s, t);
+            Cow::Owned(x)
+        }
+        _ => Cow::Borrowed(s),
+    }
 }
 
 /// The camera's HDR pixel (`sensor.hdr`), or its standard pixel as a one-readout HDR model

@@ -244,6 +244,61 @@ pub struct HotPixelsFile {
     pub log_sigma: Option<f64>,
 }
 
+/// `sensor.row_noise` (effect block, docs/effects.md): a temporal offset per row, new every
+/// frame ([`camsim_sensor::line_noise`]).
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `sigma_v` | required | σ of the per-row offset (V), ≥ 0 |
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RowNoiseFile {
+    /// σ of the per-row offset (V).
+    pub sigma_v: f64,
+}
+
+/// `sensor.rtn` (effect block, docs/effects.md): random-telegraph-noise pixels, a two-state
+/// trap per pixel stepping as a Markov chain in the global frame index
+/// ([`camsim_sensor::line_noise`]).
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `fraction` | required | fraction of pixels with a trap, in [0, 1] |
+/// | `amplitude_v` | required | step between the two levels (V), ≥ 0 (median with `log_sigma`) |
+/// | `p_up` | 0.5 | probability per frame of a low → high switch, in (0, 1] |
+/// | `p_down` | 0.5 | probability per frame of a high → low switch, in (0, 1] |
+/// | `log_sigma` | 0 | generator form: σ of ln(amplitude) (lognormal amplitudes) |
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RtnFile {
+    /// Fraction of pixels with a trap.
+    pub fraction: f64,
+    /// Step between the two levels (V).
+    pub amplitude_v: f64,
+    /// Probability per frame of a low → high switch (default 0.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_up: Option<f64>,
+    /// Probability per frame of a high → low switch (default 0.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_down: Option<f64>,
+    /// Generator: σ of ln(amplitude).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log_sigma: Option<f64>,
+}
+
+/// `sensor.black_level_drift` (effect block, docs/effects.md): the black level of the frame
+/// with global index j (capture order) is `black_level_dn + dn_per_frame · j`.
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `dn_per_frame` | required | drift rate (DN per frame), finite |
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlackLevelDriftFile {
+    /// Drift rate (DN per frame).
+    pub dn_per_frame: f64,
+}
+
 /// `sensor.nonlinearity` (`"kind"` selects the form).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -541,6 +596,15 @@ pub struct SensorFile {
     /// Extension: HDR pixel (split pixel, dual conversion gain, bracketing).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hdr: Option<HdrFile>,
+    /// Effect block `row_noise` ([`RowNoiseFile`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub row_noise: Option<RowNoiseFile>,
+    /// Effect block `rtn` ([`RtnFile`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rtn: Option<RtnFile>,
+    /// Effect block `black_level_drift` ([`BlackLevelDriftFile`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub black_level_drift: Option<BlackLevelDriftFile>,
 }
 
 /// `sensor.hdr` (extension): an HDR pixel of charge packets (photodiodes, or exposures of
@@ -759,6 +823,11 @@ pub struct ShotFile {
     /// Extension: image motion during the exposure.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion: Option<MotionFile>,
+    /// Extension: sensor temperature (°C) during this shot; with the camera's doubling law
+    /// (`sensor.temperature_c`, `dark_reference_temperature_c`, `dark_doubling_temperature_c`)
+    /// it scales the dark current of the shot (docs/effects.md, `dark_temperature`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature_c: Option<f64>,
 }
 
 /// `captures.simulation` (extension).
@@ -844,6 +913,8 @@ pub struct Shot {
     pub light: Option<PwmLight>,
     /// Image motion during the exposure (`motion`; None: static).
     pub motion: Option<Motion>,
+    /// Sensor temperature during the shot (°C, `temperature_c`; None: the camera's).
+    pub temperature_c: Option<f64>,
 }
 
 /// How a shot's exposure time is set.
@@ -1699,6 +1770,56 @@ fn sensor_effects_from_file(
             )
         })
     };
+    if let Some(r) = &s.row_noise {
+        fx.row_noise = Some(camsim_sensor::RowNoise {
+            sigma_v: non_negative(path, "sensor.row_noise.sigma_v", r.sigma_v)?,
+        });
+    }
+    if let Some(r) = &s.rtn {
+        let prob = |key: &str, v: Option<f64>| {
+            in_range(
+                path,
+                key,
+                v.unwrap_or(0.5),
+                |p| p > 0.0 && p <= 1.0,
+                "must be a probability per frame in (0, 1]",
+            )
+        };
+        fx.rtn = Some(camsim_sensor::Rtn {
+            fraction: in_range(
+                path,
+                "sensor.rtn.fraction",
+                r.fraction,
+                |v| (0.0..=1.0).contains(&v),
+                "must be in [0, 1]",
+            )?,
+            amplitude_v: non_negative(path, "sensor.rtn.amplitude_v", r.amplitude_v)?,
+            log_sigma: non_negative(path, "sensor.rtn.log_sigma", r.log_sigma.unwrap_or(0.0))?,
+            p_up: prob("sensor.rtn.p_up", r.p_up)?,
+            p_down: prob("sensor.rtn.p_down", r.p_down)?,
+        });
+    }
+    if let Some(d) = &s.black_level_drift {
+        fx.black_level_drift = Some(camsim_sensor::BlackLevelDrift {
+            dn_per_frame: finite(
+                path,
+                "sensor.black_level_drift.dn_per_frame",
+                d.dn_per_frame,
+            )?,
+        });
+    }
+    // The doubling law, once validated by `dark_voltage_at_temperature`: the dark voltage
+    // holds at the operating temperature `temperature_c`; a shot's `temperature_c` scales it.
+    if let (Some(t), Some(_), Some(td)) = (
+        s.temperature_c,
+        s.dark_reference_temperature_c,
+        s.dark_doubling_temperature_c,
+    ) {
+        fx.dark_temperature = Some(camsim_sensor::DarkTemperature {
+            reference_temperature_c: t,
+            doubling_temperature_c: td,
+        });
+    }
     if let Some(h) = &s.hot_pixels {
         fx.hot_pixels = Some(HotPixels {
             fraction: in_range(
@@ -1986,6 +2107,16 @@ pub fn captures_with_camera(
             frames: s.frames.clone(),
             light,
             motion,
+            temperature_c: match s.temperature_c {
+                Some(t) => Some(in_range(
+                    path,
+                    &format!("{key}.temperature_c"),
+                    t,
+                    |v| v > -273.15,
+                    "must be a temperature above absolute zero (°C)",
+                )?),
+                None => None,
+            },
         });
     }
     let simulation = raw.simulation.unwrap_or_default();

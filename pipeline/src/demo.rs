@@ -20,7 +20,7 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
 /// Every effect id of effects.md, in its table's order.
-pub const EFFECT_IDS: [&str; 19] = [
+pub const EFFECT_IDS: [&str; 23] = [
     "exposure_scale",
     "conversion_gain",
     "black_level",
@@ -40,6 +40,10 @@ pub const EFFECT_IDS: [&str; 19] = [
     "qe_shift",
     "distortion",
     "lateral_color",
+    "row_noise",
+    "rtn",
+    "black_level_drift",
+    "dark_temperature",
 ];
 
 /// How an effect is hidden in the capture set.
@@ -234,6 +238,8 @@ struct Plan {
     target: Value,
     level: Level,
     repeats: usize,
+    /// Sensor temperature of the shot (°C, captures.json `temperature_c`).
+    temperature_c: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -254,9 +260,30 @@ fn darks(exposures: &[f64], repeats: usize) -> Vec<Plan> {
             target: json!({"kind": "dark"}),
             level: Level::Exposure(t),
             repeats,
+            temperature_c: None,
         })
         .collect()
 }
+
+/// Darks at `exposures` at every sensor temperature of `temperatures_c` (ids
+/// `dark-{ms}ms-{T}c`).
+fn darks_at_temperatures(exposures: &[f64], temperatures_c: &[f64], repeats: usize) -> Vec<Plan> {
+    let mut out = Vec::new();
+    for &t in temperatures_c {
+        for mut p in darks(exposures, repeats) {
+            p.id = format!("{}-{}c", p.id, t.round() as i64);
+            p.temperature_c = Some(t);
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// Sensor temperatures of the dark-temperature series (°C): their mean is the true camera's
+/// operating temperature [`DEMO_TEMPERATURE_C`], where the believed dark current holds.
+const DARK_TEMPERATURES_C: [f64; 4] = [10.0, 20.0, 30.0, 40.0];
+/// The true camera's operating temperature (°C) with `dark_temperature`.
+const DEMO_TEMPERATURE_C: f64 = 25.0;
 
 fn flats(levels: &[f64], repeats: usize) -> Vec<Plan> {
     levels
@@ -267,6 +294,7 @@ fn flats(levels: &[f64], repeats: usize) -> Vec<Plan> {
                            "mean_luminance_cd_m2": 200.0}),
             level: Level::FullScale(f),
             repeats,
+            temperature_c: None,
         })
         .collect()
 }
@@ -281,6 +309,7 @@ fn flats_at(kelvin: f64, levels: &[f64], repeats: usize) -> Vec<Plan> {
                            "mean_luminance_cd_m2": 200.0}),
             level: Level::FullScale(f),
             repeats,
+            temperature_c: None,
         })
         .collect()
 }
@@ -295,6 +324,7 @@ fn charts(levels: &[f64], repeats: usize) -> Vec<Plan> {
                                "mean_luminance_cd_m2": 100.0}),
                 level: Level::FullScale(f),
                 repeats,
+                temperature_c: None,
             });
         }
     }
@@ -317,6 +347,7 @@ fn edge(level: f64, repeats: usize) -> Vec<Plan> {
                        "angle_deg": 5.0, "mean_luminance_cd_m2": 100.0}),
         level: Level::FullScale(level),
         repeats,
+        temperature_c: None,
     }]
 }
 
@@ -328,6 +359,7 @@ fn points(level: f64, repeats: usize) -> Vec<Plan> {
                        "spacing_px": 12, "point_size_px": 2}),
         level: Level::FullScale(level),
         repeats,
+        temperature_c: None,
     }]
 }
 
@@ -337,6 +369,7 @@ fn ramp(level: f64, repeats: usize) -> Vec<Plan> {
         target: json!({"kind": "ramp", "radiance": blackbody(3200.0), "min": 0.05, "max": 1.0}),
         level: Level::FullScale(level),
         repeats,
+        temperature_c: None,
     }]
 }
 
@@ -375,6 +408,7 @@ fn radial_scene(dir: &Path, rows: usize, cols: usize) -> Result<Plan, CliError> 
         target: json!({"kind": "image", "file": "scenes/radial.exr"}),
         level: Level::FullScale(0.7),
         repeats: 2,
+        temperature_c: None,
     })
 }
 
@@ -438,8 +472,22 @@ fn plan_shots(spec: &DemoSpec, dir: &Path) -> Result<Vec<Plan>, CliError> {
                         v.extend(flats(&[0.5], 2));
                         v
                     }
+                    // The dark current's temperature law: darks at two exposures at four
+                    // temperatures (its look-alike, dark_current, at one temperature).
+                    "dark_temperature" => {
+                        let mut v = darks_at_temperatures(&[0.01, 1.0], &DARK_TEMPERATURES_C, 3);
+                        v.extend(flats(&[0.5], 2));
+                        v
+                    }
+                    // Drift vs pedestal: darks and a flat with repeats in capture order.
+                    "black_level_drift" => {
+                        let mut v = darks(&[0.002, 1.0], 6);
+                        v.extend(flats(&[0.5], 2));
+                        v
+                    }
                     // Fixed vs temporal noise: repeats at a few levels.
-                    "prnu" | "read_noise" | "column_fpn" | "hot_pixels" | "full_well" => {
+                    "prnu" | "read_noise" | "column_fpn" | "hot_pixels" | "full_well"
+                    | "row_noise" | "rtn" => {
                         let mut v = flats(&[0.1, 0.4, 0.8, 0.95], 4);
                         v.extend(darks(&DARK_T, 4));
                         v
@@ -626,6 +674,36 @@ fn add_effect(cam: &mut Value, id: &str, m: f64, believed: &CameraFile) -> Resul
             need(true, id, m, "a displacement in µm")?;
             cam["optics"]["lateral_color"] = json!({"kind": "cauchy", "displacement_um": m});
         }
+        "row_noise" => {
+            need(m >= 0.0, id, m, "a row-noise σ ≥ 0 (V)")?;
+            cam["sensor"]["row_noise"] = json!({"sigma_v": m});
+        }
+        "rtn" => {
+            need((0.0..=1.0).contains(&m), id, m, "a fraction in [0, 1]")?;
+            // Steps lognormal about 8× the believed read noise (median), slower switching
+            // than the fitted form's 1/2 per frame (mean dwell 2.5 frames each way).
+            cam["sensor"]["rtn"] = json!({"fraction": m,
+                "amplitude_v": 8.0 * s.read_noise_v.unwrap_or(1e-3).max(1e-4),
+                "log_sigma": 0.3, "p_up": 0.4, "p_down": 0.4});
+        }
+        "black_level_drift" => {
+            need(true, id, m, "a drift in DN over the capture set")?;
+            // dn_per_frame is set once the set's frame count is known
+            cam["sensor"]["black_level_drift"] = json!({"dn_per_frame": 0.0});
+        }
+        // 0: the temperature series without a temperature law (a null set for it).
+        "dark_temperature" if m == 0.0 => {}
+        "dark_temperature" => {
+            need(
+                (2.0..=50.0).contains(&m),
+                id,
+                m,
+                "a doubling temperature in [2, 50] °C (or 0: no law)",
+            )?;
+            cam["sensor"]["temperature_c"] = json!(DEMO_TEMPERATURE_C);
+            cam["sensor"]["dark_reference_temperature_c"] = json!(DEMO_TEMPERATURE_C);
+            cam["sensor"]["dark_doubling_temperature_c"] = json!(m);
+        }
         other => {
             return Err(CliError::Other(format!(
                 "--effect {other}: unknown effect id (expected one of {})",
@@ -662,6 +740,11 @@ fn true_magnitude(
         "lateral_color" => o.lateral_color.map_or(0.0, |l| l.magnitude()),
         "veiling_glare" => o.veiling_glare.unwrap_or(0.0),
         "exposure_scale" => o.exposure_scale.unwrap_or(1.0),
+        "rtn" => camsim_sensor::rtn_pixel_count(s) as f64 / (s.rows * s.cols) as f64,
+        "dark_temperature" => s
+            .effects
+            .dark_temperature
+            .map_or(0.0, |d| d.doubling_temperature_c),
         // The realised fraction of the drawn pattern.
         "hot_pixels" => hot_pixel_count(s) as f64 / (s.rows * s.cols) as f64,
         // The realised σ of the drawn column offsets (about their mean).
@@ -703,6 +786,16 @@ pub fn generate_capture_set(spec: &DemoSpec, out_dir: &Path) -> Result<DemoTruth
         // The believed camera and the true one (the latter only inside the staging folder,
         // which is removed afterwards).
         crate::config::write_camera_file(&stage.join("camera.json"), &believed)?;
+        let plans = plan_shots(spec, stage)?;
+        // Black-level drift: the requested drift over the set's frames, per frame.
+        let n_frames: usize = plans.iter().map(|p| p.repeats).sum();
+        let mut true_json = true_json.clone();
+        for (id, m) in &spec.effects {
+            if id == "black_level_drift" {
+                true_json["sensor"]["black_level_drift"] =
+                    json!({"dn_per_frame": m / (n_frames.max(2) - 1) as f64});
+            }
+        }
         let true_path = stage.join(".true-camera.json");
         std::fs::write(
             &true_path,
@@ -710,7 +803,6 @@ pub fn generate_capture_set(spec: &DemoSpec, out_dir: &Path) -> Result<DemoTruth
         )
         .map_err(|e| CliError::output(&true_path, e))?;
         let truth_cam = load_camera(&true_path)?;
-        let plans = plan_shots(spec, stage)?;
         let mut files: Vec<PathBuf> = vec!["camera.json".into(), "captures.json".into()];
         if plans.iter().any(|p| p.id == "radial-scene") {
             files.push("scenes/radial.exr".into());
@@ -755,8 +847,12 @@ pub fn generate_capture_set(spec: &DemoSpec, out_dir: &Path) -> Result<DemoTruth
             let frames: Vec<String> = (0..p.repeats)
                 .map(|k| format!("raw/{}-{k}.png", p.id))
                 .collect();
-            shots.push(json!({"id": p.id, "target": p.target, "exposure_s": t,
-                              "frames": frames}));
+            let mut shot = json!({"id": p.id, "target": p.target, "exposure_s": t,
+                                  "frames": frames});
+            if let Some(tc) = p.temperature_c {
+                shot["temperature_c"] = json!(tc);
+            }
+            shots.push(shot);
         }
         write_caps(&shots)?;
         // Frames from the true camera.

@@ -414,6 +414,31 @@ fn fitted_camera_json(
             s["crosstalk"] = json!({"fraction": c.total()});
         }
     }
+    if fs.effects.row_noise != bs.effects.row_noise {
+        if let Some(r) = fs.effects.row_noise {
+            s["row_noise"] = json!({"sigma_v": r.sigma_v});
+        }
+    }
+    if fs.effects.rtn != bs.effects.rtn {
+        if let Some(r) = fs.effects.rtn {
+            s["rtn"] = json!({"fraction": r.fraction, "amplitude_v": r.amplitude_v,
+                              "p_up": r.p_up, "p_down": r.p_down});
+        }
+    }
+    if fs.effects.black_level_drift != bs.effects.black_level_drift {
+        if let Some(d) = fs.effects.black_level_drift {
+            s["black_level_drift"] = json!({"dn_per_frame": d.dn_per_frame});
+        }
+    }
+    if fs.effects.dark_temperature != bs.effects.dark_temperature {
+        if let Some(t) = fs.effects.dark_temperature {
+            // the dark voltage holds at the law's reference, the operating temperature
+            s["temperature_c"] = json!(t.reference_temperature_c);
+            s["dark_reference_temperature_c"] = json!(t.reference_temperature_c);
+            s["dark_doubling_temperature_c"] = json!(t.doubling_temperature_c);
+            s["dark_voltage_v_per_s"] = json!(fs.dark_voltage_v_per_s);
+        }
+    }
     if f.exposure_factor != b.exposure_factor {
         let old = cam["optics"]["exposure_scale"]["factor"]
             .as_f64()
@@ -491,13 +516,16 @@ fn load_data(
                 bar.inc(1);
             }
         }
-        shots.push(acc.finish(
+        let mut sd = acc.finish(
             shot.id.clone(),
             target_class(&shot.target.target),
             shot.target_key.clone(),
             exposure_s,
             shot.analog_gain,
-        ));
+        );
+        sd.temperature_c = shot.temperature_c;
+        sd.first_frame = crate::chain::frame_index(set, si, 0);
+        shots.push(sd);
         used.push(si);
     }
     bar.finish_and_clear();
@@ -563,6 +591,7 @@ pub fn run_diagnose(
         sensor: set.camera.sensor.clone(),
         exposure_factor: 1.0,
         rates: RateSpec::default(),
+        frames_in_set: set.shots.iter().map(|s| s.frames.len() as u64).sum(),
     };
     let mut dopts = DiagnoseOptions::default();
     dopts.select.bic_threshold = opts.bic_threshold;

@@ -567,8 +567,10 @@ pub fn simulate_each(
         let sh = crate::chain::shot_exposure(set, si, rate);
         let rate = &*crate::chain::shot_time_rate(set, si, rate, &sh);
         exposures_s.push((shot.id.clone(), sh.exposure_s));
+        // The sensor during this shot (dark current at the shot's temperature).
+        let shot_sensor = crate::chain::shot_sensor(set, si);
         if expected {
-            let plane = crate::chain::expected_frame(sensor, rate, &sh);
+            let plane = crate::chain::expected_frame(&shot_sensor, rate, &sh);
             sink(SimOutput::Expected {
                 shot: si,
                 dn: plane,
@@ -586,13 +588,14 @@ pub fn simulate_each(
                     }
                     PatternSource::Maps(fixed.as_ref().expect("built above"))
                 };
-                let frame = crate::chain::simulate_frame(
-                    sensor,
+                let frame = crate::chain::simulate_frame_at(
+                    &shot_sensor,
                     rate,
                     &sh,
                     pattern,
                     seed,
                     &[si as u64, fi as u64],
+                    crate::chain::frame_index(set, si, fi),
                 );
                 lap("expose");
                 sink(SimOutput::Frame {

@@ -30,6 +30,15 @@ pub struct SensorEffects {
     pub ir_leakage: Option<IrLeakage>,
     /// `qe_shift`: per-channel wavelength shift of the QE curves.
     pub qe_shift: Option<QeShift>,
+    /// `row_noise`: a temporal offset per row and frame ([`crate::line_noise`]).
+    pub row_noise: Option<crate::line_noise::RowNoise>,
+    /// `rtn`: random-telegraph-noise pixels ([`crate::line_noise`]).
+    pub rtn: Option<crate::line_noise::Rtn>,
+    /// `black_level_drift`: the pedestal drifting with the frame index ([`crate::line_noise`]).
+    pub black_level_drift: Option<crate::line_noise::BlackLevelDrift>,
+    /// `dark_temperature`: the dark current's doubling law, applied to shots with a
+    /// temperature ([`crate::line_noise::dark_voltage_at`]).
+    pub dark_temperature: Option<crate::line_noise::DarkTemperature>,
 }
 
 impl SensorEffects {

@@ -29,6 +29,7 @@ pub mod effects;
 pub mod hdr;
 mod integrate;
 pub mod isetcam;
+pub mod line_noise;
 mod noise;
 pub mod normal;
 pub mod pixel_rng;
@@ -49,8 +50,12 @@ pub use hdr::{
 pub use integrate::{
     box_weights, electron_rate, electron_rate_from_term_planes, pixel_term_planes, PixelTermPlanes,
 };
+pub use line_noise::{
+    dark_voltage_at, row_offsets_v, rtn_offsets_v, rtn_pixel_count, rtn_pixel_map, rtn_state,
+    BlackLevelDrift, DarkTemperature, RowNoise, Rtn, RtnPixel,
+};
 pub use noise::{
-    auto_exposure_s, expected_dn, expected_volts, expose, expose_with, fixed_pattern,
+    auto_exposure_s, expected_dn, expected_volts, expose, expose_frame, expose_with, fixed_pattern,
     nonlinearity_magnitude, PatternSource, FIXED_PATTERN_TAG,
 };
 pub use temporal::{
@@ -433,7 +438,8 @@ impl SensorModel {
         if let Some(r) = &self.reset_noise {
             nonneg("reset_noise.sigma_v", r.sigma_v)?;
         }
-        effects::validate(self)
+        effects::validate(self)?;
+        line_noise::validate(self)
     }
 }
 

@@ -205,7 +205,26 @@ pub fn expose_with(
     seed: u64,
     stream_ids: &[u64],
 ) -> RawFrame {
+    expose_frame(sensor, rate, shot, pattern, seed, stream_ids, 0)
+}
+
+/// [`expose_with`] for the frame with global index `frame_index` in its capture set (capture
+/// order): the frame-dependent blocks of [`crate::line_noise`] use it — black-level drift
+/// (`black + rate·frame_index`) and the RTN trap states (positions from the camera seed
+/// `seed`); row noise draws one offset per row from `stream(seed, [ROW_NOISE_TAG,
+/// stream…])`. Without those blocks the frame is [`expose_with`]'s, bit for bit.
+pub fn expose_frame(
+    sensor: &SensorModel,
+    rate: &ElectronRate,
+    shot: &Shot,
+    pattern: PatternSource<'_>,
+    seed: u64,
+    stream_ids: &[u64],
+    frame_index: u64,
+) -> RawFrame {
     check_rate(sensor, rate);
+    let row_off = crate::line_noise::row_offsets_v(sensor, seed, stream_ids);
+    let rtn_on = crate::line_noise::rtn_offsets_v(sensor, seed, frame_index);
     let (rows, cols) = (sensor.rows, sensor.cols);
     let sw = sensor.noise;
     let seeded_cols;
@@ -239,8 +258,12 @@ pub fn expose_with(
     } else {
         &zero_cols
     };
+    let mut ch = Chain::new(sensor, shot);
+    if let Some(d) = sensor.effects.black_level_drift {
+        ch.black = d.black_level_dn(ch.black, frame_index);
+    }
     let k = Kernel {
-        ch: Chain::new(sensor, shot),
+        ch,
         sw,
         read_sigma: if sw.read { sensor.read_noise_v } else { 0.0 },
         // Reset (kTC) noise: cancelled by CDS, else a new N(0, σ²) per pixel and frame (step 5).
@@ -286,6 +309,26 @@ pub fn expose_with(
             electrons.resize(cols, 0.0);
             volts.resize(cols, 0.0);
             let hot = hot_row(hot, r);
+            // Row noise and RTN (effect blocks): the row's offsets in volts on top of the
+            // column offsets (a row-local copy; without the blocks the column offsets as they
+            // are).
+            let rtn_row: &[(usize, f64)] = {
+                let a = rtn_on.partition_point(|x| x.0 < base);
+                let b = rtn_on.partition_point(|x| x.0 < base + cols);
+                &rtn_on[a..b]
+            };
+            let with_row: Vec<f32>;
+            let col_off: &[f32] = if row_off.is_some() || !rtn_row.is_empty() {
+                let dr = row_off.as_ref().map_or(0.0, |o| o[r]);
+                let mut v: Vec<f32> = col_off.iter().map(|&c| (c as f64 + dr) as f32).collect();
+                for &(i, a) in rtn_row {
+                    v[i - base] = (v[i - base] as f64 + a) as f32;
+                }
+                with_row = v;
+                &with_row
+            } else {
+                col_off
+            };
             k.row(
                 rates, prnu, dsnu, col_off, hot, &mut rng, electrons, volts, out,
             );

@@ -4,5 +4,6 @@
 mod effects;
 mod hdr;
 mod isetcam_oracle;
+mod line_noise;
 mod statistics;
 mod temporal;

@@ -42,6 +42,10 @@ pub(crate) struct Evidence {
     pub max_photo_e: f64,
     /// The believed well capacity.
     pub well_e: f64,
+    /// A shot with two or more frames.
+    pub repeats: bool,
+    /// Exposed shots at two or more sensor temperatures.
+    pub temperatures: bool,
 }
 
 impl Evidence {
@@ -80,6 +84,18 @@ impl Evidence {
             exposed: d.shots.iter().any(|s| s.exposure_s > 0.0),
             channels: d.channels(),
             column_rows: ctx.column_term(RowSel::Fit),
+            repeats: d.shots.iter().any(|s| s.has_variance()),
+            temperatures: {
+                let mut t: Vec<f64> = d
+                    .shots
+                    .iter()
+                    .filter(|s| s.exposure_s > 0.0)
+                    .filter_map(|s| s.temperature_c)
+                    .collect();
+                t.sort_by(|a, b| a.total_cmp(b));
+                t.dedup();
+                t.len() >= 2
+            },
         }
     }
 
@@ -108,6 +124,13 @@ impl Evidence {
             DarkCurrent | HotPixels if !self.exposed => {
                 Some("every shot has zero exposure time".into())
             }
+            RowNoise | Rtn | BlackLevelDrift if !self.repeats => {
+                Some("no shot has two or more frames: frame-to-frame noise cannot show".into())
+            }
+            DarkTemperature if !self.temperatures => Some(
+                "fewer than two sensor temperatures among the exposed shots (captures.json temperature_c)"
+                    .into(),
+            ),
             ColumnFpn if !self.column_rows => Some(format!(
                 "fewer than {} rows: column offsets cannot be told from pixel offsets",
                 super::like::MIN_COLUMN_ROWS
@@ -816,6 +839,80 @@ pub(crate) fn fit_effect(
             out(st, f, 1)
         }
         Effect::IrLeakage => fit_ir(ctx, state, f0),
+        Effect::RowNoise => {
+            let r0 = s0.effects.row_noise.map_or(0.0, |r| r.sigma_v);
+            let hi = (4.0 * r0).max(2.0 * sc.var_max.sqrt() / sc.k).max(1e-7);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| {
+                    st.sensor.effects.row_noise = Some(camsim_sensor::RowNoise { sigma_v: x * x })
+                },
+                0.0,
+                hi.sqrt(),
+                17,
+                1e-6 * hi.sqrt(),
+            );
+            out(st, f, 1)
+        }
+        Effect::BlackLevelDrift => {
+            let r0 = s0.effects.black_level_drift.map_or(0.0, |d| d.dn_per_frame);
+            let n = (state.frames_in_set.max(2) - 1) as f64;
+            let w = (4.0 * r0.abs()).max((4.0 * (sc.mean_dark.abs() + sc.rms_dark) + 8.0) / n);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| {
+                    st.sensor.effects.black_level_drift =
+                        Some(camsim_sensor::BlackLevelDrift { dn_per_frame: x })
+                },
+                r0 - w,
+                r0 + w,
+                21,
+                1e-6 * w,
+            );
+            out(st, f, 1)
+        }
+        Effect::DarkTemperature => {
+            // variable: 1/T_d (0 = no temperature dependence), T_d ≥ 2 °C; the reference is
+            // the believed law's, else the mean temperature of the shots that give one.
+            let temps: Vec<f64> = ctx
+                .data
+                .shots
+                .iter()
+                .filter_map(|s| s.temperature_c)
+                .collect();
+            let t_ref = s0
+                .effects
+                .dark_temperature
+                .map_or(temps.iter().sum::<f64>() / temps.len().max(1) as f64, |d| {
+                    d.reference_temperature_c
+                });
+            let x0 = s0
+                .effects
+                .dark_temperature
+                .map_or(0.0, |d| 1.0 / d.doubling_temperature_c);
+            let (st, f) = fit_1d(
+                &eval_base,
+                state,
+                f0,
+                &|st, x| {
+                    st.sensor.effects.dark_temperature =
+                        (x > 1e-9).then_some(camsim_sensor::DarkTemperature {
+                            reference_temperature_c: t_ref,
+                            doubling_temperature_c: 1.0 / x,
+                        })
+                },
+                0.0,
+                (2.0 * x0).max(0.5),
+                21,
+                1e-5,
+            );
+            out(st, f, 1)
+        }
+        Effect::Rtn => fit_rtn(ctx, state, &base, f0),
         Effect::Defocus => {
             // variable: σ² (the blur's effect on the pixels is nearly linear in it)
             let p_um = s0.pixel_pitch_m * 1e6;
@@ -1016,6 +1113,137 @@ fn fit_hot(
     }
 }
 
+/// RTN pixels: start from the pixels whose temporal variance exceeds the model's fourfold in
+/// most of their shots with repeats (step A from the median excess, `A²p(1−p)` with
+/// p = 1/2), then coordinate-wise ML of (fraction, amplitude); the fitted form switches with
+/// probability 1/2 per frame each way (independent states, p = 1/2).
+fn fit_rtn(
+    ctx: &Ctx,
+    state: &ModelState,
+    base: &Arc<Rates>,
+    f0: f64,
+) -> Result<FitOutcome, String> {
+    let eval = |st: &ModelState| neg_ll_base(ctx, st, base);
+    let set = |st: &mut ModelState, f: f64, a: f64| {
+        st.sensor.effects.rtn = Some(camsim_sensor::Rtn {
+            fraction: f,
+            amplitude_v: a,
+            log_sigma: 0.0,
+            p_up: 0.5,
+            p_down: 0.5,
+        })
+    };
+    let (fr0, a0) = match state.sensor.effects.rtn {
+        Some(r) if r.fraction > 0.0 && r.amplitude_v > 0.0 => (r.fraction, r.amplitude_v),
+        _ => {
+            let d = ctx.data;
+            let rates = ctx.transform_fit(base, state);
+            let consts = ctx.consts(state);
+            // the dark shots with repeats (where the temporal noise is the floor), else all
+            let rep_all: Vec<usize> = (0..d.shots.len())
+                .filter(|&s| d.shots[s].has_variance())
+                .collect();
+            let rep_dark: Vec<usize> = rep_all
+                .iter()
+                .copied()
+                .filter(|&s| !d.shots[s].target.is_light())
+                .collect();
+            let rep = if rep_dark.is_empty() {
+                rep_all
+            } else {
+                rep_dark
+            };
+            let mut excess_v2: Vec<f64> = Vec::new();
+            for &r in &ctx.fit_rows {
+                for j in 0..d.cols {
+                    let i = r * d.cols + j;
+                    let mut hits = 0;
+                    let mut ex: Vec<f64> = Vec::new();
+                    for &s in &rep {
+                        let sh = &d.shots[s];
+                        if sh.censored[i] {
+                            continue;
+                        }
+                        let c = &consts[s];
+                        let p = c.predict(rates[s][i] as f64 * c.t, 0.0);
+                        let v = sh.var_dn[i] as f64;
+                        if v > 4.0 * p.var_t {
+                            hits += 1;
+                        }
+                        ex.push(((v - p.var_t) / (p.u * p.u).max(1e-30)).max(0.0));
+                    }
+                    if !ex.is_empty() && 5 * hits >= 3 * ex.len() {
+                        excess_v2.push(median(&ex));
+                    }
+                }
+            }
+            if excess_v2.is_empty() {
+                return Ok(FitOutcome::Fitted {
+                    state: state.clone(),
+                    neg_ll: f0,
+                    k: 2,
+                });
+            }
+            let n = (ctx.fit_rows.len() * d.cols) as f64;
+            // A²/4 = median excess (V²)
+            (
+                (excess_v2.len() as f64 / n).min(0.2),
+                2.0 * median(&excess_v2).sqrt(),
+            )
+        }
+    };
+    let mut st = state.clone();
+    set(&mut st, fr0, a0);
+    let mut f = eval(&st);
+    for _ in 0..2 {
+        let r = st.sensor.effects.rtn.expect("set");
+        let (s2, f2) = fit_1d(
+            &eval,
+            &st,
+            f,
+            &|s, x| {
+                let r = s.sensor.effects.rtn.expect("set");
+                set(s, x.exp(), r.amplitude_v)
+            },
+            r.fraction.ln() - 1.5,
+            (r.fraction.ln() + 1.5).min(0.5f64.ln()),
+            7,
+            1e-3,
+        );
+        st = s2;
+        f = f2;
+        let r = st.sensor.effects.rtn.expect("set");
+        let (s2, f2) = fit_1d(
+            &eval,
+            &st,
+            f,
+            &|s, x| {
+                let r = s.sensor.effects.rtn.expect("set");
+                set(s, r.fraction, x.exp())
+            },
+            r.amplitude_v.ln() - 1.0,
+            r.amplitude_v.ln() + 1.0,
+            7,
+            1e-3,
+        );
+        st = s2;
+        f = f2;
+    }
+    if f < f0 {
+        Ok(FitOutcome::Fitted {
+            state: st,
+            neg_ll: f,
+            k: 2,
+        })
+    } else {
+        Ok(FitOutcome::Fitted {
+            state: state.clone(),
+            neg_ll: f0,
+            k: 2,
+        })
+    }
+}
+
 /// Relative illumination: polynomial fall-off 1 + a1 h² + … + a_K h^(2K); the order K is
 /// chosen by BIC among 1–`FALLOFF_MAX_ORDER` (a vignetted pupil falls off nearly linearly
 /// in h from the centre, which low even orders cannot follow).
@@ -1145,6 +1373,16 @@ pub fn magnitude(effect: Effect, st: &ModelState, believed: &ModelState) -> f64 
         }),
         Effect::Distortion => st.rates.distortion.map_or(0.0, |[a, b]| a + b),
         Effect::LateralColor => st.rates.lateral_color_um.unwrap_or(0.0),
+        Effect::RowNoise => s.effects.row_noise.map_or(0.0, |r| r.sigma_v),
+        Effect::Rtn => s.effects.rtn.map_or(0.0, |r| r.fraction),
+        Effect::BlackLevelDrift => s
+            .effects
+            .black_level_drift
+            .map_or(0.0, |d| d.magnitude_dn(st.frames_in_set as usize)),
+        Effect::DarkTemperature => s
+            .effects
+            .dark_temperature
+            .map_or(f64::INFINITY, |d| d.doubling_temperature_c),
     }
 }
 

@@ -60,6 +60,12 @@ pub struct ShotData {
     /// because a frame of their own hit a rail, so their rail counts are seen only given at
     /// least one rail frame (the χ² summary's expected deviance is conditional on that).
     pub rail_only: Vec<bool>,
+    /// Sensor temperature during the shot (°C, captures.json `temperature_c`), if given.
+    pub temperature_c: Option<f64>,
+    /// Global index (capture order over the whole set) of the shot's first frame.
+    pub first_frame: u64,
+    /// Row means of every frame (DN), frame-major: `row_means_dn[f·rows + r]`.
+    pub row_means_dn: Vec<f64>,
 }
 
 impl ShotData {
@@ -120,6 +126,7 @@ pub struct ShotAccumulator {
     sumsq: Vec<u64>,
     n_low: Vec<u16>,
     n_high: Vec<u16>,
+    row_means: Vec<f64>,
 }
 
 impl ShotAccumulator {
@@ -135,6 +142,7 @@ impl ShotAccumulator {
             sumsq: vec![0; n],
             n_low: vec![0; n],
             n_high: vec![0; n],
+            row_means: Vec::new(),
         }
     }
 
@@ -175,6 +183,11 @@ impl ShotAccumulator {
                     hi[i] += (v == max) as u16;
                 }
             });
+        // Row means of this frame (exact integer sums per row).
+        self.row_means.extend(
+            dn.chunks(cols)
+                .map(|row| row.iter().map(|&v| v as u64).sum::<u64>() as f64 / cols as f64),
+        );
         self.frames += 1;
         Ok(())
     }
@@ -257,6 +270,9 @@ impl ShotAccumulator {
             n_high: self.n_high,
             censored,
             rail_only,
+            temperature_c: None,
+            first_frame: 0,
+            row_means_dn: self.row_means,
         }
     }
 }

@@ -42,11 +42,19 @@ pub enum Effect {
     Distortion,
     /// `lateral_color`
     LateralColor,
+    /// `row_noise`
+    RowNoise,
+    /// `rtn`
+    Rtn,
+    /// `black_level_drift`
+    BlackLevelDrift,
+    /// `dark_temperature`
+    DarkTemperature,
 }
 
 impl Effect {
     /// Every effect, in the order of effects.md.
-    pub const ALL: [Effect; 19] = [
+    pub const ALL: [Effect; 23] = [
         Effect::ExposureScale,
         Effect::ConversionGain,
         Effect::BlackLevel,
@@ -66,6 +74,10 @@ impl Effect {
         Effect::QeShift,
         Effect::Distortion,
         Effect::LateralColor,
+        Effect::RowNoise,
+        Effect::Rtn,
+        Effect::BlackLevelDrift,
+        Effect::DarkTemperature,
     ];
 
     /// The id of effects.md.
@@ -90,6 +102,10 @@ impl Effect {
             Effect::QeShift => "qe_shift",
             Effect::Distortion => "distortion",
             Effect::LateralColor => "lateral_color",
+            Effect::RowNoise => "row_noise",
+            Effect::Rtn => "rtn",
+            Effect::BlackLevelDrift => "black_level_drift",
+            Effect::DarkTemperature => "dark_temperature",
         }
     }
 
@@ -117,6 +133,10 @@ impl Effect {
             Effect::QeShift => "nm",
             Effect::Distortion => "fraction of half-diagonal",
             Effect::LateralColor => "um",
+            Effect::RowNoise => "V",
+            Effect::Rtn => "fraction of pixels",
+            Effect::BlackLevelDrift => "DN over the capture set",
+            Effect::DarkTemperature => "degC (doubling temperature)",
         }
     }
 
@@ -142,6 +162,10 @@ impl Effect {
             Effect::QeShift => "a channel's spectral sensitivity sits at other wavelengths",
             Effect::Distortion => "geometric distortion not in the model",
             Effect::LateralColor => "the magnification differs with wavelength (lateral chromatic aberration)",
+            Effect::RowNoise => "every row gets a new offset each frame (row-wise temporal noise of the readout)",
+            Effect::Rtn => "some pixels switch between two levels from frame to frame (random telegraph noise of a trap)",
+            Effect::BlackLevelDrift => "the pedestal drifts with the frame order (capture time)",
+            Effect::DarkTemperature => "the dark current changes with the sensor temperature (it doubles every few degrees)",
         }
     }
 }
@@ -239,6 +263,26 @@ pub const ALIKE: &[AlikePair] = &[
         a: Effect::Distortion,
         b: Effect::LateralColor,
         separated_by: "structure seen in more than one channel: lateral colour moves the channels apart, distortion moves them together",
+    },
+    AlikePair {
+        a: Effect::RowNoise,
+        b: Effect::ReadNoise,
+        separated_by: "the variance of row means across frames: row noise moves whole rows together, read noise averages out over a row",
+    },
+    AlikePair {
+        a: Effect::Rtn,
+        b: Effect::HotPixels,
+        separated_by: "darks at several exposure times: a hot pixel's excess grows with exposure, an RTN pixel's frame-to-frame jumps do not",
+    },
+    AlikePair {
+        a: Effect::BlackLevelDrift,
+        b: Effect::BlackLevel,
+        separated_by: "several frames per shot in capture order: a drift moves the frame means along the frame index",
+    },
+    AlikePair {
+        a: Effect::DarkTemperature,
+        b: Effect::DarkCurrent,
+        separated_by: "darks at two or more sensor temperatures (captures with temperature_c)",
     },
     AlikePair {
         a: Effect::ExposureScale,

@@ -103,7 +103,7 @@ impl Ctx<'_> {
     pub(crate) fn shot_maps(&self, state: &ModelState, rates: &Rates, s: usize) -> ShotMaps {
         let d = self.data;
         let sh = &d.shots[s];
-        let c = ShotConst::new(&state.sensor, sh.exposure_s, sh.analog_gain, sh.frames);
+        let c = ShotConst::for_shot(&state.sensor, sh);
         let sn = &state.sensor;
         let sig_u2 =
             sn.dsnu_sigma_v.powi(2) + sn.column_fpn.map_or(0.0, |c| c.offset_sigma_v.powi(2));
@@ -129,7 +129,7 @@ impl Ctx<'_> {
         let nch = d.channels();
         let mut shot_channels = Vec::new();
         for (s, sh) in d.shots.iter().enumerate() {
-            let c = ShotConst::new(&state.sensor, sh.exposure_s, sh.analog_gain, sh.frames);
+            let c = ShotConst::for_shot(&state.sensor, sh);
             for ch in 0..nch {
                 let x = &ev.per_sc[s * nch + ch];
                 if x.dof <= 0.0 {
@@ -185,7 +185,7 @@ impl Ctx<'_> {
     fn profiles(&self, state: &ModelState, s: usize, maps: &ShotMaps) -> ShotProfiles {
         let d = self.data;
         let sh = &d.shots[s];
-        let c = ShotConst::new(&state.sensor, sh.exposure_s, sh.analog_gain, sh.frames);
+        let c = ShotConst::for_shot(&state.sensor, sh);
         let (rows, cols) = (d.rows, d.cols);
         let mut rad = vec![(0.0f64, 0.0f64, 0.0f64); RADIAL_BINS];
         let mut col_sum = vec![(0.0f64, 0.0f64); cols];

@@ -416,6 +416,47 @@ fn report_finding(
             "as colour fringes at structure, growing towards the corners".into(),
             format!("the 650 nm image sits {mag:+.3} µm from the 450 nm image at h = 1"),
         ),
+        Effect::RowNoise => (
+            "as offsets shared by whole rows, new in every frame".into(),
+            format!(
+                "row noise σ is {:.4e} V (model: {:.4e})",
+                mag,
+                b.effects.row_noise.map_or(0.0, |r| r.sigma_v)
+            ),
+        ),
+        Effect::Rtn => {
+            let r = s.effects.rtn;
+            (
+                format!(
+                    "in about {} pixels whose level jumps between two values from frame to frame",
+                    (mag * d.pixels() as f64).round()
+                ),
+                format!(
+                    "{} of the pixels show random telegraph noise with a step of about {:.3e} V",
+                    pct(mag),
+                    r.map_or(0.0, |r| r.amplitude_v)
+                ),
+            )
+        }
+        Effect::BlackLevelDrift => (
+            "as frame means that move with the frame order".into(),
+            format!(
+                "the pedestal drifts by {:+.4} DN per frame, {:+.3} DN over the {} frames of the set",
+                s.effects.black_level_drift.map_or(0.0, |x| x.dn_per_frame),
+                mag,
+                st.frames_in_set
+            ),
+        ),
+        Effect::DarkTemperature => (
+            "in darks taken at different sensor temperatures".into(),
+            format!(
+                "the dark current doubles every {:.2} °C (reference {:.1} °C)",
+                mag,
+                s.effects
+                    .dark_temperature
+                    .map_or(f64::NAN, |x| x.reference_temperature_c)
+            ),
+        ),
     };
     let chi2_after = f.after.chi2 / f.after.dof.max(1.0);
     let chi2_before = prev.chi2 / prev.dof.max(1.0);

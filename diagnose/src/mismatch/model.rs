@@ -52,6 +52,8 @@ pub struct ModelState {
     pub exposure_factor: f64,
     /// Effects evaluated by the forward model.
     pub rates: RateSpec,
+    /// Frames in the capture set (the black-level drift's magnitude is the drift over them).
+    pub frames_in_set: u64,
 }
 
 /// Per-shot constants of the sensor chain.
@@ -153,6 +155,40 @@ impl ShotConst {
         };
         c.adc_first = c.base_dn + c.k * c.nonlinear(c.well * c.g).0
             > c.hi_dn - CENSOR_SIGMAS * c.const_var.sqrt();
+        c
+    }
+
+    /// [`ShotConst::new`] for a shot of the data set, with the frame-dependent blocks of
+    /// `camsim_sensor::line_noise`: the dark voltage at the shot's temperature
+    /// (`dark_temperature`), the row-noise variance k²σ_row² in every frame (`row_noise`),
+    /// and the black-level drift `rate·j` averaged over the shot's frames
+    /// j = first … first + F − 1 (mean `rate·(first + (F−1)/2)`; the ramp adds its sample
+    /// variance `rate²·F(F+1)/12` to the temporal variance).
+    pub fn for_shot(sensor: &SensorModel, shot: &super::data::ShotData) -> Self {
+        let dark = camsim_sensor::dark_voltage_at(sensor, shot.temperature_c);
+        let owned;
+        let sensor = if dark != sensor.dark_voltage_v_per_s {
+            let mut s = sensor.clone();
+            s.dark_voltage_v_per_s = dark;
+            owned = s;
+            &owned
+        } else {
+            sensor
+        };
+        let mut c = ShotConst::new(sensor, shot.exposure_s, shot.analog_gain, shot.frames);
+        let fx = &sensor.effects;
+        if fx.row_noise.is_some() || fx.black_level_drift.is_some() {
+            if let Some(r) = fx.row_noise {
+                c.const_var += c.k * c.k * r.sigma_v * r.sigma_v;
+            }
+            if let Some(d) = fx.black_level_drift {
+                let f = shot.frames.max(1) as f64;
+                c.base_dn += d.dn_per_frame * (shot.first_frame as f64 + 0.5 * (f - 1.0));
+                c.const_var += d.dn_per_frame * d.dn_per_frame * f * (f + 1.0) / 12.0;
+            }
+            c.adc_first = c.base_dn + c.k * c.nonlinear(c.well * c.g).0
+                > c.hi_dn - CENSOR_SIGMAS * c.const_var.sqrt();
+        }
         c
     }
 

@@ -201,6 +201,10 @@ fn without_effect(e: Effect, state: &ModelState, believed: &ModelState) -> Model
         Effect::LateralColor => st.rates.lateral_color_um = believed.rates.lateral_color_um,
         Effect::IrLeakage => st.rates.ir_leakage = believed.rates.ir_leakage.clone(),
         Effect::QeShift => st.rates.qe_shift_nm = believed.rates.qe_shift_nm.clone(),
+        Effect::RowNoise => s.effects.row_noise = b.effects.row_noise,
+        Effect::Rtn => s.effects.rtn = b.effects.rtn,
+        Effect::BlackLevelDrift => s.effects.black_level_drift = b.effects.black_level_drift,
+        Effect::DarkTemperature => s.effects.dark_temperature = b.effects.dark_temperature,
     }
     st
 }

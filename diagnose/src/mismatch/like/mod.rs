@@ -29,6 +29,7 @@
 //! holds the forward-model cache and the exposure/crosstalk transform, `linear.rs` the
 //! normal equations of linear rate parameters; `prof.rs` the stage timers.
 mod column;
+mod frames;
 mod hot;
 mod linear;
 mod pixel;
@@ -127,6 +128,9 @@ pub(crate) struct Ctx<'a> {
     /// What a likelihood with hot pixels shares with every other hot-pixel parameter value
     /// (the hot-pixel fit changes only the mixture's parameters).
     hot_base: Mutex<Option<Arc<HotBase>>>,
+    /// Per shot and row: the sum of the pixels' temporal variances and whether no pixel is
+    /// censored (`frames.rs`; data only, computed on first use).
+    frame_pre: std::sync::OnceLock<Vec<(Vec<f64>, Vec<bool>)>>,
 }
 
 /// The parts of a fit-row log-likelihood that do not depend on the hot-pixel mixture's
@@ -279,6 +283,7 @@ impl<'a> Ctx<'a> {
             memo: Mutex::new(Vec::new()),
             pred_buf: Mutex::new(Vec::new()),
             hot_base: Mutex::new(None),
+            frame_pre: std::sync::OnceLock::new(),
         }
     }
 
@@ -329,7 +334,7 @@ impl<'a> Ctx<'a> {
         self.data
             .shots
             .iter()
-            .map(|s| ShotConst::new(&state.sensor, s.exposure_s, s.analog_gain, s.frames))
+            .map(|s| ShotConst::for_shot(&state.sensor, s))
             .collect()
     }
 
@@ -368,6 +373,14 @@ impl<'a> Ctx<'a> {
                 ln_rate: h.dark_voltage_v_per_s.ln(),
                 log_sigma: h.log_sigma,
             });
+        // RTN pixels (effect block): a second mixture over the pixel's class — a trap of
+        // step A (V) in its high state with probability p adds u·A·p to every shot's mean and
+        // (u·A)²p(1−p) to its temporal variance (u = DN per volt).
+        let rtn = s
+            .effects
+            .rtn
+            .filter(|r| r.fraction > 0.0 && r.amplitude_v > 0.0)
+            .map(|r| (r.fraction.min(0.5), r.amplitude_v, r.high_probability()));
         let use_cols = self.column_term(sel);
         let rows = self.rows(sel);
         // A likelihood alone with hot pixels: reuse (or keep) what does not depend on the
@@ -443,6 +456,7 @@ impl<'a> Ctx<'a> {
                 // uniform shot share.
                 let mut hot_memo: HashMap<Vec<(u64, u16, u16)>, (f64, Vec<Pred>)> = HashMap::new();
                 let mut l0s: Vec<f64> = Vec::new();
+                let mut rtn_buf: Vec<Pred> = Vec::with_capacity(ns);
                 for (ri, &r) in blk.iter().enumerate() {
                     for j in 0..cols {
                         let i = r * cols + j;
@@ -532,12 +546,51 @@ impl<'a> Ctx<'a> {
                                 tot
                             }
                         };
+                        let mut rtn_class = false;
+                        let li = match rtn {
+                            None => li,
+                            Some((fr, a_v, p)) => {
+                                let base_preds: &[Pred] =
+                                    if hot_class { &hot_buf[..] } else { preds };
+                                rtn_buf.clear();
+                                rtn_buf.extend(base_preds.iter().map(|q| {
+                                    let a = q.u * a_v;
+                                    Pred {
+                                        mean: q.mean + a * p,
+                                        var_t: q.var_t + a * a * p * (1.0 - p),
+                                        s2_t: q.s2_t + a * a * p * (1.0 - p),
+                                        y: q.y + a * p,
+                                        ..*q
+                                    }
+                                }));
+                                let lr = self.pixel_ll(
+                                    px,
+                                    &rtn_buf,
+                                    &consts,
+                                    cs,
+                                    sig_d,
+                                    sig_p,
+                                    if use_cols { 0.0 } else { sig_c },
+                                );
+                                let a = (1.0 - fr).ln() + li;
+                                let b = fr.ln() + lr;
+                                let tot = log_add_exp(a, b);
+                                rtn_class = b - tot > -std::f64::consts::LN_2;
+                                tot
+                            }
+                        };
                         ll += li;
                         if !stats {
                             continue;
                         }
                         // Reported χ² (marginal per pixel-shot) with the pixel's class.
-                        let used = if hot_class { &hot_buf[..] } else { preds };
+                        let used = if rtn_class {
+                            &rtn_buf[..]
+                        } else if hot_class {
+                            &hot_buf[..]
+                        } else {
+                            preds
+                        };
                         for sidx in 0..ns {
                             let sh = &d.shots[sidx];
                             let x = &px[sidx];
@@ -590,7 +643,9 @@ impl<'a> Ctx<'a> {
                 (ll, sc, n_hot, l0s)
             })
             .collect();
-        let mut logl = logl_columns;
+        // Frame-sequence terms (row noise, black-level drift; `frames.rs`): rows × shots of
+        // arithmetic, on every row whatever the selection.
+        let mut logl = logl_columns + self.frame_terms_ll(state);
         let mut per_sc = vec![ScStat::default(); ns * nch];
         let mut hot_pixels = 0;
         for (ll, sc, nh, _) in &blocks {
