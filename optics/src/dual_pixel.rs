@@ -60,6 +60,12 @@ pub fn dual_pixel_disparity_m(signed_coc_radius_m: f64, separation: f64) -> f64 
 /// full disc's sub-samples) at `pitch_m`, normalised to sum 1. A disc too small to hold a
 /// sub-sample of either half is the identity (the point is in focus: both halves see it at
 /// the same place).
+///
+/// Limit: each cell's sub-samples count at the cell's centre, so the column through the
+/// disc's centre puts half its light at x = 0 instead of ±¼ sample; the sampled centroid
+/// falls short of `4R/(3π)` by up to ~1/(2πR) samples (a disc within the centre cell, R < ½
+/// sample, gives no disparity at all). A moment-preserving (linear in x) deposition would
+/// remove the bias at the cost of the exact partition of [`crate::pillbox_psf`].
 pub fn half_pupil_psf(signed_coc_radius_m: f64, pitch_m: f64, half: PupilHalf) -> SampledPsf {
     let r = signed_coc_radius_m.abs();
     let h = (r / pitch_m - 0.5 - 1e-9).ceil().max(0.0) as usize;
