@@ -2,6 +2,7 @@
 mod calibrate;
 mod cli;
 mod develop;
+mod dual_pixel;
 mod diagnose;
 mod effects;
 mod emva1288;

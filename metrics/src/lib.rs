@@ -12,6 +12,7 @@
 //!   spec (target kind `patches`), per CFA channel;
 //! * [`hdr_snr`]: SNR-versus-exposure curves, dynamic range and SNR holes of HDR pixels
 //!   (split pixel, dual gain, bracketing) in closed form;
+//! * [`dual_pixel`]: the disparity between the left and right images of a dual-pixel sensor;
 //! * [`rolling_shutter`]: edge skew per row and flicker band period of rolling-shutter frames;
 //! * [`summary`]: PSNR and ΔE distribution statistics.
 //!
@@ -19,6 +20,7 @@
 #![deny(missing_docs)]
 
 pub mod color_difference;
+pub mod dual_pixel;
 pub mod error;
 pub mod hdr_snr;
 pub mod patches;

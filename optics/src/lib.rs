@@ -28,6 +28,7 @@
 #![deny(missing_docs)]
 
 mod band_split;
+pub mod dual_pixel;
 pub mod effects;
 mod error;
 mod far_tail;
@@ -44,6 +45,9 @@ pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid}
 pub use effects::{
     equivalent_gaussian_sigma_um, two_circle_overlap_fraction, Defocus, Distortion, Falloff,
     LateralColor, LateralColorKind, OpticsEffects,
+};
+pub use dual_pixel::{
+    dual_pixel_disparity_m, half_disc_centroid_offset_m, half_pupil_psf, PupilHalf,
 };
 pub use error::OpticsError;
 pub use formulas::{

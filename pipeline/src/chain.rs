@@ -15,6 +15,7 @@
 //! | HDR readouts (split pixel, DCG, bracketing; DN) | [`hdr_model`], [`hdr_readout_models`], [`simulate_hdr_frame`] | [`camsim_sensor::expose_hdr`] |
 //! | HDR merge (linear exposure, e⁻) | [`merge_hdr`] | [`camsim_isp::hdr_merge()`] |
 //! | contrast autofocus (lens position of the sharpest region) | [`crate::autofocus::contrast_autofocus`] | the steps above per position |
+//! | dual pixel (left/right pupil-half images, half-photodiode readout) | [`dual_pixel_irradiance`], [`dual_pixel_rates`], [`expected_dual_pixel_frames`]; phase-detection AF: [`crate::pdaf::phase_detection_autofocus`] | [`camsim_optics::half_pupil_psf`] by depth slab ([`camsim_render::depth_path::defocus_layered_with`]), [`camsim_optics::form_image`], [`camsim_sensor::DualPixel::photodiode_rates`], [`camsim_sensor::expected_dual_pixel_dn`] |
 use crate::config::{Camera, CaptureSet, Exposure};
 use crate::error::CliError;
 use camsim_core::image::{Plane, RawFrame, SceneRadiance, SensorIrradiance};
@@ -400,4 +401,175 @@ pub fn merge_hdr(
 ) -> Result<Plane, CliError> {
     camsim_isp::hdr_merge(frame, models)
         .map_err(|e| CliError::input(camera_path, format!("sensor.hdr: {e}")))
+}
+
+/// The light of a scene through the two halves of the exit pupil ([`dual_pixel_irradiance`]).
+#[derive(Debug, Clone)]
+pub struct DualPixelIrradiance {
+    /// Through the left pupil half (x < 0): half the light at focus.
+    pub left: SensorIrradiance,
+    /// Through the right pupil half.
+    pub right: SensorIrradiance,
+}
+
+/// The thin-lens defocus of the camera at the scene's sample pitch `sample_pitch_m`
+/// ([`camsim_render::depth_optics::thin_lens_for_camera`], focused at
+/// `optics.focus_distance_m`, infinity when absent).
+pub(crate) fn camera_thin_lens(
+    cam: &Camera,
+    camera_path: &Path,
+    sample_pitch_m: f64,
+) -> Result<camsim_render::depth_path::ThinLensDefocus, CliError> {
+    camsim_render::depth_optics::thin_lens_for_camera(
+        cam.optics.focal_length_m,
+        cam.optics.f_number,
+        cam.thin_lens_focus_m,
+        sample_pitch_m,
+    )
+    .map_err(|e| CliError::input(camera_path, format!("optics: {e}")))
+}
+
+/// The signed thin-lens circle of confusion at inverse depth `inv_z_per_m` (1/m, 0 =
+/// infinity) in samples of `t`: the radius of
+/// [`camsim_render::depth_path::ThinLensDefocus::coc_radius_px`] with the sign of
+/// `1/z − 1/D` (positive: nearer than the focus; [`camsim_optics::dual_pixel`]).
+pub(crate) fn signed_coc_radius_px(t: &camsim_render::depth_path::ThinLensDefocus, inv_z_per_m: f64) -> f64 {
+    let z = if inv_z_per_m > 0.0 {
+        1.0 / inv_z_per_m
+    } else {
+        f64::INFINITY
+    };
+    let sign = if inv_z_per_m >= 1.0 / t.focus_distance_m {
+        1.0
+    } else {
+        -1.0
+    };
+    sign * t.coc_radius_px(z)
+}
+
+/// The thin-lens dual-pixel disparity (pixels; right image minus left image) of an object at
+/// `object_distance_m` (`None` = infinity) for the camera's focus, F-number and dual-pixel
+/// separation: [`camsim_optics::dual_pixel_disparity_m`] of the signed circle of confusion in
+/// pixels (the closed form the measured disparity is compared with).
+pub fn dual_pixel_expected_disparity_px(
+    cam: &Camera,
+    camera_path: &Path,
+    object_distance_m: Option<f64>,
+) -> Result<f64, CliError> {
+    let dp = cam.dual_pixel.ok_or_else(|| {
+        CliError::input(camera_path, "sensor.dual_pixel: required for dual-pixel images")
+    })?;
+    let t = camera_thin_lens(cam, camera_path, cam.sensor.pixel_pitch_m)?;
+    let r_px = signed_coc_radius_px(&t, object_distance_m.map_or(0.0, |z| 1.0 / z));
+    Ok(camsim_optics::dual_pixel_disparity_m(r_px, dp.separation))
+}
+
+/// The optics stage of a dual-pixel camera (`sensor.dual_pixel`): the scene through each
+/// half of the exit pupil of the camera's thin lens (focused at `optics.focus_distance_m`,
+/// infinity when absent). Every slab of the scene's depth (`SceneRadiance::depth_m`; without
+/// one, the plane at the scene's `object_distance_m`, infinity when absent) is blurred with the
+/// half-disc PSF of its signed circle of confusion ([`camsim_optics::half_pupil_psf`]) by the
+/// depth-layered compositing of the depth-aware optics ([`DEPTH_LAYERS`] slabs), weighted by ½
+/// (the half pupil's share of the light), then the camera's own optics apply
+/// ([`camsim_optics::form_image`]). The two halves sum to the thin-lens depth-aware image of
+/// [`irradiance_and_blur_of`] (the half discs partition its pillbox). A real lens
+/// (`blur.kind = "lens"`) is refused.
+pub fn dual_pixel_irradiance(
+    cam: &Camera,
+    camera_path: &Path,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<DualPixelIrradiance, CliError> {
+    use camsim_optics::PupilHalf;
+    use camsim_render::depth_path::{defocus_layered_with, Kernel};
+    if cam.dual_pixel.is_none() {
+        return Err(CliError::input(
+            camera_path,
+            "sensor.dual_pixel: required for dual-pixel images",
+        ));
+    }
+    if matches!(cam.optics.blur, camsim_optics::Blur::Lens(_)) {
+        return Err(CliError::input(
+            camera_path,
+            "sensor.dual_pixel: needs the thin lens (optics.focus_distance_m); blur kind \"lens\" is not supported",
+        ));
+    }
+    let (w, h) = (scene.radiance.cols, scene.radiance.rows);
+    let dx = scene.sample_pitch_m;
+    let plane_depth;
+    let depth: &[f32] = match &scene.depth_m {
+        Some(d) if d.rows == h && d.cols == w => &d.data,
+        Some(d) => {
+            return Err(CliError::input(
+                camera_path,
+                format!(
+                    "optics: the scene's depth is {}×{} but its radiance {h}×{w}",
+                    d.rows, d.cols
+                ),
+            ))
+        }
+        None => {
+            let z = scene.object_distance_m.map_or(f32::INFINITY, |z| z as f32);
+            plane_depth = vec![z; w * h];
+            &plane_depth
+        }
+    };
+    let t = camera_thin_lens(cam, camera_path, dx)?;
+    let half_image = |half: PupilHalf| -> Result<SensorIrradiance, CliError> {
+        let kernel = |inv_z: f64| {
+            let psf = camsim_optics::half_pupil_psf(signed_coc_radius_px(&t, inv_z) * dx, dx, half);
+            Kernel {
+                radius: psf.half_rows,
+                values: psf.data.iter().map(|v| *v as f32).collect(),
+            }
+        };
+        let planes = defocus_layered_with(
+            &scene.radiance.planes,
+            depth,
+            w,
+            h,
+            DEPTH_LAYERS,
+            true,
+            kernel,
+        );
+        let mut defocused = scene.clone();
+        defocused.radiance.planes = planes
+            .into_iter()
+            .map(|p| p.into_iter().map(|v| 0.5 * v).collect())
+            .collect();
+        camsim_optics::form_image(&cam.optics, &defocused, grid)
+            .map_err(|e| CliError::input(camera_path, format!("optics: {e}")))
+    };
+    Ok(DualPixelIrradiance {
+        left: half_image(PupilHalf::Left)?,
+        right: half_image(PupilHalf::Right)?,
+    })
+}
+
+/// The half-photodiode electron rates of a scene: [`dual_pixel_irradiance`], the pixel
+/// integration of each half ([`camsim_sensor::electron_rate`]), then the camera's split
+/// ([`camsim_sensor::DualPixel::photodiode_rates`]).
+pub fn dual_pixel_rates(
+    cam: &Camera,
+    camera_path: &Path,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<camsim_sensor::DualPixelRates, CliError> {
+    let irr = dual_pixel_irradiance(cam, camera_path, scene, grid)?;
+    let dp = cam.dual_pixel.expect("checked by dual_pixel_irradiance");
+    Ok(dp.photodiode_rates(
+        &camsim_sensor::electron_rate(&cam.sensor, &irr.left),
+        &camsim_sensor::electron_rate(&cam.sensor, &irr.right),
+    ))
+}
+
+/// The noise-free expected frames (DN, unrounded) of both half-photodiodes of `rates` under
+/// `shot` ([`camsim_sensor::expected_dual_pixel_dn`]).
+pub fn expected_dual_pixel_frames(
+    cam: &Camera,
+    rates: &camsim_sensor::DualPixelRates,
+    shot: &Shot,
+) -> Option<camsim_sensor::DualPixelExpected> {
+    cam.dual_pixel
+        .map(|dp| camsim_sensor::expected_dual_pixel_dn(&cam.sensor, &dp, rates, shot))
 }

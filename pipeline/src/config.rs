@@ -605,6 +605,26 @@ pub struct SensorFile {
     /// Effect block `black_level_drift` ([`BlackLevelDriftFile`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub black_level_drift: Option<BlackLevelDriftFile>,
+    /// Extension: dual-pixel readout (two half-photodiodes under one microlens).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dual_pixel: Option<DualPixelFile>,
+}
+
+/// `sensor.dual_pixel` (extension): every pixel is two half-photodiodes (left, right) under
+/// one microlens, each collecting the light of one half of the exit pupil
+/// ([`camsim_sensor::dual_pixel`], [`camsim_optics::dual_pixel`]); their sum is the normal
+/// pixel. Absent: off, and every output is the baseline chain's. The two images are formed by
+/// [`crate::chain::dual_pixel_irradiance`].
+///
+/// | key | default | meaning |
+/// |---|---|---|
+/// | `separation` | 1 | fraction of one pupil half's light reaching its own half-photodiode (0.5 = no split … 1 = ideal) |
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DualPixelFile {
+    /// Separation (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub separation: Option<f64>,
 }
 
 /// `sensor.hdr` (extension): an HDR pixel of charge packets (photodiodes, or exposures of
@@ -889,6 +909,8 @@ pub struct Camera {
     pub uncropped_optical_image: bool,
     /// HDR pixel (`sensor.hdr`; None: the standard pixel).
     pub hdr: Option<HdrModel>,
+    /// Dual-pixel readout (`sensor.dual_pixel`; None: one photodiode per pixel).
+    pub dual_pixel: Option<camsim_sensor::DualPixel>,
     /// Thin-lens focus distance (m, `optics.focus_distance_m`): scenes with depth are
     /// defocused by depth as a thin lens focused there ([`crate::chain::irradiance_of`]).
     pub thin_lens_focus_m: Option<f64>,
@@ -1093,6 +1115,17 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         None => None,
         Some(h) => Some(hdr_from_file(path, h, &sensor)?),
     };
+    let dual_pixel = match &raw.sensor.dual_pixel {
+        None => None,
+        Some(d) => {
+            let dp = camsim_sensor::DualPixel {
+                separation: d.separation.unwrap_or(1.0),
+            };
+            dp.validate()
+                .map_err(|e| CliError::input(path, e.to_string()))?;
+            Some(dp)
+        }
+    };
     let thin_lens_focus_m = match o.focus_distance_m {
         None => None,
         Some(_) if matches!(optics.blur, Blur::Lens(_)) => {
@@ -1119,6 +1152,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         readout,
         uncropped_optical_image,
         hdr,
+        dual_pixel,
         thin_lens_focus_m,
     })
 }

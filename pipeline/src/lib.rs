@@ -23,6 +23,7 @@ pub mod honest_color;
 pub mod lens_cmd;
 pub mod metric_cmd;
 pub mod noise_profiles_cmd;
+pub mod pdaf;
 #[doc = include_str!("../../docs/physics.md")]
 pub mod physics {}
 pub mod plots;

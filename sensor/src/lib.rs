@@ -16,6 +16,8 @@
 //! and hot pixels. The optional effect blocks of `spec/effects.md` (hot pixels,
 //! nonlinearity, crosstalk, IR leakage, QE shift) live in [`effects`] and
 //! [`SensorModel::effects`]; absent, they cost nothing.
+//! The [`dual_pixel`] module holds the dual-pixel readout (two half-photodiodes under one
+//! microlens, the left and right halves of the exit pupil).
 //! The [`hdr`] module holds HDR pixels (split pixel, dual conversion gain, exposure
 //! bracketing): several charge packets and readouts per pixel ([`expose_hdr`]).
 //! The [`isetcam`] module holds documented ISETCam-compatible variants (bilinear pixel
@@ -25,6 +27,7 @@
 //! Units live in names: `_m`, `_s`, `_v`, `_e` (electrons), `_dn`.
 #![deny(missing_docs)]
 
+pub mod dual_pixel;
 pub mod effects;
 pub mod hdr;
 mod integrate;
@@ -40,6 +43,10 @@ use camsim_core::Spectrum;
 use thiserror::Error;
 
 pub use camsim_core::{RawFrame, SensorIrradiance};
+pub use dual_pixel::{
+    expected_dual_pixel_dn, expose_dual_pixel, DualPixel, DualPixelExpected, DualPixelFrame,
+    DualPixelRates,
+};
 pub use effects::{
     apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map, Crosstalk, HotPixel,
     HotPixels, IrLeakage, Nonlinearity, QeShift, SensorEffects,

@@ -14,6 +14,8 @@
 //! * [`rolling`]: the rolling-shutter evaluator (skew of a moving edge, LED flicker bands);
 //! * [`hdr`](mod@hdr): the HDR pixel evaluator (split pixel, DCG, bracketing vs a standard pixel:
 //!   merged SNR against exposure, dynamic range, SNR holes);
+//! * [`dual_pixel`](mod@dual_pixel): the dual-pixel evaluator (disparity of an edge against the
+//!   thin-lens closed form, phase-detection autofocus);
 //! * [`table`] and [`report`]: CSV + JSON tables in spec order, HTML report with plots and
 //!   image strips;
 //! * [`ray`]: the Ray engine: the same points, each run by `camsim study-point` on a Ray
@@ -22,6 +24,7 @@
 //! Each point's random seed is derived from its hash, so a point's result does not depend on
 //! which other points run, in which order, on how many threads or on which machine.
 pub mod capture;
+pub mod dual_pixel;
 pub mod hash;
 pub mod hdr;
 pub mod output;

@@ -31,6 +31,9 @@ pub enum PointKind {
     /// exposure: merged SNR simulated and in closed form, dynamic range, SNR holes
     /// ([`super::hdr`]).
     Hdr,
+    /// A vertical edge at one distance through a dual-pixel camera: disparity against the
+    /// thin-lens closed form, and a phase-detection autofocus loop ([`super::dual_pixel`]).
+    DualPixel,
 }
 
 impl PointKind {
@@ -41,8 +44,9 @@ impl PointKind {
             Some("render") => Ok(PointKind::Render),
             Some("rolling_shutter") => Ok(PointKind::RollingShutter),
             Some("hdr") => Ok(PointKind::Hdr),
+            Some("dual_pixel") => Ok(PointKind::DualPixel),
             Some(other) => Err(format!(
-                "kind: unknown point kind \"{other}\" (expected \"capture\", \"render\", \"rolling_shutter\" or \"hdr\")"
+                "kind: unknown point kind \"{other}\" (expected \"capture\", \"render\", \"rolling_shutter\", \"hdr\" or \"dual_pixel\")"
             )),
             None => Err("kind: required (a string)".into()),
         }
@@ -56,6 +60,7 @@ pub fn validate(doc: &Value) -> Result<(), String> {
         PointKind::Render => render::validate(doc),
         PointKind::RollingShutter => super::rolling::validate(doc),
         PointKind::Hdr => super::hdr::validate(doc),
+        PointKind::DualPixel => super::dual_pixel::validate(doc),
     }
 }
 
@@ -132,6 +137,8 @@ pub fn evaluate_into(
         PointKind::RollingShutter => super::rolling::evaluate(doc, seed, dir)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
         PointKind::Hdr => super::hdr::evaluate(doc, seed, dir)
+            .map_err(|e| CliError::input(&point_path, e.one_line()))?,
+        PointKind::DualPixel => super::dual_pixel::evaluate(doc, seed, dir)
             .map_err(|e| CliError::input(&point_path, e.one_line()))?,
     };
     let metrics: serde_json::Map<String, Value> = out

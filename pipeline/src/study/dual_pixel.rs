@@ -1,0 +1,335 @@
+//! The `"dual_pixel"` study point: a vertical edge on a plane at one object distance through
+//! a dual-pixel camera with a thin lens ([`crate::chain::dual_pixel_irradiance`]): the
+//! disparity between the left and right half-photodiode images against the thin-lens closed
+//! form `d = (2s − 1) · 8r/(3π)` (r the signed circle of confusion; `camsim_optics::dual_pixel`),
+//! and a phase-detection autofocus loop ([`crate::pdaf`]) from the camera's focus onto the
+//! edge, with the slope calibrated on a chart at a known distance.
+//!
+//! | key | default | meaning |
+//! |---|---|---|
+//! | `camera` | required | camera.json content with `sensor.dual_pixel` and the thin lens's `optics.focus_distance_m` |
+//! | `target` | required | a captures.json target holding one vertical edge (`slanted_edge` with `angle_deg` 0); its `distance_m` is replaced by the object distance |
+//! | `object_vergence_per_m` | required | 1 / object distance (1/m, > 0) |
+//! | `exposure_s` | required | exposure time (s) |
+//! | `reference_fraction` | 0.125 | fraction of the columns at each side used as the edge's reference levels |
+//! | `pdaf` | `{}` | `tolerance_px` (0.05), `max_iterations` (8), `calibration_distance_m` (the camera's focus distance), `calibration_offsets_per_m` ([−0.5, 0.5]: focus vergences of the calibration relative to the chart's) |
+//! | `simulation` | absent | captures.json `simulation` block |
+//!
+//! Metrics (one row of the study table):
+//! * `object_distance_m`, `defocus_per_m` (`1/Z − 1/D`), `coc_radius_px` (signed);
+//! * `disparity_px_expected` (closed form, [`crate::chain::dual_pixel_expected_disparity_px`]),
+//!   `disparity_px_measured` (on the noise-free expected frames), `disparity_px_sampled` (the
+//!   x-centroid difference of the two sampled half-disc kernels the chain applies, at the
+//!   scene's sample pitch: each sample cell's sub-samples count at the cell's centre, so the
+//!   column through the disc's centre puts half its light at x = 0 instead of ±¼ sample, a
+//!   bias of the order of 1/(π r) samples that vanishes as r grows), `disparity_px_tolerance`
+//!   (0.02 px + 2 % of the closed form + the kernel's sampling bias `|sampled − expected|`);
+//! * `disparity_px_noisy`, `disparity_px_noisy_std_error` (one noisy readout; the standard
+//!   error from the row-to-row scatter);
+//! * `slope_px_m_calibrated`, `slope_px_m_expected` (α = d / (1/Z − 1/D) at the calibration
+//!   focus, closed form);
+//! * `pdaf_iterations` (measurements), `pdaf_final_focus_m`, `pdaf_focus_error_per_m`
+//!   (`|1/D_final − 1/Z|`), `depth_of_focus_per_m` (thin lens, circle of confusion one pixel
+//!   across, [`crate::pdaf::depth_of_focus_per_m`]), `pdaf_within_depth_of_focus` (1/0).
+use super::output::PointOutput;
+use crate::config::{camera_from_file, captures_with_camera, CameraFile, CapturesFile, CaptureSet};
+use crate::error::CliError;
+use crate::pdaf::{
+    calibrate_slope, depth_of_focus_per_m, focus_vergence_per_m, measure_disparity,
+    phase_detection_autofocus, DisparityFrames, DisparityOptions, PdafOptions,
+};
+use camsim_core::stats::Rect;
+use serde::Deserialize;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DualPixelDoc {
+    #[allow(dead_code)]
+    kind: String,
+    camera: Value,
+    target: Value,
+    object_vergence_per_m: f64,
+    exposure_s: f64,
+    #[serde(default)]
+    reference_fraction: Option<f64>,
+    #[serde(default)]
+    pdaf: Option<PdafDoc>,
+    #[serde(default)]
+    simulation: Option<Value>,
+    /// Added by the study planner (hashed with the point).
+    #[allow(dead_code)]
+    #[serde(default)]
+    camsim_version: Option<String>,
+    /// Per-point seed override ([`super::point::seed_of`]).
+    #[allow(dead_code)]
+    #[serde(default)]
+    seed: Option<u64>,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PdafDoc {
+    #[serde(default)]
+    tolerance_px: Option<f64>,
+    #[serde(default)]
+    max_iterations: Option<usize>,
+    #[serde(default)]
+    calibration_distance_m: Option<f64>,
+    #[serde(default)]
+    calibration_offsets_per_m: Option<Vec<f64>>,
+}
+
+/// The validated point.
+struct Point {
+    /// The object's capture set (one shot).
+    set: CaptureSet,
+    /// The calibration chart's capture set (the same target at the calibration distance).
+    chart: CaptureSet,
+    object_distance_m: f64,
+    chart_distance_m: f64,
+    ref_fraction: f64,
+    tolerance_px: f64,
+    max_iterations: usize,
+    calibration_offsets_per_m: Vec<f64>,
+}
+
+fn capture_set(
+    d: &DualPixelDoc,
+    cam: &crate::config::Camera,
+    distance_m: f64,
+) -> Result<CaptureSet, String> {
+    let mut target = d.target.clone();
+    if !target.is_object() {
+        return Err("target: a captures.json target object".into());
+    }
+    target["distance_m"] = json!(distance_m);
+    let mut captures = json!({
+        "camera": "camera.json",
+        "shots": [{
+            "id": "frame",
+            "target": target,
+            "exposure_s": d.exposure_s,
+            "frames": ["frame.png"],
+        }],
+    });
+    if let Some(s) = &d.simulation {
+        captures["simulation"] = s.clone();
+    }
+    let raw: CapturesFile = serde_json::from_value(captures).map_err(|e| e.to_string())?;
+    captures_with_camera(Path::new("point"), raw, cam.clone(), PathBuf::from("camera"))
+        .map_err(|e| e.one_line())
+}
+
+fn point(doc: &Value) -> Result<Point, String> {
+    let d: DualPixelDoc = serde_json::from_value(doc.clone()).map_err(|e| e.to_string())?;
+    let f: CameraFile =
+        serde_json::from_value(d.camera.clone()).map_err(|e| format!("camera: {e}"))?;
+    let cam = camera_from_file(Path::new("camera"), f).map_err(|e| e.one_line())?;
+    if cam.dual_pixel.is_none() {
+        return Err("camera.sensor.dual_pixel: required by a dual_pixel point (e.g. {})".into());
+    }
+    let Some(focus_m) = cam.thin_lens_focus_m else {
+        return Err(
+            "camera.optics.focus_distance_m: required by a dual_pixel point (the thin lens's focus)"
+                .into(),
+        );
+    };
+    let u = d.object_vergence_per_m;
+    let f_m = cam.optics.focal_length_m;
+    if !(u.is_finite() && u > 0.0 && 1.0 / u > f_m) {
+        return Err(format!(
+            "object_vergence_per_m: must be > 0 with 1/value beyond the focal length ({f_m} m), got {u}"
+        ));
+    }
+    let frac = d.reference_fraction.unwrap_or(0.125);
+    if !(frac > 0.0 && frac <= 0.5) {
+        return Err(format!("reference_fraction: must be in (0, 0.5], got {frac}"));
+    }
+    let pd = d.pdaf.clone().unwrap_or_default();
+    let tolerance_px = pd.tolerance_px.unwrap_or(0.05);
+    if !(tolerance_px.is_finite() && tolerance_px > 0.0) {
+        return Err(format!("pdaf.tolerance_px: must be > 0, got {tolerance_px}"));
+    }
+    let max_iterations = pd.max_iterations.unwrap_or(8);
+    if !(1..=100).contains(&max_iterations) {
+        return Err(format!("pdaf.max_iterations: must be 1 to 100, got {max_iterations}"));
+    }
+    let chart_distance_m = pd.calibration_distance_m.unwrap_or(focus_m);
+    if !(chart_distance_m.is_finite() && chart_distance_m > f_m) {
+        return Err(format!(
+            "pdaf.calibration_distance_m: must be finite and beyond the focal length ({f_m} m), got {chart_distance_m}"
+        ));
+    }
+    let offsets = pd.calibration_offsets_per_m.unwrap_or_else(|| vec![-0.5, 0.5]);
+    let chart_u = 1.0 / chart_distance_m;
+    if offsets.is_empty()
+        || offsets
+            .iter()
+            .any(|o| !(o.is_finite() && *o != 0.0 && chart_u + o >= 0.0 && chart_u + o < 1.0 / f_m))
+    {
+        return Err(format!(
+            "pdaf.calibration_offsets_per_m: non-zero focus vergences relative to the chart's ({chart_u} 1/m) that keep the focus between infinity and the focal length, got {offsets:?}"
+        ));
+    }
+    let set = capture_set(&d, &cam, 1.0 / u)?;
+    let chart = capture_set(&d, &cam, chart_distance_m)?;
+    Ok(Point {
+        set,
+        chart,
+        object_distance_m: 1.0 / u,
+        chart_distance_m,
+        ref_fraction: frac,
+        tolerance_px,
+        max_iterations,
+        calibration_offsets_per_m: offsets,
+    })
+}
+
+/// Cheap validation of a dual-pixel document.
+pub fn validate(doc: &Value) -> Result<(), String> {
+    point(doc).map(|_| ())
+}
+
+/// Evaluate a dual-pixel point (see the module documentation).
+pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliError> {
+    let p = point(doc).map_err(CliError::Other)?;
+    let cam = &p.set.camera;
+    let path = &p.set.camera_path;
+    let grid = crate::chain::wavelength_grid(&p.set);
+    let scene = crate::chain::shot_scene(&p.set, 0, &grid)?;
+    let chart = crate::chain::shot_scene(&p.chart, 0, &grid)?;
+    let rate = camsim_sensor::electron_rate(
+        &cam.sensor,
+        &crate::chain::irradiance_of(&p.set, &scene, &grid)?,
+    );
+    let shot = crate::chain::shot_exposure(&p.set, 0, &rate);
+    let s = &cam.sensor;
+    let region = Rect {
+        row0: 0,
+        row1: s.rows,
+        col0: 0,
+        col1: s.cols,
+    };
+    let ref_cols = ((s.cols as f64 * p.ref_fraction).round() as usize).max(1);
+    let expected_opts = DisparityOptions {
+        region,
+        ref_cols,
+        frames: DisparityFrames::Expected,
+    };
+    let z = p.object_distance_m;
+    let u_focus = focus_vergence_per_m(cam);
+
+    // Disparity against the closed form.
+    let expected = crate::chain::dual_pixel_expected_disparity_px(cam, path, Some(z))?;
+    let separation = cam.dual_pixel.expect("checked").separation;
+    let coc_px = expected / camsim_optics::dual_pixel_disparity_m(1.0, separation);
+    let measured = measure_disparity(cam, path, &scene, &grid, &shot, &expected_opts, 0)?;
+    let noisy_opts = DisparityOptions {
+        frames: DisparityFrames::Noisy { seed },
+        ..expected_opts
+    };
+    let noisy = measure_disparity(cam, path, &scene, &grid, &shot, &noisy_opts, 0)?;
+
+    // Slope calibration on the chart, then the loop from the camera's focus.
+    let chart_u = 1.0 / p.chart_distance_m;
+    let cal_focus: Vec<f64> = p
+        .calibration_offsets_per_m
+        .iter()
+        .map(|o| chart_u + o)
+        .collect();
+    let cal = calibrate_slope(
+        cam,
+        path,
+        &chart,
+        p.chart_distance_m,
+        &grid,
+        &shot,
+        &expected_opts,
+        &cal_focus,
+    )?;
+    let slope_expected = {
+        let mut c = cam.clone();
+        c.thin_lens_focus_m = Some(p.chart_distance_m);
+        // α = d / (1/Z − 1/D) at unit defocus, closed form
+        crate::chain::dual_pixel_expected_disparity_px(&c, path, Some(1.0 / (chart_u + 1.0)))?
+    };
+    let pdaf = phase_detection_autofocus(
+        cam,
+        path,
+        &scene,
+        &grid,
+        &shot,
+        &PdafOptions {
+            disparity: expected_opts,
+            slope_px_m: cal.slope_px_m,
+            tolerance_px: p.tolerance_px,
+            max_iterations: p.max_iterations,
+        },
+    )?;
+    let final_u = pdaf.final_focus_vergence_per_m;
+    let mut at_final = cam.clone();
+    at_final.thin_lens_focus_m = (final_u > 0.0).then(|| 1.0 / final_u);
+    let dof = depth_of_focus_per_m(&at_final, path)?;
+    let focus_error = (final_u - 1.0 / z).abs();
+
+    let mut out = PointOutput::default();
+    out.put("object_distance_m", z);
+    out.put("defocus_per_m", 1.0 / z - u_focus);
+    out.put("coc_radius_px", coc_px);
+    out.put("disparity_px_expected", expected);
+    out.put("disparity_px_measured", measured.disparity_px);
+    let sampled = sampled_kernel_disparity_px(cam, scene.sample_pitch_m, coc_px, separation);
+    out.put("disparity_px_sampled", sampled);
+    out.put(
+        "disparity_px_tolerance",
+        0.02 + 0.02 * expected.abs() + (sampled - expected).abs(),
+    );
+    out.put("disparity_px_noisy", noisy.disparity_px);
+    out.put("disparity_px_noisy_std_error", noisy.std_error_px);
+    out.put("slope_px_m_calibrated", cal.slope_px_m);
+    out.put("slope_px_m_expected", slope_expected);
+    out.put("pdaf_iterations", pdaf.steps.len() as f64);
+    out.put_opt("pdaf_final_focus_m", (final_u > 0.0).then(|| 1.0 / final_u));
+    out.put("pdaf_focus_error_per_m", focus_error);
+    out.put("depth_of_focus_per_m", dof);
+    out.put(
+        "pdaf_within_depth_of_focus",
+        if pdaf.converged && focus_error <= dof { 1.0 } else { 0.0 },
+    );
+    out.detail = json!({
+        "pdaf_converged": pdaf.converged,
+        "pdaf_steps": pdaf.steps.iter().map(|s| json!({
+            "focus_vergence_per_m": s.focus_vergence_per_m,
+            "disparity_px": s.disparity_px,
+        })).collect::<Vec<_>>(),
+        "calibration": cal.points.iter().map(|(x, d)| json!({"defocus_per_m": x, "disparity_px": d})).collect::<Vec<_>>(),
+        "rows_used": measured.rows_used,
+    });
+    Ok(out)
+}
+
+/// The disparity (pixels) implied by the sampled half-disc kernels the chain applies for the
+/// signed circle of confusion `coc_px` (pixels) at the scene sample pitch `dx_m`: the
+/// difference of their x-centroids (cell centres), times `2s − 1`.
+fn sampled_kernel_disparity_px(
+    cam: &crate::config::Camera,
+    dx_m: f64,
+    coc_px: f64,
+    separation: f64,
+) -> f64 {
+    use camsim_optics::{half_pupil_psf, PupilHalf};
+    let p = cam.sensor.pixel_pitch_m;
+    let centroid_m = |half| {
+        let k = half_pupil_psf(coc_px * p, dx_m, half);
+        let n = k.cols();
+        k.data
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v * ((i % n) as f64 - k.half_cols as f64) * dx_m)
+            .sum::<f64>()
+            / k.sum()
+    };
+    (2.0 * separation - 1.0) * (centroid_m(PupilHalf::Right) - centroid_m(PupilHalf::Left)) / p
+}
