@@ -33,6 +33,7 @@ mod noise;
 pub mod normal;
 pub mod pixel_rng;
 pub mod poisson;
+pub mod pixel_optics;
 pub mod temporal;
 
 use camsim_core::Spectrum;
