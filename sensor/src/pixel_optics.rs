@@ -726,7 +726,10 @@ mod tests {
         // ∫ x^k over [−1, 1] = 2/(k+1) for even k, exact up to degree 2n − 1.
         for k in (0..2 * APERTURE_QUADRATURE_POINTS).step_by(2) {
             let q: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(k as i32)).sum();
-            assert!((q - 2.0 / (k as f64 + 1.0)).abs() < 1e-12, "degree {k}: {q}");
+            assert!(
+                (q - 2.0 / (k as f64 + 1.0)).abs() < 1e-12,
+                "degree {k}: {q}"
+            );
         }
     }
 

@@ -4,5 +4,6 @@
 mod effects;
 mod hdr;
 mod isetcam_oracle;
+mod pixel_optics;
 mod statistics;
 mod temporal;
