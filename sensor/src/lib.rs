@@ -31,9 +31,9 @@ mod integrate;
 pub mod isetcam;
 mod noise;
 pub mod normal;
+pub mod pixel_optics;
 pub mod pixel_rng;
 pub mod poisson;
-pub mod pixel_optics;
 pub mod temporal;
 
 use camsim_core::Spectrum;
