@@ -541,6 +541,9 @@ pub struct SensorFile {
     /// Extension: HDR pixel (split pixel, dual conversion gain, bracketing).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hdr: Option<HdrFile>,
+    /// Extension: pixel optics (microlens, chief-ray angle, shift; issue 21).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_optics: Option<crate::pixel_optics_config::PixelOpticsFile>,
 }
 
 /// `sensor.hdr` (extension): an HDR pixel of charge packets (photodiodes, or exposures of
@@ -823,6 +826,9 @@ pub struct Camera {
     /// Thin-lens focus distance (m, `optics.focus_distance_m`): scenes with depth are
     /// defocused by depth as a thin lens focused there ([`crate::chain::irradiance_of`]).
     pub thin_lens_focus_m: Option<f64>,
+    /// Pixel optics (`sensor.pixel_optics`; None: off): CRA shading and optical crosstalk,
+    /// applied by [`crate::chain::apply_pixel_optics`].
+    pub pixel_optics: Option<crate::pixel_optics_config::CameraPixelOptics>,
 }
 
 /// A validated shot.
@@ -1041,6 +1047,17 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
             Some(d)
         }
     };
+    let pixel_optics = match &raw.sensor.pixel_optics {
+        None => None,
+        Some(po) => Some(crate::pixel_optics_config::pixel_optics_from_file(
+            path,
+            dir,
+            po,
+            pixel_pitch_m * 1e6,
+            optics.f_number,
+            optics.focal_length_m * 1e3,
+        )?),
+    };
     Ok(Camera {
         name: raw.name.unwrap_or_else(|| "camera".into()),
         optics,
@@ -1049,6 +1066,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         uncropped_optical_image,
         hdr,
         thin_lens_focus_m,
+        pixel_optics,
     })
 }
 

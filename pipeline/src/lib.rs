@@ -25,6 +25,7 @@ pub mod metric_cmd;
 pub mod noise_profiles_cmd;
 #[doc = include_str!("../../docs/physics.md")]
 pub mod physics {}
+pub mod pixel_optics_config;
 pub mod plots;
 pub mod png_stored;
 pub mod progress;
