@@ -16,7 +16,13 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 /// A monochrome camera, no blur, no relative illumination, linear DN through zero.
-fn camera(rows: usize, cols: usize, pitch_um: f64, f_number: f64, pixel_optics: Option<Value>) -> Value {
+fn camera(
+    rows: usize,
+    cols: usize,
+    pitch_um: f64,
+    f_number: f64,
+    pixel_optics: Option<Value>,
+) -> Value {
     let mut cam = json!({
         "name": "pixel-optics",
         "optics": {"f_number": f_number, "focal_length_mm": 50.0, "transmittance": 1.0,
@@ -81,7 +87,10 @@ fn shading_vs_closed_form(
 ) -> Vec<(f64, f64, f64)> {
     let po = json!({"photodiode_width_um": w_um, "microlens_focal_length_um": F_UM,
                     "refractive_index": N_STACK, "chief_ray": chief_ray});
-    let with = frame(&load(dir, &camera(rows, cols, pitch_um, f_number, Some(po))));
+    let with = frame(&load(
+        dir,
+        &camera(rows, cols, pitch_um, f_number, Some(po)),
+    ));
     let without = frame(&load(dir, &camera(rows, cols, pitch_um, f_number, None)));
     let (p, hw) = (pitch_um, 0.5 * w_um);
     let r_spot = F_UM * (pupil_radius_mm / pupil_distance_mm) / N_STACK;
@@ -91,7 +100,10 @@ fn shading_vs_closed_form(
     let y_top = -(rows as f64 - 1.0) / 2.0 * p * 1e-3;
     // The closed form holds when the spot crosses only vertical photodiode edges.
     let cy = c_of(y_top).abs();
-    assert!(cy + r_spot < hw, "spot crosses a horizontal edge: {cy} + {r_spot} ≥ {hw}");
+    assert!(
+        cy + r_spot < hw,
+        "spot crosses a horizontal edge: {cy} + {r_spot} ≥ {hw}"
+    );
     assert!(r_spot < p - hw, "spot reaches a diagonal neighbour");
     let mut out = Vec::with_capacity(cols);
     for j in 0..cols {
@@ -131,7 +143,10 @@ fn flat_field_shading_matches_the_closed_form_exit_pupil() {
     let mut worst = 0f64;
     for (x, m, cf) in &rows {
         worst = worst.max((m - cf).abs());
-        assert!((m - cf).abs() < 2e-5, "x = {x} mm: frame {m} vs closed form {cf}");
+        assert!(
+            (m - cf).abs() < 2e-5,
+            "x = {x} mm: frame {m} vs closed form {cf}"
+        );
     }
     // The edge is vignetted and its light partly moved to the neighbour.
     let (centre, edge) = (rows[30].1, rows[0].1);
@@ -142,10 +157,14 @@ fn flat_field_shading_matches_the_closed_form_exit_pupil() {
 /// The double Gauss's paraxial exit pupil (distance in front of the image, radius; mm).
 fn double_gauss_pupil() -> (f64, f64) {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses/double_gauss_50mm_f2.json");
-    let lens = camsim_lens::LensPrescription::from_json_file(&p, &camsim_lens::GlassCatalog::bundled())
-        .unwrap();
+    let lens =
+        camsim_lens::LensPrescription::from_json_file(&p, &camsim_lens::GlassCatalog::bundled())
+            .unwrap();
     let fo = lens.first_order(550.0).unwrap();
-    (-fo.exit_pupil_from_image_mm, 0.5 * fo.exit_pupil_diameter_mm)
+    (
+        -fo.exit_pupil_from_image_mm,
+        0.5 * fo.exit_pupil_diameter_mm,
+    )
 }
 
 fn double_gauss_rows(dir: &Path, cols: usize, pitch_um: f64) -> Vec<(f64, f64, f64)> {
@@ -156,7 +175,7 @@ fn double_gauss_rows(dir: &Path, cols: usize, pitch_um: f64) -> Vec<(f64, f64, f
         2,
         cols,
         pitch_um,
-        1.0,
+        1.3,
         z / (2.0 * r_xp),
         json!({"lens": lens.to_str().unwrap()}),
         z,
@@ -166,20 +185,30 @@ fn double_gauss_rows(dir: &Path, cols: usize, pitch_um: f64) -> Vec<(f64, f64, f
 
 #[test]
 fn flat_field_shading_matches_the_closed_form_double_gauss() {
-    // A 2 × 1001 sensor of 20 µm pixels: ±10 mm of field behind the shipped double Gauss,
-    // CRA from its paraxial exit pupil; 1 µm photodiode on a 20 µm pitch with a 3 µm stack is
-    // not a real pixel, it scales the geometry so the lens's ~10–15° CRA walks the spot over
-    // the photodiode edge. The map is interpolated between nodes (≤ 1e-3).
+    // A 2 × 10001 sensor of 2 µm pixels (1.3 µm photodiode, 3 µm focal-plane stack): ±10 mm
+    // of field behind the shipped double Gauss, CRA from its paraxial exit pupil. The map is
+    // interpolated between nodes (≤ 1e-3).
     let dir = tempfile::tempdir().unwrap();
     let (z, r_xp) = double_gauss_pupil();
-    assert!(z > 20.0 && r_xp > 5.0, "exit pupil {z} mm, radius {r_xp} mm");
-    let rows = double_gauss_rows(dir.path(), 1001, 20.0);
+    assert!(
+        z > 20.0 && r_xp > 5.0,
+        "exit pupil {z} mm, radius {r_xp} mm"
+    );
+    let rows = double_gauss_rows(dir.path(), 10001, 2.0);
     let mut worst = 0f64;
     for (x, m, cf) in &rows {
         worst = worst.max((m - cf).abs());
-        assert!((m - cf).abs() < 1e-3, "x = {x} mm: frame {m} vs closed form {cf}");
+        assert!(
+            (m - cf).abs() < 1e-3,
+            "x = {x} mm: frame {m} vs closed form {cf}"
+        );
     }
-    assert!(rows[0].1 < 0.97 * rows[500].1, "no shading at the edge: {:?} vs {:?}", rows[0], rows[500]);
+    assert!(
+        rows[0].1 < 0.97 * rows[5000].1,
+        "no shading at the edge: {:?} vs {:?}",
+        rows[0],
+        rows[5000]
+    );
     eprintln!("double Gauss: worst |frame − closed form| = {worst:.2e}");
 }
 
@@ -188,25 +217,55 @@ fn identity_block_is_bit_identical_and_bad_values_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     // Hostile input: one clear error naming the key.
     for (po, key) in [
-        (json!({"photodiode_width_um": 3.0, "microlens_focal_length_um": 3.0}), "photodiode_width_um"),
-        (json!({"photodiode_width_um": 1.0}), "microlens_focal_length_um"),
-        (json!({"photodiode_width_um": 1.0, "microlens_f_number": -2.0}), "microlens_f_number"),
-        (json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
-                "chief_ray": {"cra_table": [[0.0, 0.0], [1.0, 95.0]]}}), "chief_ray.cra_table[1][1]"),
-        (json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
-                "chief_ray": {"exit_pupil_distance_mm": 5.0}}), "chief_ray.exit_pupil_diameter_mm"),
-        (json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
-                "chief_ray": {"lens": "missing.json"}}), "chief_ray.lens"),
-        (json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
-                "microlens_shift": {"cra_fraction": 1.0, "um_per_mm": 2.0}}), "microlens_shift"),
+        (
+            json!({"photodiode_width_um": 3.0, "microlens_focal_length_um": 3.0}),
+            "photodiode_width_um",
+        ),
+        (
+            json!({"photodiode_width_um": 1.0}),
+            "microlens_focal_length_um",
+        ),
+        (
+            json!({"photodiode_width_um": 1.0, "microlens_f_number": -2.0}),
+            "microlens_f_number",
+        ),
+        (
+            json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
+                "chief_ray": {"cra_table": [[0.0, 0.0], [1.0, 95.0]]}}),
+            "chief_ray.cra_table[1][1]",
+        ),
+        (
+            json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
+                "chief_ray": {"exit_pupil_distance_mm": 5.0}}),
+            "chief_ray.exit_pupil_diameter_mm",
+        ),
+        (
+            json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
+                "chief_ray": {"lens": "missing.json"}}),
+            "chief_ray.lens",
+        ),
+        (
+            json!({"photodiode_width_um": 1.0, "microlens_f_number": 2.0,
+                "microlens_shift": {"cra_fraction": 1.0, "um_per_mm": 2.0}}),
+            "microlens_shift",
+        ),
     ] {
-        std::fs::write(dir.path().join("camera.json"), camera(2, 8, 1.4, 2.8, Some(po)).to_string()).unwrap();
+        std::fs::write(
+            dir.path().join("camera.json"),
+            camera(2, 8, 1.4, 2.8, Some(po)).to_string(),
+        )
+        .unwrap();
         let c = json!({"camera": "camera.json", "shots": [
             {"id": "flat", "exposure_s": 0.01, "frames": ["flat.png"],
              "target": {"kind": "uniform", "radiance": 0.01}}]});
         std::fs::write(dir.path().join("captures.json"), c.to_string()).unwrap();
-        let e = load_captures(&dir.path().join("captures.json"), None).unwrap_err().to_string();
-        assert!(e.contains(&format!("sensor.pixel_optics.{key}")), "{key}: {e}");
+        let e = load_captures(&dir.path().join("captures.json"), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!("sensor.pixel_optics.{key}")),
+            "{key}: {e}"
+        );
         assert!(!e.contains('\n'), "one line: {e}");
     }
     // A block with full CRA compensation and a spot inside the photodiode is the identity on
@@ -224,12 +283,17 @@ fn identity_block_is_bit_identical_and_bad_values_are_refused() {
 fn pixel_optics_table() {
     let dir = tempfile::tempdir().unwrap();
     let (z, r_xp) = double_gauss_pupil();
-    println!("double Gauss 50 mm f/2: exit pupil {z:.3} mm in front of the image, radius {r_xp:.3} mm");
-    let rows = double_gauss_rows(dir.path(), 1001, 20.0);
+    println!(
+        "double Gauss 50 mm f/2: exit pupil {z:.3} mm in front of the image, radius {r_xp:.3} mm"
+    );
+    let rows = double_gauss_rows(dir.path(), 10001, 2.0);
     println!("| field height (mm) | CRA (°) | frame / no block | closed form |");
     println!("|---|---|---|---|");
-    for j in (500..=1000).step_by(50) {
+    for j in (5000..=10000).step_by(500) {
         let (x, m, cf) = rows[j];
-        println!("| {x:.1} | {:.2} | {m:.4} | {cf:.4} |", (x / z).atan().to_degrees());
+        println!(
+            "| {x:.1} | {:.2} | {m:.4} | {cf:.4} |",
+            (x / z).atan().to_degrees()
+        );
     }
 }

@@ -29,9 +29,7 @@
 //! `p² · FF · η · ∫ QE E dλ` — set `fill_factor` to 1 when `photodiode_width_um` describes the
 //! photodiode aperture, or both apply.
 use crate::error::CliError;
-use camsim_sensor::pixel_optics::{
-    ChiefRay, Microlens, MicrolensShift, PixelOptics, ResponseMap,
-};
+use camsim_sensor::pixel_optics::{ChiefRay, Microlens, MicrolensShift, PixelOptics, ResponseMap};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
@@ -266,12 +264,17 @@ fn chief_ray_from_file(
         if !p.is_file() {
             return Err(err("lens", format!("cannot read {}", p.display())));
         }
-        let lens =
-            camsim_lens::LensPrescription::from_json_file(&p, &camsim_lens::GlassCatalog::bundled())
-                .map_err(|e| CliError::input(&p, e))?;
+        let lens = camsim_lens::LensPrescription::from_json_file(
+            &p,
+            &camsim_lens::GlassCatalog::bundled(),
+        )
+        .map_err(|e| CliError::input(&p, e))?;
         let wl = c.wavelength_nm.unwrap_or(DEFAULT_PUPIL_WAVELENGTH_NM);
         if !(wl.is_finite() && (200.0..=2500.0).contains(&wl)) {
-            return Err(err("wavelength_nm", format!("must be in [200, 2500] nm, got {wl}")));
+            return Err(err(
+                "wavelength_nm",
+                format!("must be in [200, 2500] nm, got {wl}"),
+            ));
         }
         let fo = lens.first_order(wl).map_err(|e| CliError::input(&p, e))?;
         // exit_pupil_from_image_mm = z_xp − z_image (negative: the pupil before the image).
@@ -288,12 +291,18 @@ fn chief_ray_from_file(
             ),
         ));
     }
-    let z = c
-        .exit_pupil_distance_mm
-        .ok_or_else(|| err("exit_pupil_distance_mm", "required with exit_pupil_diameter_mm".into()))?;
-    let d = c
-        .exit_pupil_diameter_mm
-        .ok_or_else(|| err("exit_pupil_diameter_mm", "required with exit_pupil_distance_mm".into()))?;
+    let z = c.exit_pupil_distance_mm.ok_or_else(|| {
+        err(
+            "exit_pupil_distance_mm",
+            "required with exit_pupil_diameter_mm".into(),
+        )
+    })?;
+    let d = c.exit_pupil_diameter_mm.ok_or_else(|| {
+        err(
+            "exit_pupil_diameter_mm",
+            "required with exit_pupil_distance_mm".into(),
+        )
+    })?;
     if !(d.is_finite() && d > 0.0) {
         return Err(err(
             "exit_pupil_diameter_mm",
