@@ -485,7 +485,7 @@ impl PixelOptics {
     pub fn response_map(&self, rows: usize, cols: usize) -> ResponseMap {
         let p_mm = self.microlens.pitch_um * 1e-3;
         let axis = |n: usize| -> Vec<f64> {
-            let k = n.min(MAP_NODES).max(1);
+            let k = n.clamp(1, MAP_NODES);
             (0..k)
                 .map(|i| {
                     let idx = if k == 1 {
