@@ -13,6 +13,7 @@ mod lens_fields;
 mod metric_cli;
 mod oracles;
 mod pixel_area;
+mod pixel_optics;
 mod raw_formats;
 mod real_data;
 mod render;

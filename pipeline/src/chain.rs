@@ -7,6 +7,7 @@
 //! | scene radiance of a shot (field of view, distance, illuminant swap) | [`shot_scene`] | [`camsim_core::scene_view::render_target_in_view`], [`camsim_core::illuminant::swap_illuminant`] |
 //! | optics | [`shot_irradiance`], [`irradiance_of`], [`irradiance_and_blur_of`] (depth-aware for scenes with depth), [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`]; [`camsim_render::depth_optics::defocus_by_depth`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
+//! | pixel optics (`sensor.pixel_optics`: CRA shading, optical crosstalk) | [`apply_pixel_optics`] (inside [`shot_electron_rate`]) | [`camsim_sensor::pixel_optics::apply_pixel_optics`] |
 //! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |
 //! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`] | [`camsim_sensor::time_averaged_rate`] |
 //! | expected frame (DN) | [`expected_frame`] | [`camsim_sensor::expected_dn`] |
@@ -253,6 +254,20 @@ pub fn camera_irradiance_and_blur(
             },
         }),
     })
+}
+
+/// The pixel-optics stage (`sensor.pixel_optics`, issue 21): each pixel's light, as
+/// integrated over the pixel by [`camsim_sensor::electron_rate`], is shared between its own
+/// photodiode (pixel vignetting / CRA shading) and its neighbours' (angle-dependent optical
+/// crosstalk) by the camera's response map ([`camsim_sensor::pixel_optics`]). Without the
+/// block `rate` is untouched (same bits). Applied once, after the pixel integration (and after
+/// its `crosstalk` block: both are linear, the order matters only at second order), by
+/// [`shot_electron_rate`] and `camsim run`.
+pub fn apply_pixel_optics(camera: &Camera, rate: &mut ElectronRate) {
+    if let Some(po) = &camera.pixel_optics {
+        let map = po.response_map(rate.rows, rate.cols);
+        camsim_sensor::pixel_optics::apply_pixel_optics(&map, rate);
+    }
 }
 
 /// The exposure and gain of shot `shot_index`: its fixed exposure, or the auto exposure that

@@ -608,6 +608,9 @@ pub struct SensorFile {
     /// Extension: dual-pixel readout (two half-photodiodes under one microlens).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dual_pixel: Option<DualPixelFile>,
+    /// Extension: pixel optics (microlens, chief-ray angle, shift; issue 21).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_optics: Option<crate::pixel_optics_config::PixelOpticsFile>,
 }
 
 /// `sensor.dual_pixel` (extension): every pixel is two half-photodiodes (left, right) under
@@ -914,6 +917,9 @@ pub struct Camera {
     /// Thin-lens focus distance (m, `optics.focus_distance_m`): scenes with depth are
     /// defocused by depth as a thin lens focused there ([`crate::chain::irradiance_of`]).
     pub thin_lens_focus_m: Option<f64>,
+    /// Pixel optics (`sensor.pixel_optics`; None: off): CRA shading and optical crosstalk,
+    /// applied by [`crate::chain::apply_pixel_optics`].
+    pub pixel_optics: Option<crate::pixel_optics_config::CameraPixelOptics>,
 }
 
 /// A validated shot.
@@ -1145,6 +1151,17 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
             Some(d)
         }
     };
+    let pixel_optics = match &raw.sensor.pixel_optics {
+        None => None,
+        Some(po) => Some(crate::pixel_optics_config::pixel_optics_from_file(
+            path,
+            dir,
+            po,
+            pixel_pitch_m * 1e6,
+            optics.f_number,
+            optics.focal_length_m * 1e3,
+        )?),
+    };
     Ok(Camera {
         name: raw.name.unwrap_or_else(|| "camera".into()),
         optics,
@@ -1154,6 +1171,7 @@ pub fn camera_from_file(path: &Path, raw: CameraFile) -> Result<Camera, CliError
         hdr,
         dual_pixel,
         thin_lens_focus_m,
+        pixel_optics,
     })
 }
 

@@ -26,6 +26,7 @@ pub mod noise_profiles_cmd;
 pub mod pdaf;
 #[doc = include_str!("../../docs/physics.md")]
 pub mod physics {}
+pub mod pixel_optics_config;
 pub mod plots;
 pub mod png_stored;
 pub mod progress;

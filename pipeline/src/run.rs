@@ -733,7 +733,8 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
 
     // 3. Sensor
     bar.set_message("sensor");
-    let rate = electron_rate(sensor, &irr);
+    let mut rate = electron_rate(sensor, &irr);
+    crate::chain::apply_pixel_optics(&set.camera, &mut rate);
     let shot = crate::chain::shot_exposure(set, 0, &rate);
     let exposure_s = shot.exposure_s;
     let fixed = fixed_pattern(sensor, r.seed);

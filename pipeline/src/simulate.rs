@@ -312,19 +312,22 @@ fn target_extent_m(set: &CaptureSet, shot: &crate::config::Shot) -> Option<(f64,
     })
 }
 
-/// Mean electron rate of every pixel for one target (optics + pixel integration).
+/// Mean electron rate of every pixel for one target (optics + pixel integration + pixel
+/// optics, [`crate::chain::apply_pixel_optics`]).
 pub fn shot_electron_rate(
     set: &CaptureSet,
     shot_index: usize,
     grid: &WavelengthGrid,
 ) -> Result<ElectronRate, CliError> {
-    if let Some(rate) = uniform_electron_rate(set, shot_index, grid)? {
-        return Ok(rate);
-    }
-    Ok(electron_rate(
-        &set.camera.sensor,
-        &shot_irradiance(set, shot_index, grid)?,
-    ))
+    let mut rate = match uniform_electron_rate(set, shot_index, grid)? {
+        Some(rate) => rate,
+        None => electron_rate(
+            &set.camera.sensor,
+            &shot_irradiance(set, shot_index, grid)?,
+        ),
+    };
+    crate::chain::apply_pixel_optics(&set.camera, &mut rate);
+    Ok(rate)
 }
 
 /// Fast path of [`shot_electron_rate`] for a uniform (or dark) target seen without blur,

@@ -346,15 +346,20 @@ impl Camera {
     }
 
     /// Mean electron rate (electrons/s, float32, (rows, cols)) of every pixel for `irradiance`
-    /// (QE × CFA and pixel-area integration; the image is centred on the sensor).
+    /// (QE × CFA and pixel-area integration, then `sensor.pixel_optics` when present; the
+    /// image is centred on the sensor).
     fn electron_rate<'py>(
         &self,
         py: Python<'py>,
         irradiance: &Irradiance,
     ) -> PyResult<Bound<'py, PyAny>> {
         self.check_irradiance(irradiance)?;
-        let s = &self.cam.sensor;
-        let rate = py.detach(|| camsim_sensor::electron_rate(s, &irradiance.irr));
+        let (cam, s) = (&self.cam, &self.cam.sensor);
+        let rate = py.detach(|| {
+            let mut rate = camsim_sensor::electron_rate(s, &irradiance.irr);
+            camsim_pipeline::chain::apply_pixel_optics(cam, &mut rate);
+            rate
+        });
         arr(py, rate.electrons_per_s, &[s.rows, s.cols])
     }
 
@@ -368,13 +373,14 @@ impl Camera {
         analog_gain: Option<f64>,
     ) -> PyResult<Bound<'py, PyAny>> {
         self.check_irradiance(irradiance)?;
-        let s = &self.cam.sensor;
+        let (cam, s) = (&self.cam, &self.cam.sensor);
         let shot = camsim_sensor::Shot {
             exposure_s,
             analog_gain: analog_gain.unwrap_or(s.analog_gain),
         };
         let dn = py.detach(|| {
-            let rate = camsim_sensor::electron_rate(s, &irradiance.irr);
+            let mut rate = camsim_sensor::electron_rate(s, &irradiance.irr);
+            camsim_pipeline::chain::apply_pixel_optics(cam, &mut rate);
             camsim_sensor::expected_dn(s, &rate, &shot)
         });
         arr(py, dn, &[s.rows, s.cols])
@@ -392,13 +398,14 @@ impl Camera {
         analog_gain: Option<f64>,
     ) -> PyResult<Bound<'py, PyAny>> {
         self.check_irradiance(irradiance)?;
-        let s = &self.cam.sensor;
+        let (cam, s) = (&self.cam, &self.cam.sensor);
         let shot = camsim_sensor::Shot {
             exposure_s,
             analog_gain: analog_gain.unwrap_or(s.analog_gain),
         };
         let f = py.detach(|| {
-            let rate = camsim_sensor::electron_rate(s, &irradiance.irr);
+            let mut rate = camsim_sensor::electron_rate(s, &irradiance.irr);
+            camsim_pipeline::chain::apply_pixel_optics(cam, &mut rate);
             camsim_sensor::expose_with(
                 s,
                 &rate,

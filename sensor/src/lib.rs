@@ -35,6 +35,7 @@ pub mod isetcam;
 pub mod line_noise;
 mod noise;
 pub mod normal;
+pub mod pixel_optics;
 pub mod pixel_rng;
 pub mod poisson;
 pub mod temporal;

@@ -5,5 +5,6 @@ mod effects;
 mod hdr;
 mod isetcam_oracle;
 mod line_noise;
+mod pixel_optics;
 mod statistics;
 mod temporal;
