@@ -6,3 +6,4 @@ mod hdr;
 mod isetcam_oracle;
 mod statistics;
 mod temporal;
+mod temporal_nodes;
