@@ -1,5 +1,5 @@
 //! Time within the exposure through the pipeline: the rolling-shutter study
-//! (examples/study_rolling_shutter/spec_ci.json: skew of a moving edge and LED flicker band
+//! (examples/study_rolling_shutter/spec_edge_ci.json: skew of a moving edge and LED flicker band
 //! period measured on simulated frames against `v · row_time` and `(1/f)/row_time`), the
 //! camera and shot keys (one-line errors), and the dark-current temperature law through
 //! `camera.json`.
@@ -15,7 +15,7 @@ fn repo() -> PathBuf {
 #[test]
 fn rolling_shutter_study_measures_skew_and_flicker_period() {
     let dir = tempfile::tempdir().unwrap();
-    let spec = repo().join("examples/study_rolling_shutter/spec_ci.json");
+    let spec = repo().join("examples/study_rolling_shutter/spec_edge_ci.json");
     let o = camsim()
         .arg("study")
         .arg(&spec)
@@ -65,6 +65,100 @@ fn rolling_shutter_study_measures_skew_and_flicker_period() {
     // 2.5 ms = 2.5 periods: (0.6 − 0.4)/(0.6 + 0.4).
     assert!((num(&rows[0], "flicker_visibility_expected") - 1.0).abs() < 1e-12);
     assert!((num(&rows[1], "flicker_visibility_expected") - 0.2).abs() < 1e-12);
+}
+
+#[test]
+fn rolling_shutter_study_on_a_moving_gltf_bar() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = repo().join("examples/study_rolling_shutter/spec_ci.json");
+    let t0 = std::time::Instant::now();
+    let o = camsim()
+        .arg("study")
+        .arg(&spec)
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    eprintln!("study: {:.1} s", t0.elapsed().as_secs_f64());
+    let t: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("table.json")).unwrap())
+            .unwrap();
+    let rows = t["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "two exposure times");
+    let num = |r: &Value, k: &str| {
+        r[k].as_f64()
+            .unwrap_or_else(|| panic!("{k} missing in {r}"))
+    };
+    // Closed form of the bar's image velocity: a pinhole camera whose 30° vertical field spans
+    // the 200 rows (blur none: no margin, one sample per pixel): f_px = 100 / tan 15°; the bar
+    // moves at 8 m/s in the plane 2 m away: v = 8 · f_px / 2 px/s.
+    let v = 8.0 * (100.0 / 15f64.to_radians().tan()) / 2.0;
+    let row_time = 20e-6;
+    for r in rows {
+        assert!(
+            (num(r, "image_velocity_px_per_s") - v).abs() < 1e-3 * v,
+            "{r}"
+        );
+        let (m, e, tol) = (
+            num(r, "skew_px_measured"),
+            num(r, "skew_px_expected"),
+            num(r, "skew_px_tolerance"),
+        );
+        assert!((e - v * row_time * 199.0).abs() < 1e-2, "{e}");
+        assert!(tol < 0.1 * e, "skew tolerance {tol} too loose for {e}");
+        assert!(
+            (m - e).abs() <= tol,
+            "skew measured {m} expected {e} ± {tol}"
+        );
+        let (m, e, tol) = (
+            num(r, "flicker_period_rows_measured"),
+            num(r, "flicker_period_rows_expected"),
+            num(r, "flicker_period_rows_tolerance"),
+        );
+        assert!((e - 50.0).abs() < 1e-9, "{e}");
+        assert!(tol < 0.05 * e, "period tolerance {tol} too loose for {e}");
+        assert!(
+            (m - e).abs() <= tol,
+            "period measured {m} expected {e} ± {tol}"
+        );
+        // video, 240 Hz: the bar advances v/240 px per frame
+        let (m, e, tol) = (
+            num(r, "bar_advance_px_per_frame_measured"),
+            num(r, "bar_advance_px_per_frame_expected"),
+            num(r, "bar_advance_px_per_frame_tolerance"),
+        );
+        assert!((e - v / 240.0).abs() < 1e-6 * e, "{e}");
+        assert!(tol < 0.1 * e, "advance tolerance {tol} too loose for {e}");
+        assert!(
+            (m - e).abs() <= tol,
+            "advance measured {m} expected {e} ± {tol}"
+        );
+        // the bands drift by ((1/240 s) mod 1 ms) / 20 µs = 8.33 rows per frame
+        let (m, e, tol) = (
+            num(r, "band_drift_rows_measured"),
+            num(r, "band_drift_rows_expected"),
+            num(r, "band_drift_rows_tolerance"),
+        );
+        assert!((e - (1.0 / 240.0 - 4e-3) / row_time).abs() < 1e-6, "{e}");
+        assert!(tol < 0.1 * 50.0, "drift tolerance {tol} too loose");
+        let d = (m - e).rem_euclid(50.0);
+        assert!(
+            d.min(50.0 - d) <= tol,
+            "drift measured {m} expected {e} ± {tol}"
+        );
+    }
+    // the numbered frames of each point
+    let points: Vec<_> = std::fs::read_dir(dir.path().join("points"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(points.len(), 2);
+    for p in points {
+        for f in ["frame_000.png", "frame_001.png"] {
+            assert!(p.join(f).is_file(), "{} missing in {}", f, p.display());
+        }
+    }
 }
 
 fn camera(sensor_extra: Value) -> Value {

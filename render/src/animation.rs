@@ -77,9 +77,11 @@ pub fn translation_tracks(
             let interpolation = match ch.sampler().interpolation() {
                 gltf::animation::Interpolation::Linear => Interpolation::Linear,
                 gltf::animation::Interpolation::Step => Interpolation::Step,
-                gltf::animation::Interpolation::CubicSpline => return Err(err(format!(
+                gltf::animation::Interpolation::CubicSpline => {
+                    return Err(err(format!(
                     "{what}: interpolation CUBICSPLINE is not supported (expected LINEAR or STEP)"
-                ))),
+                )))
+                }
             };
             let reader = ch.reader(|b| buffers.get(b.index()).map(|v| v.as_slice()));
             let times_s: Vec<f64> = reader
@@ -91,7 +93,8 @@ pub fn translation_tracks(
                 Some(gltf::animation::util::ReadOutputs::Translations(it)) => {
                     it.map(|v| v.map(|x| x as f64)).collect()
                 }
-                Some(_) => return Err(err(format!(
+                Some(_) => {
+                    return Err(err(format!(
                     "{what}: path \"{}\" is not supported (camsim animates node translation only)",
                     match ch.target().property() {
                         gltf::animation::Property::Rotation => "rotation",
@@ -99,7 +102,8 @@ pub fn translation_tracks(
                         gltf::animation::Property::MorphTargetWeights => "weights",
                         gltf::animation::Property::Translation => "translation",
                     }
-                ))),
+                )))
+                }
                 None => return Err(err(format!("{what}: sampler output cannot be read"))),
             };
             if times_s.is_empty() || times_s.len() != translations_m.len() {
