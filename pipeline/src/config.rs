@@ -759,6 +759,11 @@ pub struct ShotFile {
     /// Extension: image motion during the exposure.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion: Option<MotionFile>,
+    /// Extension: the frames are a video at this frame rate (Hz): frame k starts its exposure
+    /// at k / frame_rate_hz, the light modulation and the motion carrying on (absent: every
+    /// frame is a repeat of the same exposure window).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_rate_hz: Option<f64>,
 }
 
 /// `captures.simulation` (extension).
@@ -844,6 +849,8 @@ pub struct Shot {
     pub light: Option<PwmLight>,
     /// Image motion during the exposure (`motion`; None: static).
     pub motion: Option<Motion>,
+    /// Video frame rate (`frame_rate_hz`; None: the frames repeat one exposure window).
+    pub frame_rate_hz: Option<f64>,
 }
 
 /// How a shot's exposure time is set.
@@ -1977,6 +1984,14 @@ pub fn captures_with_camera(
         };
         time.validate()
             .map_err(|e| CliError::input(path, format!("{key}: {e}")))?;
+        if let Some(f) = s.frame_rate_hz {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(CliError::input(
+                    path,
+                    format!("{key}: frame_rate_hz = {f}: must be a positive number of frames per second"),
+                ));
+            }
+        }
         shots.push(Shot {
             id: s.id.clone(),
             target,
@@ -1986,6 +2001,7 @@ pub fn captures_with_camera(
             frames: s.frames.clone(),
             light,
             motion,
+            frame_rate_hz: s.frame_rate_hz,
         });
     }
     let simulation = raw.simulation.unwrap_or_default();

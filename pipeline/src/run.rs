@@ -390,6 +390,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         frames: vec!["raw.png".into()],
         light: None,
         motion: None,
+        frame_rate_hz: None,
     };
     let set = CaptureSet {
         path: path.clone(),

@@ -424,6 +424,7 @@ impl Ctx<'_> {
                     frames: vec![],
                     light: None,
                     motion: None,
+                    frame_rate_hz: None,
                 }],
                 simulation: self.sim.clone(),
                 raw_format: None,
