@@ -117,3 +117,62 @@ pub fn dominant_period(values: &[f64], noise_variance: f64) -> Option<PeriodEsti
         amplitude,
     })
 }
+
+/// The centre of a bright (or dark) vertical bar in every row of a frame: row r's background
+/// level `a` is the mean of its first and last `ref_cols` values together, and the centre is
+/// the first moment `Σ_c c·(v_c − a) / Σ_c (v_c − a)` over the columns between the two
+/// reference blocks (pixel centres at integer columns). A blur that conserves signal (optics,
+/// motion) leaves the first moment of the bar where it was, and a common gain of the row
+/// (flicker) cancels in the ratio, so under motion the centre is the bar's centre at the
+/// light-weighted mean time of the row's window. Rows whose bar signal `|Σ_c (v_c − a)|` is
+/// below `min_contrast_fraction` of the largest row's give NaN (rows that caught little
+/// light).
+pub fn row_bar_centres_px(
+    plane: &[f64],
+    rows: usize,
+    cols: usize,
+    ref_cols: usize,
+    min_contrast_fraction: f64,
+) -> Vec<f64> {
+    let k = ref_cols.clamp(1, (cols / 2).saturating_sub(1).max(1));
+    let moments: Vec<(f64, f64)> = (0..rows)
+        .map(|r| {
+            let row = &plane[r * cols..(r + 1) * cols];
+            let a = (row[..k].iter().sum::<f64>() + row[cols - k..].iter().sum::<f64>())
+                / (2 * k) as f64;
+            let (mut m0, mut m1) = (0.0, 0.0);
+            for (c, v) in row.iter().enumerate().take(cols - k).skip(k) {
+                m0 += v - a;
+                m1 += c as f64 * (v - a);
+            }
+            (m0, m1)
+        })
+        .collect();
+    let max_signal = moments.iter().map(|(m0, _)| m0.abs()).fold(0.0, f64::max);
+    moments
+        .iter()
+        .map(|&(m0, m1)| {
+            if m0 != 0.0 && m0.abs() >= min_contrast_fraction * max_signal {
+                m1 / m0
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
+}
+
+/// The phase (radians, in (−π, π]) of the component of period `period_rows` in `values`:
+/// `arg Σ_i d_i e^{−2πi·i/P}` of the mean-removed values `d_i`, the least-squares phase φ of
+/// `A cos(2π i/P + φ)` when the record holds many periods. A pattern that moves D rows up
+/// (`m'(i) = m(i + D)`) has its phase advanced by `2π D / P`.
+pub fn phase_at_period(values: &[f64], period_rows: f64) -> f64 {
+    let n = values.len();
+    let mean = values.iter().sum::<f64>() / n.max(1) as f64;
+    let (mut re, mut im) = (0.0, 0.0);
+    for (i, v) in values.iter().enumerate() {
+        let a = 2.0 * std::f64::consts::PI * i as f64 / period_rows;
+        re += (v - mean) * a.cos();
+        im -= (v - mean) * a.sin();
+    }
+    im.atan2(re)
+}

@@ -9,7 +9,8 @@
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
 //! | pixel optics (`sensor.pixel_optics`: CRA shading, optical crosstalk) | [`apply_pixel_optics`] (inside [`shot_electron_rate`]) | [`camsim_sensor::pixel_optics::apply_pixel_optics`] |
 //! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |
-//! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`] | [`camsim_sensor::time_averaged_rate`] |
+//! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`], [`shot_time_rate_from`] (frame k of a video) | [`camsim_sensor::time_averaged_rate`], [`camsim_sensor::time_averaged_rate_from`] |
+//! | an animated glTF scene through each row's window (renders at time nodes → optics → pixels → per-row time integral) | [`animated_shot_rate`] | [`camsim_render::job::prepare_at_time`], [`camsim_sensor::NodeIntegrator`] |
 //! | expected frame (DN) | [`expected_frame`] | [`camsim_sensor::expected_dn`] |
 //! | noisy frame (DN) | [`simulate_frame`] | [`camsim_sensor::expose_with`] |
 //! | frame of a capture set (drift, RTN by frame index; dark current at the shot's temperature) | [`simulate_frame_at`], [`frame_index`], [`shot_sensor`] | [`camsim_sensor::expose_frame`], [`camsim_sensor::dark_voltage_at`] |
@@ -315,6 +316,78 @@ pub fn shot_time_rate<'a>(
             &model,
         ))
     }
+}
+
+/// [`shot_time_rate`] of frame `frame_start_s` of a video (frame k at `k / frame_rate_hz`):
+/// each row's window starts `frame_start_s` later, the light's phase and the motion carry on
+/// ([`camsim_sensor::time_averaged_rate_from`]); a static shot is `rate` itself.
+pub fn shot_time_rate_from<'a>(
+    set: &CaptureSet,
+    shot_index: usize,
+    rate: &'a ElectronRate,
+    shot: &Shot,
+    frame_start_s: f64,
+) -> Cow<'a, ElectronRate> {
+    let model = shot_time_model(set, shot_index);
+    if model.is_static() {
+        Cow::Borrowed(rate)
+    } else {
+        Cow::Owned(camsim_sensor::time_averaged_rate_from(
+            &set.camera.sensor,
+            rate,
+            shot.exposure_s,
+            &model,
+            frame_start_s,
+        ))
+    }
+}
+
+/// The electron rate of shot `shot_index` seeing the animated glTF `scene`, integrated over
+/// each row's exposure window `[F + t_r, F + t_r + T]` (F = `frame_start_s`) under the shot's
+/// light modulation: the scene is path-traced at time nodes `Δt` = `scene.time_step_s` apart
+/// covering the frame ([`crate::animated::render_on_grid_at`]), each render goes through the
+/// optics ([`irradiance_of`]) and pixel integration ([`camsim_sensor::electron_rate`]), and
+/// the rows are integrated over the nodes ([`camsim_sensor::NodeIntegrator`]: exact for a rate
+/// linear in time between nodes). The optics act on each instant's scene before the row
+/// integration, so a blur that spreads light across rows mixes rows at each instant, as it
+/// does on a real sensor. The shot's `motion` must be absent (the animation moves the scene).
+/// Returns the rate and the number of renders.
+pub fn animated_shot_rate(
+    set: &CaptureSet,
+    shot_index: usize,
+    scene: &crate::animated::AnimatedScene,
+    shot: &Shot,
+    frame_start_s: f64,
+    seed: u64,
+) -> Result<(ElectronRate, usize), CliError> {
+    let sensor = &set.camera.sensor;
+    let model = shot_time_model(set, shot_index);
+    let bad = |m: String| CliError::input(&scene.gltf, m);
+    let (t0, t1) = camsim_sensor::frame_span_s(&model, sensor.rows, shot.exposure_s, frame_start_s);
+    let nodes = camsim_sensor::TimeNodes::covering(t0, t1, scene.time_step_s).map_err(bad)?;
+    let mut acc = camsim_sensor::NodeIntegrator::new(
+        &model,
+        sensor.rows,
+        sensor.cols,
+        shot.exposure_s,
+        frame_start_s,
+        &nodes,
+    )
+    .map_err(bad)?;
+    let grid = wavelength_grid(set);
+    let mut renders = 0;
+    for k in 0..nodes.count {
+        if !acc.needs(k) {
+            continue;
+        }
+        let radiance =
+            crate::animated::render_on_grid_at(set, scene, seed, &grid, nodes.time_s(k))?;
+        let irr = irradiance_of(set, &radiance, &grid)?;
+        acc.add(k, &camsim_sensor::electron_rate(sensor, &irr))
+            .map_err(bad)?;
+        renders += 1;
+    }
+    Ok((acc.finish(), renders))
 }
 
 /// The noise-free expected frame (DN, before quantisation) of `rate` under `shot`.

@@ -851,6 +851,11 @@ pub struct ShotFile {
     /// it scales the dark current of the shot (docs/effects.md, `dark_temperature`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temperature_c: Option<f64>,
+    /// Extension: the frames are a video at this frame rate (Hz): frame k starts its exposure
+    /// at k / frame_rate_hz, the light modulation and the motion carrying on (absent: every
+    /// frame is a repeat of the same exposure window).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_rate_hz: Option<f64>,
 }
 
 /// `captures.simulation` (extension).
@@ -943,6 +948,8 @@ pub struct Shot {
     pub motion: Option<Motion>,
     /// Sensor temperature during the shot (°C, `temperature_c`; None: the camera's).
     pub temperature_c: Option<f64>,
+    /// Video frame rate (`frame_rate_hz`; None: the frames repeat one exposure window).
+    pub frame_rate_hz: Option<f64>,
 }
 
 /// How a shot's exposure time is set.
@@ -2150,6 +2157,14 @@ pub fn captures_with_camera(
         };
         time.validate()
             .map_err(|e| CliError::input(path, format!("{key}: {e}")))?;
+        if let Some(f) = s.frame_rate_hz {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(CliError::input(
+                    path,
+                    format!("{key}: frame_rate_hz = {f}: must be a positive number of frames per second"),
+                ));
+            }
+        }
         shots.push(Shot {
             id: s.id.clone(),
             target,
@@ -2169,6 +2184,7 @@ pub fn captures_with_camera(
                 )?),
                 None => None,
             },
+            frame_rate_hz: s.frame_rate_hz,
         });
     }
     let simulation = raw.simulation.unwrap_or_default();

@@ -5,6 +5,7 @@
 //! (`camsim-core` → `camsim-optics` → `camsim-sensor`).
 #![deny(missing_docs)]
 
+pub mod animated;
 pub mod autofocus;
 pub mod budget;
 pub mod calibrate_cmd;

@@ -391,6 +391,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         light: None,
         motion: None,
         temperature_c: None,
+        frame_rate_hz: None,
     };
     let set = CaptureSet {
         path: path.clone(),

@@ -568,6 +568,7 @@ pub fn simulate_each(
         }
         let rate = &cache[shot.target_key.as_str()];
         let sh = crate::chain::shot_exposure(set, si, rate);
+        let base_rate = rate;
         let rate = &*crate::chain::shot_time_rate(set, si, rate, &sh);
         exposures_s.push((shot.id.clone(), sh.exposure_s));
         // The sensor during this shot (dark current at the shot's temperature).
@@ -582,6 +583,11 @@ pub fn simulate_each(
             progress(done, total);
         } else {
             for fi in 0..shot.frames.len() {
+                // a video: frame fi starts at fi / frame_rate (light phase and motion carry on)
+                let video_rate = shot.frame_rate_hz.filter(|_| fi > 0).map(|f| {
+                    crate::chain::shot_time_rate_from(set, si, base_rate, &sh, fi as f64 / f)
+                });
+                let rate = video_rate.as_deref().unwrap_or(rate);
                 let pattern = if total_frames <= 1 {
                     PatternSource::Seeded(seed)
                 } else {

@@ -63,6 +63,7 @@ impl Camera {
                 frames: (0..frames).map(|i| format!("frame_{i}.png")).collect(),
                 light_modulation: None,
                 motion: None,
+                frame_rate_hz: None,
             }],
             simulation,
             raw_format: None,

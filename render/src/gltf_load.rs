@@ -90,6 +90,45 @@ fn extras_json(e: &gltf::json::Extras) -> Option<Value> {
 /// A glTF whose indices point outside their arrays can make the `gltf` crate's own validation
 /// panic (gltf-json 1.4); that panic is caught (silently) and reported as one error line.
 pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
+    guarded(path, || load_gltf_unguarded(path, None).map(|(s, _)| s))
+}
+
+/// The world transform of one node of a loaded scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeWorld {
+    /// Node index in the file.
+    pub index: usize,
+    /// Node name, when it has one.
+    pub name: Option<String>,
+    /// Node-to-world transform.
+    pub to_world: DMat4,
+}
+
+/// [`load_gltf`] with every node translation animated by the file's animations taken at time
+/// `time_s` (s; [`crate::animation`]): objects and the camera where they are at that instant.
+pub fn load_gltf_at_time(path: &Path, time_s: f64) -> Result<Scene, RenderError> {
+    load_gltf_nodes_at_time(path, time_s).map(|(s, _)| s)
+}
+
+/// [`load_gltf_at_time`] with the world transform of every node of the default scene.
+pub fn load_gltf_nodes_at_time(
+    path: &Path,
+    time_s: f64,
+) -> Result<(Scene, Vec<NodeWorld>), RenderError> {
+    if !time_s.is_finite() {
+        return Err(RenderError::Scene {
+            path: path.display().to_string(),
+            msg: format!("animation time {time_s} s: must be finite"),
+        });
+    }
+    guarded(path, || load_gltf_unguarded(path, Some(time_s)))
+}
+
+/// Runs a loader, turning a panic of the `gltf` crate's validation into one error line.
+fn guarded<T>(
+    path: &Path,
+    load: impl FnOnce() -> Result<T, RenderError>,
+) -> Result<T, RenderError> {
     thread_local! {
         static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
     }
@@ -105,7 +144,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
         }));
     });
     QUIET.with(|q| q.set(true));
-    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_gltf_unguarded(path)));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(load));
     QUIET.with(|q| q.set(false));
     match r {
         Ok(r) => r,
@@ -126,7 +165,10 @@ pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
     }
 }
 
-fn load_gltf_unguarded(path: &Path) -> Result<Scene, RenderError> {
+fn load_gltf_unguarded(
+    path: &Path,
+    time_s: Option<f64>,
+) -> Result<(Scene, Vec<NodeWorld>), RenderError> {
     let cx = Ctx { path };
     let bytes = std::fs::read(path).map_err(|e| cx.err(format!("cannot read: {e}")))?;
     // 1. required extensions, with a message naming them (before validation, which would
@@ -173,6 +215,15 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene, RenderError> {
         buffers.push(data.0);
     }
     let doc = &gltf.document;
+    // animated node translations at the requested time
+    let animated = match time_s {
+        Some(t) => crate::animation::translations_at(
+            &crate::animation::translation_tracks(path, doc, &buffers)?,
+            t,
+        ),
+        None => HashMap::new(),
+    };
+    let mut node_worlds: Vec<NodeWorld> = Vec::new();
     // 3. materials (index len = default material)
     let mut materials: Vec<Material> = Vec::new();
     let mut texture_cache: HashMap<usize, (u32, u32, Vec<[f32; 3]>)> = HashMap::new();
@@ -230,8 +281,20 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene, RenderError> {
                 )));
             }
         }
-        let local =
-            DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|v| v as f64)));
+        let local = match animated.get(&node.index()) {
+            // the animated translation replaces the node's own (glTF 2.0 §3.11)
+            Some(t) => {
+                let (_, r, sc) = node.transform().decomposed();
+                DMat4::from_scale_rotation_translation(
+                    DVec3::from_array(sc.map(|v| v as f64)),
+                    glam::DQuat::from_array(r.map(|v| v as f64)).normalize(),
+                    DVec3::from_array(*t),
+                )
+            }
+            None => {
+                DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|v| v as f64)))
+            }
+        };
         let world = parent * local;
         if !world.is_finite() {
             return Err(cx.err(format!(
@@ -239,6 +302,11 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene, RenderError> {
                 node_label(&node)
             )));
         }
+        node_worlds.push(NodeWorld {
+            index: node.index(),
+            name: node.name().map(str::to_string),
+            to_world: world,
+        });
         if let Some(cam) = node.camera() {
             cameras.push(convert_camera(&cx, &node, &cam, &world)?);
         }
@@ -267,7 +335,10 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene, RenderError> {
             "no camera: the scene needs a node with a perspective camera (glTF \"cameras\")",
         ));
     }
-    Ok(Scene::build(tris, shading, materials, punctual, cameras))
+    Ok((
+        Scene::build(tris, shading, materials, punctual, cameras),
+        node_worlds,
+    ))
 }
 
 fn node_label(n: &gltf::Node) -> String {

@@ -129,6 +129,7 @@ pub fn cuboid(lo: [f32; 3], hi: [f32; 3], inward: bool) -> MeshData {
 /// A glTF document under construction.
 #[derive(Debug, Clone, Default)]
 pub struct GltfBuilder {
+    animations: Vec<Value>,
     bin: Vec<u8>,
     buffer_views: Vec<Value>,
     accessors: Vec<Value>,
@@ -244,6 +245,34 @@ impl GltfBuilder {
         i
     }
 
+    /// Add an animation of node `node`'s translation: keyframe `times_s` and `translations_m`,
+    /// `interpolation` `"LINEAR"` or `"STEP"` (glTF 2.0 §3.11); returns its index.
+    pub fn translation_animation(
+        &mut self,
+        name: &str,
+        node: usize,
+        times_s: &[f32],
+        translations_m: &[[f32; 3]],
+        interpolation: &str,
+    ) -> usize {
+        let input = self.accessor_f32(times_s, 1, "SCALAR", true);
+        let flat: Vec<f32> = translations_m.iter().flatten().copied().collect();
+        let output = self.accessor_f32(&flat, 3, "VEC3", false);
+        // animation data is not a vertex attribute: no bufferView target
+        for a in [input, output] {
+            let v = self.accessors[a]["bufferView"].as_u64().expect("view") as usize;
+            if let Some(o) = self.buffer_views[v].as_object_mut() {
+                o.remove("target");
+            }
+        }
+        self.animations.push(json!({
+            "name": name,
+            "samplers": [{"input": input, "output": output, "interpolation": interpolation}],
+            "channels": [{"sampler": 0, "target": {"node": node, "path": "translation"}}],
+        }));
+        self.animations.len() - 1
+    }
+
     /// Declare an extension as used (and required).
     pub fn use_extension(&mut self, name: &str, required: bool) {
         if !self.extensions_used.iter().any(|e| e == name) {
@@ -269,6 +298,9 @@ impl GltfBuilder {
         });
         if !self.cameras.is_empty() {
             d["cameras"] = json!(self.cameras);
+        }
+        if !self.animations.is_empty() {
+            d["animations"] = json!(self.animations);
         }
         if !self.images.is_empty() {
             d["images"] = json!(self.images);

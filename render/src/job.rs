@@ -90,6 +90,13 @@ fn settings_err(msg: String) -> RenderError {
 
 /// Load the scene and build the camera.
 pub fn prepare(job: &RenderJob) -> Result<PreparedJob, RenderError> {
+    prepare_at_time(job, None)
+}
+
+/// [`prepare`] with the scene's animations taken at `time_s` (s; None: the nodes' own
+/// transforms, animations ignored): the objects and the camera where they are at that instant
+/// ([`crate::gltf_load::load_gltf_at_time`]).
+pub fn prepare_at_time(job: &RenderJob, time_s: Option<f64>) -> Result<PreparedJob, RenderError> {
     if job.width == 0 || job.width > 16384 {
         return Err(settings_err(format!(
             "--width {}: must be 1–16384 pixels",
@@ -126,7 +133,10 @@ pub fn prepare(job: &RenderJob) -> Result<PreparedJob, RenderError> {
             }
         }
     }
-    let scene = load_gltf(&job.scene)?;
+    let scene = match time_s {
+        None => load_gltf(&job.scene)?,
+        Some(t) => crate::gltf_load::load_gltf_at_time(&job.scene, t)?,
+    };
     let sc = pick_camera(&scene, job.camera_name.as_deref()).map_err(|m| RenderError::Scene {
         path: job.scene.display().to_string(),
         msg: m,
@@ -202,4 +212,35 @@ pub fn prepare(job: &RenderJob) -> Result<PreparedJob, RenderError> {
         lightfield,
         camera_description: desc,
     })
+}
+
+/// Where the origin of the node named `node_name` projects on the film of `job` (px, film
+/// coordinates: x right from the left edge, y down from the top edge; pixel centres at
+/// half-integers) at time `time_s`, through the job's camera node taken at the same time —
+/// the pinhole projection ([`crate::camera::Perspective::project`]) of the glTF camera
+/// (glTF 2.0 §3.10.3), so both an animated object and an animated camera move the point.
+pub fn node_film_position_px(
+    job: &RenderJob,
+    node_name: &str,
+    time_s: f64,
+) -> Result<[f64; 2], RenderError> {
+    let scene_err = |msg: String| RenderError::Scene {
+        path: job.scene.display().to_string(),
+        msg,
+    };
+    let (scene, nodes) = crate::gltf_load::load_gltf_nodes_at_time(&job.scene, time_s)?;
+    let sc = pick_camera(&scene, job.camera_name.as_deref()).map_err(scene_err)?;
+    let node = nodes
+        .iter()
+        .find(|n| n.name.as_deref() == Some(node_name))
+        .ok_or_else(|| scene_err(format!("no node named \"{node_name}\"")))?;
+    let world = node.to_world.transform_point3(glam::DVec3::ZERO);
+    let cam = sc.to_world.as_dmat4().inverse().transform_point3(world);
+    let width = job.width;
+    let height = job.height.unwrap_or(width);
+    let p = sc
+        .perspective(width, height)
+        .project(cam.as_vec3())
+        .ok_or_else(|| scene_err(format!("node \"{node_name}\" is behind the camera")))?;
+    Ok([p.x as f64, p.y as f64])
 }

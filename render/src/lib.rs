@@ -6,6 +6,8 @@
 //!
 //! * [`gltf_load`]: glTF 2.0 (.gltf/.glb) → [`scene::Scene`] (meshes, node hierarchy, cameras,
 //!   materials, KHR lights, textures) with the Mitsuba harness's conventions;
+//! * [`animation`]: glTF node translation animations sampled at a time (motion within an
+//!   exposure, video);
 //! * [`bsdf`]: Lambertian, rough conductor (spectral η/κ), rough dielectric with dispersion,
 //!   rough plastic;
 //! * [`integrator`]: path tracing with NEE + MIS, Russian roulette, hero-wavelength sampling,
@@ -16,6 +18,7 @@
 //! * [`gltf_write`]: a small glTF writer used to generate the test scenes.
 #![deny(missing_docs)]
 
+pub mod animation;
 pub mod bsdf;
 pub mod bvh4;
 mod bvh8_flat;

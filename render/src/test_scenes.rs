@@ -11,6 +11,9 @@
 //!   sphere (ISO 12233 style target);
 //! * [`color_chart`] — the 24 Macbeth ColorChecker reflectances (ISETCam data) under a
 //!   D65-shaped emitter sphere: patch radiance = ρ(λ)·Le(λ);
+//! * [`moving_bar`] — a bright vertical bar translating sideways (a glTF animation) in front
+//!   of a dark wall, facing a camera that looks along −Z: its image moves at
+//!   `v · f_px / Z` pixels per second (the rolling-shutter skew study);
 //! * [`showcase`] — a Cornell-like room with a dispersive glass sphere, a rough gold sphere, a
 //!   rough-plastic block and a thin-lens camera.
 use crate::gltf_write::{
@@ -122,6 +125,76 @@ pub fn slanted_edge() -> GltfBuilder {
     b.node(json!({"name": "white_half", "mesh": mw}), true);
     b.node(json!({"name": "black_half", "mesh": mb}), true);
     camera_down(&mut b, 1.0, 30.0);
+    b
+}
+
+/// The numbers of [`moving_bar`].
+pub mod moving_bar_spec {
+    /// Distance of the bar's plane from the camera (m; the bar lies in z = −Z).
+    pub const BAR_DISTANCE_M: f64 = 2.0;
+    /// Distance of the wall behind it (m).
+    pub const WALL_DISTANCE_M: f64 = 4.0;
+    /// Bar width (m) and half height (m).
+    pub const BAR_WIDTH_M: f64 = 0.1;
+    /// Half height of the bar (m): taller than the view.
+    pub const BAR_HALF_HEIGHT_M: f64 = 1.0;
+    /// Velocity of the bar along +x (m/s), from its two LINEAR keyframes.
+    pub const BAR_VELOCITY_M_PER_S: f64 = 8.0;
+    /// x of the bar's centre at t = 0 (m).
+    pub const BAR_X0_M: f64 = -0.1;
+    /// Time of the last keyframe (s).
+    pub const LAST_KEYFRAME_S: f64 = 0.1;
+    /// Vertical field of view of the camera (degrees).
+    pub const YFOV_DEG: f64 = 30.0;
+    /// Emitted radiance of the bar and of the wall (W m⁻² sr⁻¹ nm⁻¹, flat spectra).
+    pub const BAR_RADIANCE: f64 = 0.01;
+    /// Emitted radiance of the wall.
+    pub const WALL_RADIANCE: f64 = 0.001;
+}
+
+/// Moving bar: a vertical emitting bar ([`moving_bar_spec`]) in the plane z = −Z translating
+/// along +x at constant speed (a two-keyframe LINEAR translation animation on node `"bar"`),
+/// in front of a dimmer emitting wall; camera at the origin looking along −Z (no aspect
+/// ratio: the film's own). Non-reflecting emitters, so a pixel's radiance is the
+/// area-weighted mix of the two radiances.
+pub fn moving_bar() -> GltfBuilder {
+    use moving_bar_spec::*;
+    let mut b = GltfBuilder::new();
+    let emitter = |name: &str, le: f64| {
+        json!({"name": name, "doubleSided": true,
+            "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+            "extras": {"spectral_reflectance": flat_spectrum(0.0), "spectral_emission": flat_spectrum(le)}})
+    };
+    let wall_m = b.material(emitter("wall", WALL_RADIANCE));
+    let bar_m = b.material(emitter("bar", BAR_RADIANCE));
+    let (zw, h) = (-WALL_DISTANCE_M as f32, 4.0f32);
+    let wall = quad([[-h, -h, zw], [h, -h, zw], [h, h, zw], [-h, h, zw]]);
+    let mw = b.mesh("wall", &wall, wall_m);
+    b.node(json!({"name": "wall", "mesh": mw}), true);
+    // the bar's mesh is centred on its node; the node carries the position
+    let (hw, hh) = ((BAR_WIDTH_M / 2.0) as f32, BAR_HALF_HEIGHT_M as f32);
+    let bar = quad([
+        [-hw, -hh, 0.0],
+        [hw, -hh, 0.0],
+        [hw, hh, 0.0],
+        [-hw, hh, 0.0],
+    ]);
+    let mb = b.mesh("bar", &bar, bar_m);
+    let z = -BAR_DISTANCE_M;
+    let node = b.node(
+        json!({"name": "bar", "mesh": mb, "translation": [BAR_X0_M, 0.0, z]}),
+        true,
+    );
+    let x1 = BAR_X0_M + BAR_VELOCITY_M_PER_S * LAST_KEYFRAME_S;
+    b.translation_animation(
+        "bar_slide",
+        node,
+        &[0.0, LAST_KEYFRAME_S as f32],
+        &[[BAR_X0_M as f32, 0.0, z as f32], [x1 as f32, 0.0, z as f32]],
+        "LINEAR",
+    );
+    let c = b.camera("camera", YFOV_DEG.to_radians(), None, 0.001);
+    b.node(json!({"name": "camera", "camera": c}), true);
     b
 }
 
@@ -263,5 +336,6 @@ pub fn all() -> Vec<(&'static str, GltfBuilder)> {
         ("slanted_edge", slanted_edge()),
         ("color_chart", color_chart()),
         ("showcase", showcase()),
+        ("moving_bar", moving_bar()),
     ]
 }

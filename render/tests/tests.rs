@@ -1,6 +1,7 @@
 //! Integration tests of camsim-render: one test binary for the crate, one module per topic
 //! (`cargo test --release -p camsim-render --test tests <module>::`).
 
+mod animation;
 mod depth_crosscheck;
 mod depth_path;
 mod gltf_input;

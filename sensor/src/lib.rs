@@ -39,6 +39,7 @@ pub mod pixel_optics;
 pub mod pixel_rng;
 pub mod poisson;
 pub mod temporal;
+pub mod temporal_nodes;
 
 use camsim_core::Spectrum;
 use thiserror::Error;
@@ -67,8 +68,11 @@ pub use noise::{
     nonlinearity_magnitude, PatternSource, FIXED_PATTERN_TAG,
 };
 pub use temporal::{
-    dark_at_temperature, flicker_period_rows, time_averaged_rate, Motion, PwmLight, Readout,
-    ShutterMode, TimeModel,
+    dark_at_temperature, flicker_period_rows, time_averaged_rate, time_averaged_rate_from, Motion,
+    PwmLight, Readout, ShutterMode, TimeModel,
+};
+pub use temporal_nodes::{
+    frame_span_s, row_node_weights, NodeIntegrator, RowNodeWeights, TimeNodes,
 };
 
 /// Errors of the sensor stage.

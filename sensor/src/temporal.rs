@@ -251,7 +251,21 @@ impl TimeModel {
         exposure_s: f64,
         stride_px: [f64; 2],
     ) -> Vec<ShiftSample> {
-        let t0 = self.readout.row_start_s(row);
+        self.row_samples_from(row, exposure_s, stride_px, 0.0)
+    }
+
+    /// [`TimeModel::row_samples`] of a frame whose first row starts its exposure at
+    /// `frame_start_s` (a frame of a video): row r's window is
+    /// `[frame_start + t_r, frame_start + t_r + T]`, the light's phase and the motion carry
+    /// on from t = 0.
+    pub fn row_samples_from(
+        &self,
+        row: usize,
+        exposure_s: f64,
+        stride_px: [f64; 2],
+        frame_start_s: f64,
+    ) -> Vec<ShiftSample> {
+        let t0 = frame_start_s + self.readout.row_start_s(row);
         let t1 = t0 + exposure_s;
         let v = self.motion.map_or([0.0, 0.0], |m| m.velocity_px_per_s);
         if exposure_s <= 0.0 {
@@ -338,6 +352,18 @@ pub fn time_averaged_rate(
     exposure_s: f64,
     model: &TimeModel,
 ) -> ElectronRate {
+    time_averaged_rate_from(sensor, rate, exposure_s, model, 0.0)
+}
+
+/// [`time_averaged_rate`] of a frame starting at `frame_start_s` (frame k of a video at
+/// `k / frame_rate`; [`TimeModel::row_samples_from`]).
+pub fn time_averaged_rate_from(
+    sensor: &SensorModel,
+    rate: &ElectronRate,
+    exposure_s: f64,
+    model: &TimeModel,
+    frame_start_s: f64,
+) -> ElectronRate {
     if model.is_static() {
         return rate.clone();
     }
@@ -345,7 +371,12 @@ pub fn time_averaged_rate(
     let stride = (sensor.cfa.tile_rows().max(1), sensor.cfa.tile_cols().max(1));
     let mut out = vec![0f32; rows * cols];
     for (r, row_out) in out.chunks_mut(cols).enumerate() {
-        let samples = model.row_samples(r, exposure_s, [stride.1 as f64, stride.0 as f64]);
+        let samples = model.row_samples_from(
+            r,
+            exposure_s,
+            [stride.1 as f64, stride.0 as f64],
+            frame_start_s,
+        );
         if model.motion.is_none() {
             let w: f64 = samples.iter().map(|s| s.weight).sum();
             for (o, i) in row_out.iter_mut().zip(&rate.electrons_per_s[r * cols..]) {

@@ -8,3 +8,4 @@ mod line_noise;
 mod pixel_optics;
 mod statistics;
 mod temporal;
+mod temporal_nodes;

@@ -425,6 +425,7 @@ impl Ctx<'_> {
                     light: None,
                     motion: None,
                     temperature_c: None,
+                    frame_rate_hz: None,
                 }],
                 simulation: self.sim.clone(),
                 raw_format: None,

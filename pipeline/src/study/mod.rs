@@ -33,6 +33,7 @@ pub mod ray;
 pub mod render;
 pub mod report;
 pub mod rolling;
+pub mod rolling_scene;
 pub mod spec;
 pub mod table;
 

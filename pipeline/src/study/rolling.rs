@@ -6,10 +6,12 @@
 //! | key | default | meaning |
 //! |---|---|---|
 //! | `camera` | required | camera.json content; `sensor.readout` must be `"rolling"` |
-//! | `target` | required | a captures.json target holding one near-vertical edge (`slanted_edge` with `angle_deg` 0) |
+//! | `target` | one of `target`, `scene` | a captures.json target holding one near-vertical edge (`slanted_edge` with `angle_deg` 0), moved by `motion` |
+//! | `scene` | one of `target`, `scene` | an animated glTF scene holding a vertical bar: `{"gltf": PATH, "node": NAME, "camera", "spp" (4), "time_step_s" (1e-4)}` ([`super::rolling_scene`]) |
+//! | `frames`, `frame_rate_hz` | 1, absent | with a `scene`: a video of `frames` frames, frame k starting at k / frame_rate_hz |
 //! | `exposure_s` | required | exposure time (s) |
 //! | `light_modulation` | required | `{"frequency_hz", "duty_cycle", "phase"}` as in captures.json |
-//! | `motion` | required | `{"velocity_px_per_s": [v_x, v_y]}` as in captures.json |
+//! | `motion` | with a `target` | `{"velocity_px_per_s": [v_x, v_y]}` as in captures.json |
 //! | `reference_fraction` | 0.125 | fraction of the columns at each side used as the edge's reference levels (the light side's also give the flicker row means) |
 //! | `simulation` | absent | captures.json `simulation` block |
 //!
@@ -44,10 +46,18 @@ struct RollingDoc {
     #[allow(dead_code)]
     kind: String,
     camera: Value,
-    target: Value,
+    #[serde(default)]
+    target: Option<Value>,
+    #[serde(default)]
+    scene: Option<SceneDoc>,
     exposure_s: f64,
     light_modulation: Value,
-    motion: Value,
+    #[serde(default)]
+    motion: Option<Value>,
+    #[serde(default)]
+    frames: Option<usize>,
+    #[serde(default)]
+    frame_rate_hz: Option<f64>,
     #[serde(default)]
     reference_fraction: Option<f64>,
     #[serde(default)]
@@ -62,9 +72,93 @@ struct RollingDoc {
     seed: Option<u64>,
 }
 
+/// `scene`: an animated glTF scene holding a vertical bar.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneDoc {
+    /// The glTF file (absolute, or relative to the working folder; a spec writes
+    /// `{"$path": "…"}` to give it relative to the spec).
+    gltf: String,
+    /// The animated node whose image velocity gives the expected skew.
+    node: String,
+    #[serde(default)]
+    camera: Option<String>,
+    #[serde(default)]
+    spp: Option<u32>,
+    #[serde(default)]
+    time_step_s: Option<f64>,
+}
+
+/// The animated scene of a document with a `scene`, and the video settings.
+struct ScenePoint {
+    scene: crate::animated::AnimatedScene,
+    node: String,
+    frames: usize,
+    frame_rate_hz: Option<f64>,
+}
+
+fn scene_point(d: &RollingDoc) -> Result<Option<ScenePoint>, String> {
+    let Some(sd) = &d.scene else {
+        if d.frames.is_some() || d.frame_rate_hz.is_some() {
+            return Err("frames, frame_rate_hz: video needs a glTF \"scene\"".into());
+        }
+        return Ok(None);
+    };
+    let time_step_s = sd.time_step_s.unwrap_or(1e-4);
+    if !(time_step_s.is_finite() && time_step_s > 0.0) {
+        return Err(format!(
+            "scene.time_step_s: must be a positive number of seconds, got {time_step_s}"
+        ));
+    }
+    let spp = sd.spp.unwrap_or(4);
+    if spp == 0 || spp > 4096 {
+        return Err(format!("scene.spp: must be 1–4096, got {spp}"));
+    }
+    let frames = d.frames.unwrap_or(1);
+    if frames == 0 || frames > 1000 {
+        return Err(format!("frames: must be 1–1000, got {frames}"));
+    }
+    match d.frame_rate_hz {
+        Some(f) if !(f.is_finite() && f > 0.0) => {
+            return Err(format!("frame_rate_hz: must be a positive number, got {f}"))
+        }
+        None if frames > 1 => return Err("frame_rate_hz: required with frames > 1".into()),
+        _ => {}
+    }
+    Ok(Some(ScenePoint {
+        scene: crate::animated::AnimatedScene {
+            gltf: PathBuf::from(&sd.gltf),
+            camera_name: sd.camera.clone(),
+            spp,
+            time_step_s,
+        },
+        node: sd.node.clone(),
+        frames,
+        frame_rate_hz: d.frame_rate_hz,
+    }))
+}
+
 /// The capture set of the point (one shot, one frame) from the document.
 fn capture_set(doc: &Value) -> Result<(crate::config::CaptureSet, f64), String> {
+    capture_set_and_scene(doc).map(|(s, f, _)| (s, f))
+}
+
+/// [`capture_set`] and the animated scene when the document has one.
+fn capture_set_and_scene(
+    doc: &Value,
+) -> Result<(crate::config::CaptureSet, f64, Option<ScenePoint>), String> {
     let d: RollingDoc = serde_json::from_value(doc.clone()).map_err(|e| e.to_string())?;
+    let scene = scene_point(&d)?;
+    let target = match (&d.target, &scene, &d.motion) {
+        (Some(t), None, Some(_)) => t.clone(),
+        (None, Some(_), None) => json!({"kind": "dark"}),
+        (Some(_), Some(_), _) => return Err("target, scene: give one of them".into()),
+        (None, None, _) => return Err("target or scene: one of them is required".into()),
+        (_, Some(_), Some(_)) => {
+            return Err("motion: not with a glTF scene (its animation moves it)".into())
+        }
+        (Some(_), None, None) => return Err("light_modulation and motion: both required".into()),
+    };
     let f: CameraFile =
         serde_json::from_value(d.camera.clone()).map_err(|e| format!("camera: {e}"))?;
     let cam = camera_from_file(Path::new("camera"), f).map_err(|e| e.one_line())?;
@@ -81,23 +175,25 @@ fn capture_set(doc: &Value) -> Result<(crate::config::CaptureSet, f64), String> 
         "camera": "camera.json",
         "shots": [{
             "id": "frame",
-            "target": d.target,
+            "target": target,
             "exposure_s": d.exposure_s,
             "frames": ["frame.png"],
             "light_modulation": d.light_modulation,
-            "motion": d.motion,
         }],
     });
+    if let Some(m) = &d.motion {
+        captures["shots"][0]["motion"] = m.clone();
+    }
     if let Some(s) = d.simulation {
         captures["simulation"] = s;
     }
     let raw: CapturesFile = serde_json::from_value(captures).map_err(|e| e.to_string())?;
     let set = captures_with_camera(Path::new("point"), raw, cam, PathBuf::from("camera"))
         .map_err(|e| e.one_line())?;
-    if set.shots[0].light.is_none() || set.shots[0].motion.is_none() {
-        return Err("light_modulation and motion: both required".into());
+    if set.shots[0].light.is_none() {
+        return Err("light_modulation: required".into());
     }
-    Ok((set, frac))
+    Ok((set, frac, scene))
 }
 
 /// Cheap validation of a rolling-shutter document.
@@ -106,8 +202,20 @@ pub fn validate(doc: &Value) -> Result<(), String> {
 }
 
 /// Evaluate a rolling-shutter point (see the module documentation).
-pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliError> {
-    let (set, frac) = capture_set(doc).map_err(CliError::Other)?;
+pub fn evaluate(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliError> {
+    let (set, frac, scene) = capture_set_and_scene(doc).map_err(CliError::Other)?;
+    if let Some(sp) = scene {
+        return super::rolling_scene::evaluate(
+            &set,
+            frac,
+            &sp.scene,
+            &sp.node,
+            sp.frames,
+            sp.frame_rate_hz,
+            seed,
+            dir,
+        );
+    }
     let sensor = &set.camera.sensor;
     let (rows, cols) = (sensor.rows, sensor.cols);
     let black = sensor.black_level_dn;

@@ -142,8 +142,9 @@ fn bad(path: &Path, msg: impl std::fmt::Display) -> CliError {
 }
 
 /// Replace every `{"$file": "x.json"}` in `v` by the parsed contents of x.json (relative to
-/// `dir`; references inside it are relative to its own folder). `key` names the place in
-/// messages.
+/// `dir`; references inside it are relative to its own folder), and every
+/// `{"$path": "scene.gltf"}` by the absolute path of that file (a file the point reads
+/// itself). `key` names the place in messages.
 /// An include cycle (a file that includes itself, directly or through others) and chains
 /// deeper than [`MAX_INCLUDE_DEPTH`] are refused.
 pub fn expand_files(v: &Value, dir: &Path, spec: &Path, key: &str) -> Result<Value, CliError> {
@@ -204,6 +205,21 @@ fn expand_files_in(
             chain.pop();
             r
         }
+        Value::Object(m) if m.contains_key("$path") => match (m.len(), m.get("$path")) {
+            // a file the point reads itself (a glTF scene): its absolute path, resolved like
+            // a $file reference
+            (1, Some(Value::String(f))) => {
+                let p = dir.join(f);
+                crate::staging::protect_input(&p);
+                let canon = std::fs::canonicalize(&p)
+                    .map_err(|e| bad(spec, format!("{key}: cannot read {}: {e}", p.display())))?;
+                Ok(Value::String(canon.to_string_lossy().into_owned()))
+            }
+            _ => Err(bad(
+                spec,
+                format!("{key}: a path reference is {{\"$path\": \"file\"}} and nothing else"),
+            )),
+        },
         Value::Object(m) => {
             let mut out = Map::new();
             for (k, x) in m {
