@@ -33,6 +33,7 @@ pub mod constants;
 pub mod data;
 pub mod error;
 pub mod exr_io;
+pub mod fft_size;
 pub mod hdr;
 pub mod illuminant;
 pub mod image;

@@ -75,29 +75,7 @@ pub fn half_pupil_psf(signed_coc_radius_m: f64, pitch_m: f64, half: PupilHalf) -
         PupilHalf::Left => -signed_coc_radius_m.signum(),
         PupilHalf::Right => signed_coc_radius_m.signum(),
     };
-    const S: usize = 8;
-    let mut data = vec![0.0; n * n];
-    for i in 0..n {
-        for j in 0..n {
-            let mut c = 0usize;
-            for a in 0..S {
-                for b in 0..S {
-                    let y = (i as f64 - h as f64 - 0.5 + (a as f64 + 0.5) / S as f64) * pitch_m;
-                    let x = (j as f64 - h as f64 - 0.5 + (b as f64 + 0.5) / S as f64) * pitch_m;
-                    if x * x + y * y <= r * r && x * side > 0.0 {
-                        c += 1;
-                    }
-                }
-            }
-            data[i * n + j] = c as f64;
-        }
-    }
-    let mut p = SampledPsf {
-        half_rows: h,
-        half_cols: h,
-        pitch_m,
-        data,
-    };
+    let mut p = crate::kernels::disc_subsample_counts(r, pitch_m, |x| x * side > 0.0);
     if p.sum() == 0.0 {
         p.data.iter_mut().for_each(|v| *v = 0.0);
         p.data[h * n + h] = 1.0;

@@ -30,22 +30,7 @@ pub(crate) enum Transfer<'a> {
     Spectrum(&'a [Complex32]),
 }
 
-/// Smallest `m ≥ n` of the form 2^a 3^b 5^c.
-pub(crate) fn next_smooth(n: usize) -> usize {
-    let mut m = n.max(1);
-    loop {
-        let mut k = m;
-        for p in [2, 3, 5] {
-            while k % p == 0 {
-                k /= p;
-            }
-        }
-        if k == 1 {
-            return m;
-        }
-        m += 1;
-    }
-}
+pub(crate) use camsim_core::fft_size::next_smooth;
 
 /// MATLAB `round` (half away from zero) of `n / 8`.
 pub(crate) fn isetcam_pad(n: usize) -> usize {

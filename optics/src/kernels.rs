@@ -125,12 +125,16 @@ pub(crate) fn separable_convolve(
     });
 }
 
-/// A uniform disk ("pillbox") of diameter `width_m`, area-sampled (8×8 sub-samples per
-/// sample cell) at `pitch_m` and normalised to sum 1. A disk narrower than a sample is the
-/// identity.
-pub fn pillbox_psf(width_m: f64, pitch_m: f64) -> SampledPsf {
-    let r = width_m / 2.0;
-    let h = (r / pitch_m - 0.5 - 1e-9).ceil().max(0.0) as usize;
+/// A disc of radius `r_m` (centred on a sample) area-sampled at `pitch_m`: per sample cell,
+/// the count of its 8×8 sub-samples inside the disc for which `keep(x_m)` holds (x the
+/// sub-sample's signed offset along the columns; none lies on x = 0). Unnormalised; the
+/// half-width is the fewest samples that hold the disc.
+pub(crate) fn disc_subsample_counts(
+    r_m: f64,
+    pitch_m: f64,
+    keep: impl Fn(f64) -> bool,
+) -> SampledPsf {
+    let h = (r_m / pitch_m - 0.5 - 1e-9).ceil().max(0.0) as usize;
     let n = 2 * h + 1;
     const S: usize = 8;
     let mut data = vec![0.0; n * n];
@@ -141,7 +145,7 @@ pub fn pillbox_psf(width_m: f64, pitch_m: f64) -> SampledPsf {
                 for b in 0..S {
                     let y = (i as f64 - h as f64 - 0.5 + (a as f64 + 0.5) / S as f64) * pitch_m;
                     let x = (j as f64 - h as f64 - 0.5 + (b as f64 + 0.5) / S as f64) * pitch_m;
-                    if x * x + y * y <= r * r {
+                    if x * x + y * y <= r_m * r_m && keep(x) {
                         c += 1;
                     }
                 }
@@ -149,12 +153,21 @@ pub fn pillbox_psf(width_m: f64, pitch_m: f64) -> SampledPsf {
             data[i * n + j] = c as f64;
         }
     }
-    let mut p = SampledPsf {
+    SampledPsf {
         half_rows: h,
         half_cols: h,
         pitch_m,
         data,
-    };
+    }
+}
+
+/// A uniform disk ("pillbox") of diameter `width_m`, area-sampled (8×8 sub-samples per
+/// sample cell) at `pitch_m` and normalised to sum 1. A disk narrower than a sample is the
+/// identity.
+pub fn pillbox_psf(width_m: f64, pitch_m: f64) -> SampledPsf {
+    let mut p = disc_subsample_counts(width_m / 2.0, pitch_m, |_| true);
+    let h = p.half_rows;
+    let n = 2 * h + 1;
     if p.sum() == 0.0 {
         p.data[h * n + h] = 1.0;
     }

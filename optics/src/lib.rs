@@ -42,12 +42,12 @@ mod wavefront;
 
 pub use band_split::{split_into_bands, BandSplit};
 pub use camsim_core::{SceneRadiance, SensorIrradiance, Spectrum, WavelengthGrid};
+pub use dual_pixel::{
+    dual_pixel_disparity_m, half_disc_centroid_offset_m, half_pupil_psf, PupilHalf,
+};
 pub use effects::{
     equivalent_gaussian_sigma_um, two_circle_overlap_fraction, Defocus, Distortion, Falloff,
     LateralColor, LateralColorKind, OpticsEffects,
-};
-pub use dual_pixel::{
-    dual_pixel_disparity_m, half_disc_centroid_offset_m, half_pupil_psf, PupilHalf,
 };
 pub use error::OpticsError;
 pub use formulas::{

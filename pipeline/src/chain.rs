@@ -521,7 +521,10 @@ pub(crate) fn camera_thin_lens(
 /// infinity) in samples of `t`: the radius of
 /// [`camsim_render::depth_path::ThinLensDefocus::coc_radius_px`] with the sign of
 /// `1/z − 1/D` (positive: nearer than the focus; [`camsim_optics::dual_pixel`]).
-pub(crate) fn signed_coc_radius_px(t: &camsim_render::depth_path::ThinLensDefocus, inv_z_per_m: f64) -> f64 {
+pub(crate) fn signed_coc_radius_px(
+    t: &camsim_render::depth_path::ThinLensDefocus,
+    inv_z_per_m: f64,
+) -> f64 {
     let z = if inv_z_per_m > 0.0 {
         1.0 / inv_z_per_m
     } else {
@@ -545,7 +548,10 @@ pub fn dual_pixel_expected_disparity_px(
     object_distance_m: Option<f64>,
 ) -> Result<f64, CliError> {
     let dp = cam.dual_pixel.ok_or_else(|| {
-        CliError::input(camera_path, "sensor.dual_pixel: required for dual-pixel images")
+        CliError::input(
+            camera_path,
+            "sensor.dual_pixel: required for dual-pixel images",
+        )
     })?;
     let t = camera_thin_lens(cam, camera_path, cam.sensor.pixel_pitch_m)?;
     let r_px = signed_coc_radius_px(&t, object_distance_m.map_or(0.0, |z| 1.0 / z));

@@ -99,7 +99,8 @@ pub fn measure_disparity(
         }
         DisparityFrames::Noisy { seed } => {
             let dp = cam.dual_pixel.expect("dual pixel checked");
-            let f = camsim_sensor::expose_dual_pixel(&cam.sensor, &dp, &rates, shot, seed, seed, &[k]);
+            let f =
+                camsim_sensor::expose_dual_pixel(&cam.sensor, &dp, &rates, shot, seed, seed, &[k]);
             (
                 f.left.dn.iter().map(|v| *v as f64 - black).collect(),
                 f.right.dn.iter().map(|v| *v as f64 - black).collect(),
@@ -107,13 +108,20 @@ pub fn measure_disparity(
         }
     };
     let period = cam.sensor.cfa.tile_cols().max(cam.sensor.cfa.tile_rows());
-    edge_disparity_px(&left, &right, cam.sensor.cols, opts.region, period, opts.ref_cols)
-        .ok_or_else(|| {
-            CliError::input(
-                camera_path,
-                "dual pixel: the disparity region holds no edge (flat left and right images)",
-            )
-        })
+    edge_disparity_px(
+        &left,
+        &right,
+        cam.sensor.cols,
+        opts.region,
+        period,
+        opts.ref_cols,
+    )
+    .ok_or_else(|| {
+        CliError::input(
+            camera_path,
+            "dual pixel: the disparity region holds no edge (flat left and right images)",
+        )
+    })
 }
 
 /// A calibrated disparity slope.
@@ -214,7 +222,10 @@ pub fn phase_detection_autofocus(
     if !(opts.slope_px_m.is_finite() && opts.slope_px_m != 0.0) {
         return Err(CliError::input(
             camera_path,
-            format!("dual pixel: the calibrated slope must be finite and non-zero, got {}", opts.slope_px_m),
+            format!(
+                "dual pixel: the calibrated slope must be finite and non-zero, got {}",
+                opts.slope_px_m
+            ),
         ));
     }
     let max_vergence = 0.99 / cam.optics.focal_length_m;

@@ -1148,13 +1148,7 @@ fn render_scene(
     grid: &WavelengthGrid,
     depth_aware: bool,
 ) -> Result<camsim_core::SceneRadiance, CliError> {
-    use camsim_render::job::{prepare, CameraChoice, RenderJob};
-    let step = grid
-        .step_nm()
-        .ok_or_else(|| CliError::input(&rf.scene, "render: the wavelength grid must be regular"))?;
-    let (w0, wn) = (grid.wavelength_nm[0], grid.wavelength_nm[grid.len() - 1]);
-    let bands = camsim_render::Bands::new(w0 - step / 2.0, wn + step / 2.0, step)
-        .map_err(|e| CliError::input(&rf.scene, format!("render bands: {e}")))?;
+    use camsim_render::job::CameraChoice;
     let camera: CameraChoice = match &rf.camera {
         None if depth_aware => CameraChoice::Pinhole,
         None => CameraChoice::Auto,
@@ -1168,45 +1162,17 @@ fn render_scene(
             "render.camera \"thinlens\": the camera's optics already defocus by depth (optics.focus_distance_m or blur kind \"lens\"); render with \"pinhole\"",
         ));
     }
-    let job = RenderJob {
-        scene: rf.scene.clone(),
+    let g = crate::animated::GridRender {
         camera_name: rf.camera_name.clone(),
         camera,
-        width: ((sensor.cols + 2 * margin) * os) as u32,
-        height: Some(((sensor.rows + 2 * margin) * os) as u32),
-        aperture_radius_m: None,
-        focus_distance_m: None,
-        settings: camsim_render::RenderSettings {
-            spp: rf.spp.unwrap_or(16),
-            seed,
-            bands,
-            max_depth: rf.max_depth.unwrap_or(-1),
-            rr_depth: camsim_render::RenderSettings::default().rr_depth,
-            variance: false,
-            depth_spp: 0,
-        },
+        sensor,
+        oversample: os,
+        margin_px: margin,
+        spp: rf.spp.unwrap_or(16),
+        max_depth: rf.max_depth.unwrap_or(-1),
     };
-    let err = |e: camsim_render::RenderError| CliError::input(&rf.scene, e.to_string());
-    let p = prepare(&job).map_err(err)?;
-    if p.camera.output_quantity() != camsim_render::camera::OutputQuantity::Radiance {
-        return Err(CliError::input(
-            &rf.scene,
-            "render.camera: camsim run needs a radiance camera (pinhole or thinlens); the optics stage forms the image",
-        ));
-    }
-    let out = camsim_render::render(
-        &p.scene,
-        p.camera.as_ref(),
-        p.camera_to_world,
-        &job.settings,
-        None,
-    );
-    let mut sr =
-        camsim_render::output::scene_radiance(&out, sensor.pixel_pitch_m / os as f64, None)
-            .map_err(err)?;
-    // resample the band-centre cube onto the run's grid (same wavelengths)
-    sr.radiance = sr.radiance.to_bands(grid);
-    Ok(sr)
+    let job = crate::animated::grid_render_job(&rf.scene, &g, seed, grid)?;
+    crate::animated::render_job_radiance(&job, None, sensor.pixel_pitch_m / os as f64, grid)
 }
 
 fn write_rgb16(path: &Path, data: &[u16], rows: usize, cols: usize) -> Result<(), CliError> {

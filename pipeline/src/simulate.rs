@@ -321,10 +321,7 @@ pub fn shot_electron_rate(
 ) -> Result<ElectronRate, CliError> {
     let mut rate = match uniform_electron_rate(set, shot_index, grid)? {
         Some(rate) => rate,
-        None => electron_rate(
-            &set.camera.sensor,
-            &shot_irradiance(set, shot_index, grid)?,
-        ),
+        None => electron_rate(&set.camera.sensor, &shot_irradiance(set, shot_index, grid)?),
     };
     crate::chain::apply_pixel_optics(&set.camera, &mut rate);
     Ok(rate)

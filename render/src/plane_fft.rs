@@ -21,22 +21,7 @@ thread_local! {
         RefCell::new((RealFftPlanner::new(), FftPlanner::new()));
 }
 
-/// The smallest n' ≥ n whose prime factors are 2, 3 and 5 (fast FFT sizes).
-fn smooth_size(n: usize) -> usize {
-    let mut m = n.max(1);
-    loop {
-        let mut k = m;
-        for p in [2, 3, 5] {
-            while k % p == 0 {
-                k /= p;
-            }
-        }
-        if k == 1 {
-            return m;
-        }
-        m += 1;
-    }
-}
+use camsim_core::fft_size::next_smooth as smooth_size;
 
 /// A kernel prepared for convolving `w × h` planes: the direct sum for small kernels, else
 /// the kernel's spectrum on the FFT grid.

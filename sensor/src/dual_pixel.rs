@@ -195,7 +195,11 @@ mod tests {
             assert!((pr.right.electrons_per_s[0] - 100.0 * (1.0 - s) as f32).abs() < 1e-4);
         }
         assert!(DualPixel { separation: 0.4 }.validate().is_err());
-        assert!(DualPixel { separation: f64::NAN }.validate().is_err());
+        assert!(DualPixel {
+            separation: f64::NAN
+        }
+        .validate()
+        .is_err());
     }
 
     /// Each half-photodiode clips at half the full well: a rate far above it reads the same

@@ -355,6 +355,22 @@ pub fn hot_pixel_count(sensor: &SensorModel) -> usize {
     }
 }
 
+/// `k` distinct values of [0, n), sorted: Floyd's sampling without replacement (Bentley &
+/// Floyd, "A sample of brilliance", CACM 30(9), 1987), each uniform integer in [0, m) by the
+/// multiply-shift reduction of one 64-bit draw (bias < m / 2^64). Draws exactly k numbers.
+pub(crate) fn distinct_sorted_indices(rng: &mut impl Rng, n: usize, k: usize) -> Vec<usize> {
+    let mut chosen = std::collections::HashSet::with_capacity(k);
+    for j in (n - k)..n {
+        let t = ((rng.next_u64() as u128 * (j + 1) as u128) >> 64) as usize;
+        if !chosen.insert(t) {
+            chosen.insert(j);
+        }
+    }
+    let mut idx: Vec<usize> = chosen.into_iter().collect();
+    idx.sort_unstable();
+    idx
+}
+
 /// The camera's hot pixels, sorted by (row, col): [`hot_pixel_count`] distinct positions
 /// (Floyd's sampling without replacement) and their rates, drawn from the camera seed's
 /// fixed-pattern stream (independent of the thread count). Empty without the block.
@@ -371,19 +387,8 @@ pub fn hot_pixel_map(sensor: &SensorModel, seed: u64) -> Vec<HotPixel> {
         seed,
         &[crate::pixel_rng::FIXED_PATTERN_TAG, HOT_PIXEL_STREAM_KIND],
     );
-    // Uniform integer in [0, m) by the multiply-shift reduction (bias < m / 2^64).
-    let mut below = |m: usize| ((rng.next_u64() as u128 * m as u128) >> 64) as usize;
-    // Floyd (Bentley & Floyd, CACM 30(9), 1987): k distinct values of [0, n).
-    let mut chosen = std::collections::HashSet::with_capacity(k);
-    for j in (n - k)..n {
-        let t = below(j + 1);
-        if !chosen.insert(t) {
-            chosen.insert(j);
-        }
-    }
-    let mut idx: Vec<usize> = chosen.into_iter().collect();
-    idx.sort_unstable();
-    idx.into_iter()
+    distinct_sorted_indices(&mut rng, n, k)
+        .into_iter()
         .map(|i| {
             let v = if h.log_sigma > 0.0 {
                 h.dark_voltage_v_per_s

@@ -165,17 +165,8 @@ pub fn rtn_pixel_map(sensor: &SensorModel, seed: u64) -> Vec<RtnPixel> {
         seed,
         &[crate::pixel_rng::FIXED_PATTERN_TAG, RTN_STREAM_KIND],
     );
-    let mut below = |m: usize| ((rng.next_u64() as u128 * m as u128) >> 64) as usize;
-    let mut chosen = std::collections::HashSet::with_capacity(k);
-    for j in (n - k)..n {
-        let t = below(j + 1);
-        if !chosen.insert(t) {
-            chosen.insert(j);
-        }
-    }
-    let mut idx: Vec<usize> = chosen.into_iter().collect();
-    idx.sort_unstable();
-    idx.into_iter()
+    crate::effects::distinct_sorted_indices(&mut rng, n, k)
+        .into_iter()
         .map(|i| RtnPixel {
             row: (i / sensor.cols) as u32,
             col: (i % sensor.cols) as u32,

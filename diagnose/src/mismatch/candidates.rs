@@ -265,6 +265,32 @@ fn fit_1d(
     }
 }
 
+/// One coordinate of [`cyclic_fit_1d`]: how a trial value enters the state, and the search
+/// interval around the state's current value.
+type Coordinate<'a> = (
+    &'a dyn Fn(&mut ModelState, f64),
+    &'a dyn Fn(&ModelState) -> (f64, f64),
+);
+
+/// Cyclic coordinate descent: `rounds` passes of [`fit_1d`] (7-point grid, tolerance 1e-3)
+/// over `coords` in order, each from the state the previous one left.
+fn cyclic_fit_1d(
+    eval: &dyn Fn(&ModelState) -> f64,
+    state: ModelState,
+    neg_ll: f64,
+    rounds: usize,
+    coords: &[Coordinate],
+) -> (ModelState, f64) {
+    let (mut st, mut f) = (state, neg_ll);
+    for _ in 0..rounds {
+        for (set, range) in coords {
+            let (lo, hi) = range(&st);
+            (st, f) = fit_1d(eval, &st, f, *set, lo, hi, 7, 1e-3);
+        }
+    }
+    (st, f)
+}
+
 /// `f` of every pixel of the rows a fit-row evaluation reads ([`Ctx::calc_rows`]; every
 /// pixel when the fit uses all rows), 0 elsewhere: the candidates' rate algebra touches only
 /// what the fit looks at (instead of full 1 MP images per likelihood evaluation).
@@ -1047,57 +1073,43 @@ fn fit_hot(
     };
     let mut st = state.clone();
     set_h(&mut st, fr0, v0, ls0);
-    let mut f = eval(&st);
-    for _ in 0..2 {
-        let h = st.sensor.effects.hot_pixels.expect("set");
-        let (s2, f2) = fit_1d(
-            &eval,
-            &st,
-            f,
-            &|s, x| {
-                let h = s.sensor.effects.hot_pixels.expect("set");
-                set_h(s, x.exp(), h.dark_voltage_v_per_s, h.log_sigma)
-            },
-            h.fraction.ln() - 1.5,
-            (h.fraction.ln() + 1.5).min(0.5f64.ln()),
-            7,
-            1e-3,
-        );
-        st = s2;
-        f = f2;
-        let h = st.sensor.effects.hot_pixels.expect("set");
-        let (s2, f2) = fit_1d(
-            &eval,
-            &st,
-            f,
-            &|s, x| {
-                let h = s.sensor.effects.hot_pixels.expect("set");
-                set_h(s, h.fraction, x.exp(), h.log_sigma)
-            },
-            h.dark_voltage_v_per_s.ln() - 1.0,
-            h.dark_voltage_v_per_s.ln() + 1.0,
-            7,
-            1e-3,
-        );
-        st = s2;
-        f = f2;
-        let h = st.sensor.effects.hot_pixels.expect("set");
-        let (s2, f2) = fit_1d(
-            &eval,
-            &st,
-            f,
-            &|s, x| {
-                let h = s.sensor.effects.hot_pixels.expect("set");
-                set_h(s, h.fraction, h.dark_voltage_v_per_s, x)
-            },
-            0.0,
-            (2.0 * h.log_sigma).max(1.5),
-            7,
-            1e-3,
-        );
-        st = s2;
-        f = f2;
-    }
+    let f = eval(&st);
+    let hot = |s: &ModelState| s.sensor.effects.hot_pixels.expect("set");
+    let (st, f) = cyclic_fit_1d(
+        &eval,
+        st,
+        f,
+        2,
+        &[
+            (
+                &|s, x| {
+                    let h = hot(s);
+                    set_h(s, x.exp(), h.dark_voltage_v_per_s, h.log_sigma)
+                },
+                &|s| {
+                    let l = hot(s).fraction.ln();
+                    (l - 1.5, (l + 1.5).min(0.5f64.ln()))
+                },
+            ),
+            (
+                &|s, x| {
+                    let h = hot(s);
+                    set_h(s, h.fraction, x.exp(), h.log_sigma)
+                },
+                &|s| {
+                    let l = hot(s).dark_voltage_v_per_s.ln();
+                    (l - 1.0, l + 1.0)
+                },
+            ),
+            (
+                &|s, x| {
+                    let h = hot(s);
+                    set_h(s, h.fraction, h.dark_voltage_v_per_s, x)
+                },
+                &|s| (0.0, (2.0 * hot(s).log_sigma).max(1.5)),
+            ),
+        ],
+    );
     if f < f0 {
         Ok(FitOutcome::Fitted {
             state: st,
@@ -1194,41 +1206,36 @@ fn fit_rtn(
     };
     let mut st = state.clone();
     set(&mut st, fr0, a0);
-    let mut f = eval(&st);
-    for _ in 0..2 {
-        let r = st.sensor.effects.rtn.expect("set");
-        let (s2, f2) = fit_1d(
-            &eval,
-            &st,
-            f,
-            &|s, x| {
-                let r = s.sensor.effects.rtn.expect("set");
-                set(s, x.exp(), r.amplitude_v)
-            },
-            r.fraction.ln() - 1.5,
-            (r.fraction.ln() + 1.5).min(0.5f64.ln()),
-            7,
-            1e-3,
-        );
-        st = s2;
-        f = f2;
-        let r = st.sensor.effects.rtn.expect("set");
-        let (s2, f2) = fit_1d(
-            &eval,
-            &st,
-            f,
-            &|s, x| {
-                let r = s.sensor.effects.rtn.expect("set");
-                set(s, r.fraction, x.exp())
-            },
-            r.amplitude_v.ln() - 1.0,
-            r.amplitude_v.ln() + 1.0,
-            7,
-            1e-3,
-        );
-        st = s2;
-        f = f2;
-    }
+    let f = eval(&st);
+    let rtn = |s: &ModelState| s.sensor.effects.rtn.expect("set");
+    let (st, f) = cyclic_fit_1d(
+        &eval,
+        st,
+        f,
+        2,
+        &[
+            (
+                &|s, x| {
+                    let a = rtn(s).amplitude_v;
+                    set(s, x.exp(), a)
+                },
+                &|s| {
+                    let l = rtn(s).fraction.ln();
+                    (l - 1.5, (l + 1.5).min(0.5f64.ln()))
+                },
+            ),
+            (
+                &|s, x| {
+                    let fr = rtn(s).fraction;
+                    set(s, fr, x.exp())
+                },
+                &|s| {
+                    let l = rtn(s).amplitude_v.ln();
+                    (l - 1.0, l + 1.0)
+                },
+            ),
+        ],
+    );
     if f < f0 {
         Ok(FitOutcome::Fitted {
             state: st,

@@ -32,7 +32,7 @@
 //!   (`|1/D_final − 1/Z|`), `depth_of_focus_per_m` (thin lens, circle of confusion one pixel
 //!   across, [`crate::pdaf::depth_of_focus_per_m`]), `pdaf_within_depth_of_focus` (1/0).
 use super::output::PointOutput;
-use crate::config::{camera_from_file, captures_with_camera, CameraFile, CapturesFile, CaptureSet};
+use crate::config::{camera_from_file, captures_with_camera, CameraFile, CaptureSet, CapturesFile};
 use crate::error::CliError;
 use crate::pdaf::{
     calibrate_slope, depth_of_focus_per_m, focus_vergence_per_m, measure_disparity,
@@ -118,8 +118,13 @@ fn capture_set(
         captures["simulation"] = s.clone();
     }
     let raw: CapturesFile = serde_json::from_value(captures).map_err(|e| e.to_string())?;
-    captures_with_camera(Path::new("point"), raw, cam.clone(), PathBuf::from("camera"))
-        .map_err(|e| e.one_line())
+    captures_with_camera(
+        Path::new("point"),
+        raw,
+        cam.clone(),
+        PathBuf::from("camera"),
+    )
+    .map_err(|e| e.one_line())
 }
 
 fn point(doc: &Value) -> Result<Point, String> {
@@ -145,16 +150,22 @@ fn point(doc: &Value) -> Result<Point, String> {
     }
     let frac = d.reference_fraction.unwrap_or(0.125);
     if !(frac > 0.0 && frac <= 0.5) {
-        return Err(format!("reference_fraction: must be in (0, 0.5], got {frac}"));
+        return Err(format!(
+            "reference_fraction: must be in (0, 0.5], got {frac}"
+        ));
     }
     let pd = d.pdaf.clone().unwrap_or_default();
     let tolerance_px = pd.tolerance_px.unwrap_or(0.05);
     if !(tolerance_px.is_finite() && tolerance_px > 0.0) {
-        return Err(format!("pdaf.tolerance_px: must be > 0, got {tolerance_px}"));
+        return Err(format!(
+            "pdaf.tolerance_px: must be > 0, got {tolerance_px}"
+        ));
     }
     let max_iterations = pd.max_iterations.unwrap_or(8);
     if !(1..=100).contains(&max_iterations) {
-        return Err(format!("pdaf.max_iterations: must be 1 to 100, got {max_iterations}"));
+        return Err(format!(
+            "pdaf.max_iterations: must be 1 to 100, got {max_iterations}"
+        ));
     }
     let chart_distance_m = pd.calibration_distance_m.unwrap_or(focus_m);
     if !(chart_distance_m.is_finite() && chart_distance_m > f_m) {
@@ -162,7 +173,9 @@ fn point(doc: &Value) -> Result<Point, String> {
             "pdaf.calibration_distance_m: must be finite and beyond the focal length ({f_m} m), got {chart_distance_m}"
         ));
     }
-    let offsets = pd.calibration_offsets_per_m.unwrap_or_else(|| vec![-0.5, 0.5]);
+    let offsets = pd
+        .calibration_offsets_per_m
+        .unwrap_or_else(|| vec![-0.5, 0.5]);
     let chart_u = 1.0 / chart_distance_m;
     if offsets.is_empty()
         || offsets
@@ -296,7 +309,11 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
     out.put("depth_of_focus_per_m", dof);
     out.put(
         "pdaf_within_depth_of_focus",
-        if pdaf.converged && focus_error <= dof { 1.0 } else { 0.0 },
+        if pdaf.converged && focus_error <= dof {
+            1.0
+        } else {
+            0.0
+        },
     );
     out.detail = json!({
         "pdaf_converged": pdaf.converged,
