@@ -64,11 +64,20 @@ fn dual_pixel_study_disparity_follows_thin_lens_and_pdaf_focuses() {
         // The closed form reported is the thin-lens one.
         let e = num(r, "disparity_px_expected");
         let indep = thin_lens_disparity_px(z);
-        assert!((e - indep).abs() < 1e-9 * (1.0 + indep.abs()), "Z {z}: {e} vs {indep}");
+        assert!(
+            (e - indep).abs() < 1e-9 * (1.0 + indep.abs()),
+            "Z {z}: {e} vs {indep}"
+        );
         // Noise-free: the measured edge disparity is exactly the x-centroid difference of the
         // sampled half-disc kernels the chain applies (a step edge's centroid shift; f32 sums).
-        let (m, sampled) = (num(r, "disparity_px_measured"), num(r, "disparity_px_sampled"));
-        assert!((m - sampled).abs() < 2e-3, "Z {z}: measured {m}, kernels' {sampled}");
+        let (m, sampled) = (
+            num(r, "disparity_px_measured"),
+            num(r, "disparity_px_sampled"),
+        );
+        assert!(
+            (m - sampled).abs() < 2e-3,
+            "Z {z}: measured {m}, kernels' {sampled}"
+        );
         // The kernels converge to the half-disc closed form: each sample cell counts at its
         // centre, so the centre column (light fraction ≈ 2/(πr) of a half disc of r samples)
         // sits ¼ sample off: a bias below 1/(π r) samples on the disparity, plus the
@@ -85,25 +94,43 @@ fn dual_pixel_study_disparity_follows_thin_lens_and_pdaf_focuses() {
                 "Z {z}: kernels' {sampled} vs closed form {e} (r = {coc} px)"
             );
         }
-        assert!((m - e).abs() <= tol, "Z {z}: measured {m} expected {e} ± {tol}");
+        assert!(
+            (m - e).abs() <= tol,
+            "Z {z}: measured {m} expected {e} ± {tol}"
+        );
         // One noisy readout: within 5 standard errors (row scatter) plus the sampling bound.
-        let (nz, se) = (num(r, "disparity_px_noisy"), num(r, "disparity_px_noisy_std_error"));
+        let (nz, se) = (
+            num(r, "disparity_px_noisy"),
+            num(r, "disparity_px_noisy_std_error"),
+        );
         assert!(se > 0.0 && se < 0.3, "Z {z}: standard error {se}");
-        assert!((nz - e).abs() <= 5.0 * se + tol, "Z {z}: noisy {nz} expected {e}, SE {se}");
+        assert!(
+            (nz - e).abs() <= 5.0 * se + tol,
+            "Z {z}: noisy {nz} expected {e}, SE {se}"
+        );
         if e.abs() > tol {
             signs.push((z, m.signum()));
         } else {
             assert!(m.abs() <= tol, "in focus: {m}");
         }
         // Calibrated slope against α = 8 A v / (3π p) at the 1 m calibration focus.
-        let (sc, se_) = (num(r, "slope_px_m_calibrated"), num(r, "slope_px_m_expected"));
+        let (sc, se_) = (
+            num(r, "slope_px_m_calibrated"),
+            num(r, "slope_px_m_expected"),
+        );
         let alpha = thin_lens_disparity_px(1.0 / 2.0);
         assert!((se_ - alpha).abs() < 1e-9 * alpha, "{se_} vs {alpha}");
         assert!((sc - se_).abs() < 0.05 * se_, "calibrated {sc} vs {se_}");
         // PDAF from 1 m onto Z: converged within the depth of focus, in a few measurements.
-        let (err, dof) = (num(r, "pdaf_focus_error_per_m"), num(r, "depth_of_focus_per_m"));
+        let (err, dof) = (
+            num(r, "pdaf_focus_error_per_m"),
+            num(r, "depth_of_focus_per_m"),
+        );
         assert_eq!(num(r, "pdaf_within_depth_of_focus"), 1.0, "Z {z}: {r}");
-        assert!(err <= dof, "Z {z}: focus error {err} 1/m beyond the depth of focus {dof}");
+        assert!(
+            err <= dof,
+            "Z {z}: focus error {err} 1/m beyond the depth of focus {dof}"
+        );
         let it = num(r, "pdaf_iterations");
         assert!((1.0..=4.0).contains(&it), "Z {z}: {it} measurements");
     }
@@ -130,8 +157,13 @@ fn edge_set(camera: Value, z_m: f64) -> CaptureSet {
         }],
     });
     let raw: CapturesFile = serde_json::from_value(captures).unwrap();
-    captures_with_camera(Path::new("captures.json"), raw, cam, PathBuf::from("camera.json"))
-        .unwrap()
+    captures_with_camera(
+        Path::new("captures.json"),
+        raw,
+        cam,
+        PathBuf::from("camera.json"),
+    )
+    .unwrap()
 }
 
 #[test]
@@ -186,9 +218,17 @@ fn imperfect_split_scales_the_disparity() {
         ref_cols: 12,
         frames: DisparityFrames::Expected,
     };
-    let d = measure_disparity(&set.camera, &set.camera_path, &scene, &grid, &shot, &opts, 0)
-        .unwrap()
-        .disparity_px;
+    let d = measure_disparity(
+        &set.camera,
+        &set.camera_path,
+        &scene,
+        &grid,
+        &shot,
+        &opts,
+        0,
+    )
+    .unwrap()
+    .disparity_px;
     let e = (2.0 * 0.75 - 1.0) * thin_lens_disparity_px(0.4);
     let tol = 0.02 + 0.02 * e.abs();
     assert!((d - e).abs() <= tol, "separation 0.75: {d} vs {e} ± {tol}");
@@ -198,9 +238,18 @@ fn imperfect_split_scales_the_disparity() {
 fn dual_pixel_block_absent_or_present_keeps_the_normal_frame() {
     let mut with = example_camera();
     let mut without = with.clone();
-    without["sensor"].as_object_mut().unwrap().remove("dual_pixel");
-    with["optics"].as_object_mut().unwrap().remove("focus_distance_m");
-    without["optics"].as_object_mut().unwrap().remove("focus_distance_m");
+    without["sensor"]
+        .as_object_mut()
+        .unwrap()
+        .remove("dual_pixel");
+    with["optics"]
+        .as_object_mut()
+        .unwrap()
+        .remove("focus_distance_m");
+    without["optics"]
+        .as_object_mut()
+        .unwrap()
+        .remove("focus_distance_m");
     let frame = |c: Value| {
         let set = edge_set(c, 0.4);
         let mut out = Vec::new();
@@ -215,14 +264,23 @@ fn dual_pixel_block_absent_or_present_keeps_the_normal_frame() {
     };
     let (a, b) = (frame(with), frame(without));
     assert!(!a.is_empty());
-    assert_eq!(a, b, "sensor.dual_pixel must not change the normal chain's frame");
+    assert_eq!(
+        a, b,
+        "sensor.dual_pixel must not change the normal chain's frame"
+    );
 }
 
 #[test]
 fn dual_pixel_key_errors_are_one_line() {
     for (block, needle) in [
-        (json!({"separation": 0.3}), "sensor.dual_pixel.separation = 0.3"),
-        (json!({"separation": 1.5}), "sensor.dual_pixel.separation = 1.5"),
+        (
+            json!({"separation": 0.3}),
+            "sensor.dual_pixel.separation = 0.3",
+        ),
+        (
+            json!({"separation": 1.5}),
+            "sensor.dual_pixel.separation = 1.5",
+        ),
         (json!({"split": "vertical"}), "split"),
     ] {
         let mut c = example_camera();

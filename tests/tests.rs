@@ -2,8 +2,8 @@
 mod calibrate;
 mod cli;
 mod develop;
-mod dual_pixel;
 mod diagnose;
+mod dual_pixel;
 mod effects;
 mod emva1288;
 mod hostile;

@@ -42,12 +42,8 @@ pub fn edge_disparity_px(
     for pr in 0..p {
         for pc in 0..p {
             // The sub-lattice of phase (pr, pc) inside the region.
-            let rows: Vec<usize> = (region.row0..region.row1)
-                .filter(|r| r % p == pr)
-                .collect();
-            let cs: Vec<usize> = (region.col0..region.col1)
-                .filter(|c| c % p == pc)
-                .collect();
+            let rows: Vec<usize> = (region.row0..region.row1).filter(|r| r % p == pr).collect();
+            let cs: Vec<usize> = (region.col0..region.col1).filter(|c| c % p == pc).collect();
             if rows.is_empty() || cs.len() < 3 {
                 continue;
             }
