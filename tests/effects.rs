@@ -953,6 +953,10 @@ fn demo_magnitude(id: &str) -> f64 {
         "qe_shift" => -6.0,
         "distortion" => -0.04,
         "lateral_color" => 2.5,
+        "row_noise" => 4.0e-4,
+        "rtn" => 0.006,
+        "black_level_drift" => 6.0,
+        "dark_temperature" => 6.0,
         _ => unreachable!(),
     }
 }
@@ -990,9 +994,9 @@ fn demo_generates_every_effect_with_its_true_magnitude() {
         assert!((file[0].1 - truth.effects[0].magnitude).abs() <= 1e-14 * file[0].1.abs());
         let got = truth.effects[0].magnitude;
         // Solved generator parameters reproduce the request; drawn patterns are realised
-        // values (hot pixels: round(f·N)/N; column offsets: sample σ of 48 columns).
+        // values (hot and RTN pixels: round(f·N)/N; column offsets: sample σ of 48 columns).
         let tol = match id {
-            "hot_pixels" => 0.5 / (32.0 * 48.0),
+            "hot_pixels" | "rtn" => 0.5 / (32.0 * 48.0),
             "column_fpn" => 0.35 * m,
             _ => 1e-6 * m.abs(),
         };
