@@ -32,10 +32,10 @@
 //!   (`|1/D_final − 1/Z|`), `depth_of_focus_per_m` (thin lens, circle of confusion one pixel
 //!   across, [`crate::pdaf::depth_of_focus_per_m`]), `pdaf_within_depth_of_focus` (1/0).
 use super::output::PointOutput;
-use crate::config::{camera_from_file, captures_with_camera, CameraFile, CapturesFile, CaptureSet};
+use crate::config::{camera_from_file, captures_with_camera, CameraFile, CaptureSet, CapturesFile};
 use crate::error::CliError;
 use crate::pdaf::{
-    calibrate_slope, depth_of_focus_per_m, focus_vergence_per_m, measure_disparity,
+    calibrate_slope, depth_of_focus_per_m, focus_vergence_per_m, focused_at, measure_disparity,
     phase_detection_autofocus, DisparityFrames, DisparityOptions, PdafOptions,
 };
 use camsim_core::stats::Rect;
@@ -58,6 +58,9 @@ struct DualPixelDoc {
     pdaf: Option<PdafDoc>,
     #[serde(default)]
     simulation: Option<Value>,
+    /// A real lens (prescription) in place of the thin lens.
+    #[serde(default)]
+    lens: Option<Value>,
     /// Added by the study planner (hashed with the point).
     #[allow(dead_code)]
     #[serde(default)]
@@ -93,6 +96,87 @@ struct Point {
     tolerance_px: f64,
     max_iterations: usize,
     calibration_offsets_per_m: Vec<f64>,
+    /// The real lens and how to build its blur (installed by [`evaluate`]: the field model is
+    /// not built by [`validate`]).
+    lens: Option<(
+        camsim_lens::LensPrescription,
+        camsim_optics::LensBlurOptions,
+    )>,
+}
+
+/// The point's real lens: the prescription `lens` with the camera's `optics.blur` focus keys
+/// (`focus_distance_m` from the first vertex, required; `focus_criterion`,
+/// `focus_frequency_cyc_per_mm`, `focus_group_surfaces`), and the camera with blur "none" in
+/// its place. Returns the camera file, the lens and its blur options and the focus vergence
+/// (1/m from the entrance pupil) and effective focal length (m).
+#[allow(clippy::type_complexity)]
+fn lens_point(
+    camera: &Value,
+    lens: &Value,
+) -> Result<
+    (
+        CameraFile,
+        camsim_lens::LensPrescription,
+        camsim_optics::LensBlurOptions,
+        f64,
+        f64,
+    ),
+    String,
+> {
+    let mut cam = camera.clone();
+    let blur = cam["optics"]["blur"].clone();
+    match blur["kind"].as_str() {
+        Some("lens") => {}
+        k => {
+            return Err(format!(
+                "camera.optics.blur.kind: {k:?} but the point has a lens; use \"lens\" with focus_distance_m"
+            ))
+        }
+    }
+    let b: crate::config::BlurFile =
+        serde_json::from_value(blur).map_err(|e| format!("camera.optics.blur: {e}"))?;
+    if b.lens_file.is_some() {
+        return Err("camera.optics.blur.lens_file: in a study the lens is the point's \"lens\" (e.g. {\"$file\": \"lens.json\"})".into());
+    }
+    let fd = match b.focus_distance_m {
+        Some(d) if d.is_finite() && d > 0.0 => d,
+        d => {
+            return Err(format!(
+                "camera.optics.blur.focus_distance_m: required by a dual_pixel point with a lens (m from the first vertex, > 0), got {d:?}"
+            ))
+        }
+    };
+    let method = camsim_lens::FocusMethod::from_keys(
+        b.focus_criterion.as_deref(),
+        b.focus_frequency_cyc_per_mm,
+        b.focus_group_surfaces,
+    )
+    .map_err(|m| format!("camera.optics.blur.{m}"))?;
+    if let Some(o) = cam.get_mut("optics").and_then(Value::as_object_mut) {
+        o.insert("blur".into(), json!({"kind": "none"}));
+        o.remove("focus_distance_m");
+    }
+    let f: CameraFile = serde_json::from_value(cam).map_err(|e| format!("camera: {e}"))?;
+    let prescription = camsim_lens::LensPrescription::from_json_str(
+        &lens.to_string(),
+        &camsim_lens::GlassCatalog::bundled(),
+    )
+    .map_err(|e| format!("lens: {e}"))?;
+    let fo = prescription
+        .first_order(prescription.primary_nm)
+        .map_err(|e| format!("lens: {e}"))?;
+    let mut opts = camsim_optics::LensBlurOptions::covering(1.0);
+    opts.focus = camsim_optics::LensFocus::At(Some(fd * 1e3));
+    opts.focus_method = method;
+    // distortion and relative illumination only (the dual-pixel PSFs are traced per half)
+    opts.kind = Some(camsim_lens::PsfKind::Geometric);
+    Ok((
+        f,
+        prescription,
+        opts,
+        1e3 / (fd * 1e3 + fo.entrance_pupil_z_mm),
+        fo.efl_mm * 1e-3,
+    ))
 }
 
 fn capture_set(
@@ -118,26 +202,58 @@ fn capture_set(
         captures["simulation"] = s.clone();
     }
     let raw: CapturesFile = serde_json::from_value(captures).map_err(|e| e.to_string())?;
-    captures_with_camera(Path::new("point"), raw, cam.clone(), PathBuf::from("camera"))
-        .map_err(|e| e.one_line())
+    captures_with_camera(
+        Path::new("point"),
+        raw,
+        cam.clone(),
+        PathBuf::from("camera"),
+    )
+    .map_err(|e| e.one_line())
 }
 
 fn point(doc: &Value) -> Result<Point, String> {
     let d: DualPixelDoc = serde_json::from_value(doc.clone()).map_err(|e| e.to_string())?;
-    let f: CameraFile =
-        serde_json::from_value(d.camera.clone()).map_err(|e| format!("camera: {e}"))?;
+    let (f, lens, lens_focus) = match &d.lens {
+        None => (
+            serde_json::from_value(d.camera.clone()).map_err(|e| format!("camera: {e}"))?,
+            None,
+            None,
+        ),
+        Some(l) => {
+            let (f, pr, opts, u_focus, efl_m) = lens_point(&d.camera, l)?;
+            (f, Some((pr, opts)), Some((u_focus, efl_m)))
+        }
+    };
     let cam = camera_from_file(Path::new("camera"), f).map_err(|e| e.one_line())?;
     if cam.dual_pixel.is_none() {
         return Err("camera.sensor.dual_pixel: required by a dual_pixel point (e.g. {})".into());
     }
-    let Some(focus_m) = cam.thin_lens_focus_m else {
-        return Err(
-            "camera.optics.focus_distance_m: required by a dual_pixel point (the thin lens's focus)"
-                .into(),
-        );
+    let (focus_m, f_m) = match lens_focus {
+        Some((u_focus, efl_m)) => (1.0 / u_focus, efl_m),
+        None => {
+            let Some(focus_m) = cam.thin_lens_focus_m else {
+                return Err(
+                    "camera.optics.focus_distance_m: required by a dual_pixel point (the thin lens's focus)"
+                        .into(),
+                );
+            };
+            (focus_m, cam.optics.focal_length_m)
+        }
     };
+    // the sensor's half-diagonal, as camera.json's blur kind "lens" covers it; merit
+    // frequency default half the pixel Nyquist
+    let lens = lens.map(|(pr, mut o)| {
+        let s = &cam.sensor;
+        o.max_image_height_mm = (0.5 * s.pixel_pitch_m * (s.rows as f64).hypot(s.cols as f64))
+            .max(s.pixel_pitch_m)
+            * 1e3;
+        o.focus_method.frequency_cyc_per_mm = o
+            .focus_method
+            .frequency_cyc_per_mm
+            .or(Some(0.25 / (s.pixel_pitch_m * 1e3)));
+        (pr, o)
+    });
     let u = d.object_vergence_per_m;
-    let f_m = cam.optics.focal_length_m;
     if !(u.is_finite() && u > 0.0 && 1.0 / u > f_m) {
         return Err(format!(
             "object_vergence_per_m: must be > 0 with 1/value beyond the focal length ({f_m} m), got {u}"
@@ -145,16 +261,22 @@ fn point(doc: &Value) -> Result<Point, String> {
     }
     let frac = d.reference_fraction.unwrap_or(0.125);
     if !(frac > 0.0 && frac <= 0.5) {
-        return Err(format!("reference_fraction: must be in (0, 0.5], got {frac}"));
+        return Err(format!(
+            "reference_fraction: must be in (0, 0.5], got {frac}"
+        ));
     }
     let pd = d.pdaf.clone().unwrap_or_default();
     let tolerance_px = pd.tolerance_px.unwrap_or(0.05);
     if !(tolerance_px.is_finite() && tolerance_px > 0.0) {
-        return Err(format!("pdaf.tolerance_px: must be > 0, got {tolerance_px}"));
+        return Err(format!(
+            "pdaf.tolerance_px: must be > 0, got {tolerance_px}"
+        ));
     }
     let max_iterations = pd.max_iterations.unwrap_or(8);
     if !(1..=100).contains(&max_iterations) {
-        return Err(format!("pdaf.max_iterations: must be 1 to 100, got {max_iterations}"));
+        return Err(format!(
+            "pdaf.max_iterations: must be 1 to 100, got {max_iterations}"
+        ));
     }
     let chart_distance_m = pd.calibration_distance_m.unwrap_or(focus_m);
     if !(chart_distance_m.is_finite() && chart_distance_m > f_m) {
@@ -162,7 +284,9 @@ fn point(doc: &Value) -> Result<Point, String> {
             "pdaf.calibration_distance_m: must be finite and beyond the focal length ({f_m} m), got {chart_distance_m}"
         ));
     }
-    let offsets = pd.calibration_offsets_per_m.unwrap_or_else(|| vec![-0.5, 0.5]);
+    let offsets = pd
+        .calibration_offsets_per_m
+        .unwrap_or_else(|| vec![-0.5, 0.5]);
     let chart_u = 1.0 / chart_distance_m;
     if offsets.is_empty()
         || offsets
@@ -184,6 +308,7 @@ fn point(doc: &Value) -> Result<Point, String> {
         tolerance_px,
         max_iterations,
         calibration_offsets_per_m: offsets,
+        lens,
     })
 }
 
@@ -194,7 +319,13 @@ pub fn validate(doc: &Value) -> Result<(), String> {
 
 /// Evaluate a dual-pixel point (see the module documentation).
 pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliError> {
-    let p = point(doc).map_err(CliError::Other)?;
+    let mut p = point(doc).map_err(CliError::Other)?;
+    if let Some((lens, opts)) = &p.lens {
+        let blur = camsim_optics::LensBlur::from_prescription(lens, opts)
+            .map_err(|e| CliError::Other(format!("lens: {e}")))?;
+        p.set.camera.optics.blur = camsim_optics::Blur::Lens(blur.clone());
+        p.chart.camera.optics.blur = camsim_optics::Blur::Lens(blur);
+    }
     let cam = &p.set.camera;
     let path = &p.set.camera_path;
     let grid = crate::chain::wavelength_grid(&p.set);
@@ -250,8 +381,7 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
         &cal_focus,
     )?;
     let slope_expected = {
-        let mut c = cam.clone();
-        c.thin_lens_focus_m = Some(p.chart_distance_m);
+        let c = focused_at(cam, path, chart_u)?;
         // α = d / (1/Z − 1/D) at unit defocus, closed form
         crate::chain::dual_pixel_expected_disparity_px(&c, path, Some(1.0 / (chart_u + 1.0)))?
     };
@@ -269,8 +399,7 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
         },
     )?;
     let final_u = pdaf.final_focus_vergence_per_m;
-    let mut at_final = cam.clone();
-    at_final.thin_lens_focus_m = (final_u > 0.0).then(|| 1.0 / final_u);
+    let at_final = focused_at(cam, path, final_u)?;
     let dof = depth_of_focus_per_m(&at_final, path)?;
     let focus_error = (final_u - 1.0 / z).abs();
 
@@ -280,7 +409,12 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
     out.put("coc_radius_px", coc_px);
     out.put("disparity_px_expected", expected);
     out.put("disparity_px_measured", measured.disparity_px);
-    let sampled = sampled_kernel_disparity_px(cam, scene.sample_pitch_m, coc_px, separation);
+    let sampled = match crate::pdaf::real_lens(cam) {
+        None => sampled_kernel_disparity_px(cam, scene.sample_pitch_m, coc_px, separation),
+        Some((lb, f)) => {
+            lens_kernel_disparity_px(cam, lb, f, scene.sample_pitch_m, 1.0 / z, separation)?
+        }
+    };
     out.put("disparity_px_sampled", sampled);
     out.put(
         "disparity_px_tolerance",
@@ -296,7 +430,11 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
     out.put("depth_of_focus_per_m", dof);
     out.put(
         "pdaf_within_depth_of_focus",
-        if pdaf.converged && focus_error <= dof { 1.0 } else { 0.0 },
+        if pdaf.converged && focus_error <= dof {
+            1.0
+        } else {
+            0.0
+        },
     );
     out.detail = json!({
         "pdaf_converged": pdaf.converged,
@@ -332,4 +470,44 @@ fn sampled_kernel_disparity_px(
             / k.sum()
     };
     (2.0 * separation - 1.0) * (centroid_m(PupilHalf::Right) - centroid_m(PupilHalf::Left)) / p
+}
+
+/// The disparity (pixels) implied by the traced half-pupil kernels of the real lens the chain
+/// applies ([`camsim_render::depth_path::LensDualPixelDefocus`]) at inverse depth `inv_z`
+/// (1/m) and the scene sample pitch `dx_m`: the difference of their x-centroids averaged over
+/// the tabulated wavelengths, times `2s − 1`.
+fn lens_kernel_disparity_px(
+    cam: &crate::config::Camera,
+    lb: &camsim_optics::LensBlur,
+    f: &camsim_lens::FocusedLens,
+    dx_m: f64,
+    inv_z: f64,
+    separation: f64,
+) -> Result<f64, CliError> {
+    let dp = camsim_render::depth_path::LensDualPixelDefocus::new(
+        f,
+        dx_m * 1e3,
+        &lb.model.wavelengths_nm,
+        32,
+        &[inv_z],
+    )
+    .map_err(|e| CliError::Other(format!("lens: {e}")))?;
+    let cx = |k: &camsim_render::depth_path::Kernel| {
+        let n = 2 * k.radius + 1;
+        k.values
+            .iter()
+            .enumerate()
+            .map(|(i, v)| *v as f64 * ((i % n) as f64 - k.radius as f64))
+            .sum::<f64>()
+            / k.values.iter().map(|v| *v as f64).sum::<f64>()
+    };
+    let n = dp.wavelengths_nm.len();
+    let mean_samples = (0..n)
+        .map(|w| {
+            let (l, r) = dp.kernels(w, inv_z);
+            cx(&r) - cx(&l)
+        })
+        .sum::<f64>()
+        / n as f64;
+    Ok((2.0 * separation - 1.0) * mean_samples * dx_m / cam.sensor.pixel_pitch_m)
 }
