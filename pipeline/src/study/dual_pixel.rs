@@ -170,6 +170,10 @@ fn lens_point(
     opts.focus_method = method;
     // distortion and relative illumination only (the dual-pixel PSFs are traced per half)
     opts.kind = Some(camsim_lens::PsfKind::Geometric);
+    // the lens's own wavelengths (each band uses the nearest), few field heights: a study
+    // point's sensor is small
+    opts.wavelengths_nm = prescription.wavelengths_nm.clone();
+    opts.n_dense_fields = 9;
     Ok((
         f,
         prescription,
@@ -331,9 +335,15 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
     let grid = crate::chain::wavelength_grid(&p.set);
     let scene = crate::chain::shot_scene(&p.set, 0, &grid)?;
     let chart = crate::chain::shot_scene(&p.chart, 0, &grid)?;
+    // The shot's exposure from the normal pixel's light; a real lens's PSFs are left out
+    // there (a normalised PSF does not change the light level the exposure depends on).
+    let mut exposure_set = p.set.clone();
+    if let camsim_optics::Blur::Lens(l) = &mut exposure_set.camera.optics.blur {
+        l.apply_psf = false;
+    }
     let rate = camsim_sensor::electron_rate(
         &cam.sensor,
-        &crate::chain::irradiance_of(&p.set, &scene, &grid)?,
+        &crate::chain::irradiance_of(&exposure_set, &scene, &grid)?,
     );
     let shot = crate::chain::shot_exposure(&p.set, 0, &rate);
     let s = &cam.sensor;
