@@ -17,7 +17,7 @@
 //! | HDR readouts (split pixel, DCG, bracketing; DN) | [`hdr_model`], [`hdr_readout_models`], [`simulate_hdr_frame`] | [`camsim_sensor::expose_hdr`] |
 //! | HDR merge (linear exposure, e⁻) | [`merge_hdr`] | [`camsim_isp::hdr_merge()`] |
 //! | contrast autofocus (lens position of the sharpest region) | [`crate::autofocus::contrast_autofocus`] | the steps above per position |
-//! | dual pixel (left/right pupil-half images, half-photodiode readout) | [`dual_pixel_irradiance`], [`dual_pixel_rates`], [`expected_dual_pixel_frames`]; phase-detection AF: [`crate::pdaf::phase_detection_autofocus`] | [`camsim_optics::half_pupil_psf`] by depth slab ([`camsim_render::depth_path::defocus_layered_with`]), [`camsim_optics::form_image`], [`camsim_sensor::DualPixel::photodiode_rates`], [`camsim_sensor::expected_dual_pixel_dn`] |
+//! | dual pixel (left/right pupil-half images, half-photodiode readout) | [`dual_pixel_irradiance`], [`dual_pixel_rates`], [`expected_dual_pixel_frames`]; phase-detection AF: [`crate::pdaf::phase_detection_autofocus`] | [`camsim_optics::half_pupil_psf`] (thin lens) or [`camsim_render::depth_path::LensDualPixelDefocus`] (real lens) by depth slab ([`camsim_render::depth_path::defocus_layered_with`]), [`camsim_optics::form_image`], [`camsim_sensor::DualPixel::photodiode_rates`], [`camsim_sensor::expected_dual_pixel_dn`] |
 use crate::config::{Camera, CaptureSet, Exposure};
 use crate::error::CliError;
 use camsim_core::image::{Plane, RawFrame, SceneRadiance, SensorIrradiance};

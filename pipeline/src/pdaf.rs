@@ -16,6 +16,11 @@
 //!   slightly with the focus (the sensor distance v), which the iteration absorbs.
 //!   The focus is kept beyond the focal length (vergence clamped to `[0, 0.99/f]`).
 //!
+//! * **Real lens** (`blur.kind = "lens"`, issue 21): the half-pupil images are the lens's
+//!   traced half-pupil PSFs ([`crate::chain::dual_pixel_irradiance`]) and each focus move
+//!   refocuses the lens by its focus model ([`focused_at`]: the whole lens, or its focusing
+//!   group); vergences are measured from the lens's paraxial entrance pupil.
+//!
 //! The depth of focus the loop must land in is the thin-lens one for an acceptable circle of
 //! confusion one pixel pitch `p` across: `|1/D − 1/z| ≤ (p/2) / (A v)` ([`depth_of_focus_per_m`]).
 use crate::chain::{dual_pixel_rates, expected_dual_pixel_frames};

@@ -14,6 +14,7 @@
 //! | `reference_fraction` | 0.125 | fraction of the columns at each side used as the edge's reference levels |
 //! | `pdaf` | `{}` | `tolerance_px` (0.05), `max_iterations` (8), `calibration_distance_m` (the camera's focus distance), `calibration_offsets_per_m` ([−0.5, 0.5]: focus vergences of the calibration relative to the chart's) |
 //! | `simulation` | absent | captures.json `simulation` block |
+//! | `lens` | absent | a real lens (prescription) in place of the thin lens: the camera's `optics.blur` is then `{"kind": "lens", "focus_distance_m": …}` (m from the first vertex; focus keys as in camera.json, no `lens_file`); vergences are from the lens's entrance pupil, the disparity is formed by its traced half-pupil PSFs and the loop refocuses it by its focus model (docs/study.md) |
 //!
 //! Metrics (one row of the study table):
 //! * `object_distance_m`, `defocus_per_m` (`1/Z − 1/D`), `coc_radius_px` (signed);
