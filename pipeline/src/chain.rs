@@ -585,7 +585,7 @@ pub fn dual_pixel_expected_disparity_px(
 /// ([`camsim_optics::form_image`]). The two halves sum to the thin-lens depth-aware image of
 /// [`irradiance_and_blur_of`] (the half discs partition its pillbox). A real lens
 /// (`blur.kind = "lens"`, focused by the focus model) uses its traced half-pupil PSFs instead
-/// ([`dual_pixel_lens_irradiance`]).
+/// (`dual_pixel_lens_irradiance`).
 pub fn dual_pixel_irradiance(
     cam: &Camera,
     camera_path: &Path,
