@@ -374,20 +374,16 @@ fn entry(
             }
         }
         PsfKind::Geometric => {
-            let b = lens.trace_system(w).trace_pupil(
+            img = bin_geometric_psf(
+                lens,
                 &aim,
-                &pupil_grid(opts.pupil_n),
-                Clipping::SemiDiameters,
+                chief.image_mm,
+                w,
+                opts.pupil_n,
+                pitch_mm,
+                psf_n,
+                |_| true,
             );
-            for r in (0..b.len()).filter_map(|i| b.get(i)) {
-                {
-                    let fx = ((r.image_mm[0] - chief.image_mm[0]) / pitch_mm + c0 + 0.5).floor();
-                    let fy = ((r.image_mm[1] - chief.image_mm[1]) / pitch_mm + c0 + 0.5).floor();
-                    if fx >= 0.0 && fy >= 0.0 && (fx as usize) < psf_n && (fy as usize) < psf_n {
-                        img[fy as usize * psf_n + fx as usize] += 1.0;
-                    }
-                }
-            }
         }
     }
     normalise(&mut img);
@@ -395,6 +391,111 @@ fn entry(
         real_height_mm: chief.image_mm[1],
         psf: img,
         aliased,
+    })
+}
+
+/// The geometric PSF (ray counts, not normalised) of the rays of the `pupil_n`² entrance-pupil
+/// grid ([`pupil_grid`], normalised pupil coordinates) that `keep` accepts, traced through
+/// `lens` at wavelength `w` for the field of `aim` and binned on a `psf_n`² grid of pitch
+/// `pitch_mm` centred (bin centre) on the chief ray's image point `chief_mm`: the one binning of
+/// [`FieldModel`]'s geometric PSFs and of [`geometric_pupil_half_psfs`].
+#[allow(clippy::too_many_arguments)]
+fn bin_geometric_psf(
+    lens: &LensPrescription,
+    aim: &crate::trace::FieldAim,
+    chief_mm: crate::trace::Vec3,
+    w: f64,
+    pupil_n: usize,
+    pitch_mm: f64,
+    psf_n: usize,
+    keep: impl Fn(&[f64; 2]) -> bool,
+) -> Vec<f64> {
+    let c0 = (psf_n / 2) as f64;
+    let grid = pupil_grid(pupil_n);
+    let b = lens
+        .trace_system(w)
+        .trace_pupil(aim, &grid, Clipping::SemiDiameters);
+    let mut img = vec![0.0; psf_n * psf_n];
+    for (i, p) in grid.iter().enumerate() {
+        let Some(r) = b.get(i).filter(|_| keep(p)) else {
+            continue;
+        };
+        let fx = ((r.image_mm[0] - chief_mm[0]) / pitch_mm + c0 + 0.5).floor();
+        let fy = ((r.image_mm[1] - chief_mm[1]) / pitch_mm + c0 + 0.5).floor();
+        if fx >= 0.0 && fy >= 0.0 && (fx as usize) < psf_n && (fy as usize) < psf_n {
+            img[fy as usize * psf_n + fx as usize] += 1.0;
+        }
+    }
+    img
+}
+
+/// The on-axis geometric PSFs of the two halves of the entrance pupil
+/// ([`geometric_pupil_half_psfs`]): the dual-pixel sensor's left and right half-photodiode
+/// PSFs (a microlens images the exit pupil, hence each pupil half, onto one half-photodiode).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PupilHalfPsfs {
+    /// Samples per side (odd); the chief ray's image point is the centre bin.
+    pub n: usize,
+    /// Pitch (mm).
+    pub pitch_mm: f64,
+    /// Rays through the pupil half x < 0, as a fraction of all the rays that got through
+    /// (row-major `n²`).
+    pub left: Vec<f64>,
+    /// Rays through the half x > 0, the same normalisation: `left + right` is the full
+    /// geometric PSF of [`FieldModel`] (sum 1).
+    pub right: Vec<f64>,
+}
+
+/// The geometric PSFs of `lens` (as it stands: focus setting and object distance) on axis at
+/// `wavelength_nm` from the rays through the left (pupil x < 0) and the right (x > 0) half of
+/// the entrance pupil only, with [`FieldModel`]'s binning (`pupil_n`² pupil grid, made even so
+/// that no ray lies on the split line and the halves partition the full PSF's rays; `psf_n`²
+/// bins of `pitch_mm`, made odd). Rays outside the grid are dropped from both halves.
+pub fn geometric_pupil_half_psfs(
+    lens: &LensPrescription,
+    wavelength_nm: f64,
+    pupil_n: usize,
+    psf_n: usize,
+    pitch_mm: f64,
+) -> Result<PupilHalfPsfs, LensError> {
+    if !(pitch_mm > 0.0) || psf_n == 0 || pupil_n < 2 {
+        return Err(LensError::Prescription(
+            "pupil-half PSFs: pitch, psf_n and pupil_n must be positive".into(),
+        ));
+    }
+    let (pupil_n, psf_n) = (pupil_n + pupil_n % 2, psf_n | 1);
+    let fo = lens.first_order(wavelength_nm)?;
+    let aim = lens.aim_field(0.0, wavelength_nm, &fo)?;
+    let chief = lens
+        .trace(&aim.ray(0.0, 0.0), wavelength_nm, Clipping::None)
+        .ok_or_else(|| LensError::Aiming {
+            field_deg: 0.0,
+            msg: format!("chief ray lost at {wavelength_nm} nm"),
+        })?;
+    let bin = |left: bool| {
+        bin_geometric_psf(
+            lens,
+            &aim,
+            chief.image_mm,
+            wavelength_nm,
+            pupil_n,
+            pitch_mm,
+            psf_n,
+            |p| (p[0] < 0.0) == left,
+        )
+    };
+    let (mut left, mut right) = (bin(true), bin(false));
+    let total: f64 = left.iter().chain(&right).sum();
+    if total > 0.0 {
+        left.iter_mut()
+            .chain(right.iter_mut())
+            .for_each(|v| *v /= total);
+    }
+    Ok(PupilHalfPsfs {
+        n: psf_n,
+        pitch_mm,
+        left,
+        right,
     })
 }
 

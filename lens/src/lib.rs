@@ -99,7 +99,10 @@ pub mod trace;
 
 pub use batch::{RayBatch, TraceSystem};
 pub use error::LensError;
-pub use field_model::{FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind};
+pub use field_model::{
+    geometric_pupil_half_psfs, FieldModel, FieldModelOptions, FieldTable, Focus, PsfKind,
+    PupilHalfPsfs,
+};
 pub use focus_model::{FocusCriterion, FocusMethod, FocusMotion, FocusSpec, FocusedLens};
 pub use glass::{Glass, GlassCatalog, NearGlass};
 pub use paraxial::FirstOrder;

@@ -17,7 +17,7 @@
 //! | HDR readouts (split pixel, DCG, bracketing; DN) | [`hdr_model`], [`hdr_readout_models`], [`simulate_hdr_frame`] | [`camsim_sensor::expose_hdr`] |
 //! | HDR merge (linear exposure, e⁻) | [`merge_hdr`] | [`camsim_isp::hdr_merge()`] |
 //! | contrast autofocus (lens position of the sharpest region) | [`crate::autofocus::contrast_autofocus`] | the steps above per position |
-//! | dual pixel (left/right pupil-half images, half-photodiode readout) | [`dual_pixel_irradiance`], [`dual_pixel_rates`], [`expected_dual_pixel_frames`]; phase-detection AF: [`crate::pdaf::phase_detection_autofocus`] | [`camsim_optics::half_pupil_psf`] by depth slab ([`camsim_render::depth_path::defocus_layered_with`]), [`camsim_optics::form_image`], [`camsim_sensor::DualPixel::photodiode_rates`], [`camsim_sensor::expected_dual_pixel_dn`] |
+//! | dual pixel (left/right pupil-half images, half-photodiode readout) | [`dual_pixel_irradiance`], [`dual_pixel_rates`], [`expected_dual_pixel_frames`]; phase-detection AF: [`crate::pdaf::phase_detection_autofocus`] | [`camsim_optics::half_pupil_psf`] (thin lens) or [`camsim_render::depth_path::LensDualPixelDefocus`] (real lens) by depth slab ([`camsim_render::depth_path::defocus_layered_with`]), [`camsim_optics::form_image`], [`camsim_sensor::DualPixel::photodiode_rates`], [`camsim_sensor::expected_dual_pixel_dn`] |
 use crate::config::{Camera, CaptureSet, Exposure};
 use crate::error::CliError;
 use camsim_core::image::{Plane, RawFrame, SceneRadiance, SensorIrradiance};
@@ -541,7 +541,9 @@ pub(crate) fn signed_coc_radius_px(
 /// The thin-lens dual-pixel disparity (pixels; right image minus left image) of an object at
 /// `object_distance_m` (`None` = infinity) for the camera's focus, F-number and dual-pixel
 /// separation: [`camsim_optics::dual_pixel_disparity_m`] of the signed circle of confusion in
-/// pixels (the closed form the measured disparity is compared with).
+/// pixels (the closed form the measured disparity is compared with). For a real lens
+/// (`blur.kind = "lens"`) the paraxial disc of its entrance pupil at its focus
+/// ([`crate::pdaf::depth_of_focus_per_m`]'s law), distances from the entrance pupil.
 pub fn dual_pixel_expected_disparity_px(
     cam: &Camera,
     camera_path: &Path,
@@ -553,8 +555,23 @@ pub fn dual_pixel_expected_disparity_px(
             "sensor.dual_pixel: required for dual-pixel images",
         )
     })?;
+    let inv_z = object_distance_m.map_or(0.0, |z| 1.0 / z);
+    if let Some((_, f)) = crate::pdaf::real_lens(cam) {
+        // the paraxial disc of the real lens: entrance-pupil radius A, image-side scale H
+        // (mm per unit tan θ), r = A (1/z − 1/D) H, distances from the entrance pupil
+        let fo = crate::pdaf::lens_first_order(f)
+            .map_err(|e| CliError::input(camera_path, format!("optics.blur: {e}")))?;
+        let r_mm = fo.entrance_pupil_radius_mm
+            * 1e-3
+            * (inv_z - crate::pdaf::focus_vergence_per_m(cam))
+            * fo.per_tan_mm;
+        return Ok(camsim_optics::dual_pixel_disparity_m(
+            r_mm * 1e-3 / cam.sensor.pixel_pitch_m,
+            dp.separation,
+        ));
+    }
     let t = camera_thin_lens(cam, camera_path, cam.sensor.pixel_pitch_m)?;
-    let r_px = signed_coc_radius_px(&t, object_distance_m.map_or(0.0, |z| 1.0 / z));
+    let r_px = signed_coc_radius_px(&t, inv_z);
     Ok(camsim_optics::dual_pixel_disparity_m(r_px, dp.separation))
 }
 
@@ -567,7 +584,8 @@ pub fn dual_pixel_expected_disparity_px(
 /// (the half pupil's share of the light), then the camera's own optics apply
 /// ([`camsim_optics::form_image`]). The two halves sum to the thin-lens depth-aware image of
 /// [`irradiance_and_blur_of`] (the half discs partition its pillbox). A real lens
-/// (`blur.kind = "lens"`) is refused.
+/// (`blur.kind = "lens"`, focused by the focus model) uses its traced half-pupil PSFs instead
+/// (`dual_pixel_lens_irradiance`).
 pub fn dual_pixel_irradiance(
     cam: &Camera,
     camera_path: &Path,
@@ -580,12 +598,6 @@ pub fn dual_pixel_irradiance(
         return Err(CliError::input(
             camera_path,
             "sensor.dual_pixel: required for dual-pixel images",
-        ));
-    }
-    if matches!(cam.optics.blur, camsim_optics::Blur::Lens(_)) {
-        return Err(CliError::input(
-            camera_path,
-            "sensor.dual_pixel: needs the thin lens (optics.focus_distance_m); blur kind \"lens\" is not supported",
         ));
     }
     let (w, h) = (scene.radiance.cols, scene.radiance.rows);
@@ -608,6 +620,9 @@ pub fn dual_pixel_irradiance(
             &plane_depth
         }
     };
+    if let camsim_optics::Blur::Lens(lb) = &cam.optics.blur {
+        return dual_pixel_lens_irradiance(cam, camera_path, lb, scene, depth, grid);
+    }
     let t = camera_thin_lens(cam, camera_path, dx)?;
     let half_image = |half: PupilHalf| -> Result<SensorIrradiance, CliError> {
         let kernel = |inv_z: f64| {
@@ -666,4 +681,88 @@ pub fn expected_dual_pixel_frames(
 ) -> Option<camsim_sensor::DualPixelExpected> {
     cam.dual_pixel
         .map(|dp| camsim_sensor::expected_dual_pixel_dn(&cam.sensor, &dp, rates, shot))
+}
+
+/// [`dual_pixel_irradiance`] for a real lens (`blur.kind = "lens"`): every slab of `depth_m`
+/// (m, the scene's grid) is blurred with the on-axis geometric PSFs of the left and the right
+/// entrance-pupil half of the lens as the focus model focused it, at the slab's object distance
+/// and the tabulated wavelength nearest each band
+/// ([`camsim_render::depth_path::LensDualPixelDefocus`], the scene split into the grid's
+/// bands), by the same depth-layered compositing, weighted by ½; then the lens's distortion and
+/// relative illumination (its field model without PSFs), as [`irradiance_and_blur_of`] does
+/// for the normal pixel. The two halves sum to the on-axis depth-aware real-lens image.
+fn dual_pixel_lens_irradiance(
+    cam: &Camera,
+    camera_path: &Path,
+    lb: &camsim_optics::LensBlur,
+    scene: &SceneRadiance,
+    depth: &[f32],
+    grid: &WavelengthGrid,
+) -> Result<DualPixelIrradiance, CliError> {
+    use camsim_render::depth_path::{
+        defocus_layered_with, slab_inverse_depths, LensDualPixelDefocus,
+    };
+    let optics_err =
+        |e: &dyn std::fmt::Display| CliError::input(camera_path, format!("optics: {e}"));
+    let focus = lb.focus.as_ref().ok_or_else(|| {
+        CliError::input(
+            camera_path,
+            "sensor.dual_pixel: blur kind \"lens\" needs a prescription (optics.blur.lens_file) focused by the focus model, not a loaded field model",
+        )
+    })?;
+    let (w, h) = (scene.radiance.cols, scene.radiance.rows);
+    let dx = scene.sample_pitch_m;
+    let dp = LensDualPixelDefocus::new(
+        focus,
+        dx * 1e3,
+        &lb.model.wavelengths_nm,
+        32,
+        &slab_inverse_depths(depth, DEPTH_LAYERS),
+    )
+    .map_err(|e| optics_err(&e))?;
+    let bands = scene.radiance.to_bands(grid);
+    let band_nm: Vec<f64> = match &bands.basis {
+        camsim_core::image::SpectralBasis::Bands(g) => g.wavelength_nm.clone(),
+        _ => vec![550.0; bands.planes.len()],
+    };
+    let groups: Vec<usize> = band_nm
+        .iter()
+        .map(|wl| dp.nearest_wavelength(*wl))
+        .collect();
+    let mut optics = cam.optics.clone();
+    if let camsim_optics::Blur::Lens(l) = &mut optics.blur {
+        // the PSFs are applied here; the lens model keeps distortion and illumination
+        l.apply_psf = false;
+    }
+    let half_image = |right: bool| -> Result<SensorIrradiance, CliError> {
+        let mut planes = vec![Vec::new(); bands.planes.len()];
+        let mut gl = groups.clone();
+        gl.sort_unstable();
+        gl.dedup();
+        for g in gl {
+            let idx: Vec<usize> = (0..planes.len()).filter(|b| groups[*b] == g).collect();
+            let sub: Vec<Vec<f32>> = idx.iter().map(|b| bands.planes[*b].clone()).collect();
+            let out = defocus_layered_with(&sub, depth, w, h, DEPTH_LAYERS, true, |iz| {
+                let (l, r) = dp.kernels(g, iz);
+                if right {
+                    r
+                } else {
+                    l
+                }
+            });
+            for (b, p) in idx.into_iter().zip(out) {
+                planes[b] = p.into_iter().map(|v| 0.5 * v).collect();
+            }
+        }
+        let mut defocused = scene.clone();
+        defocused.radiance = camsim_core::image::SpectralImage {
+            planes,
+            ..bands.clone()
+        };
+        camsim_optics::form_image(&optics, &defocused, grid).map_err(|e| optics_err(&e))
+    };
+    Ok(DualPixelIrradiance {
+        left: half_image(false)?,
+        right: half_image(true)?,
+    })
 }

@@ -16,6 +16,11 @@
 //!   slightly with the focus (the sensor distance v), which the iteration absorbs.
 //!   The focus is kept beyond the focal length (vergence clamped to `[0, 0.99/f]`).
 //!
+//! * **Real lens** (`blur.kind = "lens"`, issue 21): the half-pupil images are the lens's
+//!   traced half-pupil PSFs ([`crate::chain::dual_pixel_irradiance`]) and each focus move
+//!   refocuses the lens by its focus model ([`focused_at`]: the whole lens, or its focusing
+//!   group); vergences are measured from the lens's paraxial entrance pupil.
+//!
 //! The depth of focus the loop must land in is the thin-lens one for an acceptable circle of
 //! confusion one pixel pitch `p` across: `|1/D − 1/z| ≤ (p/2) / (A v)` ([`depth_of_focus_per_m`]).
 use crate::chain::{dual_pixel_rates, expected_dual_pixel_frames};
@@ -52,27 +57,129 @@ pub struct DisparityOptions {
     pub frames: DisparityFrames,
 }
 
-/// The camera with its thin lens focused at the vergence `vergence_per_m` (1/m; 0 = infinity).
-fn focused_at(cam: &Camera, vergence_per_m: f64) -> Camera {
+/// The real lens of a camera (`blur.kind = "lens"` built from a prescription): its blur and
+/// the lens as the focus model focused it (`None` for a thin-lens camera).
+pub(crate) fn real_lens(
+    cam: &Camera,
+) -> Option<(&camsim_optics::LensBlur, &camsim_lens::FocusedLens)> {
+    match &cam.optics.blur {
+        camsim_optics::Blur::Lens(lb) => lb.focus.as_deref().map(|f| (lb, f)),
+        _ => None,
+    }
+}
+
+/// Paraxial first-order data of a focused lens the loop needs: entrance-pupil position and
+/// radius (mm), effective focal length (mm) and the image-side scale (mm of paraxial image per
+/// unit tan θ of the object).
+pub(crate) struct LensFirstOrder {
+    pub(crate) entrance_pupil_z_mm: f64,
+    pub(crate) entrance_pupil_radius_mm: f64,
+    pub(crate) efl_mm: f64,
+    pub(crate) per_tan_mm: f64,
+}
+
+pub(crate) fn lens_first_order(
+    f: &camsim_lens::FocusedLens,
+) -> Result<LensFirstOrder, camsim_lens::LensError> {
+    let l = &f.lens;
+    let fo = l.first_order(l.primary_nm)?;
+    Ok(LensFirstOrder {
+        entrance_pupil_z_mm: fo.entrance_pupil_z_mm,
+        entrance_pupil_radius_mm: 0.5 * fo.entrance_pupil_diameter_mm,
+        efl_mm: fo.efl_mm,
+        per_tan_mm: (l.paraxial_chief_height_mm(1.0, l.primary_nm)? / 1f64.to_radians().tan())
+            .abs(),
+    })
+}
+
+/// The camera focused at the vergence `vergence_per_m` (1/m from the lens's entrance pupil
+/// for a real lens; 0 = infinity): the thin lens's focus distance, or the real lens refocused
+/// by the focus model with the camera's method (criterion and motion: the whole lens, or its
+/// focusing group from its infinity position). A real lens's distortion and relative
+/// illumination stay those of the camera's own focus (second order for a focus move).
+pub fn focused_at(
+    cam: &Camera,
+    camera_path: &Path,
+    vergence_per_m: f64,
+) -> Result<Camera, CliError> {
     let mut c = cam.clone();
-    c.thin_lens_focus_m = (vergence_per_m > 0.0).then(|| 1.0 / vergence_per_m);
-    c
+    let Some((lb, f)) = real_lens(cam) else {
+        c.thin_lens_focus_m = (vergence_per_m > 0.0).then(|| 1.0 / vergence_per_m);
+        return Ok(c);
+    };
+    let lens_err =
+        |e: &dyn std::fmt::Display| CliError::input(camera_path, format!("optics.blur: {e}"));
+    let fo = lens_first_order(f).map_err(|e| lens_err(&e))?;
+    let distance_mm = if vergence_per_m > 0.0 {
+        let d = 1e3 / vergence_per_m - fo.entrance_pupil_z_mm;
+        if !(d > 0.0) {
+            return Err(lens_err(&format!(
+                "focus vergence {vergence_per_m} 1/m lies behind the lens's first vertex"
+            )));
+        }
+        Some(d)
+    } else {
+        None
+    };
+    // the prescription at its own gaps: undo the focusing group's shift
+    let base = match f.motion {
+        camsim_lens::FocusMotion::Group {
+            first_surface,
+            last_surface,
+        } => f
+            .lens
+            .with_group_shift(first_surface, last_surface, -f.group_shift_mm)
+            .map_err(|e| lens_err(&e))?,
+        camsim_lens::FocusMotion::Unit => f.lens.clone(),
+    };
+    let refocused = base
+        .focus(&camsim_lens::FocusSpec {
+            focus_distance_mm: distance_mm,
+            method: f.method.clone(),
+        })
+        .map_err(|e| lens_err(&e))?;
+    let mut blur = lb.clone();
+    blur.focus = Some(std::sync::Arc::new(refocused));
+    c.optics.blur = camsim_optics::Blur::Lens(blur);
+    Ok(c)
 }
 
-/// The vergence (1/m) of the camera's focus (0 = infinity).
+/// The vergence (1/m) of the camera's focus (0 = infinity): the thin lens's, or the real
+/// lens's focus distance measured from its entrance pupil.
 pub fn focus_vergence_per_m(cam: &Camera) -> f64 {
-    cam.thin_lens_focus_m.map_or(0.0, |d| 1.0 / d)
+    match real_lens(cam) {
+        Some((_, f)) => match (f.focus_distance_mm, lens_first_order(f)) {
+            (Some(d), Ok(fo)) => 1e3 / (d + fo.entrance_pupil_z_mm),
+            _ => 0.0,
+        },
+        None => cam.thin_lens_focus_m.map_or(0.0, |d| 1.0 / d),
+    }
 }
 
-/// Thin-lens depth of focus as a vergence half-width (1/m): the defocus `|1/z − 1/D|` at
-/// which the circle of confusion (its radius grows linearly with the defocus,
+/// Depth of focus as a vergence half-width (1/m): the defocus `|1/z − 1/D|` at which the
+/// circle of confusion (its radius grows linearly with the defocus,
 /// [`crate::chain::dual_pixel_expected_disparity_px`]'s law) reaches a diameter of one pixel
-/// pitch, for the camera's focus.
+/// pitch, for the camera's focus. For a real lens the same paraxial law with the entrance-pupil
+/// radius A and the image-side scale H (mm per unit tan θ): radius `A |Δ(1/z)| H`.
 pub fn depth_of_focus_per_m(cam: &Camera, camera_path: &Path) -> Result<f64, CliError> {
+    if let Some((_, f)) = real_lens(cam) {
+        let fo = lens_first_order(f)
+            .map_err(|e| CliError::input(camera_path, format!("optics.blur: {e}")))?;
+        let r1_mm = fo.entrance_pupil_radius_mm * 1e-3 * fo.per_tan_mm;
+        return Ok(0.5 * cam.sensor.pixel_pitch_m * 1e3 / r1_mm);
+    }
     let t = crate::chain::camera_thin_lens(cam, camera_path, cam.sensor.pixel_pitch_m)?;
     // radius (px) at a defocus of 1/m
     let r1 = crate::chain::signed_coc_radius_px(&t, focus_vergence_per_m(cam) + 1.0);
     Ok(0.5 / r1)
+}
+
+/// The largest focus vergence (1/m) the loop may set: 0.99 over the focal length.
+fn max_focus_vergence_per_m(cam: &Camera) -> f64 {
+    match real_lens(cam).map(|(_, f)| lens_first_order(f)) {
+        Some(Ok(fo)) => 0.99e3 / fo.efl_mm.abs(),
+        _ => 0.99 / cam.optics.focal_length_m,
+    }
 }
 
 /// The disparity (pixels, right − left) of `scene` through `cam` as it is focused, on the
@@ -150,7 +257,7 @@ pub fn calibrate_slope(
     let mut points = Vec::new();
     for (k, &u) in focus_vergences_per_m.iter().enumerate() {
         let d = measure_disparity(
-            &focused_at(cam, u),
+            &focused_at(cam, camera_path, u)?,
             camera_path,
             chart,
             grid,
@@ -209,7 +316,7 @@ pub struct Pdaf {
     pub converged: bool,
 }
 
-/// Focus `cam` (thin lens) on the edge in the region of `scene` by phase detection (module
+/// Focus `cam` (thin lens, or a real lens moved by its focus model, [`focused_at`]) on the edge in the region of `scene` by phase detection (module
 /// docs).
 pub fn phase_detection_autofocus(
     cam: &Camera,
@@ -228,12 +335,12 @@ pub fn phase_detection_autofocus(
             ),
         ));
     }
-    let max_vergence = 0.99 / cam.optics.focal_length_m;
+    let max_vergence = max_focus_vergence_per_m(cam);
     let mut u = focus_vergence_per_m(cam);
     let mut steps = Vec::new();
     for k in 0..opts.max_iterations.max(1) {
         let d = measure_disparity(
-            &focused_at(cam, u),
+            &focused_at(cam, camera_path, u)?,
             camera_path,
             scene,
             grid,

@@ -475,3 +475,106 @@ pub(crate) fn trim_kernel(psf: &[f64], n: usize) -> Kernel {
     values.iter_mut().for_each(|v| *v /= s);
     Kernel { radius: r, values }
 }
+
+/// Real-lens dual-pixel defocus: the on-axis geometric PSFs of the left (entrance-pupil
+/// x < 0) and the right (x > 0) pupil half of a focused `camsim-lens` prescription at each
+/// object distance ([`camsim_lens::geometric_pupil_half_psfs`], the binning of the field
+/// model's geometric PSF, so the two halves partition the full PSF of [`LensDefocus`] /
+/// [`crate::depth_optics::LensDepthKernels`]), per wavelength. A microlens images the exit
+/// pupil onto the two half-photodiodes, so each sees one half (Wadhwa et al., ACM TOG 37(4),
+/// 2018, §3; the thin-lens form is `camsim_optics::dual_pixel`). Conventions (planar depth from
+/// the paraxial entrance pupil) are those of [`LensDefocus`]. On axis the two halves carry
+/// equal shares of the light (the pupil grid is symmetric in x), so each kernel is normalised
+/// to 1 and the caller weights each half image by ½. Limits: one (on-axis) PSF per
+/// wavelength and depth for the whole frame; geometric (no diffraction).
+#[derive(Debug, Clone)]
+pub struct LensDualPixelDefocus {
+    /// Tabulated wavelengths (nm, increasing).
+    pub wavelengths_nm: Vec<f64>,
+    /// `[wavelength]` → (1/z in 1/m, left kernel, right kernel) by increasing 1/z.
+    table: Vec<Vec<(f64, Kernel, Kernel)>>,
+    /// Entrance-pupil radius (m) of the lens.
+    pub entrance_pupil_radius_m: f64,
+}
+
+impl LensDualPixelDefocus {
+    /// Tabulate the half-pupil PSFs of `focus.lens` (as focused) at the planar inverse depths
+    /// `inv_depths_per_m` (1/m from the entrance pupil, 0 = infinity) and `wavelengths_nm`,
+    /// binned at `sample_pitch_mm` with a `pupil_n`² ray grid.
+    pub fn new(
+        focus: &camsim_lens::FocusedLens,
+        sample_pitch_mm: f64,
+        wavelengths_nm: &[f64],
+        pupil_n: usize,
+        inv_depths_per_m: &[f64],
+    ) -> Result<Self, camsim_lens::LensError> {
+        if !(sample_pitch_mm > 0.0) || wavelengths_nm.is_empty() {
+            return Err(camsim_lens::LensError::Prescription(
+                "dual-pixel lens defocus: sample pitch must be > 0 and at least one wavelength given"
+                    .into(),
+            ));
+        }
+        let lens = &focus.lens;
+        let fo = lens.first_order(lens.primary_nm)?;
+        let z_ep_mm = fo.entrance_pupil_z_mm;
+        let r_ep_mm = 0.5 * fo.entrance_pupil_diameter_mm;
+        let per_tan_mm =
+            (lens.paraxial_chief_height_mm(1.0, lens.primary_nm)? / 1f64.to_radians().tan()).abs();
+        let v_focus = focus.focus_distance_mm.map_or(0.0, |d| 1e3 / (d + z_ep_mm));
+        let mut invs: Vec<f64> = inv_depths_per_m.iter().map(|v| v.max(0.0)).collect();
+        invs.sort_by(|a, b| a.total_cmp(b));
+        invs.dedup();
+        if invs.is_empty() {
+            invs.push(v_focus);
+        }
+        let mut wls = wavelengths_nm.to_vec();
+        wls.sort_by(|a, b| a.total_cmp(b));
+        wls.dedup();
+        let table = wls
+            .iter()
+            .map(|wl| {
+                invs.iter()
+                    .map(|v| {
+                        let d = vertex_distance_mm(*v, z_ep_mm, "dual-pixel lens defocus")?;
+                        // thin-lens disc radius (samples) + margin for aberrations
+                        let c = r_ep_mm * 1e-3 * (v - v_focus).abs() * per_tan_mm / sample_pitch_mm;
+                        let psf_n = 2 * ((1.5 * c + 8.0).ceil() as usize) + 1;
+                        let p = camsim_lens::geometric_pupil_half_psfs(
+                            &lens.with_object_distance(d),
+                            *wl,
+                            pupil_n,
+                            psf_n,
+                            sample_pitch_mm,
+                        )?;
+                        Ok((*v, trim_kernel(&p.left, p.n), trim_kernel(&p.right, p.n)))
+                    })
+                    .collect::<Result<Vec<_>, camsim_lens::LensError>>()
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(LensDualPixelDefocus {
+            wavelengths_nm: wls,
+            table,
+            entrance_pupil_radius_m: r_ep_mm * 1e-3,
+        })
+    }
+
+    /// The tabulated (left, right) kernels of wavelength index `wl`, nearest in 1/z to `inv_z`.
+    pub fn kernels(&self, wl: usize, inv_z: f64) -> (Kernel, Kernel) {
+        self.table[wl]
+            .iter()
+            .min_by(|a, b| (a.0 - inv_z).abs().total_cmp(&(b.0 - inv_z).abs()))
+            .map(|t| (t.1.clone(), t.2.clone()))
+            .unwrap_or_else(|| (Kernel::delta(), Kernel::delta()))
+    }
+
+    /// Index of the tabulated wavelength nearest `wavelength_nm`.
+    pub fn nearest_wavelength(&self, wavelength_nm: f64) -> usize {
+        (0..self.wavelengths_nm.len())
+            .min_by(|a, b| {
+                (self.wavelengths_nm[*a] - wavelength_nm)
+                    .abs()
+                    .total_cmp(&(self.wavelengths_nm[*b] - wavelength_nm).abs())
+            })
+            .unwrap_or(0)
+    }
+}

@@ -4,6 +4,7 @@
 mod animation;
 mod depth_crosscheck;
 mod depth_path;
+mod dual_pixel_lens;
 mod gltf_input;
 mod lightfield;
 mod mitsuba;

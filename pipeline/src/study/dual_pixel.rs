@@ -14,6 +14,7 @@
 //! | `reference_fraction` | 0.125 | fraction of the columns at each side used as the edge's reference levels |
 //! | `pdaf` | `{}` | `tolerance_px` (0.05), `max_iterations` (8), `calibration_distance_m` (the camera's focus distance), `calibration_offsets_per_m` ([−0.5, 0.5]: focus vergences of the calibration relative to the chart's) |
 //! | `simulation` | absent | captures.json `simulation` block |
+//! | `lens` | absent | a real lens (prescription) in place of the thin lens: the camera's `optics.blur` is then `{"kind": "lens", "focus_distance_m": …}` (m from the first vertex; focus keys as in camera.json, no `lens_file`); vergences are from the lens's entrance pupil, the disparity is formed by its traced half-pupil PSFs and the loop refocuses it by its focus model (docs/study.md) |
 //!
 //! Metrics (one row of the study table):
 //! * `object_distance_m`, `defocus_per_m` (`1/Z − 1/D`), `coc_radius_px` (signed);
@@ -35,7 +36,7 @@ use super::output::PointOutput;
 use crate::config::{camera_from_file, captures_with_camera, CameraFile, CaptureSet, CapturesFile};
 use crate::error::CliError;
 use crate::pdaf::{
-    calibrate_slope, depth_of_focus_per_m, focus_vergence_per_m, measure_disparity,
+    calibrate_slope, depth_of_focus_per_m, focus_vergence_per_m, focused_at, measure_disparity,
     phase_detection_autofocus, DisparityFrames, DisparityOptions, PdafOptions,
 };
 use camsim_core::stats::Rect;
@@ -58,6 +59,9 @@ struct DualPixelDoc {
     pdaf: Option<PdafDoc>,
     #[serde(default)]
     simulation: Option<Value>,
+    /// A real lens (prescription) in place of the thin lens.
+    #[serde(default)]
+    lens: Option<Value>,
     /// Added by the study planner (hashed with the point).
     #[allow(dead_code)]
     #[serde(default)]
@@ -93,6 +97,91 @@ struct Point {
     tolerance_px: f64,
     max_iterations: usize,
     calibration_offsets_per_m: Vec<f64>,
+    /// The real lens and how to build its blur (installed by [`evaluate`]: the field model is
+    /// not built by [`validate`]).
+    lens: Option<(
+        camsim_lens::LensPrescription,
+        camsim_optics::LensBlurOptions,
+    )>,
+}
+
+/// The point's real lens: the prescription `lens` with the camera's `optics.blur` focus keys
+/// (`focus_distance_m` from the first vertex, required; `focus_criterion`,
+/// `focus_frequency_cyc_per_mm`, `focus_group_surfaces`), and the camera with blur "none" in
+/// its place. Returns the camera file, the lens and its blur options and the focus vergence
+/// (1/m from the entrance pupil) and effective focal length (m).
+#[allow(clippy::type_complexity)]
+fn lens_point(
+    camera: &Value,
+    lens: &Value,
+) -> Result<
+    (
+        CameraFile,
+        camsim_lens::LensPrescription,
+        camsim_optics::LensBlurOptions,
+        f64,
+        f64,
+    ),
+    String,
+> {
+    let mut cam = camera.clone();
+    let blur = cam["optics"]["blur"].clone();
+    match blur["kind"].as_str() {
+        Some("lens") => {}
+        k => {
+            return Err(format!(
+                "camera.optics.blur.kind: {k:?} but the point has a lens; use \"lens\" with focus_distance_m"
+            ))
+        }
+    }
+    let b: crate::config::BlurFile =
+        serde_json::from_value(blur).map_err(|e| format!("camera.optics.blur: {e}"))?;
+    if b.lens_file.is_some() {
+        return Err("camera.optics.blur.lens_file: in a study the lens is the point's \"lens\" (e.g. {\"$file\": \"lens.json\"})".into());
+    }
+    let fd = match b.focus_distance_m {
+        Some(d) if d.is_finite() && d > 0.0 => d,
+        d => {
+            return Err(format!(
+                "camera.optics.blur.focus_distance_m: required by a dual_pixel point with a lens (m from the first vertex, > 0), got {d:?}"
+            ))
+        }
+    };
+    let method = camsim_lens::FocusMethod::from_keys(
+        b.focus_criterion.as_deref(),
+        b.focus_frequency_cyc_per_mm,
+        b.focus_group_surfaces,
+    )
+    .map_err(|m| format!("camera.optics.blur.{m}"))?;
+    if let Some(o) = cam.get_mut("optics").and_then(Value::as_object_mut) {
+        o.insert("blur".into(), json!({"kind": "none"}));
+        o.remove("focus_distance_m");
+    }
+    let f: CameraFile = serde_json::from_value(cam).map_err(|e| format!("camera: {e}"))?;
+    let prescription = camsim_lens::LensPrescription::from_json_str(
+        &lens.to_string(),
+        &camsim_lens::GlassCatalog::bundled(),
+    )
+    .map_err(|e| format!("lens: {e}"))?;
+    let fo = prescription
+        .first_order(prescription.primary_nm)
+        .map_err(|e| format!("lens: {e}"))?;
+    let mut opts = camsim_optics::LensBlurOptions::covering(1.0);
+    opts.focus = camsim_optics::LensFocus::At(Some(fd * 1e3));
+    opts.focus_method = method;
+    // distortion and relative illumination only (the dual-pixel PSFs are traced per half)
+    opts.kind = Some(camsim_lens::PsfKind::Geometric);
+    // the lens's own wavelengths (each band uses the nearest), few field heights: a study
+    // point's sensor is small
+    opts.wavelengths_nm = prescription.wavelengths_nm.clone();
+    opts.n_dense_fields = 9;
+    Ok((
+        f,
+        prescription,
+        opts,
+        1e3 / (fd * 1e3 + fo.entrance_pupil_z_mm),
+        fo.efl_mm * 1e-3,
+    ))
 }
 
 fn capture_set(
@@ -129,20 +218,47 @@ fn capture_set(
 
 fn point(doc: &Value) -> Result<Point, String> {
     let d: DualPixelDoc = serde_json::from_value(doc.clone()).map_err(|e| e.to_string())?;
-    let f: CameraFile =
-        serde_json::from_value(d.camera.clone()).map_err(|e| format!("camera: {e}"))?;
+    let (f, lens, lens_focus) = match &d.lens {
+        None => (
+            serde_json::from_value(d.camera.clone()).map_err(|e| format!("camera: {e}"))?,
+            None,
+            None,
+        ),
+        Some(l) => {
+            let (f, pr, opts, u_focus, efl_m) = lens_point(&d.camera, l)?;
+            (f, Some((pr, opts)), Some((u_focus, efl_m)))
+        }
+    };
     let cam = camera_from_file(Path::new("camera"), f).map_err(|e| e.one_line())?;
     if cam.dual_pixel.is_none() {
         return Err("camera.sensor.dual_pixel: required by a dual_pixel point (e.g. {})".into());
     }
-    let Some(focus_m) = cam.thin_lens_focus_m else {
-        return Err(
-            "camera.optics.focus_distance_m: required by a dual_pixel point (the thin lens's focus)"
-                .into(),
-        );
+    let (focus_m, f_m) = match lens_focus {
+        Some((u_focus, efl_m)) => (1.0 / u_focus, efl_m),
+        None => {
+            let Some(focus_m) = cam.thin_lens_focus_m else {
+                return Err(
+                    "camera.optics.focus_distance_m: required by a dual_pixel point (the thin lens's focus)"
+                        .into(),
+                );
+            };
+            (focus_m, cam.optics.focal_length_m)
+        }
     };
+    // the sensor's half-diagonal, as camera.json's blur kind "lens" covers it; merit
+    // frequency default half the pixel Nyquist
+    let lens = lens.map(|(pr, mut o)| {
+        let s = &cam.sensor;
+        o.max_image_height_mm = (0.5 * s.pixel_pitch_m * (s.rows as f64).hypot(s.cols as f64))
+            .max(s.pixel_pitch_m)
+            * 1e3;
+        o.focus_method.frequency_cyc_per_mm = o
+            .focus_method
+            .frequency_cyc_per_mm
+            .or(Some(0.25 / (s.pixel_pitch_m * 1e3)));
+        (pr, o)
+    });
     let u = d.object_vergence_per_m;
-    let f_m = cam.optics.focal_length_m;
     if !(u.is_finite() && u > 0.0 && 1.0 / u > f_m) {
         return Err(format!(
             "object_vergence_per_m: must be > 0 with 1/value beyond the focal length ({f_m} m), got {u}"
@@ -197,6 +313,7 @@ fn point(doc: &Value) -> Result<Point, String> {
         tolerance_px,
         max_iterations,
         calibration_offsets_per_m: offsets,
+        lens,
     })
 }
 
@@ -207,15 +324,27 @@ pub fn validate(doc: &Value) -> Result<(), String> {
 
 /// Evaluate a dual-pixel point (see the module documentation).
 pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliError> {
-    let p = point(doc).map_err(CliError::Other)?;
+    let mut p = point(doc).map_err(CliError::Other)?;
+    if let Some((lens, opts)) = &p.lens {
+        let blur = camsim_optics::LensBlur::from_prescription(lens, opts)
+            .map_err(|e| CliError::Other(format!("lens: {e}")))?;
+        p.set.camera.optics.blur = camsim_optics::Blur::Lens(blur.clone());
+        p.chart.camera.optics.blur = camsim_optics::Blur::Lens(blur);
+    }
     let cam = &p.set.camera;
     let path = &p.set.camera_path;
     let grid = crate::chain::wavelength_grid(&p.set);
     let scene = crate::chain::shot_scene(&p.set, 0, &grid)?;
     let chart = crate::chain::shot_scene(&p.chart, 0, &grid)?;
+    // The shot's exposure from the normal pixel's light; a real lens's PSFs are left out
+    // there (a normalised PSF does not change the light level the exposure depends on).
+    let mut exposure_set = p.set.clone();
+    if let camsim_optics::Blur::Lens(l) = &mut exposure_set.camera.optics.blur {
+        l.apply_psf = false;
+    }
     let rate = camsim_sensor::electron_rate(
         &cam.sensor,
-        &crate::chain::irradiance_of(&p.set, &scene, &grid)?,
+        &crate::chain::irradiance_of(&exposure_set, &scene, &grid)?,
     );
     let shot = crate::chain::shot_exposure(&p.set, 0, &rate);
     let s = &cam.sensor;
@@ -263,8 +392,7 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
         &cal_focus,
     )?;
     let slope_expected = {
-        let mut c = cam.clone();
-        c.thin_lens_focus_m = Some(p.chart_distance_m);
+        let c = focused_at(cam, path, chart_u)?;
         // α = d / (1/Z − 1/D) at unit defocus, closed form
         crate::chain::dual_pixel_expected_disparity_px(&c, path, Some(1.0 / (chart_u + 1.0)))?
     };
@@ -282,8 +410,7 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
         },
     )?;
     let final_u = pdaf.final_focus_vergence_per_m;
-    let mut at_final = cam.clone();
-    at_final.thin_lens_focus_m = (final_u > 0.0).then(|| 1.0 / final_u);
+    let at_final = focused_at(cam, path, final_u)?;
     let dof = depth_of_focus_per_m(&at_final, path)?;
     let focus_error = (final_u - 1.0 / z).abs();
 
@@ -293,7 +420,12 @@ pub fn evaluate(doc: &Value, seed: u64, _dir: &Path) -> Result<PointOutput, CliE
     out.put("coc_radius_px", coc_px);
     out.put("disparity_px_expected", expected);
     out.put("disparity_px_measured", measured.disparity_px);
-    let sampled = sampled_kernel_disparity_px(cam, scene.sample_pitch_m, coc_px, separation);
+    let sampled = match crate::pdaf::real_lens(cam) {
+        None => sampled_kernel_disparity_px(cam, scene.sample_pitch_m, coc_px, separation),
+        Some((lb, f)) => {
+            lens_kernel_disparity_px(cam, lb, f, scene.sample_pitch_m, 1.0 / z, separation)?
+        }
+    };
     out.put("disparity_px_sampled", sampled);
     out.put(
         "disparity_px_tolerance",
@@ -349,4 +481,44 @@ fn sampled_kernel_disparity_px(
             / k.sum()
     };
     (2.0 * separation - 1.0) * (centroid_m(PupilHalf::Right) - centroid_m(PupilHalf::Left)) / p
+}
+
+/// The disparity (pixels) implied by the traced half-pupil kernels of the real lens the chain
+/// applies ([`camsim_render::depth_path::LensDualPixelDefocus`]) at inverse depth `inv_z`
+/// (1/m) and the scene sample pitch `dx_m`: the difference of their x-centroids averaged over
+/// the tabulated wavelengths, times `2s − 1`.
+fn lens_kernel_disparity_px(
+    cam: &crate::config::Camera,
+    lb: &camsim_optics::LensBlur,
+    f: &camsim_lens::FocusedLens,
+    dx_m: f64,
+    inv_z: f64,
+    separation: f64,
+) -> Result<f64, CliError> {
+    let dp = camsim_render::depth_path::LensDualPixelDefocus::new(
+        f,
+        dx_m * 1e3,
+        &lb.model.wavelengths_nm,
+        32,
+        &[inv_z],
+    )
+    .map_err(|e| CliError::Other(format!("lens: {e}")))?;
+    let cx = |k: &camsim_render::depth_path::Kernel| {
+        let n = 2 * k.radius + 1;
+        k.values
+            .iter()
+            .enumerate()
+            .map(|(i, v)| *v as f64 * ((i % n) as f64 - k.radius as f64))
+            .sum::<f64>()
+            / k.values.iter().map(|v| *v as f64).sum::<f64>()
+    };
+    let n = dp.wavelengths_nm.len();
+    let mean_samples = (0..n)
+        .map(|w| {
+            let (l, r) = dp.kernels(w, inv_z);
+            cx(&r) - cx(&l)
+        })
+        .sum::<f64>()
+        / n as f64;
+    Ok((2.0 * separation - 1.0) * mean_samples * dx_m / cam.sensor.pixel_pitch_m)
 }
