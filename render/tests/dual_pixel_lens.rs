@@ -48,7 +48,7 @@ fn full(l: &Kernel, r: &Kernel) -> Kernel {
 /// The double Gauss 50 mm stopped to f/8 (spherical aberration small against the defocus),
 /// paraxially focused at 2 m: for objects at 1 m (nearer) and 5 m (farther), the centroid
 /// separation of the right and left half-pupil PSFs is the thin-lens closed form
-/// `d = 2·4R/(3π)` ([`camsim_optics::dual_pixel_disparity_m`]) with R the blur radius of the
+/// `d = 2·4R/(3π)` (as `camsim_optics::dual_pixel_disparity_m`) with R the blur radius of the
 /// traced full PSF (R = √2 × its RMS radius, a uniform disc's), positive for the nearer object
 /// and negative for the farther one (the halves swap through focus). Tolerance 4 % + 0.15
 /// samples: the residual spherical aberration and pupil distortion of the stopped lens make
@@ -91,7 +91,9 @@ fn lens_half_pupil_disparity_matches_thin_lens_geometry() {
         } else {
             0.0
         };
-        let expected = camsim_optics::dual_pixel_disparity_m(sign * radius, 1.0);
+        // the half-disc centroids lie 4R/(3π) either side of the centre (Pappus), restated
+        // here independently of camsim_optics::dual_pixel_disparity_m
+        let expected = sign * 8.0 * radius / (3.0 * std::f64::consts::PI);
         eprintln!("1/z {inv}: R {radius:.3} px, disparity {d:.3} px, thin lens {expected:.3} px, y {ly:.3} {ry:.3}");
         assert!(
             (d - expected).abs() < 0.04 * expected.abs() + 0.15,
