@@ -181,15 +181,34 @@ fn dual_pixel_study_through_a_real_lens_focuses_the_lens() {
             num(r, "disparity_px_sampled"),
         );
         assert!(e.abs() > 2.0, "1/Z {u}: defocused enough ({e} px)");
-        assert!((m - k).abs() < 0.15 + 0.03 * k.abs(), "1/Z {u}: measured {m} vs kernels {k}");
-        assert!((k - e).abs() < 0.15 + 0.04 * e.abs(), "1/Z {u}: kernels {k} vs paraxial {e}");
+        assert!(
+            (m - k).abs() < 0.15 + 0.03 * k.abs(),
+            "1/Z {u}: measured {m} vs kernels {k}"
+        );
+        assert!(
+            (k - e).abs() < 0.15 + 0.04 * e.abs(),
+            "1/Z {u}: kernels {k} vs paraxial {e}"
+        );
         // focus ≈ 0.49 1/m from the entrance pupil: nearer positive, farther negative
-        assert_eq!(m.signum(), if u > 0.5 { 1.0 } else { -1.0 }, "sign at 1/Z = {u}");
-        let (sc, se) = (num(r, "slope_px_m_calibrated"), num(r, "slope_px_m_expected"));
+        assert_eq!(
+            m.signum(),
+            if u > 0.5 { 1.0 } else { -1.0 },
+            "sign at 1/Z = {u}"
+        );
+        let (sc, se) = (
+            num(r, "slope_px_m_calibrated"),
+            num(r, "slope_px_m_expected"),
+        );
         assert!((sc - se).abs() < 0.05 * se, "calibrated {sc} vs {se}");
-        let (err, dof) = (num(r, "pdaf_focus_error_per_m"), num(r, "depth_of_focus_per_m"));
+        let (err, dof) = (
+            num(r, "pdaf_focus_error_per_m"),
+            num(r, "depth_of_focus_per_m"),
+        );
         assert_eq!(num(r, "pdaf_within_depth_of_focus"), 1.0, "1/Z {u}: {r}");
-        assert!(err <= dof, "1/Z {u}: focus error {err} beyond the depth of focus {dof}");
+        assert!(
+            err <= dof,
+            "1/Z {u}: focus error {err} beyond the depth of focus {dof}"
+        );
         let it = num(r, "pdaf_iterations");
         assert!((1.0..=4.0).contains(&it), "1/Z {u}: {it} measurements");
     }
