@@ -305,17 +305,7 @@ pub fn shot_time_rate<'a>(
     rate: &'a ElectronRate,
     shot: &Shot,
 ) -> Cow<'a, ElectronRate> {
-    let model = shot_time_model(set, shot_index);
-    if model.is_static() {
-        Cow::Borrowed(rate)
-    } else {
-        Cow::Owned(camsim_sensor::time_averaged_rate(
-            &set.camera.sensor,
-            rate,
-            shot.exposure_s,
-            &model,
-        ))
-    }
+    shot_time_rate_from(set, shot_index, rate, shot, 0.0)
 }
 
 /// [`shot_time_rate`] of frame `frame_start_s` of a video (frame k at `k / frame_rate_hz`):
