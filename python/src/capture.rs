@@ -64,6 +64,7 @@ impl Camera {
                 light_modulation: None,
                 motion: None,
                 frame_rate_hz: None,
+                temperature_c: None,
             }],
             simulation,
             raw_format: None,
