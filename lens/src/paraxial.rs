@@ -236,3 +236,20 @@ impl LensPrescription {
         Ok(2.0 * t.abs().atan().to_degrees())
     }
 }
+
+/// Signed paraxial blur-disc radius (mm on the image) of an object point at vergence
+/// `inv_z_per_m` for a lens focused at vergence `focus_per_m` (both 1/m, distances from the
+/// entrance pupil): `r = A · (1/z − 1/D) · H`, with A the entrance-pupil radius (mm) and H the
+/// image-side scale (mm of paraxial image height per unit tan θ). Similar triangles: the rays
+/// from the point through the pupil rim meet the plane conjugate to the focus distance A·|1/z −
+/// 1/D| (in units of tan θ) off the chief ray, which the lens images at H per unit tan θ (the
+/// thin-lens circle of confusion, f/(2N)·v·|1/z − 1/D|, with A = f/(2N) and H = v). Positive
+/// for points nearer than the focus.
+pub fn paraxial_blur_radius_mm(
+    entrance_pupil_radius_mm: f64,
+    image_mm_per_tan: f64,
+    inv_z_per_m: f64,
+    focus_per_m: f64,
+) -> f64 {
+    entrance_pupil_radius_mm * 1e-3 * (inv_z_per_m - focus_per_m) * image_mm_per_tan
+}

@@ -551,10 +551,12 @@ pub fn dual_pixel_expected_disparity_px(
         // (mm per unit tan θ), r = A (1/z − 1/D) H, distances from the entrance pupil
         let fo = crate::pdaf::lens_first_order(f)
             .map_err(|e| CliError::input(camera_path, format!("optics.blur: {e}")))?;
-        let r_mm = fo.entrance_pupil_radius_mm
-            * 1e-3
-            * (inv_z - crate::pdaf::focus_vergence_per_m(cam))
-            * fo.per_tan_mm;
+        let r_mm = camsim_lens::paraxial::paraxial_blur_radius_mm(
+            fo.entrance_pupil_radius_mm,
+            fo.per_tan_mm,
+            inv_z,
+            crate::pdaf::focus_vergence_per_m(cam),
+        );
         return Ok(camsim_optics::dual_pixel_disparity_m(
             r_mm * 1e-3 / cam.sensor.pixel_pitch_m,
             dp.separation,

@@ -165,7 +165,12 @@ pub fn depth_of_focus_per_m(cam: &Camera, camera_path: &Path) -> Result<f64, Cli
     if let Some((_, f)) = real_lens(cam) {
         let fo = lens_first_order(f)
             .map_err(|e| CliError::input(camera_path, format!("optics.blur: {e}")))?;
-        let r1_mm = fo.entrance_pupil_radius_mm * 1e-3 * fo.per_tan_mm;
+        let r1_mm = camsim_lens::paraxial::paraxial_blur_radius_mm(
+            fo.entrance_pupil_radius_mm,
+            fo.per_tan_mm,
+            1.0,
+            0.0,
+        );
         return Ok(0.5 * cam.sensor.pixel_pitch_m * 1e3 / r1_mm);
     }
     let t = crate::chain::camera_thin_lens(cam, camera_path, cam.sensor.pixel_pitch_m)?;

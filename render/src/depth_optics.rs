@@ -159,7 +159,8 @@ impl LensDepthKernels {
         }
         let max_dv = invs.iter().map(|v| (v - v_focus).abs()).fold(0.0, f64::max);
         // thin-lens disc radius (samples) + margin for aberrations (off axis too)
-        let c_max = r_ep_mm * 1e-3 * max_dv * per_tan_mm / p;
+        let c_max =
+            camsim_lens::paraxial::paraxial_blur_radius_mm(r_ep_mm, per_tan_mm, max_dv, 0.0) / p;
         let psf_n = 2 * ((1.5 * c_max + 8.0).ceil() as usize) + 1;
         let distances = invs
             .iter()

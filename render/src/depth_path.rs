@@ -388,7 +388,9 @@ impl LensDefocus {
         invs.dedup();
         let max_dv = invs.iter().map(|v| (v - v_focus).abs()).fold(0.0, f64::max);
         // thin-lens disc radius (px) + margin for aberrations
-        let c_max_px = r_ep_mm * 1e-3 * max_dv * per_tan_mm / opts.pixel_pitch_mm;
+        let c_max_px =
+            camsim_lens::paraxial::paraxial_blur_radius_mm(r_ep_mm, per_tan_mm, max_dv, 0.0)
+                / opts.pixel_pitch_mm;
         let psf_n = 2 * ((1.3 * c_max_px + 4.0).ceil() as usize) + 1;
         let distances = invs
             .iter()
@@ -537,7 +539,11 @@ impl LensDualPixelDefocus {
                     .map(|v| {
                         let d = vertex_distance_mm(*v, z_ep_mm, "dual-pixel lens defocus")?;
                         // thin-lens disc radius (samples) + margin for aberrations
-                        let c = r_ep_mm * 1e-3 * (v - v_focus).abs() * per_tan_mm / sample_pitch_mm;
+                        let c = camsim_lens::paraxial::paraxial_blur_radius_mm(
+                            r_ep_mm, per_tan_mm, *v, v_focus,
+                        )
+                        .abs()
+                            / sample_pitch_mm;
                         let psf_n = 2 * ((1.5 * c + 8.0).ceil() as usize) + 1;
                         let p = camsim_lens::geometric_pupil_half_psfs(
                             &lens.with_object_distance(d),
