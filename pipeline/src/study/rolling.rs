@@ -97,6 +97,26 @@ struct ScenePoint {
     frame_rate_hz: Option<f64>,
 }
 
+/// The table columns both rolling-shutter evaluators report: skew (measured, expected,
+/// tolerance; px over the frame) and flicker period (rows) with the band visibility expected.
+pub(super) fn skew_and_flicker_columns(
+    [skew_measured, skew_expected, skew_tol]: [f64; 3],
+    period_measured: Option<f64>,
+    period_expected: f64,
+    period_tol: Option<f64>,
+    visibility_expected: f64,
+) -> PointOutput {
+    let mut out = PointOutput::default();
+    out.put("skew_px_measured", skew_measured);
+    out.put("skew_px_expected", skew_expected);
+    out.put("skew_px_tolerance", skew_tol);
+    out.put_opt("flicker_period_rows_measured", period_measured);
+    out.put("flicker_period_rows_expected", period_expected);
+    out.put_opt("flicker_period_rows_tolerance", period_tol);
+    out.put("flicker_visibility_expected", visibility_expected);
+    out
+}
+
 fn scene_point(d: &RollingDoc) -> Result<Option<ScenePoint>, String> {
     let Some(sd) = &d.scene else {
         if d.frames.is_some() || d.frame_rate_hz.is_some() {
@@ -295,18 +315,11 @@ pub fn evaluate(doc: &Value, seed: u64, dir: &Path) -> Result<PointOutput, CliEr
         _ => None,
     };
 
-    let mut out = PointOutput::default();
-    out.put("skew_px_measured", fit.slope * span);
-    out.put("skew_px_expected", skew_expected);
-    out.put("skew_px_tolerance", skew_tol);
-    out.put_opt(
-        "flicker_period_rows_measured",
+    let mut out = skew_and_flicker_columns(
+        [fit.slope * span, skew_expected, skew_tol],
         measured.map(|m| m.period_rows),
-    );
-    out.put("flicker_period_rows_expected", period_expected);
-    out.put_opt("flicker_period_rows_tolerance", period_tol);
-    out.put(
-        "flicker_visibility_expected",
+        period_expected,
+        period_tol,
         light.band_visibility(exposure_s),
     );
     out.detail = json!({

@@ -221,18 +221,11 @@ pub fn evaluate(
         _ => None,
     };
 
-    let mut out = PointOutput::default();
-    out.put("skew_px_measured", slope * span);
-    out.put("skew_px_expected", skew_expected);
-    out.put("skew_px_tolerance", skew_tol);
-    out.put_opt(
-        "flicker_period_rows_measured",
+    let mut out = super::rolling::skew_and_flicker_columns(
+        [slope * span, skew_expected, skew_tol],
         measured.map(|m| m.period_rows),
-    );
-    out.put("flicker_period_rows_expected", period_expected);
-    out.put_opt("flicker_period_rows_tolerance", period_tol);
-    out.put(
-        "flicker_visibility_expected",
+        period_expected,
+        period_tol,
         light.band_visibility(exposure_s),
     );
     out.put("image_velocity_px_per_s", v[0]);
