@@ -12,12 +12,15 @@ DEPS="numpy==1.26.4 scipy==1.13.1 matplotlib==3.8.4 pillow==10.4.0 lxml==5.3.0 j
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="${CAMSIM_EMVA1288_VENV:-$repo/.venv-emva1288}"
 py="$venv/bin/python"
+# shellcheck source=tools/venv_lock.sh
+. "$repo/tools/venv_lock.sh"
+venv_lock "$venv"
 check="import importlib.metadata as m, sys; sys.exit(m.version('emva1288') != '$EMVA_VERSION' or m.version('numpy') != '1.26.4')"
 if [ -x "$py" ] && "$py" -c "$check" 2>/dev/null; then
     echo "emva1288_setup: emva1288 $EMVA_VERSION already in $venv"
     exit 0
 fi
-python3 -m venv "$venv"
+venv_fresh "$venv"
 "$py" -m pip install --quiet --disable-pip-version-check --upgrade pip
 # shellcheck disable=SC2086
 "$py" -m pip install --quiet --disable-pip-version-check $DEPS "emva1288==$EMVA_VERSION"

@@ -13,12 +13,15 @@ NUMPY_VERSION="2.2.6"
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="${CAMSIM_LIBRAW_VENV:-$repo/.venv-libraw}"
 py="$venv/bin/python"
+# shellcheck source=tools/venv_lock.sh
+. "$repo/tools/venv_lock.sh"
+venv_lock "$venv"
 check="import rawpy, pidng, importlib.metadata as m, sys; sys.exit(not (m.version('rawpy') == '$RAWPY_VERSION' and m.version('pidng') == '$PIDNG_VERSION'))"
 if [ -x "$py" ] && "$py" -c "$check" 2>/dev/null; then
     echo "libraw_setup: rawpy $RAWPY_VERSION and pidng $PIDNG_VERSION already in $venv"
     exit 0
 fi
-python3 -m venv "$venv"
+venv_fresh "$venv"
 "$py" -m pip install --quiet --disable-pip-version-check --upgrade pip
 "$py" -m pip install --quiet --disable-pip-version-check "numpy==$NUMPY_VERSION" "rawpy==$RAWPY_VERSION" "pidng==$PIDNG_VERSION"
 "$py" -c "import rawpy, pidng; print('libraw_setup: rawpy', rawpy.__version__, '(LibRaw', rawpy.libraw_version, ') and pidng installed in $venv')"

@@ -34,11 +34,12 @@ if [[ ! -f "$HARNESS/gltf_to_mitsuba.py" ]]; then
     exit 1
 fi
 
-# 1. Python packages.
-if [[ ! -x "$VENV/bin/python" ]]; then
-    "${PYTHON:-python3}" -m venv "$VENV"
-fi
-if ! "$VENV/bin/python" -c "import mitsuba, numpy" 2>/dev/null; then
+# 1. Python packages (one install at a time; a half-installed venv is rebuilt from empty).
+# shellcheck source=tools/venv_lock.sh
+. "$ROOT/tools/venv_lock.sh"
+venv_lock "$VENV"
+if ! { [[ -x "$VENV/bin/python" ]] && "$VENV/bin/python" -c "import mitsuba, numpy" 2>/dev/null; }; then
+    venv_fresh "$VENV"
     "$VENV/bin/pip" install --quiet --upgrade pip
     "$VENV/bin/pip" install --quiet "mitsuba==$MITSUBA_VERSION" numpy
 fi

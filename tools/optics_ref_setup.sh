@@ -14,6 +14,9 @@ OPTICALGLASS_VERSION="1.1.1"
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$repo/.venv-optics"
 py="$venv/bin/python"
+# shellcheck source=tools/venv_lock.sh
+. "$repo/tools/venv_lock.sh"
+venv_lock "$venv"
 check="
 from importlib.metadata import version
 import sys
@@ -24,7 +27,7 @@ if [ -x "$py" ] && "$py" -c "$check" 2>/dev/null; then
     echo "optics_ref_setup: optiland $OPTILAND_VERSION, rayoptics $RAYOPTICS_VERSION already in $venv"
     exit 0
 fi
-[ -x "$py" ] || "${PYTHON:-python3}" -m venv "$venv"
+venv_fresh "$venv"
 "$py" -m pip install --quiet --disable-pip-version-check --upgrade pip
 "$py" -m pip install --quiet --disable-pip-version-check "optiland==$OPTILAND_VERSION" \
     "rayoptics==$RAYOPTICS_VERSION" "opticalglass==$OPTICALGLASS_VERSION"

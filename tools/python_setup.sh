@@ -15,6 +15,9 @@ PYTEST_VERSION="9.2.0"
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="${CAMSIM_PY_VENV:-$repo/.venv-py}"
 py="$venv/bin/python"
+# shellcheck source=tools/venv_lock.sh
+. "$repo/tools/venv_lock.sh"
+venv_lock "$venv"
 pip=("$py" -m pip --disable-pip-version-check)
 if ! [ -x "$py" ] || ! "$py" - <<PYEOF 2>/dev/null
 import sys, importlib.metadata as m
@@ -22,7 +25,7 @@ want = {"maturin": "$MATURIN_VERSION", "numpy": "$NUMPY_VERSION", "pytest": "$PY
 sys.exit(any(m.version(k) != v for k, v in want.items()))
 PYEOF
 then
-    python3 -m venv "$venv"
+    venv_fresh "$venv"
     "${pip[@]}" install --quiet --upgrade pip
     "${pip[@]}" install --quiet "maturin==$MATURIN_VERSION" "numpy==$NUMPY_VERSION" "pytest==$PYTEST_VERSION"
 fi

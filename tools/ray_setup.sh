@@ -10,11 +10,14 @@ RAY_VERSION="2.60.0"
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="${CAMSIM_RAY_VENV:-$repo/.venv-ray}"
 py="$venv/bin/python"
+# shellcheck source=tools/venv_lock.sh
+. "$repo/tools/venv_lock.sh"
+venv_lock "$venv"
 if [ -x "$py" ] && "$py" -c "import ray, sys; sys.exit(ray.__version__ != '$RAY_VERSION')" 2>/dev/null; then
     echo "ray_setup: Ray $RAY_VERSION already in $venv"
     exit 0
 fi
-python3 -m venv "$venv"
+venv_fresh "$venv"
 "$py" -m pip install --quiet --disable-pip-version-check --upgrade pip
 "$py" -m pip install --quiet --disable-pip-version-check "ray[default]==$RAY_VERSION"
 "$py" -c "import ray; print('ray_setup: Ray', ray.__version__, 'installed in $venv')"
