@@ -297,3 +297,62 @@ fn pixel_optics_table() {
         );
     }
 }
+
+/// An image-space telecentric lens (a plano-convex singlet with the stop in its front focal
+/// plane, so the exit pupil is at infinity): every chief ray is parallel to the axis, so the
+/// shading is the on-axis value at every pixel — the closed form with the pupil at infinity
+/// and a cone of the lens's f-number.
+#[test]
+fn telecentric_lens_gives_no_cra_shading() {
+    let dir = tempfile::tempdir().unwrap();
+    let glass = json!({"catalog": "schott", "glass": "N-BK7"});
+    let lens_json = |stop_gap_mm: f64| {
+        json!({"name": "telecentric singlet", "units": "mm", "surfaces": [
+            {"radius_mm": null, "thickness_mm": stop_gap_mm, "material": "air",
+             "semi_diameter_mm": 5.0, "stop": true},
+            {"radius_mm": 26.0, "thickness_mm": 4.0, "material": glass, "semi_diameter_mm": 12.0},
+            {"radius_mm": null, "thickness_mm": 48.0, "material": "air", "semi_diameter_mm": 12.0}
+        ], "aperture": {"epd_mm": 10.0}})
+    };
+    let path = dir.path().join("telecentric.json");
+    let first_order = |v: &Value| {
+        std::fs::write(&path, v.to_string()).unwrap();
+        camsim_lens::LensPrescription::from_json_file(&path, &camsim_lens::GlassCatalog::bundled())
+            .unwrap()
+            .first_order(550.0)
+            .unwrap()
+    };
+    // Put the stop on the front focal point: with the stop at z = 0 and the lens at z = 50,
+    // the focal point's distance in front of the lens is 50 − z_F.
+    let fo = first_order(&lens_json(50.0));
+    let fo = first_order(&lens_json(50.0 - fo.front_focal_z_mm));
+    assert!(
+        !(fo.exit_pupil_from_image_mm.abs() < 1e6),
+        "not telecentric: exit pupil {} mm from the image",
+        fo.exit_pupil_from_image_mm
+    );
+    let n_lens = fo.f_number;
+    let far_mm = 1e12;
+    let rows = shading_vs_closed_form(
+        dir.path(),
+        2,
+        61,
+        1.4,
+        0.9,
+        2.0,
+        json!({"lens": path.to_str().unwrap()}),
+        far_mm,
+        far_mm / (2.0 * n_lens),
+    );
+    let centre = rows[30].1;
+    for (x, m, cf) in &rows {
+        assert!(
+            (m - cf).abs() < 2e-5,
+            "x = {x} mm: frame {m} vs closed form {cf}"
+        );
+        assert!(
+            (m - centre).abs() < 1e-6,
+            "x = {x} mm: {m} vs centre {centre}"
+        );
+    }
+}

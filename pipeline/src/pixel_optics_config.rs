@@ -280,6 +280,28 @@ fn chief_ray_from_file(
         // exit_pupil_from_image_mm = z_xp − z_image (negative: the pupil before the image).
         let distance_mm = -fo.exit_pupil_from_image_mm;
         let radius_mm = 0.5 * fo.exit_pupil_diameter_mm;
+        // An image-space telecentric lens (exit pupil at infinity, more than a kilometre
+        // here): every chief ray is parallel to the axis, so the chief-ray angle is 0 across
+        // the sensor and the cone is the lens's f-number.
+        if !(distance_mm.is_finite() && distance_mm.abs() < 1e6) {
+            if !(fo.f_number.is_finite() && fo.f_number > 0.0) {
+                return Err(err(
+                    "lens",
+                    format!("{l}: telecentric with no finite f-number ({})", fo.f_number),
+                ));
+            }
+            return Ok((
+                ChiefRay::Table {
+                    field_mm: vec![0.0],
+                    cra_deg: vec![0.0],
+                    f_number: fo.f_number,
+                },
+                format!(
+                    "lens {l}: image-space telecentric (exit pupil at infinity), chief-ray angle 0, f/{:.3} at {wl} nm",
+                    fo.f_number
+                ),
+            ));
+        }
         return Ok((
             ChiefRay::ExitPupil {
                 distance_mm,

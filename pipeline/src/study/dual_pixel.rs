@@ -230,8 +230,19 @@ fn point(doc: &Value) -> Result<Point, String> {
         }
     };
     let cam = camera_from_file(Path::new("camera"), f).map_err(|e| e.one_line())?;
-    if cam.dual_pixel.is_none() {
-        return Err("camera.sensor.dual_pixel: required by a dual_pixel point (e.g. {})".into());
+    match cam.dual_pixel {
+        None => {
+            return Err("camera.sensor.dual_pixel: required by a dual_pixel point (e.g. {})".into())
+        }
+        // s = ½: both half-photodiodes see the whole pupil, so there is no disparity to
+        // measure and no phase detection to focus with.
+        Some(dp) if dp.separation <= 0.5 => {
+            return Err(format!(
+                "camera.sensor.dual_pixel.separation: {} gives no disparity (both halves see the whole pupil); a dual_pixel point needs 0.5 < separation <= 1",
+                dp.separation
+            ))
+        }
+        Some(_) => {}
     }
     let (focus_m, f_m) = match lens_focus {
         Some((u_focus, efl_m)) => (1.0 / u_focus, efl_m),
