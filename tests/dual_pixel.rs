@@ -4,7 +4,7 @@
 //! depth of focus; the two half-photodiodes summing to the normal depth-aware pixel; an
 //! imperfect split scaling the disparity by 2s − 1; an absent block changing nothing; and
 //! the `sensor.dual_pixel` key's one-line errors.
-use crate::util::camsim;
+use crate::util::{num, repo, study_rows};
 use camsim_core::image::Plane;
 use camsim_pipeline::config::{
     camera_from_file, captures_with_camera, CameraFile, CaptureSet, CapturesFile,
@@ -12,10 +12,6 @@ use camsim_pipeline::config::{
 use serde_json::{json, Value};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
 
 /// The example camera (4.4 mm f/1.8 focused at 1 m, 1.4 µm mono pixels, ideal split).
 fn example_camera() -> Value {
@@ -41,23 +37,8 @@ fn thin_lens_disparity_px(z_m: f64) -> f64 {
 fn dual_pixel_study_disparity_follows_thin_lens_and_pdaf_focuses() {
     let dir = tempfile::tempdir().unwrap();
     let spec = repo().join("examples/study_dual_pixel/spec_ci.json");
-    let o = camsim()
-        .arg("study")
-        .arg(&spec)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let t: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("table.json")).unwrap())
-            .unwrap();
-    let rows = t["rows"].as_array().unwrap();
+    let rows = &study_rows(&spec, dir.path());
     assert_eq!(rows.len(), 5, "five object distances");
-    let num = |r: &Value, k: &str| {
-        r[k].as_f64()
-            .unwrap_or_else(|| panic!("{k} missing in {r}"))
-    };
     let mut signs = Vec::new();
     for r in rows {
         let z = num(r, "object_distance_m");
@@ -160,23 +141,8 @@ fn dual_pixel_study_disparity_follows_thin_lens_and_pdaf_focuses() {
 fn dual_pixel_study_through_a_real_lens_focuses_the_lens() {
     let dir = tempfile::tempdir().unwrap();
     let spec = repo().join("examples/study_dual_pixel/spec_ci_lens.json");
-    let o = camsim()
-        .arg("study")
-        .arg(&spec)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let t: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("table.json")).unwrap())
-            .unwrap();
-    let rows = t["rows"].as_array().unwrap();
+    let rows = &study_rows(&spec, dir.path());
     assert_eq!(rows.len(), 2);
-    let num = |r: &Value, k: &str| {
-        r[k].as_f64()
-            .unwrap_or_else(|| panic!("{k} missing in {r}"))
-    };
     for r in rows {
         let u = num(r, "object_vergence_per_m");
         let (e, m, k) = (

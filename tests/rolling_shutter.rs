@@ -3,36 +3,17 @@
 //! period measured on simulated frames against `v · row_time` and `(1/f)/row_time`), the
 //! camera and shot keys (one-line errors), and the dark-current temperature law through
 //! `camera.json`.
-use crate::util::camsim;
+use crate::util::{camsim, num, repo, study_rows};
 use camsim_pipeline::config::{camera_from_file, CameraFile};
 use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use std::path::Path;
 
 #[test]
 fn rolling_shutter_study_measures_skew_and_flicker_period() {
     let dir = tempfile::tempdir().unwrap();
     let spec = repo().join("examples/study_rolling_shutter/spec_edge_ci.json");
-    let o = camsim()
-        .arg("study")
-        .arg(&spec)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let t: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("table.json")).unwrap())
-            .unwrap();
-    let rows = t["rows"].as_array().unwrap();
+    let rows = &study_rows(&spec, dir.path());
     assert_eq!(rows.len(), 2, "two exposure times");
-    let num = |r: &Value, k: &str| {
-        r[k].as_f64()
-            .unwrap_or_else(|| panic!("{k} missing in {r}"))
-    };
     for r in rows {
         // Skew: v · row_time · (rows − 1) = 2000 px/s · 20 µs · 199.
         let (m, e, tol) = (
@@ -72,24 +53,9 @@ fn rolling_shutter_study_on_a_moving_gltf_bar() {
     let dir = tempfile::tempdir().unwrap();
     let spec = repo().join("examples/study_rolling_shutter/spec_ci.json");
     let t0 = std::time::Instant::now();
-    let o = camsim()
-        .arg("study")
-        .arg(&spec)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = &study_rows(&spec, dir.path());
     eprintln!("study: {:.1} s", t0.elapsed().as_secs_f64());
-    let t: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("table.json")).unwrap())
-            .unwrap();
-    let rows = t["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "two exposure times");
-    let num = |r: &Value, k: &str| {
-        r[k].as_f64()
-            .unwrap_or_else(|| panic!("{k} missing in {r}"))
-    };
     // Closed form of the bar's image velocity: a pinhole camera whose 30° vertical field spans
     // the 200 rows (blur none: no margin, one sample per pixel): f_px = 100 / tan 15°; the bar
     // moves at 8 m/s in the plane 2 m away: v = 8 · f_px / 2 px/s.

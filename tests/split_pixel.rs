@@ -2,36 +2,17 @@
 //! spec_ci.json: a standard pixel and an IMX490-style split pixel on simulated flat fields;
 //! merged SNR, dynamic range and the SNR hole against their closed forms, report with SNR
 //! plots) and the `sensor.hdr` camera keys (one-line errors).
-use crate::util::camsim;
+use crate::util::{num, repo, study_rows};
 use camsim_pipeline::config::{camera_from_file, CameraFile};
 use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use std::path::Path;
 
 #[test]
 fn split_pixel_study_reports_snr_curves_and_dynamic_range() {
     let dir = tempfile::tempdir().unwrap();
     let spec = repo().join("examples/study_split_pixel/spec_ci.json");
-    let o = camsim()
-        .arg("study")
-        .arg(&spec)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let t: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("table.json")).unwrap())
-            .unwrap();
-    let rows = t["rows"].as_array().unwrap();
+    let rows = &study_rows(&spec, dir.path());
     assert_eq!(rows.len(), 14, "2 pixels × 7 exposures");
-    let num = |r: &Value, k: &str| {
-        r[k].as_f64()
-            .unwrap_or_else(|| panic!("{k} missing in {r}"))
-    };
     // Standard pixel (camera.json): one readout, g = 50 µV/e⁻, σ = 150 µV (3 e⁻), 12 bits
     // over 1 V with black 64 DN: clips at (4095 − 64)/(4095 · 5e-5) e⁻; dark 1 mV/s · 10 ms
     // / 50 µV/e⁻ = 0.2 e⁻. Dynamic range 20 log₁₀(H_max/H₀) with H_max = 0.95 · clip − d and

@@ -2,7 +2,7 @@
 //! (examples/study_codesign/spec_ci.json), MTF50 against the closed-form product of the
 //! diffraction and pixel-aperture MTFs, resumability (points counted), the local engine against
 //! the Ray engine on a local Ray cluster, report figures, and one-line errors.
-use crate::util::camsim;
+use crate::util::{camsim, num};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -49,11 +49,6 @@ fn rows(out: &Path) -> Vec<Value> {
     let t: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
     t["rows"].as_array().unwrap().clone()
-}
-
-fn num(r: &Value, k: &str) -> f64 {
-    r[k].as_f64()
-        .unwrap_or_else(|| panic!("{k} missing in {r}"))
 }
 
 /// The sensor of examples/study_codesign/camera.json (inline) with `blur`.

@@ -30,3 +30,30 @@ pub fn values(v: &Value) -> Vec<f64> {
 pub fn camsim() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_camsim"))
 }
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Run `camsim study SPEC --out OUT` and return the rows of OUT/table.json (panicking with
+/// camsim's stderr when the study fails).
+pub fn study_rows(spec: &Path, out: &Path) -> Vec<Value> {
+    let o = camsim()
+        .arg("study")
+        .arg(spec)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
+    t["rows"].as_array().expect("table.json rows").clone()
+}
+
+/// A number in a study table row, naming the key when it is missing.
+pub fn num(r: &Value, k: &str) -> f64 {
+    r[k].as_f64()
+        .unwrap_or_else(|| panic!("{k} missing in {r}"))
+}
