@@ -43,8 +43,8 @@ struct Node4 {
     child: [u32; 4],
 }
 
-/// Aligned to 64 bytes (160 bytes of data in three cache lines, never four).
-#[repr(C, align(64))]
+/// 160 bytes aligned to 32: always three cache lines, never four, with no padding.
+#[repr(C, align(32))]
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Pack4 {
     /// Vertex 0 (x, y, z), one lane per triangle.
