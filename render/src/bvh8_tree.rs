@@ -64,11 +64,7 @@ impl Bvh8 {
     }
 
     /// Build from obvhs's binary BVH over `tris` (`count`: triangles under each binary node).
-    pub(crate) fn build(
-        tris: &[[Vec3; 3]],
-        bvh2: &obvhs::bvh2::Bvh2,
-        count: &[u32],
-    ) -> Bvh8 {
+    pub(crate) fn build(tris: &[[Vec3; 3]], bvh2: &obvhs::bvh2::Bvh2, count: &[u32]) -> Bvh8 {
         let mut b = Builder8 {
             tb: TriBuilder {
                 tris,
@@ -252,10 +248,7 @@ impl Ray8 {
         let (nx, fx) = slab(0);
         let (ny, fy) = slab(1);
         let (nz, fz) = slab(2);
-        let tnear = _mm256_max_ps(
-            _mm256_max_ps(nx, ny),
-            _mm256_max_ps(nz, self.tmin),
-        );
+        let tnear = _mm256_max_ps(_mm256_max_ps(nx, ny), _mm256_max_ps(nz, self.tmin));
         let tfar = _mm256_min_ps(
             _mm256_min_ps(fx, fy),
             _mm256_min_ps(fz, _mm256_set1_ps(tmax)),

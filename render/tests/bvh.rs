@@ -63,7 +63,11 @@ fn mesh(k: usize, rng: &mut Lcg) -> Vec<[Vec3; 3]> {
         let th = std::f32::consts::PI * i as f32 / nv as f32;
         let ph = 2.0 * std::f32::consts::PI * (j % nu) as f32 / nu as f32;
         let r = 1.0 + bump;
-        Vec3::new(r * th.sin() * ph.cos(), r * th.cos(), r * th.sin() * ph.sin())
+        Vec3::new(
+            r * th.sin() * ph.cos(),
+            r * th.cos(),
+            r * th.sin() * ph.sin(),
+        )
     };
     let bumps: Vec<f32> = (0..(nv + 1) * nu).map(|_| 0.05 * rng.f()).collect();
     let at = |i: usize, j: usize| pt(i, j, bumps[i * nu + j % nu]);
@@ -168,10 +172,18 @@ fn check(name: &str, tris: &[[Vec3; 3]], simd8: bool, rng: &mut Lcg) {
         #[cfg(not(target_arch = "x86_64"))]
         false
     };
-    assert_eq!(bvh.uses_simd8(), simd8 && avx2, "{name}: 8-wide code choice");
+    assert_eq!(
+        bvh.uses_simd8(),
+        simd8 && avx2,
+        "{name}: 8-wide code choice"
+    );
     let mut sorted = bvh.order.clone();
     sorted.sort();
-    assert_eq!(sorted, (0..tris.len() as u32).collect::<Vec<_>>(), "{name}: order");
+    assert_eq!(
+        sorted,
+        (0..tris.len() as u32).collect::<Vec<_>>(),
+        "{name}: order"
+    );
     let geo: Vec<TriGeom> = tris.iter().map(geom).collect();
     let (mut hits, mut misses, mut ties) = (0, 0, 0);
     for (o, d, tmin, tmax) in rays(tris, 3000, rng) {
@@ -211,7 +223,10 @@ fn check(name: &str, tris: &[[Vec3; 3]], simd8: bool, rng: &mut Lcg) {
         );
     }
     // the rays exercise both answers, and ties stay the exception
-    assert!(hits > 500 && misses > 100, "{name}: {hits} hits, {misses} misses");
+    assert!(
+        hits > 500 && misses > 100,
+        "{name}: {hits} hits, {misses} misses"
+    );
     assert!(ties * 4 < hits, "{name}: {ties} ties in {hits} hits");
 }
 
