@@ -18,9 +18,9 @@ use glam::{Vec2, Vec3, Vec4};
 use std::mem::MaybeUninit;
 
 /// Child reference flag: the child is a triangle pack.
-const LEAF: u32 = 1 << 31;
+pub(crate) const LEAF: u32 = 1 << 31;
 /// Unused child slot.
-const EMPTY: u32 = u32::MAX;
+pub(crate) const EMPTY: u32 = u32::MAX;
 /// Barycentric tolerance (closes cracks along shared edges; as `TriGeom::intersect`).
 const BARY_EPS: f32 = 1e-6;
 /// Traversal stack depth (each level pushes ≤ 3 entries; trees are far shallower than 80).
@@ -30,6 +30,9 @@ const STACK: usize = 256;
 /// packs that beats the branchy tree walk; measured on the Cornell box, 36 triangles).
 const FLAT_MAX_TRIS: usize = 64;
 
+/// 128 bytes aligned to 64: exactly two cache lines (an adjacent pair for the hardware's
+/// spatial prefetcher), never three.
+#[repr(C, align(64))]
 #[derive(Debug, Clone, Copy)]
 struct Node4 {
     /// Child box minima (x, y, z), one lane per child.
@@ -40,8 +43,10 @@ struct Node4 {
     child: [u32; 4],
 }
 
+/// 160 bytes aligned to 32: always three cache lines, never four, with no padding.
+#[repr(C, align(32))]
 #[derive(Debug, Clone, Copy)]
-struct Pack4 {
+pub(crate) struct Pack4 {
     /// Vertex 0 (x, y, z), one lane per triangle.
     v0: [Vec4; 3],
     /// v1 − v0.
@@ -49,7 +54,7 @@ struct Pack4 {
     /// v2 − v0.
     e2: [Vec4; 3],
     /// Triangle index (BVH order) per lane; unused lanes are degenerate (never hit).
-    prim: [u32; 4],
+    pub(crate) prim: [u32; 4],
 }
 
 /// The closest hit of a ray.
@@ -77,19 +82,23 @@ pub struct Bvh4 {
     /// (render/src/bvh8_flat.rs).
     #[cfg(target_arch = "x86_64")]
     flat8: Option<Box<crate::bvh8_flat::Flat8>>,
+    /// More triangles on a CPU with AVX2 + FMA: the 8-wide tree that replaces `nodes`/`packs`
+    /// (render/src/bvh8_tree.rs).
+    #[cfg(target_arch = "x86_64")]
+    wide8: Option<Box<crate::bvh8_tree::Bvh8>>,
 }
 
 /// A ray prepared for traversal (splatted origin/direction, safe reciprocal direction).
-struct PreparedRay {
-    o: [Vec4; 3],
+pub(crate) struct PreparedRay {
+    pub(crate) o: [Vec4; 3],
     d: [Vec4; 3],
-    inv: [Vec4; 3],
-    tmin: f32,
+    pub(crate) inv: [Vec4; 3],
+    pub(crate) tmin: f32,
 }
 
 impl PreparedRay {
     #[inline(always)]
-    fn new(o: Vec3, d: Vec3, tmin: f32) -> Self {
+    pub(crate) fn new(o: Vec3, d: Vec3, tmin: f32) -> Self {
         // a zero direction component gets a tiny one so that 0·∞ never appears in the slabs
         let safe = |x: f32| {
             if x.abs() < 1e-20 {
@@ -130,7 +139,7 @@ impl PreparedRay {
     /// Möller–Trumbore on the 4 triangles of a pack: (t per lane, b1, b2, mask of hits in
     /// [tmin, tmax]).
     #[inline(always)]
-    fn tris(&self, p: &Pack4, tmax: f32) -> (Vec4, Vec4, Vec4, u32) {
+    pub(crate) fn tris(&self, p: &Pack4, tmax: f32) -> (Vec4, Vec4, Vec4, u32) {
         let [dx, dy, dz] = self.d;
         let [e1x, e1y, e1z] = p.e1;
         let [e2x, e2y, e2z] = p.e2;
@@ -164,6 +173,34 @@ impl PreparedRay {
 }
 
 impl Bvh4 {
+    /// Ask the memory system for child `c` (node or pack) ahead of its visit: the children
+    /// that wait on the traversal stack load while the nearest one is traversed (at 10⁶
+    /// triangles the tree does not fit in the L2 cache and the traversal waits on memory).
+    #[inline(always)]
+    fn prefetch(&self, c: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let (p, lines) = if c & LEAF != 0 {
+                (
+                    self.packs.as_ptr().wrapping_add((c & !LEAF) as usize) as *const i8,
+                    3,
+                )
+            } else {
+                (self.nodes.as_ptr().wrapping_add(c as usize) as *const i8, 2)
+            };
+            for l in 0..lines {
+                // SAFETY: a prefetch never faults, whatever the address
+                #[allow(unused_unsafe)]
+                unsafe {
+                    _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l))
+                };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = c;
+    }
+
     /// Build over world-space triangles (none degenerate in a way that matters: degenerate
     /// triangles are kept and simply never hit).
     pub fn build(triangles: &[[Vec3; 3]]) -> Bvh4 {
@@ -174,11 +211,15 @@ impl Bvh4 {
     /// it (false: the portable 4-wide code only, for tests).
     pub fn build_with(triangles: &[[Vec3; 3]], simd8: bool) -> Bvh4 {
         let mut b = Builder {
-            tris: triangles,
+            tb: TriBuilder {
+                tris: triangles,
+                packs: Vec::new(),
+                order: Vec::with_capacity(triangles.len()),
+            },
             nodes: Vec::new(),
-            packs: Vec::new(),
-            order: Vec::with_capacity(triangles.len()),
         };
+        #[cfg(target_arch = "x86_64")]
+        let mut wide8 = None;
         let root = if triangles.len() <= 4 {
             let all: Vec<u32> = (0..triangles.len() as u32).collect();
             b.child_over(&all).0
@@ -202,25 +243,47 @@ impl Bvh4 {
             );
             let mut count = vec![0u32; bvh2.nodes.len()];
             subtree_count(&bvh2, 0, &mut count);
+            #[cfg(target_arch = "x86_64")]
+            if simd8 && triangles.len() > FLAT_MAX_TRIS && crate::bvh8_tree::Bvh8::supported() {
+                wide8 = Some(Box::new(crate::bvh8_tree::Bvh8::build(
+                    triangles, &bvh2, &count,
+                )));
+            }
+            #[cfg(target_arch = "x86_64")]
+            if wide8.is_some() {
+                0
+            } else {
+                b.collapse(&bvh2, &count, 0).0
+            }
+            #[cfg(not(target_arch = "x86_64"))]
             b.collapse(&bvh2, &count, 0).0
         };
         let mut bvh = Bvh4 {
             nodes: b.nodes,
-            packs: b.packs,
+            packs: b.tb.packs,
             root,
             flat: false,
-            order: b.order,
+            order: b.tb.order,
             #[cfg(target_arch = "x86_64")]
             flat8: None,
+            #[cfg(target_arch = "x86_64")]
+            wide8: None,
         };
+        #[cfg(target_arch = "x86_64")]
+        if let Some(w) = wide8 {
+            bvh.order = w.order.clone();
+            bvh.wide8 = Some(w);
+        }
         if triangles.len() <= FLAT_MAX_TRIS {
             // repack full packs of 4 in BVH order (spatially coherent groups)
             let order = std::mem::take(&mut bvh.order);
             let mut fb = Builder {
-                tris: triangles,
+                tb: TriBuilder {
+                    tris: triangles,
+                    packs: Vec::new(),
+                    order: Vec::with_capacity(triangles.len()),
+                },
                 nodes: Vec::new(),
-                packs: Vec::new(),
-                order: Vec::with_capacity(triangles.len()),
             };
             let packs: Vec<ChildBox> = order.chunks(4).map(|c| fb.child_over(c)).collect();
             // one box per pack, 4 per group node, tested before the triangles
@@ -228,8 +291,8 @@ impl Bvh4 {
                 let idx = fb.push_node();
                 fb.fill_node(idx, g);
             }
-            bvh.packs = fb.packs;
-            bvh.order = fb.order;
+            bvh.packs = fb.tb.packs;
+            bvh.order = fb.tb.order;
             bvh.nodes = fb.nodes;
             bvh.flat = true;
             #[cfg(target_arch = "x86_64")]
@@ -248,7 +311,7 @@ impl Bvh4 {
     /// True when the 8-wide AVX2 code casts the rays.
     pub fn uses_simd8(&self) -> bool {
         #[cfg(target_arch = "x86_64")]
-        return self.flat8.is_some();
+        return self.flat8.is_some() || self.wide8.is_some();
         #[cfg(not(target_arch = "x86_64"))]
         false
     }
@@ -264,6 +327,11 @@ impl Bvh4 {
                 prim,
                 bary,
             });
+        }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(w) = &self.wide8 {
+            // SAFETY: wide8 is only built when the CPU has AVX2 and FMA
+            return unsafe { w.intersect(o, d, tmin, tmax) };
         }
         let r = PreparedRay::new(o, d, tmin);
         let mut tmax = tmax;
@@ -348,6 +416,7 @@ impl Bvh4 {
                     if k > 0 {
                         // visit the nearest now, stack the others
                         for h in &hits[..k - 1] {
+                            self.prefetch(h.0);
                             stack[sp] = MaybeUninit::new(*h);
                             sp += 1;
                         }
@@ -380,6 +449,11 @@ impl Bvh4 {
             // SAFETY: flat8 is only built when the CPU has AVX2 and FMA
             return unsafe { f.unoccluded(o, d, tmin, tmax) };
         }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(w) = &self.wide8 {
+            // SAFETY: wide8 is only built when the CPU has AVX2 and FMA
+            return unsafe { w.unoccluded(o, d, tmin, tmax) };
+        }
         let r = PreparedRay::new(o, d, tmin);
         if self.flat {
             for n in &self.nodes {
@@ -411,6 +485,7 @@ impl Bvh4 {
                     m &= m - 1;
                     let c = n.child[i];
                     if c != EMPTY {
+                        self.prefetch(c);
                         stack[sp] = MaybeUninit::new(c);
                         sp += 1;
                     }
@@ -439,35 +514,85 @@ fn subtree_count(bvh: &obvhs::bvh2::Bvh2, i: usize, count: &mut [u32]) -> u32 {
     c
 }
 
+/// Input triangle indices under binary node `i`.
+pub(crate) fn prims_under(bvh: &obvhs::bvh2::Bvh2, i: usize, out: &mut Vec<u32>) {
+    let n = &bvh.nodes[i];
+    if n.prim_count > 0 {
+        let f = n.first_index as usize;
+        out.extend_from_slice(&bvh.primitive_indices[f..f + n.prim_count as usize]);
+    } else {
+        let f = n.first_index as usize;
+        prims_under(bvh, f, out);
+        prims_under(bvh, f + 1, out);
+    }
+}
+
+/// A child box padded so that float rounding in the slab test never drops a hit the triangle
+/// test would accept.
+#[inline]
+pub(crate) fn pad_box(a: Vec3, b: Vec3) -> (Vec3, Vec3) {
+    let pad = 1e-5 * (b - a).max_element() + 1e-6 * a.abs().max(b.abs()).max_element();
+    (a - Vec3::splat(pad), b + Vec3::splat(pad))
+}
+
+/// The triangle packs and the BVH order they define (shared by the 4- and 8-wide trees).
+pub(crate) struct TriBuilder<'a> {
+    pub(crate) tris: &'a [[Vec3; 3]],
+    pub(crate) packs: Vec<Pack4>,
+    pub(crate) order: Vec<u32>,
+}
+
+impl TriBuilder<'_> {
+    /// One pack over ≤ 4 input triangles (appended to the BVH order); its reference + box.
+    pub(crate) fn pack_over(&mut self, prims: &[u32]) -> ChildBox {
+        debug_assert!(prims.len() <= 4);
+        let mut p = Pack4 {
+            v0: [Vec4::ZERO; 3],
+            e1: [Vec4::ZERO; 3],
+            e2: [Vec4::ZERO; 3],
+            prim: [EMPTY; 4],
+        };
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let mut a = [[[0f32; 4]; 3]; 3];
+        for (l, &ti) in prims.iter().enumerate() {
+            let t = &self.tris[ti as usize];
+            let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+            for ax in 0..3 {
+                a[0][ax][l] = t[0][ax];
+                a[1][ax][l] = e1[ax];
+                a[2][ax][l] = e2[ax];
+            }
+            for v in t {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+            p.prim[l] = self.order.len() as u32;
+            self.order.push(ti);
+        }
+        for ax in 0..3 {
+            p.v0[ax] = Vec4::from_array(a[0][ax]);
+            p.e1[ax] = Vec4::from_array(a[1][ax]);
+            p.e2[ax] = Vec4::from_array(a[2][ax]);
+        }
+        self.packs.push(p);
+        ((self.packs.len() - 1) as u32 | LEAF, lo, hi)
+    }
+}
+
 struct Builder<'a> {
-    tris: &'a [[Vec3; 3]],
+    tb: TriBuilder<'a>,
     nodes: Vec<Node4>,
-    packs: Vec<Pack4>,
-    order: Vec<u32>,
 }
 
 /// A child reference with its box.
 type ChildBox = (u32, Vec3, Vec3);
 
 impl Builder<'_> {
-    /// Input triangle indices under binary node `i`.
-    fn prims_under(&self, bvh: &obvhs::bvh2::Bvh2, i: usize, out: &mut Vec<u32>) {
-        let n = &bvh.nodes[i];
-        if n.prim_count > 0 {
-            let f = n.first_index as usize;
-            out.extend_from_slice(&bvh.primitive_indices[f..f + n.prim_count as usize]);
-        } else {
-            let f = n.first_index as usize;
-            self.prims_under(bvh, f, out);
-            self.prims_under(bvh, f + 1, out);
-        }
-    }
-
     /// Collapse binary node `i` into a 4-wide child (a pack when ≤ 4 triangles lie below).
     fn collapse(&mut self, bvh: &obvhs::bvh2::Bvh2, count: &[u32], i: usize) -> ChildBox {
         if count[i] <= 4 || bvh.nodes[i].prim_count > 0 {
             let mut prims = Vec::new();
-            self.prims_under(bvh, i, &mut prims);
+            prims_under(bvh, i, &mut prims);
             return self.child_over(&prims);
         }
         // open the largest inner child (> 4 triangles) until there are 4 children
@@ -511,8 +636,7 @@ impl Builder<'_> {
         let mut mx = [[0f32; 4]; 3];
         let n = &mut self.nodes[idx];
         for (c, &(r, a, b)) in children.iter().enumerate() {
-            let pad = 1e-5 * (b - a).max_element() + 1e-6 * a.abs().max(b.abs()).max_element();
-            let (a, b) = (a - Vec3::splat(pad), b + Vec3::splat(pad));
+            let (a, b) = pad_box(a, b);
             for ax in 0..3 {
                 mn[ax][c] = a[ax];
                 mx[ax][c] = b[ax];
@@ -539,36 +663,7 @@ impl Builder<'_> {
     /// ≤ 4 groups (in list order; only reached for leaves the binary builder left large).
     fn child_over(&mut self, prims: &[u32]) -> ChildBox {
         if prims.len() <= 4 {
-            let mut p = Pack4 {
-                v0: [Vec4::ZERO; 3],
-                e1: [Vec4::ZERO; 3],
-                e2: [Vec4::ZERO; 3],
-                prim: [EMPTY; 4],
-            };
-            let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-            let mut a = [[[0f32; 4]; 3]; 3];
-            for (l, &ti) in prims.iter().enumerate() {
-                let t = &self.tris[ti as usize];
-                let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
-                for ax in 0..3 {
-                    a[0][ax][l] = t[0][ax];
-                    a[1][ax][l] = e1[ax];
-                    a[2][ax][l] = e2[ax];
-                }
-                for v in t {
-                    lo = lo.min(*v);
-                    hi = hi.max(*v);
-                }
-                p.prim[l] = self.order.len() as u32;
-                self.order.push(ti);
-            }
-            for ax in 0..3 {
-                p.v0[ax] = Vec4::from_array(a[0][ax]);
-                p.e1[ax] = Vec4::from_array(a[1][ax]);
-                p.e2[ax] = Vec4::from_array(a[2][ax]);
-            }
-            self.packs.push(p);
-            return ((self.packs.len() - 1) as u32 | LEAF, lo, hi);
+            return self.tb.pack_over(prims);
         }
         let idx = self.push_node();
         let per = prims.len().div_ceil(4);
@@ -591,8 +686,8 @@ mod tests {
     }
 
     /// The BVH (flat packs up to 64 triangles — 4-wide portable and 8-wide AVX2 when the CPU
-    /// has it —, the 4-wide tree above) agrees with brute force over every triangle with the
-    /// scalar test: closest hit t, triangle barycentrics, and occlusion.
+    /// has it —, the 4-wide or, with AVX2, 8-wide tree above) agrees with brute force over
+    /// every triangle with the scalar test: closest hit t, triangle barycentrics, and occlusion.
     #[test]
     fn bvh4_matches_brute_force() {
         let mut s = 7u64;
@@ -613,7 +708,12 @@ mod tests {
                         simd8 && crate::bvh8_flat::Flat8::supported()
                     );
                 } else {
-                    assert!(!bvh.uses_simd8());
+                    // the 8-wide AVX2 tree (render/src/bvh8_tree.rs) when the CPU has it
+                    #[cfg(target_arch = "x86_64")]
+                    assert_eq!(
+                        bvh.uses_simd8(),
+                        simd8 && crate::bvh8_tree::Bvh8::supported()
+                    );
                 }
                 let mut sorted = bvh.order.clone();
                 sorted.sort();

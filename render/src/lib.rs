@@ -22,6 +22,7 @@ pub mod animation;
 pub mod bsdf;
 pub mod bvh4;
 mod bvh8_flat;
+mod bvh8_tree;
 pub mod camera;
 pub mod depth_optics;
 pub mod depth_path;
