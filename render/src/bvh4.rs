@@ -207,8 +207,8 @@ impl Bvh4 {
         Self::build_with(triangles, true)
     }
 
-    /// [`Bvh4::build`]; `simd8` allows the 8-wide AVX2 code for small scenes when the CPU has
-    /// it (false: the portable 4-wide code only, for tests).
+    /// [`Bvh4::build`]; `simd8` allows the 8-wide AVX2 code when the CPU has it (a flat layout
+    /// for small scenes, a tree above; false: the portable 4-wide code only, for tests).
     pub fn build_with(triangles: &[[Vec3; 3]], simd8: bool) -> Bvh4 {
         let mut b = Builder {
             tb: TriBuilder {
@@ -245,9 +245,8 @@ impl Bvh4 {
             subtree_count(&bvh2, 0, &mut count);
             #[cfg(target_arch = "x86_64")]
             if simd8 && triangles.len() > FLAT_MAX_TRIS && crate::bvh8_tree::Bvh8::supported() {
-                wide8 = Some(Box::new(crate::bvh8_tree::Bvh8::build(
-                    triangles, &bvh2, &count,
-                )));
+                let w = crate::bvh8_tree::Bvh8::build(triangles, &bvh2, &count);
+                wide8 = w.fits_stack().then(|| Box::new(w));
             }
             #[cfg(target_arch = "x86_64")]
             if wide8.is_some() {

@@ -82,6 +82,29 @@ impl Bvh8 {
         }
     }
 
+    /// True when every root-to-leaf path fits the fixed traversal stack (each level stacks at
+    /// most 7 children); a deeper tree (a pathological obvhs build) is not used, and the
+    /// portable 4-wide tree traces instead.
+    pub(crate) fn fits_stack(&self) -> bool {
+        let max_depth = (STACK - 1) / 7;
+        let mut todo = vec![(self.root, 1usize)];
+        while let Some((c, depth)) = todo.pop() {
+            if depth > max_depth {
+                return false;
+            }
+            if c & LEAF != 0 || c == EMPTY {
+                continue;
+            }
+            let n = &self.nodes[c as usize];
+            for (i, ch) in n.child.iter().enumerate() {
+                if n.valid & (1 << i) != 0 {
+                    todo.push((*ch, depth + 1));
+                }
+            }
+        }
+        true
+    }
+
     /// Ask the memory system for child `c` ahead of its visit.
     #[inline(always)]
     fn prefetch(&self, c: u32) {
@@ -225,7 +248,7 @@ impl Bvh8 {
 impl Ray8 {
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    fn new(r: &PreparedRay) -> Ray8 {
+    unsafe fn new(r: &PreparedRay) -> Ray8 {
         let s = |v: glam::Vec4| _mm256_set1_ps(v.x);
         Ray8 {
             o: [s(r.o[0]), s(r.o[1]), s(r.o[2])],
