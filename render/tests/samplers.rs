@@ -382,6 +382,7 @@ fn area_light_sampling_matches_its_density() {
                 material: 0,
                 light: 0,
                 area: 0.5 * c.length(),
+                tangent: u32::MAX,
             }
         })
         .collect();
@@ -395,6 +396,8 @@ fn area_light_sampling_matches_its_density() {
         },
         reflectance: SpectralTexture::Constant(TabulatedSpectrum::constant(0.0)),
         emission: Some(TabulatedSpectrum::constant(1.0)),
+        emission_texture: None,
+        normal_map: None,
     };
     let scene = Scene::build(tris, shading, vec![mat], vec![], vec![]);
     let p = Vec3::new(0.1, 0.0, 0.2);
