@@ -143,6 +143,7 @@ pub struct GltfBuilder {
     extensions_required: Vec<String>,
     images: Vec<Value>,
     textures: Vec<Value>,
+    scene_extras: Option<Value>,
 }
 
 impl GltfBuilder {
@@ -315,7 +316,15 @@ impl GltfBuilder {
         if !self.extensions_required.is_empty() {
             d["extensionsRequired"] = json!(self.extensions_required);
         }
+        if let Some(e) = &self.scene_extras {
+            d["scenes"][0]["extras"] = e.clone();
+        }
         d
+    }
+
+    /// Set the `extras` of the scene (e.g. `camsim_environment_exr`).
+    pub fn scene_extras(&mut self, extras: Value) {
+        self.scene_extras = Some(extras);
     }
 
     /// Write `path` (.gltf) and its buffer `path` with extension .bin.

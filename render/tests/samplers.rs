@@ -27,7 +27,7 @@ fn bin_of(w: Vec3) -> usize {
 
 /// Chi-square test of directions from `sample` against density `pdf` (per sr) on equal-area
 /// (z, φ) bins; bins with expected count < 5 are pooled. Returns the p-value.
-fn chi_square(
+pub(crate) fn chi_square(
     n: usize,
     sub: usize,
     mut sample: impl FnMut(&mut CamRng) -> Option<Vec3>,
