@@ -107,11 +107,14 @@ pub fn job_from_args(a: &RenderArgs) -> Result<RenderJob, CliError> {
             rr_depth: a.rr_depth,
             variance: a.variance,
             depth_spp: if a.mitsuba_channels { a.depth_spp } else { 0 },
-            environment: a.environment.as_ref().map(|f| camsim_render::envmap::EnvironmentSpec {
-                exr: f.clone(),
-                strength: a.environment_strength,
-                rotation_y_deg: a.environment_rotation_deg,
-            }),
+            environment: a
+                .environment
+                .as_ref()
+                .map(|f| camsim_render::envmap::EnvironmentSpec {
+                    exr: f.clone(),
+                    strength: a.environment_strength,
+                    rotation_y_deg: a.environment_rotation_deg,
+                }),
         },
     })
 }

@@ -5,8 +5,8 @@
 //!   screen with an emissive texture, a diffuse sphere, lit by an equirectangular environment
 //!   named in the scene's extras (`camsim_environment_exr`) — every feature in one small file;
 //! * `scenes/mitsuba/envmap.gltf` (+ `.bin`, `envmap_sky.exr`): the Mitsuba 3 cross-check of
-//!   environment lighting (a sphere on a ground plane under a smooth sky with a sun-like
-//!   blob; references by tools/mitsuba_refs.sh envmap).
+//!   environment lighting (a sphere on a ground plane under a smooth grey sky with a
+//!   sun-like blob; references by tools/mitsuba_refs.sh envmap).
 use camsim_core::exr_io::{write_exr_channels, ExrChannel, ExrHeader};
 use camsim_render::gltf_write::{flat_spectrum, quad, sphere, GltfBuilder};
 use glam::{Quat, Vec3};
@@ -103,14 +103,28 @@ fn envmap_scene(dir: &Path) {
     let g = diffuse(&mut b, "ground", 0.5);
     ground(&mut b, 10.0, 1.0, g);
     let s = diffuse(&mut b, "ball", 0.8);
-    let mesh = b.mesh("ball", &sphere([0.0, 0.5, 0.0], 0.5, 32, 64, false), s);
+    let mesh = b.mesh("ball", &sphere([0.0, 0.5, 0.0], 0.5, 24, 48, false), s);
     b.node(json!({"name": "ball", "mesh": mesh}), true);
-    look_at(&mut b, Vec3::new(0.0, 1.2, 3.0), Vec3::new(0.0, 0.6, 0.0), 40.0);
+    look_at(
+        &mut b,
+        Vec3::new(0.0, 1.2, 3.0),
+        Vec3::new(0.0, 0.6, 0.0),
+        40.0,
+    );
     b.scene_extras(json!({"camsim_environment_exr": "envmap_sky.exr",
         "camsim_environment_strength": 1.0, "camsim_environment_rotation_deg": 30.0}));
-    write_rgb_exr(&dir.join("envmap_sky.exr"), 128, 64, sky);
+    // neutral (r = g = b): Mitsuba upsamples RGB with its own coefficient table, whose
+    // metamers differ from camsim's by ±1 % between 400 and 700 nm for coloured texels (same
+    // colour, different spectra); a grey map is D65-shaped in both, so the comparison checks
+    // the orientation, the D65 convention, the sampling and MIS without that difference
+    write_rgb_exr(&dir.join("envmap_sky.exr"), 128, 64, |u, v| {
+        let c = sky(u, v);
+        let y = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        [y, y, y]
+    });
     let p = dir.join("envmap.gltf");
-    b.write(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    b.write(&p)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
     println!("wrote {}", p.display());
 }
 
@@ -141,7 +155,12 @@ fn showcase(dir: &Path) {
     ground(&mut b, 3.0, 6.0, floor);
     // a screen with an emissive texture (a 16 × 8 colour pattern), facing +z
     let emissive_png = png(16, 8, |x, y| {
-        let c = [[230u8, 60, 40], [40, 200, 80], [50, 90, 230], [240, 220, 60]];
+        let c = [
+            [230u8, 60, 40],
+            [40, 200, 80],
+            [50, 90, 230],
+            [240, 220, 60],
+        ];
         c[((x / 4) + 2 * (y / 4)) as usize % 4]
     });
     let et = b.png_texture(&emissive_png);
@@ -161,12 +180,18 @@ fn showcase(dir: &Path) {
     let ball = diffuse(&mut b, "ball", 0.8);
     let mesh = b.mesh("ball", &sphere([0.6, 0.4, 0.0], 0.4, 24, 48, false), ball);
     b.node(json!({"name": "ball", "mesh": mesh}), true);
-    look_at(&mut b, Vec3::new(0.0, 1.3, 3.2), Vec3::new(0.0, 0.5, -0.5), 45.0);
+    look_at(
+        &mut b,
+        Vec3::new(0.0, 1.3, 3.2),
+        Vec3::new(0.0, 0.5, -0.5),
+        45.0,
+    );
     b.scene_extras(json!({"camsim_environment_exr": "sky.exr",
         "camsim_environment_strength": 1.0, "camsim_environment_rotation_deg": 0.0}));
     write_rgb_exr(&dir.join("sky.exr"), 64, 32, sky);
     let p = dir.join("showcase.gltf");
-    b.write(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    b.write(&p)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
     println!("wrote {}", p.display());
 }
 

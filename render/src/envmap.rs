@@ -4,9 +4,11 @@
 //! sigmoid-polynomial reflectance fit of rgb/k (Jakob & Hanika 2019, through the loader's
 //! coefficient table) times k times the unit-luminance D65.
 //!
-//! The environment map is importance-sampled by a piecewise-constant 2-D distribution over its
-//! texels with weights luminance × sin θ (Pharr, Jakob & Humphreys, *Physically Based
-//! Rendering*, 4th ed., §12.5 and §A.5.6): a texel (i, j) of a W × H map covers
+//! The environment map is looked up bilinearly (as Mitsuba 3's `envmap`) and importance-sampled
+//! by a piecewise-constant 2-D distribution over its texels with weights luminance × sin θ
+//! (Pharr, Jakob & Humphreys, *Physically Based Rendering*, 4th ed., §12.5 and §A.5.6), the
+//! luminance being the largest of the texel's 3 × 3 neighbourhood (the support of the bilinear
+//! lookup, so the density is > 0 wherever the radiance is): a texel (i, j) of a W × H map covers
 //! u ∈ [i/W, (i+1)/W), v ∈ [j/H, (j+1)/H), θ = π v, φ = 2π u, so the density per steradian of
 //! a direction is p(u, v) / (2π² sin θ).
 //!
@@ -112,11 +114,14 @@ impl RadianceImage {
     #[inline]
     pub fn index(&self, uv: Vec2, repeat: [bool; 2]) -> usize {
         let wrap = |x: f32, n: u32, rep: bool| -> usize {
-            let t = if rep { x - x.floor() } else { x.clamp(0.0, 1.0) };
+            let t = if rep {
+                x - x.floor()
+            } else {
+                x.clamp(0.0, 1.0)
+            };
             ((t * n as f32) as usize).min(n as usize - 1)
         };
-        wrap(uv.y, self.height, repeat[1]) * self.width as usize
-            + wrap(uv.x, self.width, repeat[0])
+        wrap(uv.y, self.height, repeat[1]) * self.width as usize + wrap(uv.x, self.width, repeat[0])
     }
 }
 
@@ -252,9 +257,20 @@ impl EnvMap {
             let band = th0.cos() - th1.cos();
             let s = (std::f64::consts::PI * (j as f64 + 0.5) / h as f64).sin();
             for i in 0..w {
-                let y = image.luminance[j * w + i] as f64;
+                // the bilinear lookup of a point in this cell reads the cell's 3 × 3
+                // neighbourhood: its largest luminance keeps the density > 0 wherever the
+                // interpolated radiance is (unbiased), close to proportional elsewhere
+                let mut y = 0.0f64;
+                for dj in -1i64..=1 {
+                    let jj = (j as i64 + dj).clamp(0, h as i64 - 1) as usize;
+                    for di in -1i64..=1 {
+                        let ii = (i as i64 + di).rem_euclid(w as i64) as usize;
+                        y = y.max(image.luminance[jj * w + ii] as f64);
+                    }
+                }
                 weights[j * w + i] = y * s;
-                mean += y * band * 2.0 * std::f64::consts::PI / w as f64;
+                mean += image.luminance[j * w + i] as f64 * band * 2.0 * std::f64::consts::PI
+                    / w as f64;
             }
         }
         let distr = Distribution2D::new(w, h, &weights);
@@ -292,10 +308,38 @@ impl EnvMap {
         self.to_world * Vec3::new(sp * st, ct, -cp * st)
     }
 
-    /// Radiance arriving along `-d`, i.e. seen looking in world direction `d`.
+    /// Radiance arriving along `-d`, i.e. seen looking in world direction `d`: bilinear
+    /// interpolation of the 4 nearest texels' spectra (texel centres at ((i+½)/W, (j+½)/H),
+    /// repeating in u, clamped in v), as Mitsuba's `envmap`.
     #[inline]
     pub fn eval(&self, d: Vec3, wl: &[f32; N_WL]) -> [f32; N_WL] {
-        self.image.texels[self.image.index(self.uv_of(d), [true, false])].eval4(wl)
+        let uv = self.uv_of(d);
+        let (w, h) = (self.image.width as i64, self.image.height as i64);
+        let x = uv.x * w as f32 - 0.5;
+        let y = uv.y * h as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let mut out = [0.0f32; N_WL];
+        for (dy, wy) in [(0, 1.0 - fy), (1, fy)] {
+            let j = (y0 + dy).clamp(0, h - 1) as usize;
+            for (dx, wx) in [(0, 1.0 - fx), (1, fx)] {
+                let wgt = wx * wy;
+                if wgt == 0.0 {
+                    continue;
+                }
+                let i = (x0 + dx).rem_euclid(w) as usize;
+                let t = &self.image.texels[j * w as usize + i];
+                if t.scale == 0.0 {
+                    continue;
+                }
+                let v = t.eval4(wl);
+                for k in 0..N_WL {
+                    out[k] += wgt * v[k];
+                }
+            }
+        }
+        out
     }
 
     /// Sample a direction by luminance × sin θ.

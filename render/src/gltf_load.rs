@@ -372,7 +372,9 @@ fn environment_extras(
         match e.get(key) {
             None => Ok(default),
             Some(v) => v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
-                cx.err(format!("scene extras.{key} = {v}: expected a finite number"))
+                cx.err(format!(
+                    "scene extras.{key} = {v}: expected a finite number"
+                ))
             }),
         }
     };

@@ -296,7 +296,9 @@ fn trace_path(
             if sh.tangent != u32::MAX {
                 let tv = &scene.tangents[sh.tangent as usize];
                 let tan = tv[0] * (1.0 - b.x - b.y) + tv[1] * b.x + tv[2] * b.y;
-                let tan = tan.truncate().extend(if tv[0].w < 0.0 { -1.0 } else { 1.0 });
+                let tan = tan
+                    .truncate()
+                    .extend(if tv[0].w < 0.0 { -1.0 } else { 1.0 });
                 let n2 = crate::normal_map::perturb(ns, sh.ng, tan, nm.eval(interpolate_uv(sh, b)));
                 bumped = n2 != ns;
                 ns = n2;

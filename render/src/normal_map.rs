@@ -56,7 +56,11 @@ impl NormalMap {
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Vec3 {
         let wrap = |x: f32, n: u32, rep: bool| -> usize {
-            let t = if rep { x - x.floor() } else { x.clamp(0.0, 1.0) };
+            let t = if rep {
+                x - x.floor()
+            } else {
+                x.clamp(0.0, 1.0)
+            };
             ((t * n as f32) as usize).min(n as usize - 1)
         };
         let i = wrap(uv.x, self.width, self.repeat[0]);

@@ -4,10 +4,10 @@
 use crate::bsdf::Bsdf;
 use crate::bvh4::Bvh4;
 use crate::camera::Perspective;
-use crate::sampling::{square_to_triangle, Distribution1D};
-use crate::spectral::{SigmoidPoly, TabulatedSpectrum, N_WL};
 use crate::envmap::{EmissionTexture, EnvMap};
 use crate::normal_map::NormalMap;
+use crate::sampling::{square_to_triangle, Distribution1D};
+use crate::spectral::{SigmoidPoly, TabulatedSpectrum, N_WL};
 use glam::{Mat4, Vec2, Vec3, Vec3A, Vec4};
 use obvhs::ray::Ray;
 

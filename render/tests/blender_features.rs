@@ -94,7 +94,12 @@ fn emissive_texture_scene(dir: &Path, texels: [[u8; 3]; 4], factor: [f64; 3], st
     b.write(&dir.join("emissive.gltf")).unwrap();
 }
 
-const TEXELS: [[u8; 3]; 4] = [[200, 100, 50], [30, 180, 90], [90, 60, 220], [240, 240, 240]];
+const TEXELS: [[u8; 3]; 4] = [
+    [200, 100, 50],
+    [30, 180, 90],
+    [90, 60, 220],
+    [240, 240, 240],
+];
 const FACTOR: [f64; 3] = [0.8, 1.0, 0.6];
 const STRENGTH: f64 = 5.0;
 
@@ -113,7 +118,11 @@ fn texel_rgb(t: usize) -> [f64; 3] {
 fn emissive_texture_gives_each_texels_radiance() {
     let d = tempfile::tempdir().unwrap();
     emissive_texture_scene(d.path(), TEXELS, FACTOR, STRENGTH);
-    let (_, out) = render_file(&d.path().join("emissive.gltf"), 16, &settings(64, "380:780:10", 1));
+    let (_, out) = render_file(
+        &d.path().join("emissive.gltf"),
+        16,
+        &settings(64, "380:780:10", 1),
+    );
     let bands = out.bands;
     for t in 0..4 {
         // texel (tx, ty) of the image (row 0 = v = 0); the quad's uv (0,0) is its lower-left
@@ -128,14 +137,22 @@ fn emissive_texture_gives_each_texels_radiance() {
             })
             .collect();
         let mean: Vec<f64> = (0..bands.count)
-            .map(|b| px.iter().map(|&i| out.band_planes[b][i] as f64).sum::<f64>() / px.len() as f64)
+            .map(|b| {
+                px.iter()
+                    .map(|&i| out.band_planes[b][i] as f64)
+                    .sum::<f64>()
+                    / px.len() as f64
+            })
             .collect();
         let rgb = texel_rgb(t);
         // the documented upsampling of this colour (17³ table): only noise and rounding remain
         let upsampled = RadianceTexel::from_rgb(rgb);
         for b in 0..bands.count {
             let lo = bands.lo_nm + bands.step_nm * b as f32;
-            let want = (0..10).map(|k| upsampled.eval(lo + k as f32 + 0.5) as f64).sum::<f64>() / 10.0;
+            let want = (0..10)
+                .map(|k| upsampled.eval(lo + k as f32 + 0.5) as f64)
+                .sum::<f64>()
+                / 10.0;
             let var = &out.variance_planes.as_ref().unwrap()[b];
             let sd = px.iter().map(|&i| var[i] as f64).sum::<f64>().sqrt() / px.len() as f64;
             let z = (mean[b] - want) / sd.max(1e-9 * want);
@@ -149,7 +166,10 @@ fn emissive_texture_gives_each_texels_radiance() {
         let peak = (0..bands.count)
             .map(|b| {
                 let lo = bands.lo_nm + bands.step_nm * b as f32;
-                (0..10).map(|k| exact.eval(lo + k as f32 + 0.5) as f64).sum::<f64>() / 10.0
+                (0..10)
+                    .map(|k| exact.eval(lo + k as f32 + 0.5) as f64)
+                    .sum::<f64>()
+                    / 10.0
             })
             .collect::<Vec<_>>();
         let pmax = peak.iter().copied().fold(0.0, f64::max);
@@ -231,7 +251,10 @@ fn textured_emitter_irradiance_matches_quadrature() {
         let m = sum[s] / nsamp as f64;
         let sd = ((sum2[s] / nsamp as f64 - m * m) / nsamp as f64).sqrt();
         let z = (m - want[s]) / sd;
-        eprintln!("λ {}: NEE {m:.5} ± {sd:.5}, quadrature {:.5}, z {z:.2}", wl[s], want[s]);
+        eprintln!(
+            "λ {}: NEE {m:.5} ± {sd:.5}, quadrature {:.5}, z {z:.2}",
+            wl[s], want[s]
+        );
         assert!(z.abs() < 4.0, "λ {}: z = {z:.2}", wl[s]);
         assert!((m / want[s] - 1.0).abs() < 0.01);
     }
@@ -245,7 +268,12 @@ const E_IRR: f64 = 2.0;
 /// A ground quad (y = 0, facing +y, uv u along +x, v along −z) of albedo ρ with an optional
 /// normal map of one constant texel, lit by a directional light arriving from direction
 /// `from` (unit, pointing to the light), seen from straight above.
-fn normal_mapped_plane(dir: &Path, name: &str, texel: Option<[u8; 3]>, from: Vec3) -> std::path::PathBuf {
+fn normal_mapped_plane(
+    dir: &Path,
+    name: &str,
+    texel: Option<[u8; 3]>,
+    from: Vec3,
+) -> std::path::PathBuf {
     let mut b = GltfBuilder::new();
     let mut mat = json!({"name": "ground", "doubleSided": false,
         "pbrMetallicRoughness": {"baseColorFactor": [RHO, RHO, RHO, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
@@ -263,13 +291,19 @@ fn normal_mapped_plane(dir: &Path, name: &str, texel: Option<[u8; 3]>, from: Vec
     let r = Quat::from_rotation_arc(-Vec3::Z, -from);
     let l = b.light(json!({"type": "directional", "intensity": 1.0,
         "extras": {"spectral_irradiance": flat_spectrum(E_IRR)}}));
-    b.node(json!({"name": "sun", "rotation": [r.x, r.y, r.z, r.w],
-        "extensions": {"KHR_lights_punctual": {"light": l}}}), true);
+    b.node(
+        json!({"name": "sun", "rotation": [r.x, r.y, r.z, r.w],
+        "extensions": {"KHR_lights_punctual": {"light": l}}}),
+        true,
+    );
     // camera 1 m above, looking down (−Z → −Y), seeing the middle of the plane
     let c = b.camera("cam", 40f64.to_radians(), Some(1.0), 0.01);
     let rc = Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2);
-    b.node(json!({"name": "cam", "camera": c, "translation": [0.0, 1.0, 0.0],
-        "rotation": [rc.x, rc.y, rc.z, rc.w]}), true);
+    b.node(
+        json!({"name": "cam", "camera": c, "translation": [0.0, 1.0, 0.0],
+        "rotation": [rc.x, rc.y, rc.z, rc.w]}),
+        true,
+    );
     let p = dir.join(format!("{name}.gltf"));
     b.write(&p).unwrap();
     p
@@ -362,7 +396,11 @@ fn test_env_rgb(x: usize, y: usize, w: usize, h: usize) -> [f32; 3] {
     if (0.55..0.62).contains(&v) {
         return [0.0; 3];
     }
-    [0.2 + 0.5 * (1.0 - v), 0.3 + 0.4 * (1.0 - v), 0.6 * (1.0 - v) + 0.1 * u]
+    [
+        0.2 + 0.5 * (1.0 - v),
+        0.3 + 0.4 * (1.0 - v),
+        0.6 * (1.0 - v) + 0.1 * u,
+    ]
 }
 
 /// The environment sampler against its density: chi-square over (θ, φ) bins; the density of
@@ -370,7 +408,9 @@ fn test_env_rgb(x: usize, y: usize, w: usize, h: usize) -> [f32; 3] {
 #[test]
 fn environment_sampler_matches_its_density() {
     let (w, h) = (64usize, 32usize);
-    let rgb: Vec<[f32; 3]> = (0..w * h).map(|i| test_env_rgb(i % w, i / w, w, h)).collect();
+    let rgb: Vec<[f32; 3]> = (0..w * h)
+        .map(|i| test_env_rgb(i % w, i / w, w, h))
+        .collect();
     let env = EnvMap::new(
         RadianceImage::from_rgb(w as u32, h as u32, &rgb),
         Mat3::from_rotation_y(0.7) * Mat3::from_rotation_x(0.3),
@@ -421,7 +461,10 @@ fn environment_sampler_matches_its_density() {
 fn environment_orientation_is_mitsubas() {
     let (w, h) = (8usize, 4usize);
     let rgb: Vec<[f32; 3]> = (0..w * h).map(|i| [i as f32 + 1.0, 0.0, 0.0]).collect();
-    let env = EnvMap::new(RadianceImage::from_rgb(w as u32, h as u32, &rgb), Mat3::IDENTITY);
+    let env = EnvMap::new(
+        RadianceImage::from_rgb(w as u32, h as u32, &rgb),
+        Mat3::IDENTITY,
+    );
     let texel = |d: Vec3| {
         let uv = env.uv_of(d.normalize());
         ((uv.y * h as f32) as usize, (uv.x * w as f32) as usize)
@@ -466,12 +509,21 @@ fn white_sphere_in_constant_environment_is_invisible() {
     let n = (out.width * out.height) as f64;
     for bnd in 0..out.bands.count {
         let lo = out.bands.lo_nm + out.bands.step_nm * bnd as f32;
-        let want = (0..50).map(|k| texel.eval(lo + k as f32 + 0.5) as f64).sum::<f64>() / 50.0;
+        let want = (0..50)
+            .map(|k| texel.eval(lo + k as f32 + 0.5) as f64)
+            .sum::<f64>()
+            / 50.0;
         let mean = out.band_planes[bnd].iter().map(|v| *v as f64).sum::<f64>() / n;
         let sd = var[bnd].iter().map(|v| *v as f64).sum::<f64>().sqrt() / n;
         let z = (mean - want) / sd.max(1e-12);
-        assert!(z.abs() < 4.0, "band {bnd}: mean {mean:.5}, environment {want:.5}, z {z:.2}");
-        assert!((mean / want - 1.0).abs() < 0.02, "band {bnd}: {mean} vs {want}");
+        assert!(
+            z.abs() < 4.0,
+            "band {bnd}: mean {mean:.5}, environment {want:.5}, z {z:.2}"
+        );
+        assert!(
+            (mean / want - 1.0).abs() < 0.02,
+            "band {bnd}: {mean} vs {want}"
+        );
     }
 }
 
@@ -483,15 +535,27 @@ fn environment_settings_and_errors() {
     let exr = d.path().join("sky.exr");
     write_env_exr(&exr, 8, 4, |x, y| test_env_rgb(x, y, 8, 4));
     let bad = d.path().join("neg.exr");
-    write_env_exr(&bad, 4, 2, |x, _| if x == 3 { [-1.0, 0.0, 0.0] } else { [1.0; 3] });
+    write_env_exr(
+        &bad,
+        4,
+        2,
+        |x, _| if x == 3 { [-1.0, 0.0, 0.0] } else { [1.0; 3] },
+    );
     let spec = |f: &Path, s: f64| EnvironmentSpec {
         exr: f.to_path_buf(),
         strength: s,
         rotation_y_deg: 0.0,
     };
-    let e = camsim_render::envmap::load_environment(&spec(&bad, 1.0)).unwrap_err().to_string();
-    assert!(e.contains("neg.exr") && e.contains("x 3") && !e.contains('\n'), "{e}");
-    let e = camsim_render::envmap::load_environment(&spec(&exr, -2.0)).unwrap_err().to_string();
+    let e = camsim_render::envmap::load_environment(&spec(&bad, 1.0))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("neg.exr") && e.contains("x 3") && !e.contains('\n'),
+        "{e}"
+    );
+    let e = camsim_render::envmap::load_environment(&spec(&exr, -2.0))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("strength") && !e.contains('\n'), "{e}");
     let e = camsim_render::envmap::load_environment(&spec(&d.path().join("none.exr"), 1.0))
         .unwrap_err()
@@ -503,4 +567,71 @@ fn environment_settings_and_errors() {
     let wl = [550.0f32; 4];
     let dir = Vec3::new(0.2, 0.5, -0.4).normalize();
     assert!((env.eval(dir, &wl)[0] / env1.eval(dir, &wl)[0] - 2.0).abs() < 1e-5);
+}
+
+/// Unbiased environment sampling with the bilinear lookup: the irradiance ∫ L(ω) max(0, n·ω)
+/// dω of a map with black texels next to bright ones, estimated with the environment sampler
+/// (L/pdf), equals a fine midpoint quadrature of the same lookup (z-test).
+#[test]
+fn environment_sampling_estimates_irradiance_without_bias() {
+    let (w, h) = (32usize, 16usize);
+    let rgb: Vec<[f32; 3]> = (0..w * h)
+        .map(|i| test_env_rgb(i % w, i / w, w, h))
+        .collect();
+    let env = EnvMap::new(
+        RadianceImage::from_rgb(w as u32, h as u32, &rgb),
+        Mat3::from_rotation_y(0.4),
+    );
+    let wl = [430.0f32, 510.0, 590.0, 670.0];
+    for n in [Vec3::Y, Vec3::new(0.6, -0.3, 0.5).normalize()] {
+        let (nt, np) = (600, 1200);
+        let mut want = [0.0f64; 4];
+        for j in 0..nt {
+            let th = std::f64::consts::PI * (j as f64 + 0.5) / nt as f64;
+            for i in 0..np {
+                let ph = 2.0 * std::f64::consts::PI * (i as f64 + 0.5) / np as f64;
+                let d = Vec3::new(
+                    (th.sin() * ph.cos()) as f32,
+                    th.cos() as f32,
+                    (th.sin() * ph.sin()) as f32,
+                );
+                let c = d.dot(n).max(0.0) as f64 * th.sin();
+                if c > 0.0 {
+                    let l = env.eval(d, &wl);
+                    for k in 0..4 {
+                        want[k] += l[k] as f64 * c;
+                    }
+                }
+            }
+        }
+        let dw = (std::f64::consts::PI / nt as f64) * (2.0 * std::f64::consts::PI / np as f64);
+        let want = want.map(|v| v * dw);
+        let mut rng = stream(17, &[0]);
+        let f = |r: &mut camsim_core::rng::CamRng| (r.next_u32() >> 8) as f32 / 16_777_216.0;
+        let ns = 400_000;
+        let (mut s1, mut s2) = ([0.0f64; 4], [0.0f64; 4]);
+        for _ in 0..ns {
+            if let Some(s) = env.sample(Vec2::new(f(&mut rng), f(&mut rng))) {
+                let c = s.dir.dot(n).max(0.0);
+                if c > 0.0 {
+                    let l = env.eval(s.dir, &wl);
+                    for k in 0..4 {
+                        let v = (l[k] * c / s.pdf) as f64;
+                        s1[k] += v;
+                        s2[k] += v * v;
+                    }
+                }
+            }
+        }
+        for k in 0..4 {
+            let m = s1[k] / ns as f64;
+            let sd = ((s2[k] / ns as f64 - m * m) / ns as f64).sqrt();
+            let z = (m - want[k]) / sd;
+            eprintln!(
+                "n {n:?} λ {}: sampled {m:.5} ± {sd:.5}, quadrature {:.5}",
+                wl[k], want[k]
+            );
+            assert!(z.abs() < 4.0, "λ {}: z = {z:.2}", wl[k]);
+        }
+    }
 }
