@@ -212,6 +212,22 @@ impl GltfBuilder {
         self.meshes.len() - 1
     }
 
+    /// Add a one-primitive mesh with a `TANGENT` attribute (xyz unit tangent, w = ±1 the
+    /// bitangent sign; one per vertex); returns its index.
+    pub fn mesh_with_tangents(
+        &mut self,
+        name: &str,
+        m: &MeshData,
+        tangents: &[[f32; 4]],
+        material: usize,
+    ) -> usize {
+        let i = self.mesh(name, m, material);
+        let t: Vec<f32> = tangents.iter().flatten().copied().collect();
+        let a = self.accessor_f32(&t, 4, "VEC4", false);
+        self.meshes[i]["primitives"][0]["attributes"]["TANGENT"] = json!(a);
+        i
+    }
+
     /// Add a perspective camera; returns its index.
     pub fn camera(&mut self, name: &str, yfov_rad: f64, aspect: Option<f64>, znear: f64) -> usize {
         let mut p = json!({"yfov": yfov_rad, "znear": znear});

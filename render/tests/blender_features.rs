@@ -274,6 +274,19 @@ fn normal_mapped_plane(
     texel: Option<[u8; 3]>,
     from: Vec3,
 ) -> std::path::PathBuf {
+    normal_mapped_plane_with(dir, name, texel, from, None, false)
+}
+
+/// [`normal_mapped_plane`] with a `TANGENT` attribute (the same for all 4 vertices) and,
+/// optionally, the ground node mirrored in x (scale (−1, 1, 1)).
+fn normal_mapped_plane_with(
+    dir: &Path,
+    name: &str,
+    texel: Option<[u8; 3]>,
+    from: Vec3,
+    tangent: Option<[f32; 4]>,
+    mirror_x: bool,
+) -> std::path::PathBuf {
     let mut b = GltfBuilder::new();
     let mut mat = json!({"name": "ground", "doubleSided": false,
         "pbrMetallicRoughness": {"baseColorFactor": [RHO, RHO, RHO, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
@@ -285,8 +298,15 @@ fn normal_mapped_plane(
     let m = b.material(mat);
     let h = 1.0f32;
     let q = quad([[-h, 0.0, h], [h, 0.0, h], [h, 0.0, -h], [-h, 0.0, -h]]);
-    let mesh = b.mesh("ground", &q, m);
-    b.node(json!({"name": "ground", "mesh": mesh}), true);
+    let mesh = match tangent {
+        Some(t) => b.mesh_with_tangents("ground", &q, &[t; 4], m),
+        None => b.mesh("ground", &q, m),
+    };
+    let sx = if mirror_x { -1.0 } else { 1.0 };
+    b.node(
+        json!({"name": "ground", "mesh": mesh, "scale": [sx, 1.0, 1.0]}),
+        true,
+    );
     // the light travels along −from: rotate −Z onto −from
     let r = Quat::from_rotation_arc(-Vec3::Z, -from);
     let l = b.light(json!({"type": "directional", "intensity": 1.0,
@@ -632,6 +652,61 @@ fn environment_sampling_estimates_irradiance_without_bias() {
                 wl[k], want[k]
             );
             assert!(z.abs() < 4.0, "λ {}: z = {z:.2}", wl[k]);
+        }
+    }
+}
+
+/// The glTF `TANGENT` attribute is used when present: T = +z tilts n′ towards +z; under a
+/// mirroring node (scale (−1, 1, 1)) T is transformed and its handedness w flipped, so a map
+/// tilting towards +B (bitangent w·N×T = −z on the unmirrored plane) still tilts towards −z.
+/// Both against ρE·max(0, n′·l)/π, exact.
+#[test]
+fn tangent_attribute_and_mirroring_follow_the_cosine_law() {
+    let d = tempfile::tempdir().unwrap();
+    let s2 = std::f32::consts::FRAC_1_SQRT_2;
+    // (texel, TANGENT, mirror, expected n′)
+    let cases = [
+        (
+            [218u8, 128, 218],
+            [0.0f32, 0.0, 1.0, 1.0],
+            false,
+            Vec3::new(0.0, s2, s2),
+        ),
+        (
+            [128u8, 218, 218],
+            [1.0f32, 0.0, 0.0, 1.0],
+            true,
+            Vec3::new(0.0, s2, -s2),
+        ),
+        (
+            [128u8, 218, 218],
+            [1.0f32, 0.0, 0.0, 1.0],
+            false,
+            Vec3::new(0.0, s2, -s2),
+        ),
+    ];
+    for (k, (texel, tan, mirror, n_prime)) in cases.into_iter().enumerate() {
+        for beta_deg in [0.0f32, 30.0, 60.0, -30.0] {
+            let b = beta_deg.to_radians();
+            // light in the plane of n′ and +y, β from the zenith towards n′
+            let side = Vec3::new(n_prime.x, 0.0, n_prime.z).normalize();
+            let from = Vec3::Y * b.cos() + side * b.sin();
+            let p = normal_mapped_plane_with(
+                d.path(),
+                &format!("t{k}_{beta_deg}"),
+                Some(texel),
+                from,
+                Some(tan),
+                mirror,
+            );
+            let (_, out) = render_file(&p, 8, &settings(2, "400:700:300", 2));
+            let want = RHO * E_IRR * n_prime.dot(from).max(0.0) as f64 / std::f64::consts::PI;
+            for v in &out.band_planes[0] {
+                assert!(
+                    (*v as f64 - want).abs() < 1e-4,
+                    "case {k} β {beta_deg}°: {v} vs {want}"
+                );
+            }
         }
     }
 }
