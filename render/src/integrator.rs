@@ -287,7 +287,8 @@ fn trace_path(
         let sh = &scene.shading[prim];
         let b = hit.bary;
         let p = o + d * hit.t;
-        let mut ns = shading_normal(sh, b);
+        let ns_mesh = shading_normal(sh, b);
+        let mut ns = ns_mesh;
         let wi_w = -d;
         let mat = &scene.materials[sh.material as usize];
         // normal mapping (and then the side-consistency check of normal_map.rs)
@@ -305,8 +306,9 @@ fn trace_path(
             }
         }
         // emission (one-sided: front = shading normal side, as Mitsuba's area emitter)
+        // (the mesh's normal, not the normal map's: the side next-event estimation uses)
         if mat.emits() {
-            if ns.dot(wi_w) > 0.0 {
+            if ns_mesh.dot(wi_w) > 0.0 {
                 let le = match (&mat.emission_texture, &mat.emission) {
                     (Some(t), _) => t.eval(interpolate_uv(sh, b), wl),
                     (None, Some(e)) => spectra.emission(e, sh.material, wl),
