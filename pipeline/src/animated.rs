@@ -86,6 +86,7 @@ pub fn grid_render_job(
             rr_depth: camsim_render::RenderSettings::default().rr_depth,
             variance: false,
             depth_spp: 0,
+            environment: None,
         },
     })
 }

@@ -55,6 +55,16 @@ pub struct RenderArgs {
     /// Also write the Mitsuba harness's channel names (band_LLLL_HHHH, depth.T, depth_center.T).
     #[arg(long)]
     pub mitsuba_channels: bool,
+    /// Environment lighting: an equirectangular OpenEXR (linear RGB, Mitsuba's `envmap`
+    /// orientation, y up); overrides the scene's extras.camsim_environment_exr.
+    #[arg(long)]
+    pub environment: Option<PathBuf>,
+    /// Multiplier of the environment map's values.
+    #[arg(long, default_value_t = 1.0)]
+    pub environment_strength: f64,
+    /// Rotation of the environment map about +y (degrees).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub environment_rotation_deg: f64,
     /// Jittered rays per pixel for depth.T (with --mitsuba-channels).
     #[arg(long, default_value_t = 16)]
     pub depth_spp: u32,
@@ -97,6 +107,14 @@ pub fn job_from_args(a: &RenderArgs) -> Result<RenderJob, CliError> {
             rr_depth: a.rr_depth,
             variance: a.variance,
             depth_spp: if a.mitsuba_channels { a.depth_spp } else { 0 },
+            environment: a
+                .environment
+                .as_ref()
+                .map(|f| camsim_render::envmap::EnvironmentSpec {
+                    exr: f.clone(),
+                    strength: a.environment_strength,
+                    rotation_y_deg: a.environment_rotation_deg,
+                }),
         },
     })
 }

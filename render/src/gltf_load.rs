@@ -25,7 +25,7 @@ use crate::error::RenderError;
 use crate::scene::{Material, PunctualLight, Scene, SceneCamera, SpectralTexture, TriShading};
 use crate::spectral::{self, SigmoidPoly, TabulatedSpectrum};
 use camsim_core::spectrum::Spectrum;
-use glam::{DMat3, DMat4, DVec3, Mat4, Vec2, Vec3};
+use glam::{DMat3, DMat4, DVec3, Mat4, Vec2, Vec3, Vec4};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::Path;
@@ -249,6 +249,8 @@ fn load_gltf_unguarded(
         },
         reflectance: SpectralTexture::Constant(TabulatedSpectrum::constant(1.0)),
         emission: None,
+        emission_texture: None,
+        normal_map: None,
     });
     // 4. nodes
     let scene = doc
@@ -259,6 +261,7 @@ fn load_gltf_unguarded(
     let mut shading: Vec<TriShading> = Vec::new();
     let mut cameras: Vec<SceneCamera> = Vec::new();
     let mut punctual: Vec<PunctualLight> = Vec::new();
+    let mut tangents: Vec<[Vec4; 3]> = Vec::new();
     let mut stack: Vec<(gltf::Node, DMat4, usize)> = scene
         .nodes()
         .collect::<Vec<_>>()
@@ -323,6 +326,7 @@ fn load_gltf_unguarded(
                 default_material,
                 &mut tris,
                 &mut shading,
+                &mut tangents,
             )?;
         }
         let kids: Vec<_> = node.children().collect();
@@ -335,10 +339,50 @@ fn load_gltf_unguarded(
             "no camera: the scene needs a node with a perspective camera (glTF \"cameras\")",
         ));
     }
-    Ok((
-        Scene::build(tris, shading, materials, punctual, cameras),
-        node_worlds,
-    ))
+    let mut built = Scene::build(tris, shading, materials, punctual, cameras);
+    built.tangents = tangents;
+    // environment lighting named in the scene's extras (Blender: custom properties of the
+    // scene, exported with "Include → Custom Properties")
+    if let Some(spec) = environment_extras(&cx, &scene, base)? {
+        built.set_environment(Some(crate::envmap::load_environment(&spec)?));
+    }
+    Ok((built, node_worlds))
+}
+
+/// `extras.camsim_environment_exr` (a path relative to the glTF file),
+/// `extras.camsim_environment_strength` (default 1) and
+/// `extras.camsim_environment_rotation_deg` (about +y, default 0) of the glTF scene.
+fn environment_extras(
+    cx: &Ctx,
+    scene: &gltf::Scene,
+    base: &Path,
+) -> Result<Option<crate::envmap::EnvironmentSpec>, RenderError> {
+    let Some(e) = extras_json(scene.extras()) else {
+        return Ok(None);
+    };
+    let Some(f) = e.get("camsim_environment_exr") else {
+        return Ok(None);
+    };
+    let f = f.as_str().filter(|s| !s.is_empty()).ok_or_else(|| {
+        cx.err(format!(
+            "scene extras.camsim_environment_exr = {f}: expected a file name (string)"
+        ))
+    })?;
+    let num = |key: &str, default: f64| -> Result<f64, RenderError> {
+        match e.get(key) {
+            None => Ok(default),
+            Some(v) => v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
+                cx.err(format!(
+                    "scene extras.{key} = {v}: expected a finite number"
+                ))
+            }),
+        }
+    };
+    Ok(Some(crate::envmap::EnvironmentSpec {
+        exr: base.join(f),
+        strength: num("camsim_environment_strength", 1.0)?,
+        rotation_y_deg: num("camsim_environment_rotation_deg", 0.0)?,
+    }))
 }
 
 fn node_label(n: &gltf::Node) -> String {
@@ -580,6 +624,7 @@ fn add_mesh(
     default_material: usize,
     tris: &mut Vec<[Vec3; 3]>,
     shading: &mut Vec<TriShading>,
+    tangents: &mut Vec<[Vec4; 3]>,
 ) -> Result<(), RenderError> {
     let m3 = DMat3::from_mat4(*world);
     let nmat = m3.inverse().transpose();
@@ -606,11 +651,33 @@ fn add_mesh(
         }
         let mat_index = prim.material().index();
         let material = mat_index.unwrap_or(default_material);
-        let tex_set = prim
-            .material()
-            .pbr_metallic_roughness()
-            .base_color_texture()
-            .map(|t| t.tex_coord());
+        let pm = prim.material();
+        let normal_mapped = pm.normal_texture().is_some();
+        // one TEXCOORD set per material: base colour's, else the normal map's, else the
+        // emissive texture's
+        let sets: Vec<(&str, u32)> = [
+            (
+                "baseColorTexture",
+                pm.pbr_metallic_roughness()
+                    .base_color_texture()
+                    .map(|t| t.tex_coord()),
+            ),
+            ("normalTexture", pm.normal_texture().map(|t| t.tex_coord())),
+            (
+                "emissiveTexture",
+                pm.emissive_texture().map(|t| t.tex_coord()),
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(n, s)| s.map(|s| (n, s)))
+        .collect();
+        if let Some((n, s)) = sets.iter().find(|(_, s)| *s != sets[0].1) {
+            return Err(cx.err(format!(
+                "{what}: {n} uses TEXCOORD_{s} but {} uses TEXCOORD_{}; camsim needs one texture coordinate set per material",
+                sets[0].0, sets[0].1
+            )));
+        }
+        let tex_set = sets.first().map(|(_, s)| *s);
         let uv_acc = tex_set.and_then(|s| prim.get(&gltf::Semantic::TexCoords(s)));
         if let Some(a) = &uv_acc {
             check_accessor(cx, a, buffers, &format!("{what} TEXCOORD"))?;
@@ -665,6 +732,34 @@ fn add_mesh(
                 .map(|it| it.into_f32().map(|v| Vec2::new(v[0], v[1])).collect()),
             _ => None,
         };
+        let tangent_attr: Option<Vec<Vec4>> = match (normal_mapped, reader.read_tangents()) {
+            (true, Some(it)) => {
+                let t: Vec<[f32; 4]> = it.collect();
+                if t.len() != pos.len() {
+                    return Err(cx.err(format!(
+                        "{what}: TANGENT has {} entries, POSITION {}",
+                        t.len(),
+                        pos.len()
+                    )));
+                }
+                if let Some(i) = t.iter().position(|v| !v.iter().all(|x| x.is_finite())) {
+                    return Err(cx.err(format!("{what}: TANGENT[{i}] is not finite")));
+                }
+                // tangents transform as vectors; a mirroring transform flips the handedness
+                let sign = if flip { -1.0 } else { 1.0 };
+                Some(
+                    t.iter()
+                        .map(|v| {
+                            let x = (m3 * DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+                                .normalize_or_zero()
+                                .as_vec3();
+                            x.extend(if v[3] < 0.0 { -sign } else { sign })
+                        })
+                        .collect(),
+                )
+            }
+            _ => None,
+        };
         let idx: Vec<u32> = match reader.read_indices() {
             Some(it) => it.into_u32().collect(),
             None => (0..pos.len() as u32).collect(),
@@ -706,6 +801,17 @@ fn add_mesh(
                 Some(u) if u.len() == pos.len() => [u[a as usize], u[b as usize], u[c as usize]],
                 _ => [Vec2::ZERO; 3],
             };
+            let mut tangent = u32::MAX;
+            if normal_mapped {
+                let tv = match &tangent_attr {
+                    Some(t) => Some([t[a as usize], t[b as usize], t[c as usize]]),
+                    None => crate::normal_map::triangle_tangent(v, uv, ng).map(|t| [t; 3]),
+                };
+                if let Some(tv) = tv {
+                    tangent = tangents.len() as u32;
+                    tangents.push(tv);
+                }
+            }
             tris.push(v);
             shading.push(TriShading {
                 ng,
@@ -714,6 +820,7 @@ fn add_mesh(
                 material: material as u32,
                 light: u32::MAX,
                 area: 0.5 * area2,
+                tangent,
             });
         }
     }
@@ -1093,11 +1200,54 @@ fn convert_material(
                 .then(|| spectral::rgb_emission(e))
         }
     };
+    // emissive texture × emissiveFactor × strength (sRGB-decoded), unless a spectral emission
+    // is given
+    let mut emission_texture = None;
+    let has_spectral_emission = extras
+        .as_ref()
+        .is_some_and(|e| e.get("spectral_emission").is_some());
+    if let (Some(info), false) = (m.emissive_texture(), has_spectral_emission) {
+        let s = m.emissive_strength().unwrap_or(1.0);
+        let f = m.emissive_factor().map(|v| v * s);
+        let (w, h, px) = raw_image(cx, &what, "emissiveTexture", &info.texture(), base, buffers)?;
+        let rgb: Vec<[f32; 3]> = px
+            .iter()
+            .map(|p| [0, 1, 2].map(|k| srgb_to_linear(p[k] as f64 / 255.0) as f32 * f[k]))
+            .collect();
+        let image = crate::envmap::RadianceImage::from_rgb(w, h, &rgb);
+        let t = crate::envmap::EmissionTexture::new(image, wrap_modes(&info.texture()));
+        if t.max_value > 0.0 {
+            emission_texture = Some(t);
+        }
+    }
+    let normal_map = match m.normal_texture() {
+        Some(nt) => {
+            let scale = nt.scale();
+            if !scale.is_finite() {
+                return Err(cx.err(format!(
+                    "{what}: normalTexture.scale = {scale}: expected a finite number"
+                )));
+            }
+            let (w, h, px) = raw_image(cx, &what, "normalTexture", &nt.texture(), base, buffers)?;
+            Some(crate::normal_map::NormalMap {
+                width: w,
+                height: h,
+                normals: px
+                    .iter()
+                    .map(|p| crate::normal_map::decode_texel(*p, scale))
+                    .collect(),
+                repeat: wrap_modes(&nt.texture()),
+            })
+        }
+        None => None,
+    };
     Ok(Material {
         name,
         bsdf: Bsdf { lobe, two_sided },
         reflectance,
         emission,
+        emission_texture,
+        normal_map,
     })
 }
 
@@ -1121,6 +1271,13 @@ fn coefficient_table() -> &'static Vec<[f32; 3]> {
 }
 
 use camsim_core::colorimetry::{srgb_decode as srgb_to_linear, srgb_encode as linear_to_srgb};
+
+/// Sigmoid-polynomial coefficients of a linear-RGB reflectance in [0, 1]³ from the loader's
+/// 17³ coefficient table (trilinear; the upsampling of every texture, also emissive ones and
+/// environment maps, [`crate::envmap`]).
+pub fn rgb_to_poly(rgb: [f64; 3]) -> SigmoidPoly {
+    table_lookup(rgb)
+}
 
 /// Coefficients for a linear-RGB colour from the table.
 fn table_lookup(rgb: [f64; 3]) -> SigmoidPoly {
@@ -1220,6 +1377,60 @@ fn image_texture(
         repeat: [rep(s.wrap_s()), rep(s.wrap_t())],
         mean,
     })
+}
+
+/// Repeat (true) or clamp along u and v of a texture's sampler.
+fn wrap_modes(tex: &gltf::Texture) -> [bool; 2] {
+    use gltf::texture::WrappingMode;
+    let s = tex.sampler();
+    let rep = |m: WrappingMode| !matches!(m, WrappingMode::ClampToEdge);
+    [rep(s.wrap_s()), rep(s.wrap_t())]
+}
+
+/// The 8-bit RGB texels of a texture's image (grey images repeated to RGB; alpha dropped).
+fn raw_image(
+    cx: &Ctx,
+    what: &str,
+    slot: &str,
+    tex: &gltf::Texture,
+    base: &Path,
+    buffers: &[Vec<u8>],
+) -> Result<(u32, u32, Vec<[u8; 3]>), RenderError> {
+    let img = tex.source();
+    let key = img.index();
+    let bufs: Vec<gltf::buffer::Data> = buffers
+        .iter()
+        .map(|b| gltf::buffer::Data(b.clone()))
+        .collect();
+    let data = gltf::image::Data::from_source(img.source(), Some(base), &bufs)
+        .map_err(|e| cx.err(format!("{what}: {slot} image {key}: cannot load: {e}")))?;
+    use gltf::image::Format;
+    let ch = match data.format {
+        Format::R8 => 1,
+        Format::R8G8 => 2,
+        Format::R8G8B8 => 3,
+        Format::R8G8B8A8 => 4,
+        f => {
+            return Err(cx.err(format!(
+                "{what}: {slot} image {key}: pixel format {f:?} not supported (8-bit only)"
+            )))
+        }
+    };
+    if data.width == 0 || data.height == 0 {
+        return Err(cx.err(format!("{what}: {slot} image {key}: empty image")));
+    }
+    let px = data
+        .pixels
+        .chunks_exact(ch)
+        .map(|p| {
+            if ch >= 3 {
+                [p[0], p[1], p[2]]
+            } else {
+                [p[0]; 3]
+            }
+        })
+        .collect();
+    Ok((data.width, data.height, px))
 }
 
 /// Resolve the camera to render: by node or camera name, else the first one.

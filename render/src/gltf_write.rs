@@ -143,6 +143,7 @@ pub struct GltfBuilder {
     extensions_required: Vec<String>,
     images: Vec<Value>,
     textures: Vec<Value>,
+    scene_extras: Option<Value>,
 }
 
 impl GltfBuilder {
@@ -209,6 +210,22 @@ impl GltfBuilder {
         let idx = self.accessors.len() - 1;
         self.meshes.push(json!({"name": name, "primitives": [{"attributes": attrs, "indices": idx, "material": material, "mode": 4}]}));
         self.meshes.len() - 1
+    }
+
+    /// Add a one-primitive mesh with a `TANGENT` attribute (xyz unit tangent, w = ±1 the
+    /// bitangent sign; one per vertex); returns its index.
+    pub fn mesh_with_tangents(
+        &mut self,
+        name: &str,
+        m: &MeshData,
+        tangents: &[[f32; 4]],
+        material: usize,
+    ) -> usize {
+        let i = self.mesh(name, m, material);
+        let t: Vec<f32> = tangents.iter().flatten().copied().collect();
+        let a = self.accessor_f32(&t, 4, "VEC4", false);
+        self.meshes[i]["primitives"][0]["attributes"]["TANGENT"] = json!(a);
+        i
     }
 
     /// Add a perspective camera; returns its index.
@@ -315,7 +332,15 @@ impl GltfBuilder {
         if !self.extensions_required.is_empty() {
             d["extensionsRequired"] = json!(self.extensions_required);
         }
+        if let Some(e) = &self.scene_extras {
+            d["scenes"][0]["extras"] = e.clone();
+        }
         d
+    }
+
+    /// Set the `extras` of the scene (e.g. `camsim_environment_exr`).
+    pub fn scene_extras(&mut self, extras: Value) {
+        self.scene_extras = Some(extras);
     }
 
     /// Write `path` (.gltf) and its buffer `path` with extension .bin.

@@ -12,7 +12,7 @@
 //! the number of threads.
 use crate::camera::{Camera, CameraRay, OutputQuantity};
 use crate::sampling::Frame;
-use crate::scene::{shading_normal, Scene, SpectralTexture};
+use crate::scene::{interpolate_uv, shading_normal, Scene, SpectralTexture};
 use crate::spectral::{Bands, TabulatedSpectrum, N_WL};
 use camsim_core::rng::{stream, CamRng};
 use glam::{Mat4, Vec2, Vec3};
@@ -38,6 +38,9 @@ pub struct RenderSettings {
     pub variance: bool,
     /// Jittered rays per pixel for the mean hit distance `depth.T` (0 = skip).
     pub depth_spp: u32,
+    /// Environment lighting (an equirectangular EXR); overrides the glTF scene's own
+    /// (`extras.camsim_environment_exr`). Applied by [`crate::job::prepare`].
+    pub environment: Option<crate::envmap::EnvironmentSpec>,
 }
 
 impl Default for RenderSettings {
@@ -50,6 +53,7 @@ impl Default for RenderSettings {
             rr_depth: 2,
             variance: false,
             depth_spp: 16,
+            environment: None,
         }
     }
 }
@@ -265,19 +269,51 @@ fn trace_path(
     let mut spectra = PathSpectra::new();
     loop {
         let Some(hit) = scene.intersect(o, d, tmin, tmax) else {
+            // escaped: the environment, MIS-weighted against its next-event estimation
+            if let Some(env) = &scene.environment {
+                let le = env.eval(d, wl);
+                let w = if prev_delta {
+                    1.0
+                } else {
+                    mis(prev_pdf, scene.environment_pdf(d))
+                };
+                for i in 0..N_WL {
+                    l[i] += beta[i] * le[i] * w;
+                }
+            }
             break;
         };
         let prim = hit.prim as usize;
         let sh = &scene.shading[prim];
         let b = hit.bary;
         let p = o + d * hit.t;
-        let ns = shading_normal(sh, b);
+        let ns_mesh = shading_normal(sh, b);
+        let mut ns = ns_mesh;
         let wi_w = -d;
         let mat = &scene.materials[sh.material as usize];
+        // normal mapping (and then the side-consistency check of normal_map.rs)
+        let mut bumped = false;
+        if let Some(nm) = &mat.normal_map {
+            if sh.tangent != u32::MAX {
+                let tv = &scene.tangents[sh.tangent as usize];
+                let tan = tv[0] * (1.0 - b.x - b.y) + tv[1] * b.x + tv[2] * b.y;
+                let tan = tan
+                    .truncate()
+                    .extend(if tv[0].w < 0.0 { -1.0 } else { 1.0 });
+                let n2 = crate::normal_map::perturb(ns, sh.ng, tan, nm.eval(interpolate_uv(sh, b)));
+                bumped = n2 != ns;
+                ns = n2;
+            }
+        }
         // emission (one-sided: front = shading normal side, as Mitsuba's area emitter)
-        if let Some(e) = &mat.emission {
-            if ns.dot(wi_w) > 0.0 {
-                let le = spectra.emission(e, sh.material, wl);
+        // (the mesh's normal, not the normal map's: the side next-event estimation uses)
+        if mat.emits() {
+            if ns_mesh.dot(wi_w) > 0.0 {
+                let le = match (&mat.emission_texture, &mat.emission) {
+                    (Some(t), _) => t.eval(interpolate_uv(sh, b), wl),
+                    (None, Some(e)) => spectra.emission(e, sh.material, wl),
+                    (None, None) => [0.0; N_WL],
+                };
                 let w = if prev_delta {
                     1.0
                 } else {
@@ -294,19 +330,16 @@ fn trace_path(
         }
         let frame = Frame::from_normal(ns);
         let wi = frame.to_local(wi_w);
-        let refl = spectra.reflectance(
-            mat,
-            sh.material,
-            || sh.uv[0] * (1.0 - b.x - b.y) + sh.uv[1] * b.x + sh.uv[2] * b.y,
-            wl,
-        );
+        let refl = spectra.reflectance(mat, sh.material, || interpolate_uv(sh, b), wl);
         let bsdf = &mat.bsdf;
         // next-event estimation
         let ul = next_f32(rng);
         let ul2 = next_vec2(rng);
         if !bsdf.is_delta() {
-            if let Some(ls) =
-                scene.sample_light_with(p, ul, ul2, wl, |e, m| spectra.emission(e, m, wl))
+            if let Some(ls) = scene
+                .sample_light_with(p, ul, ul2, wl, |e, m| spectra.emission(e, m, wl))
+                // a leak through the normal map contributes nothing
+                .filter(|ls| !bumped || crate::normal_map::sides_agree(sh.ng, ns, wi_w, ls.dir))
             {
                 let wo = frame.to_local(ls.dir);
                 let (f, pdf_b) = bsdf.eval_pdf(wi, wo, &refl, wl);
@@ -351,6 +384,9 @@ fn trace_path(
             hero_only = true;
         }
         let wo_w = frame.to_world(bs.wo);
+        if bumped && !crate::normal_map::sides_agree(sh.ng, ns, wi_w, wo_w) {
+            break;
+        }
         prev_pdf = bs.pdf;
         prev_delta = bs.delta;
         eta2 *= bs.eta * bs.eta;

@@ -137,6 +137,10 @@ pub fn prepare_at_time(job: &RenderJob, time_s: Option<f64>) -> Result<PreparedJ
         None => load_gltf(&job.scene)?,
         Some(t) => crate::gltf_load::load_gltf_at_time(&job.scene, t)?,
     };
+    let mut scene = scene;
+    if let Some(spec) = &job.settings.environment {
+        scene.set_environment(Some(crate::envmap::load_environment(spec)?));
+    }
     let sc = pick_camera(&scene, job.camera_name.as_deref()).map_err(|m| RenderError::Scene {
         path: job.scene.display().to_string(),
         msg: m,

@@ -10,6 +10,9 @@
 //!   exposure, video);
 //! * [`bsdf`]: Lambertian, rough conductor (spectral η/κ), rough dielectric with dispersion,
 //!   rough plastic;
+//! * [`envmap`]: emissive textures and the equirectangular environment map (RGB EXR upsampled
+//!   to spectra, importance-sampled by luminance);
+//! * [`normal_map`]: tangent-space normal maps (glTF normalTexture), tangents;
 //! * [`integrator`]: path tracing with NEE + MIS, Russian roulette, hero-wavelength sampling,
 //!   per-pixel random streams (thread-count independent), rayon over rows;
 //! * [`camera`]: the camera contract, pinhole and thin lens;
@@ -27,11 +30,13 @@ pub mod camera;
 pub mod depth_optics;
 pub mod depth_path;
 pub mod dof_scene;
+pub mod envmap;
 pub mod error;
 pub mod gltf_load;
 pub mod gltf_write;
 pub mod integrator;
 pub mod job;
+pub mod normal_map;
 pub mod output;
 pub mod plane_fft;
 pub mod sampling;

@@ -4,9 +4,11 @@
 use crate::bsdf::Bsdf;
 use crate::bvh4::Bvh4;
 use crate::camera::Perspective;
+use crate::envmap::{EmissionTexture, EnvMap};
+use crate::normal_map::NormalMap;
 use crate::sampling::{square_to_triangle, Distribution1D};
 use crate::spectral::{SigmoidPoly, TabulatedSpectrum, N_WL};
-use glam::{Mat4, Vec2, Vec3, Vec3A};
+use glam::{Mat4, Vec2, Vec3, Vec3A, Vec4};
 use obvhs::ray::Ray;
 
 /// Intersection data of one triangle (Möller & Trumbore 1997): vertex 0 and two edges.
@@ -77,6 +79,8 @@ pub struct TriShading {
     pub light: u32,
     /// Area (m²).
     pub area: f32,
+    /// Index in [`Scene::tangents`] (per-vertex tangents for normal mapping), or u32::MAX.
+    pub tangent: u32,
 }
 
 /// A spectral reflectance that may vary over the surface.
@@ -148,6 +152,19 @@ pub struct Material {
     pub reflectance: SpectralTexture,
     /// Emitted spectral radiance (W m⁻² sr⁻¹ nm⁻¹) from the front (CCW) side.
     pub emission: Option<TabulatedSpectrum>,
+    /// Emitted radiance varying over the surface (glTF emissiveTexture); replaces `emission`
+    /// where present.
+    pub emission_texture: Option<EmissionTexture>,
+    /// Tangent-space normal map (glTF normalTexture).
+    pub normal_map: Option<NormalMap>,
+}
+
+impl Material {
+    /// True when the material emits light.
+    #[inline]
+    pub fn emits(&self) -> bool {
+        self.emission.is_some() || self.emission_texture.is_some()
+    }
 }
 
 /// A point-like or directional light (KHR_lights_punctual).
@@ -244,6 +261,11 @@ pub struct Scene {
     pub bounds_center: Vec3,
     /// Bounding-sphere radius (m).
     pub bounds_radius: f32,
+    /// Environment lighting (selected after the punctual lights), if any.
+    pub environment: Option<EnvMap>,
+    /// Per-vertex tangents (xyz unit, w = ±1 bitangent sign) of normal-mapped triangles,
+    /// indexed by [`TriShading::tangent`].
+    pub tangents: Vec<[Vec4; 3]>,
 }
 
 /// A closest hit.
@@ -314,21 +336,58 @@ impl Scene {
             shading = order.iter().map(|&i| shading[i]).collect();
             (tris, Some(bvh))
         };
-        // area lights and the selection distribution (weight ∝ area × peak radiance × π)
+        // area lights
         let mut area_lights = Vec::new();
-        let mut weights = Vec::new();
         for (i, s) in shading.iter_mut().enumerate() {
             s.light = u32::MAX;
-            if let Some(e) = &materials[s.material as usize].emission {
-                let p = e.max_value() as f64 * s.area as f64 * std::f64::consts::PI;
-                if p > 0.0 && s.area > 0.0 {
-                    s.light = area_lights.len() as u32;
-                    area_lights.push(i as u32);
-                    weights.push(p);
-                }
+            if area_light_weight(&materials[s.material as usize], s.area) > 0.0 {
+                s.light = area_lights.len() as u32;
+                area_lights.push(i as u32);
             }
         }
-        for l in &punctual {
+        let mut scene = Scene {
+            tris,
+            shading,
+            bvh,
+            materials,
+            area_lights,
+            punctual,
+            light_distr: None,
+            cameras,
+            bounds_center,
+            bounds_radius,
+            environment: None,
+            tangents: Vec::new(),
+        };
+        scene.light_distr = scene.light_distribution();
+        scene
+    }
+
+    /// Set (or remove) the environment lighting and rebuild the light selection.
+    pub fn set_environment(&mut self, env: Option<EnvMap>) {
+        self.environment = env;
+        self.light_distr = self.light_distribution();
+    }
+
+    /// True when light index `li` of [`Scene::light_distr`] is the environment.
+    #[inline]
+    fn is_environment_light(&self, li: usize) -> bool {
+        li == self.area_lights.len() + self.punctual.len()
+    }
+
+    /// Light selection: area lights (weight ∝ area × peak radiance × π), punctual lights, then
+    /// the environment (π R² × π × mean luminance, R the bounding-sphere radius).
+    fn light_distribution(&self) -> Option<Distribution1D> {
+        let bounds_radius = self.bounds_radius;
+        let mut weights: Vec<f64> = self
+            .area_lights
+            .iter()
+            .map(|&i| {
+                let s = &self.shading[i as usize];
+                area_light_weight(&self.materials[s.material as usize], s.area)
+            })
+            .collect();
+        for l in &self.punctual {
             weights.push(match l {
                 PunctualLight::Point { intensity, .. } => {
                     intensity.max_value() as f64 * 4.0 * std::f64::consts::PI
@@ -340,18 +399,31 @@ impl Scene {
                 }
             });
         }
-        let light_distr = Distribution1D::new(&weights);
-        Scene {
-            tris,
-            shading,
-            bvh,
-            materials,
-            area_lights,
-            punctual,
-            light_distr,
-            cameras,
-            bounds_center,
-            bounds_radius,
+        if let Some(env) = self.environment.as_ref().filter(|e| e.has_power()) {
+            weights.push(
+                std::f64::consts::PI
+                    * std::f64::consts::PI
+                    * (bounds_radius as f64).powi(2)
+                    * env.mean_luminance,
+            );
+        }
+        Distribution1D::new(&weights)
+    }
+
+    /// Density (per steradian) of next-event estimation choosing direction `d` towards the
+    /// environment (for MIS when a BSDF-sampled ray escapes).
+    #[inline]
+    pub fn environment_pdf(&self, d: Vec3) -> f32 {
+        match (&self.environment, &self.light_distr) {
+            (Some(env), Some(distr)) if env.has_power() => {
+                let li = self.area_lights.len() + self.punctual.len();
+                if li < distr.len() {
+                    distr.pmf(li) * env.pdf(d)
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
         }
     }
 
@@ -413,6 +485,19 @@ impl Scene {
         if pmf <= 0.0 {
             return None;
         }
+        if self.is_environment_light(li) {
+            let env = self.environment.as_ref()?;
+            let es = env.sample(u2)?;
+            let inv = 1.0 / (es.pdf * pmf);
+            let le = env.eval(es.dir, wl);
+            return Some(LightSample {
+                dir: es.dir,
+                dist: f32::INFINITY,
+                weight: le.map(|v| v * inv),
+                pdf: es.pdf * pmf,
+                delta: false,
+            });
+        }
         if li < self.area_lights.len() {
             let prim = self.area_lights[li] as usize;
             let g = &self.tris[prim];
@@ -442,10 +527,11 @@ impl Scene {
             if !(pdf > 0.0 && pdf.is_finite() && inv_pdf.is_finite()) {
                 return None;
             }
-            let le = emission(
-                self.materials[s.material as usize].emission.as_ref()?,
-                s.material,
-            );
+            let mat = &self.materials[s.material as usize];
+            let le = match &mat.emission_texture {
+                Some(t) => t.eval(interpolate_uv(s, b), wl),
+                None => emission(mat.emission.as_ref()?, s.material),
+            };
             Some(LightSample {
                 dir,
                 dist,
@@ -492,6 +578,27 @@ impl Scene {
             }
         }
     }
+}
+
+/// Selection weight of an area-light triangle: area × peak radiance × π (0: not a light).
+fn area_light_weight(m: &Material, area: f32) -> f64 {
+    let peak = match (&m.emission_texture, &m.emission) {
+        (Some(t), _) => t.max_value,
+        (None, Some(e)) => e.max_value(),
+        (None, None) => 0.0,
+    };
+    let p = peak as f64 * area as f64 * std::f64::consts::PI;
+    if p > 0.0 && area > 0.0 && p.is_finite() {
+        p
+    } else {
+        0.0
+    }
+}
+
+/// Interpolated texture coordinates at barycentrics b = (b1, b2).
+#[inline]
+pub fn interpolate_uv(s: &TriShading, b: Vec2) -> Vec2 {
+    s.uv[0] * (1.0 - b.x - b.y) + s.uv[1] * b.x + s.uv[2] * b.y
 }
 
 /// Interpolated unit shading normal at barycentrics b = (b1, b2).

@@ -31,6 +31,7 @@ fn job(path: &Path, w: u32, h: u32, spp: u32) -> RenderJob {
             bands: Bands::new(500.0, 600.0, 100.0).unwrap(),
             max_depth: 1,
             depth_spp: 0,
+            environment: None,
             ..RenderSettings::default()
         },
     }

@@ -27,7 +27,7 @@ fn bin_of(w: Vec3) -> usize {
 
 /// Chi-square test of directions from `sample` against density `pdf` (per sr) on equal-area
 /// (z, φ) bins; bins with expected count < 5 are pooled. Returns the p-value.
-fn chi_square(
+pub(crate) fn chi_square(
     n: usize,
     sub: usize,
     mut sample: impl FnMut(&mut CamRng) -> Option<Vec3>,
@@ -382,6 +382,7 @@ fn area_light_sampling_matches_its_density() {
                 material: 0,
                 light: 0,
                 area: 0.5 * c.length(),
+                tangent: u32::MAX,
             }
         })
         .collect();
@@ -395,6 +396,8 @@ fn area_light_sampling_matches_its_density() {
         },
         reflectance: SpectralTexture::Constant(TabulatedSpectrum::constant(0.0)),
         emission: Some(TabulatedSpectrum::constant(1.0)),
+        emission_texture: None,
+        normal_map: None,
     };
     let scene = Scene::build(tris, shading, vec![mat], vec![], vec![]);
     let p = Vec3::new(0.1, 0.0, 0.2);

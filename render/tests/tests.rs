@@ -2,6 +2,7 @@
 //! (`cargo test --release -p camsim-render --test tests <module>::`).
 
 mod animation;
+mod blender_features;
 mod bvh;
 mod depth_crosscheck;
 mod depth_path;
