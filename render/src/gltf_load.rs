@@ -1181,7 +1181,7 @@ fn convert_material(
         reflectance = SpectralTexture::Constant(TabulatedSpectrum::constant(0.5));
     }
     // emission
-    let emission = match extras.as_ref().and_then(|e| e.get("spectral_emission")) {
+    let mut emission = match extras.as_ref().and_then(|e| e.get("spectral_emission")) {
         Some(v) => Some(TabulatedSpectrum::from_spectrum(&spectral_extra(
             cx,
             &format!("{what}: extras.spectral_emission"),
@@ -1219,6 +1219,8 @@ fn convert_material(
         if t.max_value > 0.0 {
             emission_texture = Some(t);
         }
+        // glTF: emission = factor × texture, so a black texture emits nothing (not the factor)
+        emission = None;
     }
     let normal_map = match m.normal_texture() {
         Some(nt) => {

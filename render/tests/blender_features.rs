@@ -710,3 +710,38 @@ fn tangent_attribute_and_mirroring_follow_the_cosine_law() {
         }
     }
 }
+
+/// glTF's emission is emissiveFactor × emissiveTexture: an all-black texture emits nothing,
+/// whatever the factor (the scene has no other light, so the image is black).
+#[test]
+fn black_emissive_texture_emits_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    emissive_texture_scene(d.path(), [[0, 0, 0]; 4], FACTOR, STRENGTH);
+    let (scene, out) = render_file(
+        &d.path().join("emissive.gltf"),
+        8,
+        &settings(4, "380:780:40", 2),
+    );
+    assert!(
+        scene.materials.iter().all(|m| !m.emits()),
+        "a black emissive texture made an emitter"
+    );
+    let worst = out
+        .band_planes
+        .iter()
+        .flat_map(|p| p.iter())
+        .fold(0f32, |a, v| a.max(v.abs()));
+    assert_eq!(worst, 0.0, "black emissive texture: radiance {worst}");
+    // the same scene with a grey texture does emit (the check above is not vacuous)
+    emissive_texture_scene(d.path(), [[128, 128, 128]; 4], FACTOR, STRENGTH);
+    let (_, out) = render_file(
+        &d.path().join("emissive.gltf"),
+        8,
+        &settings(4, "380:780:40", 2),
+    );
+    assert!(out
+        .band_planes
+        .iter()
+        .flat_map(|p| p.iter())
+        .any(|v| *v > 0.0));
+}
