@@ -388,6 +388,11 @@ pub struct EnvironmentSpec {
     pub rotation_y_deg: f64,
 }
 
+/// Largest decoded EXR accepted as an environment map: 1 GiB of pixels, e.g. 2²⁶ texels
+/// (16384 × 4096) of four f32 channels. The map then holds about 48 bytes per texel more
+/// (radiance texels, luminance, sampling distribution), so this bounds it near 4 GiB.
+pub const MAX_ENVIRONMENT_DECODED_BYTES: f64 = (1u64 << 30) as f64;
+
 /// Load an environment map from an EXR file.
 pub fn load_environment(spec: &EnvironmentSpec) -> Result<EnvMap, crate::RenderError> {
     let path = &spec.exr;
@@ -408,9 +413,16 @@ pub fn load_environment(spec: &EnvironmentSpec) -> Result<EnvMap, crate::RenderE
         )));
     }
     let (rows, cols, chans, _) =
-        camsim_core::exr_io::read_channels(path).map_err(|e| err(format!("{e}")))?;
+        camsim_core::exr_io::read_channels_within(path, MAX_ENVIRONMENT_DECODED_BYTES)
+            .map_err(|e| err(format!("{e}")))?;
     if rows == 0 || cols == 0 {
         return Err(err("environment map is empty".into()));
+    }
+    if let Some((c, v)) = chans.iter().find(|(_, v)| v.len() != rows * cols) {
+        return Err(err(format!(
+            "environment map channel {c} has {} values: expected {rows} × {cols} (subsampled channels are not supported)",
+            v.len()
+        )));
     }
     let find = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
     let planes: [&Vec<f32>; 3] = match (find("R"), find("G"), find("B"), find("Y")) {
