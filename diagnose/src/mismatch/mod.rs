@@ -20,6 +20,7 @@ pub mod effects;
 pub mod identify;
 mod like;
 pub mod locate;
+mod memo;
 pub mod model;
 pub mod num;
 mod select;

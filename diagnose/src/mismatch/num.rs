@@ -30,6 +30,14 @@ pub struct Censored {
 
 /// See [`Censored`]; `lo` may be −∞ and `hi` +∞. With `s = 0` the variable is `clamp(m)`.
 pub fn censored(m: f64, s: f64, lo: f64, hi: f64) -> Censored {
+    thread_local! {
+        static MEMO: std::cell::RefCell<super::memo::Memo<4, Censored>> = Default::default();
+    }
+    super::memo::memo_with(&MEMO, [m, s, lo, hi], || censored_calc(m, s, lo, hi))
+}
+
+/// [`censored`], computed.
+fn censored_calc(m: f64, s: f64, lo: f64, hi: f64) -> Censored {
     if !(s > 0.0) {
         let y = m.clamp(lo, hi);
         return Censored {

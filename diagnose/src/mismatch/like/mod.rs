@@ -125,17 +125,17 @@ pub(crate) struct Ctx<'a> {
     memo: Mutex<Vec<(ModelState, RowSel, Arc<Eval>)>>,
     /// Reused buffer of the column pass's predictions.
     pred_buf: Mutex<Vec<Pred>>,
-    /// What a likelihood with hot pixels shares with every other hot-pixel parameter value
-    /// (the hot-pixel fit changes only the mixture's parameters).
+    /// What a likelihood with hot or RTN pixels shares with every other value of their
+    /// mixtures' parameters (the hot-pixel and RTN fits change only those).
     hot_base: Mutex<Option<Arc<HotBase>>>,
     /// Per shot and row: the sum of the pixels' temporal variances and whether no pixel is
     /// censored (`frames.rs`; data only, computed on first use).
     frame_pre: std::sync::OnceLock<Vec<(Vec<f64>, Vec<bool>)>>,
 }
 
-/// The parts of a fit-row log-likelihood that do not depend on the hot-pixel mixture's
-/// parameters: the column statistics and term, and every pixel's normal-class
-/// log-likelihood. Keyed by the state without its hot pixels and the rate images.
+/// The parts of a fit-row log-likelihood that do not depend on the hot-pixel and RTN
+/// mixtures' parameters: the column statistics and term, and every pixel's normal-class
+/// log-likelihood. Keyed by the state without its hot and RTN pixels and the rate images.
 struct HotBase {
     state: ModelState,
     /// The rate images (held: compared by pointer, then by value).
@@ -383,11 +383,14 @@ impl<'a> Ctx<'a> {
             .map(|r| (r.fraction.min(0.5), r.amplitude_v, r.high_probability()));
         let use_cols = self.column_term(sel);
         let rows = self.rows(sel);
-        // A likelihood alone with hot pixels: reuse (or keep) what does not depend on the
-        // mixture's parameters. Same sums in the same order: the same value either way.
-        let hot_key = (hot.is_some() && !stats).then(|| {
+        // A likelihood alone with hot pixels or RTN pixels: reuse (or keep) what does not
+        // depend on the mixtures' parameters (the column term and every pixel's normal-class
+        // log-likelihood: neither reads the hot-pixel or RTN block). Same sums in the same
+        // order: the same value either way.
+        let hot_key = ((hot.is_some() || rtn.is_some()) && !stats).then(|| {
             let mut st = state.clone();
             st.sensor.effects.hot_pixels = None;
+            st.sensor.effects.rtn = None;
             st
         });
         let same_rates = |a: &Rates| {

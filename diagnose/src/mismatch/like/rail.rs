@@ -61,6 +61,17 @@ fn rail_nodes(p: &Pred) -> RailNodes {
 /// p_lo(z) = Φ((0.5 − y − z)/s_t), p_hi(z) = 1 − Φ((M − 0.5 − y − z)/s_t) (24-point
 /// Gauss–Hermite quadrature over z).
 pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
+    thread_local! {
+        static MEMO: std::cell::RefCell<crate::mismatch::memo::Memo<7, RailStat>> =
+            Default::default();
+    }
+    crate::mismatch::memo::memo_with(&MEMO, [p.y, p.s2_t, p.s2_f, p.hi, f, nlo, nhi], || {
+        rail_stats_calc(p, f, nlo, nhi)
+    })
+}
+
+/// [`rail_stats`], computed (reads only `y`, `s2_t`, `s2_f` and `hi` of the prediction).
+fn rail_stats_calc(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
     let nmid = f - nlo - nhi;
     let nodes = rail_nodes(p);
     let mut lmax = f64::NEG_INFINITY;
