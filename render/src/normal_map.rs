@@ -1,4 +1,4 @@
-//! Tangent-space normal mapping (glTF 2.0 §3.9.3 `normalTexture`): the texel's RGB c ∈ [0,1]³
+//! Tangent-space normal mapping (glTF 2.0 §3.9.3 `normalTexture`): the texel's RGB c ∈ \[0,1\]³
 //! gives n_t = normalize((2c_r − 1)·s, (2c_g − 1)·s, 2c_b − 1), s the texture's `scale`, in the
 //! frame (T, B, N) with B = w·(N × T) (w the tangent's handedness), +X right and +Y up in the
 //! image.
