@@ -252,6 +252,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
             illuminant: None,
             patch_labels: None,
             world: Default::default(),
+            gltf: None,
         },
         (Some(_), _) => return Err(bad(&path, "give either target or render, not both")),
         (None, Value::Null) => return Err(bad(&path, "target: required (or a render section)")),
