@@ -86,7 +86,11 @@ fn simulate_on_a_gltf_target_matches_run() {
         .current_dir(d.path())
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let summary: Value = serde_json::from_str(
         &std::fs::read_to_string(d.path().join("run_out/summary.json")).unwrap(),
     )
@@ -105,7 +109,11 @@ fn simulate_on_a_gltf_target_matches_run() {
         .current_dir(d.path())
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let run = read_png16(&d.path().join("run_out/raw.png"));
     let sim = read_png16(&d.path().join("sim/a.png"));
     let (br, bs) = (block_means(&run), block_means(&sim));
@@ -147,7 +155,10 @@ fn simulate_on_a_gltf_target_matches_run() {
         sd / n.sqrt()
     );
     assert!(z.abs() < 4.0, "same render: z = {z}");
-    assert!((m_same / m_run - 1.0).abs() < 0.003, "same render: means {m_same} vs {m_run}");
+    assert!(
+        (m_same / m_run - 1.0).abs() < 0.003,
+        "same render: means {m_same} vs {m_run}"
+    );
 }
 
 /// Shots of the same scene content and render settings render once (a second spelling of the
@@ -172,7 +183,9 @@ fn gltf_shots_of_one_scene_render_once() {
     let grid = camsim_pipeline::chain::wavelength_grid(&set);
     let cache = camsim_pipeline::gltf_target::RenderCache::new();
     let scenes: Vec<_> = (0..3)
-        .map(|i| camsim_pipeline::simulate::shot_scene_cached(&set, i, &grid, Some(&cache)).unwrap())
+        .map(|i| {
+            camsim_pipeline::simulate::shot_scene_cached(&set, i, &grid, Some(&cache)).unwrap()
+        })
         .collect();
     assert_eq!(cache.renders(), 2, "three shots, two distinct renders");
     assert_eq!(scenes[0].radiance.planes, scenes[1].radiance.planes);
@@ -184,7 +197,11 @@ fn gltf_shots_of_one_scene_render_once() {
         .current_dir(d.path())
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     for f in ["a_radiance.exr", "a_irradiance.exr", "a_scene.json"] {
         assert!(d.path().join("sc").join(f).is_file(), "{f} missing");
     }
@@ -195,18 +212,49 @@ fn gltf_shots_of_one_scene_render_once() {
 fn gltf_target_errors_name_the_key() {
     let d = tempfile::tempdir().unwrap();
     copy_scene(d.path());
-    std::fs::write(d.path().join("broken.gltf"), "{\"asset\": {\"version\": \"2.0\"}, \"meshes\": [{").unwrap();
+    std::fs::write(
+        d.path().join("broken.gltf"),
+        "{\"asset\": {\"version\": \"2.0\"}, \"meshes\": [{",
+    )
+    .unwrap();
     let cases: Vec<(Value, &str)> = vec![
-        (json!({"kind": "gltf", "file": "missing.gltf"}), "target.file: "),
+        (
+            json!({"kind": "gltf", "file": "missing.gltf"}),
+            "target.file: ",
+        ),
         (json!({"kind": "gltf"}), "target.file: required"),
-        (json!({"kind": "gltf", "file": "broken.gltf"}), "target.file: "),
-        (json!({"kind": "gltf", "file": "thinlens.gltf", "spp": 0}), "target.spp: "),
-        (json!({"kind": "gltf", "file": "thinlens.gltf", "spp": 1e12}), "target.spp: "),
-        (json!({"kind": "gltf", "file": "thinlens.gltf", "spp": 1e6}), "target.spp: needs about"),
-        (json!({"kind": "gltf", "file": "thinlens.gltf", "sp": 4}), "target.sp: unknown key"),
-        (json!({"kind": "gltf", "file": "thinlens.gltf", "fov_deg": 40}), "target.fov_deg: "),
-        (json!({"kind": "gltf", "file": "thinlens.gltf", "bands": {"start_nm": 700, "stop_nm": 400, "step_nm": 10}}), "target.bands: "),
-        (json!({"kind": "gltf", "file": "thinlens.gltf", "camera_name": "nope"}), "target.file: "),
+        (
+            json!({"kind": "gltf", "file": "broken.gltf"}),
+            "target.file: ",
+        ),
+        (
+            json!({"kind": "gltf", "file": "thinlens.gltf", "spp": 0}),
+            "target.spp: ",
+        ),
+        (
+            json!({"kind": "gltf", "file": "thinlens.gltf", "spp": 1e12}),
+            "target.spp: ",
+        ),
+        (
+            json!({"kind": "gltf", "file": "thinlens.gltf", "spp": 1e6}),
+            "target.spp: needs about",
+        ),
+        (
+            json!({"kind": "gltf", "file": "thinlens.gltf", "sp": 4}),
+            "target.sp: unknown key",
+        ),
+        (
+            json!({"kind": "gltf", "file": "thinlens.gltf", "fov_deg": 40}),
+            "target.fov_deg: ",
+        ),
+        (
+            json!({"kind": "gltf", "file": "thinlens.gltf", "bands": {"start_nm": 700, "stop_nm": 400, "step_nm": 10}}),
+            "target.bands: ",
+        ),
+        (
+            json!({"kind": "gltf", "file": "thinlens.gltf", "camera_name": "nope"}),
+            "target.file: ",
+        ),
     ];
     for (i, (target, want)) in cases.iter().enumerate() {
         write_captures(
@@ -215,14 +263,28 @@ fn gltf_target_errors_name_the_key() {
         );
         let out = format!("out{i}");
         let st = camsim()
-            .args(["--max-work", "1e8", "simulate", "captures.json", "--out", &out])
+            .args([
+                "--max-work",
+                "1e8",
+                "simulate",
+                "captures.json",
+                "--out",
+                &out,
+            ])
             .current_dir(d.path())
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&st.stderr);
         assert!(!st.status.success(), "case {i} {target}: accepted");
-        assert_eq!(err.trim().lines().count(), 1, "case {i}: not one line: {err}");
-        assert!(err.contains("captures.json"), "case {i}: no file named: {err}");
+        assert_eq!(
+            err.trim().lines().count(),
+            1,
+            "case {i}: not one line: {err}"
+        );
+        assert!(
+            err.contains("captures.json"),
+            "case {i}: no file named: {err}"
+        );
         assert!(err.contains(want), "case {i}: expected {want:?} in: {err}");
         assert!(!d.path().join(&out).exists(), "case {i}: output written");
     }
@@ -242,14 +304,26 @@ fn gltf_target_frames_are_the_same_at_any_thread_count() {
     for threads in ["1", "2"] {
         let out = format!("out{threads}");
         let st = camsim()
-            .args(["--threads", threads, "simulate", "captures.json", "--out", &out, "--seed", "9"])
+            .args([
+                "--threads",
+                threads,
+                "simulate",
+                "captures.json",
+                "--out",
+                &out,
+                "--seed",
+                "9",
+            ])
             .current_dir(d.path())
             .output()
             .unwrap();
-        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
         outs.push(
-            ["a0.png", "a1.png"]
-                .map(|f| std::fs::read(d.path().join(&out).join(f)).unwrap()),
+            ["a0.png", "a1.png"].map(|f| std::fs::read(d.path().join(&out).join(f)).unwrap()),
         );
     }
     assert_eq!(outs[0], outs[1], "frames differ between 1 and 2 threads");

@@ -145,15 +145,13 @@ pub fn gltf_target(m: &Map<String, Value>, dir: &Path) -> Result<GltfTarget, Str
     let bands = match m.get("bands") {
         None => None,
         Some(v) => {
-            let g: crate::config::GridFile = serde_json::from_value(v.clone())
-                .map_err(|e| format!(".bands: {e} (expected {{\"start_nm\", \"stop_nm\", \"step_nm\"}})"))?;
+            let g: crate::config::GridFile = serde_json::from_value(v.clone()).map_err(|e| {
+                format!(".bands: {e} (expected {{\"start_nm\", \"stop_nm\", \"step_nm\"}})")
+            })?;
             let grid = WavelengthGrid::regular(g.start_nm, g.stop_nm, g.step_nm)
                 .map_err(|e| format!(".bands: {e}"))?;
             if grid.len() < 2 || grid.len() > 1000 {
-                return Err(format!(
-                    ".bands: needs 2 to 1000 bands, got {}",
-                    grid.len()
-                ));
+                return Err(format!(".bands: needs 2 to 1000 bands, got {}", grid.len()));
             }
             Some(grid)
         }
@@ -178,7 +176,13 @@ impl GltfTarget {
 
     /// The render cache's key: the scene's content and every setting that changes the
     /// render, with the grid it is rendered on.
-    fn cache_key(&self, g: &SamplingGrid, os: usize, margin: usize, sim: &WavelengthGrid) -> String {
+    fn cache_key(
+        &self,
+        g: &SamplingGrid,
+        os: usize,
+        margin: usize,
+        sim: &WavelengthGrid,
+    ) -> String {
         let r = self.render_grid(sim);
         format!(
             "{:016x}|{:?}|{}|{}|{}|{}|{:?}|{:?}|{}x{}|{}|{}|{:e}",
