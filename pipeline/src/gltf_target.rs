@@ -1,10 +1,10 @@
 //! Shot targets of kind `gltf` (a camsim extension of the capture format; docs/config.md
 //! "glTF scenes as targets"): a glTF 2.0 scene path-traced on the shot's scene sampling grid
-//! by the same render job as `camsim run` ([`crate::animated::grid_render_job`], a pinhole
-//! render of radiance with planar depth), so that the one chain's optics stage
-//! ([`crate::chain::irradiance_and_blur_of`]) forms its image depth-aware. Renders are cached
-//! per (scene file content, render settings, sampling grid) within one `simulate`
-//! ([`RenderCache`]): shots of the same scene render once.
+//! by the one function that renders `camsim run`'s scenes too
+//! ([`crate::chain::render_gltf_on_grid`]: radiance with planar depth, the same render camera
+//! policy), so that the one chain's optics stage ([`crate::chain::irradiance_and_blur_of`])
+//! forms its image depth-aware. Renders are cached per (scene file, render settings, sampling
+//! grid) within one `simulate` ([`RenderCache`]): shots of the same scene render once.
 use crate::config::CaptureSet;
 use crate::error::CliError;
 use camsim_core::image::SceneRadiance;
@@ -34,8 +34,9 @@ pub const MAX_SPP: f64 = 1e6;
 pub struct GltfTarget {
     /// The glTF 2.0 file (.gltf or .glb), resolved against the capture file's folder.
     pub file: PathBuf,
-    /// FNV-1a 64-bit hash of the file's bytes (the render cache's identity of the scene).
-    pub file_hash: u64,
+    /// The render cache's identity of the scene: the file's canonical path (its relative
+    /// buffers and textures resolve against its folder), size and modification time.
+    pub file_identity: String,
     /// The glTF camera (node or camera name; None: the first).
     pub camera_name: Option<String>,
     /// Path-tracing samples per scene sample (default 16, as `camsim run`).
@@ -50,16 +51,6 @@ pub struct GltfTarget {
     /// Keep the render's depth so the optics stage defocuses by depth (default true; the
     /// camera needs `optics.focus_distance_m` or `blur.kind = "lens"` for it to act).
     pub depth_optics: bool,
-}
-
-/// FNV-1a, 64 bit (Fowler, Noll & Vo; the published offset basis and prime).
-fn fnv1a64(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in bytes {
-        h ^= *b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
 }
 
 /// Parse the keys of a `gltf` target (`m`, already checked for unknown keys). Errors start
@@ -97,8 +88,14 @@ pub fn gltf_target(m: &Map<String, Value>, dir: &Path) -> Result<GltfTarget, Str
             crate::budget::human_bytes(limit as f64)
         ));
     }
-    let bytes =
-        std::fs::read(&file).map_err(|e| format!(".file: {}: cannot read: {e}", file.display()))?;
+    let canonical = std::fs::canonicalize(&file)
+        .map_err(|e| format!(".file: {}: cannot read: {e}", file.display()))?;
+    let modified_ns = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos());
+    let file_identity = format!("{}|{}|{modified_ns}", canonical.display(), meta.len());
     let num = |k: &str| -> Result<Option<f64>, String> {
         match m.get(k) {
             None => Ok(None),
@@ -158,7 +155,7 @@ pub fn gltf_target(m: &Map<String, Value>, dir: &Path) -> Result<GltfTarget, Str
     };
     Ok(GltfTarget {
         file,
-        file_hash: fnv1a64(&bytes),
+        file_identity,
         camera_name,
         spp,
         seed,
@@ -174,19 +171,14 @@ impl GltfTarget {
         self.bands.as_ref().unwrap_or(sim)
     }
 
-    /// The render cache's key: the scene's content and every setting that changes the
-    /// render, with the grid it is rendered on.
-    fn cache_key(
-        &self,
-        g: &SamplingGrid,
-        os: usize,
-        margin: usize,
-        sim: &WavelengthGrid,
-    ) -> String {
+    /// The render cache's key: the scene file's identity and every setting that changes the
+    /// render, with the grid it is rendered on (the grid's size and pitch fix the
+    /// oversampling and margin; one cache serves one capture set, so one camera).
+    fn cache_key(&self, g: &SamplingGrid, sim: &WavelengthGrid) -> String {
         let r = self.render_grid(sim);
         format!(
-            "{:016x}|{:?}|{}|{}|{}|{}|{:?}|{:?}|{}x{}|{}|{}|{:e}",
-            self.file_hash,
+            "{}|{:?}|{}|{}|{}|{}|{:?}|{:?}|{}x{}|{:e}",
+            self.file_identity,
             self.camera_name,
             self.spp,
             self.seed,
@@ -196,8 +188,6 @@ impl GltfTarget {
             sim.wavelength_nm,
             g.rows,
             g.cols,
-            os,
-            margin,
             g.pitch_m
         )
     }
@@ -229,40 +219,33 @@ pub fn check_render_work(set: &CaptureSet, key: &str, t: &GltfTarget) -> Result<
     let s = &set.camera.sensor;
     let (os, margin) =
         crate::chain::sampling_for(&set.camera.optics, s, &grid, set.simulation.oversample);
-    let side = |n: usize| (n as f64 + 2.0 * margin as f64) * os as f64;
-    let samples = side(s.rows) * side(s.cols);
+    let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin);
+    let samples = g.rows as f64 * g.cols as f64;
     crate::budget::check_work(
         Some(&set.path),
         &format!("{key}.target.spp"),
         samples * t.spp as f64,
         &format!(
-            "{:.0}×{:.0} scene samples (sensor + {margin} px margin, {os}×{os} per pixel) × {} \
-             paths",
-            side(s.cols),
-            side(s.rows),
-            t.spp
+            "{}×{} scene samples (sensor + {margin} px margin, {os}×{os} per pixel) × {} paths",
+            g.cols, g.rows, t.spp
         ),
     )
 }
 
 /// The scene radiance (with planar depth unless `depth_optics` is false) of the glTF target
-/// `t` of shot `shot_id` on the sampling grid `g` (`os` samples per pixel side, `margin`
-/// pixels around the sensor), on the simulation wavelengths `sim`: the render job of
-/// `camsim run` ([`crate::animated::grid_render_job`], pinhole camera,
-/// [`crate::animated::render_job_radiance`]). With a `cache`, a render of the same scene
-/// content and settings is made once. Errors name the capture file, the shot and the key.
-#[allow(clippy::too_many_arguments)]
+/// `t` of shot `shot_id` on the sampling grid `g` of `set`'s camera, on the simulation
+/// wavelengths `sim`: [`crate::chain::render_gltf_on_grid`], the render of `camsim run`
+/// (same camera policy). With a `cache`, a render of the same scene file and settings is
+/// made once. Errors name the capture file, the shot and the key.
 pub fn render_gltf_target(
     set: &CaptureSet,
     shot_id: &str,
     t: &GltfTarget,
     g: &SamplingGrid,
-    os: usize,
-    margin: usize,
     sim: &WavelengthGrid,
     cache: Option<&RenderCache>,
 ) -> Result<SceneRadiance, CliError> {
-    let key = t.cache_key(g, os, margin, sim);
+    let key = t.cache_key(g, sim);
     if let Some(c) = cache {
         if let Some(r) = c.renders.lock().expect("render cache").get(&key) {
             return Ok((**r).clone());
@@ -274,24 +257,19 @@ pub fn render_gltf_target(
             format!("shot {shot_id}: target.file: {}", e.one_line()),
         )
     };
-    let job = crate::animated::grid_render_job(
-        &t.file,
-        &crate::animated::GridRender {
+    let mut scene = crate::chain::render_gltf_on_grid(
+        set,
+        &crate::chain::GltfOnGrid {
+            scene: &t.file,
             camera_name: t.camera_name.clone(),
-            camera: camsim_render::job::CameraChoice::Pinhole,
-            sensor: &set.camera.sensor,
-            oversample: os,
-            margin_px: margin,
+            camera: None,
             spp: t.spp,
             max_depth: t.max_depth,
+            seed: t.seed,
+            bands: t.bands.as_ref(),
         },
-        t.seed,
-        t.render_grid(sim),
+        sim,
     )
-    .map_err(err)?;
-    let mut scene = crate::guard::guarded(&t.file, || {
-        crate::animated::render_job_radiance(&job, None, g.pitch_m, t.render_grid(sim))
-    })
     .map_err(err)?;
     if scene.radiance.rows != g.rows || scene.radiance.cols != g.cols {
         return Err(CliError::input(
@@ -301,9 +279,6 @@ pub fn render_gltf_target(
                 scene.radiance.rows, scene.radiance.cols, g.rows, g.cols
             ),
         ));
-    }
-    if t.bands.is_some() {
-        scene.radiance = scene.radiance.to_bands(sim);
     }
     if !t.depth_optics {
         scene.depth_m = None;

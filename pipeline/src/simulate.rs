@@ -299,8 +299,7 @@ pub fn shot_scene_cached(
     let ap = sample_aperture_for(&cam.optics, s, grid, os, set.simulation.sample_aperture);
     let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin).with_aperture(ap);
     if let Some(t) = &shot.target.gltf {
-        let mut scene =
-            crate::gltf_target::render_gltf_target(set, &shot.id, t, &g, os, margin, grid, cache)?;
+        let mut scene = crate::gltf_target::render_gltf_target(set, &shot.id, t, &g, grid, cache)?;
         if let Some(l) = shot.target.mean_luminance_cd_m2 {
             scale_to_mean_luminance(
                 &mut scene,
