@@ -66,13 +66,75 @@ fn block_means(v: &[f64]) -> Vec<f64> {
     out
 }
 
+/// Spectral irradiance of a spectral EXR: (bands by wavelength, rows, cols).
+fn read_irradiance(p: &Path) -> (Vec<f64>, usize, usize, Vec<Vec<f32>>) {
+    let e = camsim_core::exr_io::read_spectral_exr(p).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(e.image.planes.len(), e.grid.len());
+    (
+        e.grid.wavelength_nm.clone(),
+        e.image.rows,
+        e.image.cols,
+        e.image.planes,
+    )
+}
+
+/// The sensor pixels of a scene-grid plane ((rows + 2·margin)·os × (cols + 2·margin)·os
+/// samples): the margin cropped, os × os samples averaged (what `camsim run` writes).
+fn to_pixels(p: &[f32], grid_rows: usize, grid_cols: usize) -> Vec<f64> {
+    let os = (grid_cols - grid_rows) / (COLS - ROWS);
+    let margin = (grid_rows / os - ROWS) / 2;
+    assert_eq!(
+        (grid_rows, grid_cols),
+        ((ROWS + 2 * margin) * os, (COLS + 2 * margin) * os)
+    );
+    let mut out = vec![0.0; ROWS * COLS];
+    for y in 0..ROWS {
+        for x in 0..COLS {
+            let mut s = 0.0;
+            for dy in 0..os {
+                for dx in 0..os {
+                    s += p[((y + margin) * os + dy) * grid_cols + (x + margin) * os + dx] as f64;
+                }
+            }
+            out[y * COLS + x] = s / (os * os) as f64;
+        }
+    }
+    out
+}
+
+/// High-frequency energy of an image relative to its energy: Σ (neighbour differences)² /
+/// Σ value². Defocus (a low-pass filter) lowers it.
+fn edge_energy(v: &[f64]) -> f64 {
+    let (mut d2, mut e2) = (0.0, 0.0);
+    for y in 0..ROWS {
+        for x in 0..COLS {
+            let a = v[y * COLS + x];
+            e2 += a * a;
+            if x + 1 < COLS {
+                d2 += (v[y * COLS + x + 1] - a).powi(2);
+            }
+            if y + 1 < ROWS {
+                d2 += (v[(y + 1) * COLS + x] - a).powi(2);
+            }
+        }
+    }
+    d2 / e2
+}
+
 /// `camsim simulate` on a glTF target and `camsim run` on the same scene and camera (both
-/// depth-aware: pinhole render + thin-lens defocus by depth through the one chain), renders
-/// with different seeds: the block-mean difference of the two raw frames has zero mean
-/// (z-test over 96 blocks of 4 × 4 px, |z| < 4; each block's difference carries the render
-/// noise and the sensor noise of both frames, so its scatter over the blocks estimates the
-/// standard error) and they show the same scene (the block means correlate, r > 0.95). With
-/// the run's render seed the render is the same and only the sensor noise differs.
+/// depth-aware: pinhole render + thin-lens defocus by depth through the one chain).
+///
+/// * Same render seed: the sensor irradiance of the target's shot (`camsim scene`, on the
+///   scene grid, cropped and averaged to pixels here) equals run's `sensor_irradiance.exr`
+///   to float tolerance (max |Δ| < 1e-4 of the largest value, every band): the same render
+///   and the same depth-aware optics. Control: the same shot with `depth_optics: false`
+///   (no defocus by depth) differs by more than 5 % of the largest value somewhere and its
+///   high-frequency energy ([`edge_energy`]) is over 1.2 × run's, so the comparison sees a
+///   missing defocus.
+/// * Different render seeds: the block-mean difference of the two raw frames has zero mean
+///   (z-test over 96 blocks of 4 × 4 px, |z| < 4; each block's difference carries the render
+///   noise and the sensor noise of both frames, so its scatter over the blocks estimates the
+///   standard error). With the run's render seed the raw frames differ by the sensor noise.
 #[test]
 fn simulate_on_a_gltf_target_matches_run() {
     let d = tempfile::tempdir().unwrap();
@@ -102,7 +164,10 @@ fn simulate_on_a_gltf_target_matches_run() {
         json!([{"id": "a", "exposure_s": t, "frames": ["a.png"],
                 "target": {"kind": "gltf", "file": "thinlens.gltf", "spp": 16, "seed": 11}},
                {"id": "b", "exposure_s": t, "frames": ["b.png"],
-                "target": {"kind": "gltf", "file": "thinlens.gltf", "spp": 16, "seed": 3}}]),
+                "target": {"kind": "gltf", "file": "thinlens.gltf", "spp": 16, "seed": 3}},
+               {"id": "c", "exposure_s": t, "frames": ["c.png"],
+                "target": {"kind": "gltf", "file": "thinlens.gltf", "spp": 16, "seed": 3,
+                           "depth_optics": false}}]),
     );
     let st = camsim()
         .args(["simulate", "captures.json", "--out", "sim", "--seed", "5"])
@@ -114,6 +179,68 @@ fn simulate_on_a_gltf_target_matches_run() {
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
+    // irradiance: simulate's shot b (run's render seed) and c (no depth optics) vs run
+    let (run_nm, run_rows, run_cols, run_irr) =
+        read_irradiance(&d.path().join("run_out/sensor_irradiance.exr"));
+    assert_eq!((run_rows, run_cols), (ROWS, COLS));
+    let scene_irr = |id: &str| {
+        let st = camsim()
+            .args([
+                "scene",
+                "captures.json",
+                "--shot",
+                id,
+                "--out",
+                &format!("sc_{id}"),
+            ])
+            .current_dir(d.path())
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        read_irradiance(&d.path().join(format!("sc_{id}/{id}_irradiance.exr")))
+    };
+    let (b_nm, gr, gc, b_irr) = scene_irr("b");
+    let (_, _, _, c_irr) = scene_irr("c");
+    let peak = run_irr.iter().flatten().fold(0f64, |m, v| m.max(*v as f64));
+    assert!(peak > 0.0, "run's irradiance is dark");
+    let (mut same_max, mut control_max, mut compared) = (0f64, 0f64, 0);
+    let (mut run_sum, mut c_sum) = (vec![0.0; ROWS * COLS], vec![0.0; ROWS * COLS]);
+    for (bi, nm) in run_nm.iter().enumerate() {
+        let Some(si) = b_nm.iter().position(|w| (w - nm).abs() < 1e-6) else {
+            continue;
+        };
+        compared += 1;
+        let (b, c) = (to_pixels(&b_irr[si], gr, gc), to_pixels(&c_irr[si], gr, gc));
+        for i in 0..ROWS * COLS {
+            let r = run_irr[bi][i] as f64;
+            same_max = same_max.max((b[i] - r).abs() / peak);
+            control_max = control_max.max((c[i] - r).abs() / peak);
+            run_sum[i] += r;
+            c_sum[i] += c[i];
+        }
+    }
+    let (e_run, e_c) = (edge_energy(&run_sum), edge_energy(&c_sum));
+    eprintln!(
+        "gltf target irradiance vs run ({compared} bands): same seed max |Δ|/peak {same_max:.2e}; \
+         depth_optics false max |Δ|/peak {control_max:.3}, edge energy {e_c:.4e} vs run {e_run:.4e}"
+    );
+    assert!(compared >= 10, "only {compared} common bands");
+    assert!(
+        same_max < 1e-4,
+        "simulate's irradiance differs from run's: {same_max}"
+    );
+    assert!(
+        control_max > 0.05,
+        "no defocus by depth seen: {control_max}"
+    );
+    assert!(
+        e_c > 1.2 * e_run,
+        "edge energy {e_c} (sharp) vs {e_run} (defocused)"
+    );
     let run = read_png16(&d.path().join("run_out/raw.png"));
     let sim = read_png16(&d.path().join("sim/a.png"));
     let (br, bs) = (block_means(&run), block_means(&sim));
@@ -123,22 +250,12 @@ fn simulate_on_a_gltf_target_matches_run() {
     let sd = (diff.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
     let z = mean / (sd / n.sqrt());
     let (mr, ms) = (br.iter().sum::<f64>() / n, bs.iter().sum::<f64>() / n);
-    let corr = {
-        let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-        for (a, b) in br.iter().zip(&bs) {
-            sxy += (a - mr) * (b - ms);
-            sxx += (a - mr).powi(2);
-            syy += (b - ms).powi(2);
-        }
-        sxy / (sxx * syy).sqrt()
-    };
     eprintln!(
-        "gltf target: run mean {mr:.2} DN, simulate mean {ms:.2} DN, block difference {mean:+.3} ± {:.3} DN (z {z:+.2}), block correlation {corr:.4}",
+        "gltf target: run mean {mr:.2} DN, simulate mean {ms:.2} DN, block difference {mean:+.3} ± {:.3} DN (z {z:+.2})",
         sd / n.sqrt()
     );
     assert!(mr > 50.0, "the run frame is dark ({mr} DN)");
     assert!(z.abs() < 4.0, "simulate vs run: z = {z}");
-    assert!(corr > 0.95, "block correlation {corr}");
     // The render seed of the run (3): the same render, so the frames differ by the sensor
     // noise only (independent per pixel): pixel z-test of the mean difference, |z| < 4, and
     // the means within 0.3 %.
@@ -161,35 +278,67 @@ fn simulate_on_a_gltf_target_matches_run() {
     );
 }
 
-/// Shots of the same scene content and render settings render once (a second spelling of the
-/// path and a different luminance scaling share the render); another seed renders again. The
-/// expected images of the first two shots are then proportional, and `camsim scene` writes the
-/// scene with depth-aware irradiance.
+/// Shots of the same scene file and render settings render once (the render count of the
+/// cache): a second spelling of the path, another exposure and a `mean_luminance_cd_m2`
+/// scaling share the render, and the scaled shot's scene radiance is the shared render times
+/// one factor (max deviation < 1e-5 of the peak). Another seed renders again, and so does an
+/// identical copy of the scene in another folder (its buffers could differ: the cache keys on
+/// the file's canonical path, not its content). `camsim scene` writes the scene with
+/// depth-aware irradiance.
 #[test]
 fn gltf_shots_of_one_scene_render_once() {
     let d = tempfile::tempdir().unwrap();
     copy_scene(d.path());
+    std::fs::create_dir(d.path().join("copy")).unwrap();
+    copy_scene(&d.path().join("copy"));
     let tgt = |file: &str, seed: u64| json!({"kind": "gltf", "file": file, "spp": 2, "seed": seed});
+    let mut scaled = tgt("thinlens.gltf", 1);
+    scaled["mean_luminance_cd_m2"] = json!(37.0);
     write_captures(
         d.path(),
         json!([
             {"id": "a", "exposure_s": 0.01, "frames": ["a.png"], "target": tgt("thinlens.gltf", 1)},
             {"id": "b", "exposure_s": 0.02, "frames": ["b.png"], "target": tgt("./thinlens.gltf", 1)},
-            {"id": "c", "exposure_s": 0.01, "frames": ["c.png"], "target": tgt("thinlens.gltf", 2)}
+            {"id": "c", "exposure_s": 0.01, "frames": ["c.png"], "target": tgt("thinlens.gltf", 2)},
+            {"id": "d", "exposure_s": 0.01, "frames": ["d.png"], "target": scaled},
+            {"id": "e", "exposure_s": 0.01, "frames": ["e.png"], "target": tgt("copy/thinlens.gltf", 1)}
         ]),
     );
     let set =
         camsim_pipeline::config::load_captures(&d.path().join("captures.json"), None).unwrap();
     let grid = camsim_pipeline::chain::wavelength_grid(&set);
     let cache = camsim_pipeline::gltf_target::RenderCache::new();
-    let scenes: Vec<_> = (0..3)
+    let scenes: Vec<_> = (0..5)
         .map(|i| {
             camsim_pipeline::simulate::shot_scene_cached(&set, i, &grid, Some(&cache)).unwrap()
         })
         .collect();
-    assert_eq!(cache.renders(), 2, "three shots, two distinct renders");
+    assert_eq!(
+        cache.renders(),
+        3,
+        "five shots, three distinct renders (a = b = d, c, e)"
+    );
     assert_eq!(scenes[0].radiance.planes, scenes[1].radiance.planes);
     assert_ne!(scenes[0].radiance.planes, scenes[2].radiance.planes);
+    // d: a's render scaled by one factor
+    let (a, dd): (Vec<f64>, Vec<f64>) = scenes[0]
+        .radiance
+        .planes
+        .iter()
+        .flatten()
+        .zip(scenes[3].radiance.planes.iter().flatten())
+        .map(|(x, y)| (*x as f64, *y as f64))
+        .unzip();
+    let k = dd.iter().sum::<f64>() / a.iter().sum::<f64>();
+    let peak = dd.iter().fold(0f64, |m, v| m.max(v.abs()));
+    let dev = a
+        .iter()
+        .zip(&dd)
+        .fold(0f64, |m, (x, y)| m.max((y - k * x).abs()));
+    assert!(
+        (k - 1.0).abs() > 1e-3 && dev < 1e-5 * peak,
+        "scaled shot: factor {k}, deviation {dev} of peak {peak}"
+    );
     assert!(scenes[0].depth_m.is_some());
     // camsim scene: radiance, irradiance and the report for a glTF shot
     let st = camsim()
