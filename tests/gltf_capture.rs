@@ -477,3 +477,92 @@ fn gltf_target_frames_are_the_same_at_any_thread_count() {
     }
     assert_eq!(outs[0], outs[1], "frames differ between 1 and 2 threads");
 }
+
+/// The render camera policy is `camsim run`'s: with a camera that does not defocus by depth
+/// (no `optics.focus_distance_m`), the glTF camera's own `extras.thinlens` renders thin-lens
+/// in both. Same render seed: simulate's irradiance (`camsim scene`) equals run's to float
+/// tolerance (max |Δ| < 1e-4 of the peak). Control: run with `render.camera = "pinhole"` (same
+/// seed) differs by more than 5 % of the peak somewhere, so an always-pinhole target render
+/// would fail the comparison.
+#[test]
+fn gltf_target_renders_with_runs_camera_policy() {
+    let d = tempfile::tempdir().unwrap();
+    copy_scene(d.path());
+    let mut cam = camera();
+    cam["optics"]
+        .as_object_mut()
+        .unwrap()
+        .remove("focus_distance_m");
+    let run = |name: &str, render: Value, seed: u64| {
+        let cfg = json!({"camera": cam, "render": render, "auto_exposure": 0.5, "seed": seed,
+                         "simulation": {"oversample": 1}});
+        std::fs::write(d.path().join(format!("{name}.json")), cfg.to_string()).unwrap();
+        let st = camsim()
+            .args(["run", &format!("{name}.json"), "--out", name])
+            .current_dir(d.path())
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        read_irradiance(&d.path().join(format!("{name}/sensor_irradiance.exr")))
+    };
+    let (nm, rows, cols, auto) = run("auto", json!({"scene": "thinlens.gltf", "spp": 8}), 7);
+    assert_eq!((rows, cols), (ROWS, COLS));
+    let (_, _, _, pinhole) = run(
+        "pin",
+        json!({"scene": "thinlens.gltf", "spp": 8, "camera": "pinhole"}),
+        7,
+    );
+    std::fs::write(d.path().join("camera.json"), cam.to_string()).unwrap();
+    std::fs::write(
+        d.path().join("captures.json"),
+        json!({"camera": "camera.json", "simulation": {"oversample": 1},
+               "shots": [{"id": "a", "exposure_s": 0.01, "frames": ["a.png"],
+                          "target": {"kind": "gltf", "file": "thinlens.gltf", "spp": 8,
+                                     "seed": 7}}]})
+        .to_string(),
+    )
+    .unwrap();
+    let st = camsim()
+        .args(["scene", "captures.json", "--shot", "a", "--out", "sc"])
+        .current_dir(d.path())
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let (s_nm, gr, gc, sim) = read_irradiance(&d.path().join("sc/a_irradiance.exr"));
+    let peak = auto.iter().flatten().fold(0f64, |m, v| m.max(*v as f64));
+    assert!(peak > 0.0, "run's irradiance is dark");
+    let (mut same_max, mut control_max, mut compared) = (0f64, 0f64, 0);
+    for (bi, w) in nm.iter().enumerate() {
+        let Some(si) = s_nm.iter().position(|v| (v - w).abs() < 1e-6) else {
+            continue;
+        };
+        compared += 1;
+        let s = to_pixels(&sim[si], gr, gc);
+        for i in 0..ROWS * COLS {
+            let (a, p) = (auto[bi][i] as f64, pinhole[bi][i] as f64);
+            same_max = same_max.max((s[i] - a).abs() / peak);
+            control_max = control_max.max((p - a).abs() / peak);
+        }
+    }
+    eprintln!(
+        "camera policy ({compared} bands): simulate vs run (glTF thin lens) max |Δ|/peak \
+         {same_max:.2e}; pinhole run max |Δ|/peak {control_max:.3}"
+    );
+    assert!(compared >= 10, "only {compared} common bands");
+    assert!(
+        same_max < 1e-4,
+        "simulate's irradiance differs from run's: {same_max}"
+    );
+    assert!(
+        control_max > 0.05,
+        "the pinhole render is the same: {control_max}"
+    );
+}
