@@ -6,6 +6,7 @@ mod diagnose;
 mod dual_pixel;
 mod effects;
 mod emva1288;
+mod gltf_capture;
 mod hostile;
 mod lens_blur;
 mod lens_cli;

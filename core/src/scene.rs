@@ -153,6 +153,12 @@ pub enum Target {
         /// line width (m)
         line_width_m: f64,
     },
+    /// A scene the pipeline renders itself (a glTF scene path-traced on the sampling grid,
+    /// with depth): [`render_target`] refuses it; the pipeline's shot scene renders it.
+    Rendered {
+        /// What is rendered (for messages), e.g. the scene file.
+        description: String,
+    },
 }
 
 /// Length of the overlap of [a0, a1] and [b0, b1].
@@ -274,6 +280,12 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
         SpectralImage::from_single_spectrum(g.rows, g.cols, s.clone(), plane)
     };
     Ok(match target {
+        Target::Rendered { description } => {
+            return Err(CoreError::Target(format!(
+                "{description} is a rendered scene: it is path-traced by the pipeline, not \
+                 sampled as a target"
+            )))
+        }
         Target::Dark => single(&Spectrum::constant(0.0), vec![0.0; n]),
         Target::Uniform { radiance } => single(radiance, vec![1.0; n]),
         Target::Patches {

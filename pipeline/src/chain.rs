@@ -5,6 +5,7 @@
 //! | step | function | stage call |
 //! |---|---|---|
 //! | scene radiance of a shot (field of view, distance, illuminant swap) | [`shot_scene`] | [`camsim_core::scene_view::render_target_in_view`], [`camsim_core::illuminant::swap_illuminant`] |
+//! | scene radiance of a `gltf` target (path-traced with depth on the shot's grid, cached per scene file and settings; `camsim run`'s `render` section) | [`shot_scene`], [`shot_scene_cached`], [`render_gltf_on_grid`] (camera policy: pinhole when the camera defocuses by depth, else the glTF camera's own) | [`crate::gltf_target::render_gltf_target`] → [`crate::animated::grid_render_job`], [`crate::animated::render_job_radiance`] |
 //! | optics | [`shot_irradiance`], [`irradiance_of`], [`irradiance_and_blur_of`] (depth-aware for scenes with depth), [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`]; [`camsim_render::depth_optics::defocus_by_depth`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
 //! | pixel optics (`sensor.pixel_optics`: CRA shading, optical crosstalk) | [`apply_pixel_optics`] (inside [`shot_electron_rate`]) | [`camsim_sensor::pixel_optics::apply_pixel_optics`] |
@@ -29,7 +30,8 @@ use std::borrow::Cow;
 use std::path::Path;
 
 pub use crate::simulate::{
-    sampling_for, shot_electron_rate, shot_irradiance, shot_scene, wavelength_grid,
+    sampling_for, shot_electron_rate, shot_electron_rate_cached, shot_irradiance,
+    shot_irradiance_cached, shot_scene, shot_scene_cached, wavelength_grid,
 };
 
 /// The optics stage of the set's camera applied to a scene that does not come from a shot's
@@ -757,4 +759,96 @@ fn dual_pixel_lens_irradiance(
         left: half_image(false)?,
         right: half_image(true)?,
     })
+}
+
+/// Whether `cam`'s optics defocus a scene by its depth ([`irradiance_and_blur_of`]): a thin
+/// lens focused somewhere (`optics.focus_distance_m`) or a lens blur with a focus.
+pub fn camera_defocuses_by_depth(cam: &Camera) -> bool {
+    cam.thin_lens_focus_m.is_some()
+        || matches!(&cam.optics.blur, camsim_optics::Blur::Lens(l) if l.focus.is_some())
+}
+
+/// A glTF scene to path-trace on a shot's scene sampling grid ([`render_gltf_on_grid`]).
+#[derive(Debug, Clone)]
+pub struct GltfOnGrid<'a> {
+    /// The glTF 2.0 file (.gltf or .glb).
+    pub scene: &'a Path,
+    /// The glTF camera (node or camera name; None: the first).
+    pub camera_name: Option<String>,
+    /// The render camera asked for (`pinhole`, `thinlens`, `lens:FILE`, …; None: the policy
+    /// of [`render_gltf_on_grid`]).
+    pub camera: Option<&'a str>,
+    /// Path-tracing samples per scene sample.
+    pub spp: u32,
+    /// Longest path (Mitsuba's convention, −1 = unlimited).
+    pub max_depth: i32,
+    /// Seed of the render.
+    pub seed: u64,
+    /// Render bands (band centres; None: the simulation grid); the render is resampled onto
+    /// the simulation grid.
+    pub bands: Option<&'a WavelengthGrid>,
+}
+
+/// The scene radiance of a glTF scene path-traced on the scene sampling grid of `set`'s
+/// sensor ((rows + 2·margin)·os × (cols + 2·margin)·os samples of pitch pixel_pitch/os, the
+/// margin and os of [`sampling_for`]; the glTF camera's field of view spans the grid;
+/// [`crate::animated::grid_render_job`], [`crate::animated::render_job_radiance`]), on the
+/// simulation wavelengths `grid`, with the render's planar depth: the scene of `camsim run`'s
+/// `render` section and of a `gltf` capture target alike.
+///
+/// Camera policy: when the camera defocuses by depth ([`camera_defocuses_by_depth`]) the
+/// render is a pinhole one (the optics stage defocuses it) and a thin-lens render camera is
+/// refused (it would defocus twice); otherwise the render camera is the glTF camera's own
+/// (`CameraChoice::Auto`: a camera with `extras.thinlens` renders thin-lens). `r.camera`
+/// overrides the choice.
+///
+/// The samples are cell averages ([`camsim_core::sample_aperture::SampleAperture::Cell`]): the tracer's
+/// samples are uniform over each sample's cell, whatever `simulation.sample_aperture` says
+/// (that setting chooses how closed-form targets are sampled).
+pub fn render_gltf_on_grid(
+    set: &CaptureSet,
+    r: &GltfOnGrid,
+    grid: &WavelengthGrid,
+) -> Result<SceneRadiance, CliError> {
+    use camsim_render::job::CameraChoice;
+    let cam = &set.camera;
+    let sensor = &cam.sensor;
+    let depth_aware = camera_defocuses_by_depth(cam);
+    let camera: CameraChoice = match r.camera {
+        None if depth_aware => CameraChoice::Pinhole,
+        None => CameraChoice::Auto,
+        Some(c) => c.parse().map_err(|e: String| CliError::input(r.scene, e))?,
+    };
+    if depth_aware && matches!(camera, CameraChoice::ThinLens) {
+        return Err(CliError::input(
+            r.scene,
+            "render.camera \"thinlens\": the camera's optics already defocus by depth \
+             (optics.focus_distance_m or blur kind \"lens\"); render with \"pinhole\"",
+        ));
+    }
+    let (os, margin) = sampling_for(&cam.optics, sensor, grid, set.simulation.oversample);
+    let render_grid = r.bands.unwrap_or(grid);
+    let g = crate::animated::GridRender {
+        camera_name: r.camera_name.clone(),
+        camera,
+        sensor,
+        oversample: os,
+        margin_px: margin,
+        spp: r.spp,
+        max_depth: r.max_depth,
+    };
+    let job = crate::animated::grid_render_job(r.scene, &g, r.seed, render_grid)?;
+    let mut scene = crate::guard::guarded(r.scene, || {
+        crate::animated::render_job_radiance(
+            &job,
+            None,
+            sensor.pixel_pitch_m / os as f64,
+            render_grid,
+        )
+    })?;
+    if r.bands.is_some() {
+        scene.radiance = scene.radiance.to_bands(grid);
+    }
+    scene.sample_aperture = camsim_core::sample_aperture::SampleAperture::Cell;
+    Ok(scene)
 }

@@ -19,6 +19,7 @@ pub mod diagnose_cmd;
 pub mod emva1288_cmd;
 pub mod error;
 pub mod frames;
+pub mod gltf_target;
 pub mod guard;
 pub mod honest_color;
 pub mod lens_cmd;

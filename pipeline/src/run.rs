@@ -252,6 +252,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
             illuminant: None,
             patch_labels: None,
             world: Default::default(),
+            gltf: None,
         },
         (Some(_), _) => return Err(bad(&path, "give either target or render, not both")),
         (None, Value::Null) => return Err(bad(&path, "target: required (or a render section)")),
@@ -605,11 +606,19 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
     let (os, margin) =
         crate::chain::sampling_for(&cam.optics, sensor, &grid, set.simulation.oversample);
     let scene = match &r.render {
-        Some(rf) => {
-            let depth_aware = cam.thin_lens_focus_m.is_some()
-                || matches!(&cam.optics.blur, camsim_optics::Blur::Lens(l) if l.focus.is_some());
-            render_scene(rf, r.seed, sensor, os, margin, &grid, depth_aware)?
-        }
+        Some(rf) => crate::chain::render_gltf_on_grid(
+            set,
+            &crate::chain::GltfOnGrid {
+                scene: &rf.scene,
+                camera_name: rf.camera_name.clone(),
+                camera: rf.camera.as_deref(),
+                spp: rf.spp.unwrap_or(16),
+                max_depth: rf.max_depth.unwrap_or(-1),
+                seed: r.seed,
+                bands: None,
+            },
+            &grid,
+        )?,
         None => shot_scene(set, 0, &grid)?,
     };
     let window = (
@@ -1131,48 +1140,6 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
         json: report,
     };
     Ok((summary, files))
-}
-
-/// Path-trace the glTF scene of a `render` section on the scene sampling grid of the sensor
-/// ((rows + 2·margin)·os × (cols + 2·margin)·os samples of pitch pixel_pitch/os; the glTF
-/// camera's field of view spans the whole grid), bands centred on the run's wavelengths.
-/// With `depth_aware` optics (the camera defocuses by depth) the render is a pinhole one
-/// unless `render.camera` says otherwise, and a thin-lens render camera is refused (it would
-/// defocus twice).
-fn render_scene(
-    rf: &RenderRunFile,
-    seed: u64,
-    sensor: &camsim_sensor::SensorModel,
-    os: usize,
-    margin: usize,
-    grid: &WavelengthGrid,
-    depth_aware: bool,
-) -> Result<camsim_core::SceneRadiance, CliError> {
-    use camsim_render::job::CameraChoice;
-    let camera: CameraChoice = match &rf.camera {
-        None if depth_aware => CameraChoice::Pinhole,
-        None => CameraChoice::Auto,
-        Some(c) => c
-            .parse()
-            .map_err(|e: String| CliError::input(&rf.scene, e))?,
-    };
-    if depth_aware && matches!(camera, CameraChoice::ThinLens) {
-        return Err(CliError::input(
-            &rf.scene,
-            "render.camera \"thinlens\": the camera's optics already defocus by depth (optics.focus_distance_m or blur kind \"lens\"); render with \"pinhole\"",
-        ));
-    }
-    let g = crate::animated::GridRender {
-        camera_name: rf.camera_name.clone(),
-        camera,
-        sensor,
-        oversample: os,
-        margin_px: margin,
-        spp: rf.spp.unwrap_or(16),
-        max_depth: rf.max_depth.unwrap_or(-1),
-    };
-    let job = crate::animated::grid_render_job(&rf.scene, &g, seed, grid)?;
-    crate::animated::render_job_radiance(&job, None, sensor.pixel_pitch_m / os as f64, grid)
 }
 
 fn write_rgb16(path: &Path, data: &[u16], rows: usize, cols: usize) -> Result<(), CliError> {

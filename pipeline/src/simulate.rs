@@ -177,8 +177,10 @@ pub fn shot_memory_bytes(set: &CaptureSet, grid: &WavelengthGrid) -> f64 {
     let planes = set
         .shots
         .iter()
-        .map(|sh| match &sh.target.target {
-            camsim_core::scene::Target::Image { radiance } => radiance.terms(),
+        .map(|sh| match (&sh.target.target, &sh.target.gltf) {
+            (camsim_core::scene::Target::Image { radiance }, _) => radiance.terms(),
+            // the render's bands, its depth plane and the compositing's working planes
+            (_, Some(t)) => t.render_grid(grid).len().max(grid.len()) * 2 + 2,
             _ => 0,
         })
         .max()
@@ -190,6 +192,11 @@ pub fn shot_memory_bytes(set: &CaptureSet, grid: &WavelengthGrid) -> f64 {
 /// Refuse a capture set whose shots need more memory than the budget allows
 /// ([`shot_memory_bytes`], [`crate::budget::check_memory`]).
 pub fn check_budget(set: &CaptureSet) -> Result<(), CliError> {
+    for (i, shot) in set.shots.iter().enumerate() {
+        if let Some(t) = &shot.target.gltf {
+            crate::gltf_target::check_render_work(set, &format!("shots[{i}] ({})", shot.id), t)?;
+        }
+    }
     let grid = wavelength_grid(set);
     let s = &set.camera.sensor;
     let (os, margin) = sampling_for(&set.camera.optics, s, &grid, set.simulation.oversample);
@@ -267,10 +274,23 @@ fn scene_on_grid(
 }
 
 /// The scene radiance of one shot's target, sampled for the camera's optics (with margin).
+/// A `gltf` target is path-traced on that grid ([`crate::gltf_target::render_gltf_target`],
+/// with depth).
 pub fn shot_scene(
     set: &CaptureSet,
     shot_index: usize,
     grid: &WavelengthGrid,
+) -> Result<SceneRadiance, CliError> {
+    shot_scene_cached(set, shot_index, grid, None)
+}
+
+/// [`shot_scene`] with the renders of `gltf` targets kept in `cache` (one render per scene
+/// content and render settings).
+pub fn shot_scene_cached(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+    cache: Option<&crate::gltf_target::RenderCache>,
 ) -> Result<SceneRadiance, CliError> {
     let cam = &set.camera;
     let s = &cam.sensor;
@@ -278,6 +298,18 @@ pub fn shot_scene(
     let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
     let ap = sample_aperture_for(&cam.optics, s, grid, os, set.simulation.sample_aperture);
     let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin).with_aperture(ap);
+    if let Some(t) = &shot.target.gltf {
+        let mut scene = crate::gltf_target::render_gltf_target(set, &shot.id, t, &g, grid, cache)?;
+        if let Some(l) = shot.target.mean_luminance_cd_m2 {
+            scale_to_mean_luminance(
+                &mut scene,
+                l,
+                Some((g.sensor_width_m, g.sensor_height_m)),
+                &SI,
+            );
+        }
+        return Ok(scene);
+    }
     scene_on_grid(set, shot, &g)
 }
 
@@ -287,7 +319,22 @@ pub fn shot_irradiance(
     shot_index: usize,
     grid: &WavelengthGrid,
 ) -> Result<SensorIrradiance, CliError> {
-    let scene = shot_scene(set, shot_index, grid)?;
+    shot_irradiance_cached(set, shot_index, grid, None)
+}
+
+/// [`shot_irradiance`] with a render cache ([`shot_scene_cached`]). A scene with depth (a
+/// `gltf` target) goes through the depth-aware optics stage
+/// ([`crate::chain::irradiance_and_blur_of`]), as in `camsim run`.
+pub fn shot_irradiance_cached(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+    cache: Option<&crate::gltf_target::RenderCache>,
+) -> Result<SensorIrradiance, CliError> {
+    let scene = shot_scene_cached(set, shot_index, grid, cache)?;
+    if scene.depth_m.is_some() {
+        return crate::chain::irradiance_of(set, &scene, grid);
+    }
     let shot = &set.shots[shot_index];
     let extent = target_extent_m(set, shot);
     crate::chain::optical_image(set, &scene, grid, extent)
@@ -319,9 +366,22 @@ pub fn shot_electron_rate(
     shot_index: usize,
     grid: &WavelengthGrid,
 ) -> Result<ElectronRate, CliError> {
+    shot_electron_rate_cached(set, shot_index, grid, None)
+}
+
+/// [`shot_electron_rate`] with a render cache ([`shot_scene_cached`]).
+pub fn shot_electron_rate_cached(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+    cache: Option<&crate::gltf_target::RenderCache>,
+) -> Result<ElectronRate, CliError> {
     let mut rate = match uniform_electron_rate(set, shot_index, grid)? {
         Some(rate) => rate,
-        None => electron_rate(&set.camera.sensor, &shot_irradiance(set, shot_index, grid)?),
+        None => electron_rate(
+            &set.camera.sensor,
+            &shot_irradiance_cached(set, shot_index, grid, cache)?,
+        ),
     };
     crate::chain::apply_pixel_optics(&set.camera, &mut rate);
     Ok(rate)
@@ -556,10 +616,12 @@ pub fn simulate_each(
     };
     let mut fixed: Option<FixedPattern> = None;
     let mut cache: HashMap<&str, ElectronRate> = HashMap::new();
+    // glTF targets: one render per scene content and render settings
+    let renders = crate::gltf_target::RenderCache::new();
     let mut exposures_s = Vec::with_capacity(set.shots.len());
     for (si, shot) in set.shots.iter().enumerate() {
         if !cache.contains_key(shot.target_key.as_str()) {
-            let rate = shot_electron_rate(set, si, &grid)?;
+            let rate = shot_electron_rate_cached(set, si, &grid, Some(&renders))?;
             lap("scene + optics + pixel integration");
             cache.insert(shot.target_key.as_str(), rate);
         }

@@ -26,9 +26,12 @@ pub struct ParsedTarget {
     /// Field of view, distance, illuminant swap and the illuminant's source (the keys every
     /// target accepts; docs/config.md "Scenes from the world").
     pub world: crate::world_targets::SceneWorld,
+    /// A `gltf` target (then `target` is [`Target::Rendered`]): the scene file and its render
+    /// settings ([`crate::gltf_target`]).
+    pub gltf: Option<std::sync::Arc<crate::gltf_target::GltfTarget>>,
 }
 
-const KINDS: &str = "dark, uniform, patches, slanted_edge, image, cube, macbeth, ramp, frequency_sweep, point_array, grid_lines";
+const KINDS: &str = "dark, uniform, patches, slanted_edge, image, cube, gltf, macbeth, ramp, frequency_sweep, point_array, grid_lines";
 
 struct Obj<'a> {
     m: &'a Map<String, Value>,
@@ -165,7 +168,15 @@ pub fn target_from_value(
     let mut patch_labels = None;
     let mut world_illuminant: Option<(Spectrum, String)> = None;
     let mut implied: (Option<f64>, Option<f64>) = (None, None);
+    let mut gltf = None;
     let target = match kind {
+        "gltf" => {
+            o.allow(crate::gltf_target::GLTF_KEYS)?;
+            let t = crate::gltf_target::gltf_target(m, dir)?;
+            let description = format!("the glTF scene {}", t.file.display());
+            gltf = Some(std::sync::Arc::new(t));
+            Target::Rendered { description }
+        }
         "dark" => {
             o.allow(&[])?;
             Target::Dark
@@ -411,6 +422,7 @@ pub fn target_from_value(
         illuminant,
         patch_labels,
         world,
+        gltf,
     })
 }
 

@@ -450,6 +450,7 @@ impl Ctx<'_> {
             illuminant: Some(self.illuminant_photons.clone()),
             patch_labels: None,
             world: Default::default(),
+            gltf: None,
         }
     }
 
@@ -641,6 +642,7 @@ fn mtf50(ctx: &Ctx, o: &Mtf50Opts) -> Result<MtfResult, CliError> {
         illuminant: Some(ill.clone()),
         patch_labels: None,
         world: Default::default(),
+        gltf: None,
     };
     let what = format!("slanted_edge:{angle}:{contrast}");
     let rate = ctx.rate(&what, edge, true)?;
