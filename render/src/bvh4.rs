@@ -594,25 +594,7 @@ impl Builder<'_> {
             prims_under(bvh, i, &mut prims);
             return self.child_over(&prims);
         }
-        // open the largest inner child (> 4 triangles) until there are 4 children
-        let f = bvh.nodes[i].first_index as usize;
-        let mut kids = vec![f, f + 1];
-        while kids.len() < 4 {
-            let open = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, &k)| count[k] > 4 && bvh.nodes[k].prim_count == 0)
-                .max_by(|a, b| {
-                    let area = |k: usize| bvh.nodes[k].aabb.half_area();
-                    area(*a.1).total_cmp(&area(*b.1))
-                })
-                .map(|(j, _)| j);
-            let Some(j) = open else { break };
-            let k = kids.swap_remove(j);
-            let g = bvh.nodes[k].first_index as usize;
-            kids.push(g);
-            kids.push(g + 1);
-        }
+        let kids = open_children(bvh, count, i, 4);
         let idx = self.push_node();
         let children: Vec<ChildBox> = kids.iter().map(|&k| self.collapse(bvh, count, k)).collect();
         self.fill_node(idx, &children)
@@ -669,6 +651,36 @@ impl Builder<'_> {
         let children: Vec<ChildBox> = prims.chunks(per).map(|c| self.child_over(c)).collect();
         self.fill_node(idx, &children)
     }
+}
+
+/// The binary nodes that become the children of a `width`-wide node collapsed from binary
+/// inner node `i`: starting from its two children, open the largest-area inner child with
+/// more than 4 triangles below until there are `width` (or none is left to open).
+pub(crate) fn open_children(
+    bvh: &obvhs::bvh2::Bvh2,
+    count: &[u32],
+    i: usize,
+    width: usize,
+) -> Vec<usize> {
+    let f = bvh.nodes[i].first_index as usize;
+    let mut kids = vec![f, f + 1];
+    while kids.len() < width {
+        let open = kids
+            .iter()
+            .enumerate()
+            .filter(|(_, &k)| count[k] > 4 && bvh.nodes[k].prim_count == 0)
+            .max_by(|a, b| {
+                let area = |k: usize| bvh.nodes[k].aabb.half_area();
+                area(*a.1).total_cmp(&area(*b.1))
+            })
+            .map(|(j, _)| j);
+        let Some(j) = open else { break };
+        let k = kids.swap_remove(j);
+        let g = bvh.nodes[k].first_index as usize;
+        kids.push(g);
+        kids.push(g + 1);
+    }
+    kids
 }
 
 #[cfg(test)]

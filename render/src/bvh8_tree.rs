@@ -297,25 +297,7 @@ impl Builder8<'_> {
             crate::bvh4::prims_under(bvh, i, &mut prims);
             return self.child_over(&prims);
         }
-        // open the largest inner child (> 4 triangles) until there are 8 children
-        let f = bvh.nodes[i].first_index as usize;
-        let mut kids = vec![f, f + 1];
-        while kids.len() < 8 {
-            let open = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, &k)| count[k] > 4 && bvh.nodes[k].prim_count == 0)
-                .max_by(|a, b| {
-                    let area = |k: usize| bvh.nodes[k].aabb.half_area();
-                    area(*a.1).total_cmp(&area(*b.1))
-                })
-                .map(|(j, _)| j);
-            let Some(j) = open else { break };
-            let k = kids.swap_remove(j);
-            let g = bvh.nodes[k].first_index as usize;
-            kids.push(g);
-            kids.push(g + 1);
-        }
+        let kids = crate::bvh4::open_children(bvh, count, i, 8);
         let idx = self.push_node();
         let children: Vec<ChildBox> = kids.iter().map(|&k| self.collapse(bvh, count, k)).collect();
         self.fill_node(idx, &children)

@@ -113,14 +113,7 @@ impl RadianceImage {
     /// Texel index of texture coordinates `uv` (nearest texel; repeat or clamp per axis).
     #[inline]
     pub fn index(&self, uv: Vec2, repeat: [bool; 2]) -> usize {
-        let wrap = |x: f32, n: u32, rep: bool| -> usize {
-            let t = if rep {
-                x - x.floor()
-            } else {
-                x.clamp(0.0, 1.0)
-            };
-            ((t * n as f32) as usize).min(n as usize - 1)
-        };
+        let wrap = crate::scene::texel_coord;
         wrap(uv.y, self.height, repeat[1]) * self.width as usize + wrap(uv.x, self.width, repeat[0])
     }
 }

@@ -55,14 +55,7 @@ impl NormalMap {
     /// The tangent-space normal at texture coordinates `uv`.
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Vec3 {
-        let wrap = |x: f32, n: u32, rep: bool| -> usize {
-            let t = if rep {
-                x - x.floor()
-            } else {
-                x.clamp(0.0, 1.0)
-            };
-            ((t * n as f32) as usize).min(n as usize - 1)
-        };
+        let wrap = crate::scene::texel_coord;
         let i = wrap(uv.x, self.width, self.repeat[0]);
         let j = wrap(uv.y, self.height, self.repeat[1]);
         self.normals[j * self.width as usize + i]

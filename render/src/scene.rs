@@ -104,6 +104,18 @@ pub enum SpectralTexture {
     },
 }
 
+/// Texel column (or row) of texture coordinate `x` on an axis of `n` texels, nearest texel:
+/// repeating (glTF REPEAT; MIRRORED_REPEAT is read as REPEAT) or clamped to the edge.
+#[inline]
+pub(crate) fn texel_coord(x: f32, n: u32, repeat: bool) -> usize {
+    let t = if repeat {
+        x - x.floor()
+    } else {
+        x.clamp(0.0, 1.0)
+    };
+    ((t * n as f32) as usize).min(n as usize - 1)
+}
+
 impl SpectralTexture {
     /// Reflectance at the 4 wavelengths and texture coordinates `uv`.
     #[inline]
@@ -117,14 +129,7 @@ impl SpectralTexture {
                 repeat,
                 ..
             } => {
-                let wrap = |x: f32, n: u32, rep: bool| -> usize {
-                    let t = if rep {
-                        x - x.floor()
-                    } else {
-                        x.clamp(0.0, 1.0)
-                    };
-                    ((t * n as f32) as usize).min(n as usize - 1)
-                };
+                let wrap = texel_coord;
                 let i = wrap(uv.x, *width, repeat[0]);
                 let j = wrap(uv.y, *height, repeat[1]);
                 let c = &coeffs[j * *width as usize + i];
