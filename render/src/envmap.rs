@@ -71,10 +71,11 @@ impl RadianceTexel {
     }
 }
 
-/// Luminance of linear sRGB (Rec. 709 / sRGB primaries, D65 white; IEC 61966-2-1).
+/// Luminance (relative, Y) of linear sRGB: the Y row of the core's sRGB → XYZ matrix
+/// ([`camsim_core::colorimetry::linear_srgb_to_xyz`], IEC 61966-2-1).
 #[inline]
 pub fn rgb_luminance(rgb: [f64; 3]) -> f64 {
-    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
+    camsim_core::colorimetry::linear_srgb_to_xyz(rgb)[1]
 }
 
 /// An RGB image as radiance texels (row 0 = top of the image = texture v = 0).
