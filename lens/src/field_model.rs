@@ -569,10 +569,7 @@ impl FieldModel {
         // Paraxial height is linear in tan θ at every distance.
         let per_tan: Vec<f64> = lenses
             .iter()
-            .map(|l| {
-                l.paraxial_chief_height_mm(1.0, lens.primary_nm)
-                    .map(|h| (h / 1f64.to_radians().tan()).abs())
-            })
+            .map(|l| l.paraxial_image_mm_per_tan(lens.primary_nm))
             .collect::<Result<_, _>>()?;
         let hmax = per_tan[0] * max_deg.to_radians().tan();
         let paraxial_height_mm: Vec<f64> = (0..opts.n_fields)

@@ -228,11 +228,17 @@ impl LensPrescription {
         Ok(*r.y_mm.last().unwrap())
     }
 
+    /// Image-side scale H (mm of paraxial image height per unit tan θ of the object's chief
+    /// ray) at `wavelength_nm`: the paraxial chief-ray height is linear in tan θ, so
+    /// H = |y(1°)| / tan 1° (for an infinite object, H is the EFL).
+    pub fn paraxial_image_mm_per_tan(&self, wavelength_nm: f64) -> Result<f64, LensError> {
+        Ok((self.paraxial_chief_height_mm(1.0, wavelength_nm)? / 1f64.to_radians().tan()).abs())
+    }
+
     /// Full field of view (degrees) whose paraxial image just fills a circle of radius
     /// `image_semi_diagonal_mm` (infinite object: tan θ = h / EFL).
     pub fn paraxial_full_fov_deg(&self, image_semi_diagonal_mm: f64) -> Result<f64, LensError> {
-        let h1 = self.paraxial_chief_height_mm(1.0, self.primary_nm)?; // linear in tan θ
-        let t = image_semi_diagonal_mm / (h1 / 1f64.to_radians().tan());
+        let t = image_semi_diagonal_mm / self.paraxial_image_mm_per_tan(self.primary_nm)?;
         Ok(2.0 * t.abs().atan().to_degrees())
     }
 }

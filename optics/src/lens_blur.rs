@@ -250,11 +250,7 @@ impl LensBlur {
         let mut method = opts.focus_method.clone();
         if method.max_field_deg.is_none() {
             let p = lens.focus_at(focus_mm).map_err(ctx)?;
-            let per_tan = (p
-                .paraxial_chief_height_mm(1.0, lens.primary_nm)
-                .map_err(ctx)?
-                / 1f64.to_radians().tan())
-            .abs();
+            let per_tan = p.paraxial_image_mm_per_tan(lens.primary_nm).map_err(ctx)?;
             method.max_field_deg = Some((1.1 * r / per_tan).atan().to_degrees());
         }
         let focus = lens
@@ -274,11 +270,9 @@ impl LensBlur {
         let fo = focused.first_order(lens.primary_nm).map_err(ctx)?;
         let nw = fo.working_f_number;
         // Paraxial height is linear in tan θ.
-        let per_tan = (focused
-            .paraxial_chief_height_mm(1.0, lens.primary_nm)
-            .map_err(ctx)?
-            / 1f64.to_radians().tan())
-        .abs();
+        let per_tan = focused
+            .paraxial_image_mm_per_tan(lens.primary_nm)
+            .map_err(ctx)?;
         let want = 1.1 * r;
         let mut theta = (want / per_tan).atan().to_degrees();
         // Barrel distortion: the real height falls short of the paraxial one; widen the field.

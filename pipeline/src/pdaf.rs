@@ -87,8 +87,7 @@ pub(crate) fn lens_first_order(
         entrance_pupil_z_mm: fo.entrance_pupil_z_mm,
         entrance_pupil_radius_mm: 0.5 * fo.entrance_pupil_diameter_mm,
         efl_mm: fo.efl_mm,
-        per_tan_mm: (l.paraxial_chief_height_mm(1.0, l.primary_nm)? / 1f64.to_radians().tan())
-            .abs(),
+        per_tan_mm: l.paraxial_image_mm_per_tan(l.primary_nm)?,
     })
 }
 

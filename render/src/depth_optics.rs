@@ -142,8 +142,7 @@ impl LensDepthKernels {
         let r_ep_mm = 0.5 * fo.entrance_pupil_diameter_mm;
         let to_vertex =
             |inv: f64| crate::depth_path::vertex_distance_mm(inv, z_ep_mm, "depth optics");
-        let per_tan_mm =
-            (lens.paraxial_chief_height_mm(1.0, lens.primary_nm)? / 1f64.to_radians().tan()).abs();
+        let per_tan_mm = lens.paraxial_image_mm_per_tan(lens.primary_nm)?;
         let p = opts.sample_pitch_mm;
         let half_diag_mm = 0.5 * p * (opts.width as f64).hypot(opts.height as f64);
         let max_field_deg = (1.05 * half_diag_mm / per_tan_mm)

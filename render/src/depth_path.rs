@@ -379,9 +379,7 @@ impl LensDefocus {
         })?;
         let focused = focus.lens.clone();
         // Image-side scale (mm of paraxial image per unit tan θ) → the largest defocus disc.
-        let per_tan_mm = (focused.paraxial_chief_height_mm(1.0, lens.primary_nm)?
-            / 1f64.to_radians().tan())
-        .abs();
+        let per_tan_mm = focused.paraxial_image_mm_per_tan(lens.primary_nm)?;
         let v_focus = opts.focus_distance_m.map_or(0.0, |d| 1.0 / d);
         let mut invs: Vec<f64> = inv_depths_per_m.iter().map(|v| v.max(0.0)).collect();
         invs.sort_by(|a, b| a.partial_cmp(b).unwrap());
@@ -520,8 +518,7 @@ impl LensDualPixelDefocus {
         let fo = lens.first_order(lens.primary_nm)?;
         let z_ep_mm = fo.entrance_pupil_z_mm;
         let r_ep_mm = 0.5 * fo.entrance_pupil_diameter_mm;
-        let per_tan_mm =
-            (lens.paraxial_chief_height_mm(1.0, lens.primary_nm)? / 1f64.to_radians().tan()).abs();
+        let per_tan_mm = lens.paraxial_image_mm_per_tan(lens.primary_nm)?;
         let v_focus = focus.focus_distance_mm.map_or(0.0, |d| 1e3 / (d + z_ep_mm));
         let mut invs: Vec<f64> = inv_depths_per_m.iter().map(|v| v.max(0.0)).collect();
         invs.sort_by(|a, b| a.total_cmp(b));

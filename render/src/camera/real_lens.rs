@@ -255,9 +255,7 @@ impl RealLensCamera {
         // Focus by the focus model; its merit frequency (half the pixel Nyquist) and field (the
         // film half-diagonal) are estimated on the paraxially focused lens.
         let paraxial = lens.focus_at(object_distance_mm)?;
-        let per_tan_mm = (paraxial.paraxial_chief_height_mm(1.0, lens.primary_nm)?
-            / 1f64.to_radians().tan())
-        .abs();
+        let per_tan_mm = paraxial.paraxial_image_mm_per_tan(lens.primary_nm)?;
         let pitch_est_mm = match opts.film {
             FilmSize::PixelPitchUm(p) => p * 1e-3,
             FilmSize::VerticalFovRad(fov) => {
