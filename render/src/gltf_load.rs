@@ -90,7 +90,36 @@ fn extras_json(e: &gltf::json::Extras) -> Option<Value> {
 /// A glTF whose indices point outside their arrays can make the `gltf` crate's own validation
 /// panic (gltf-json 1.4); that panic is caught (silently) and reported as one error line.
 pub fn load_gltf(path: &Path) -> Result<Scene, RenderError> {
-    guarded(path, || load_gltf_unguarded(path, None).map(|(s, _)| s))
+    guarded(path, || {
+        load_gltf_unguarded(path, None, None).map(|(s, _)| s)
+    })
+}
+
+/// [`load_gltf`] (or [`load_gltf_at_time`] when `time_s` is given) lit by `environment`
+/// instead of the environment named in the scene's extras: the extras' map is then not
+/// read at all, so an override also works when the scene names a missing or invalid file.
+pub fn load_gltf_with_environment(
+    path: &Path,
+    time_s: Option<f64>,
+    environment: &crate::envmap::EnvironmentSpec,
+) -> Result<Scene, RenderError> {
+    if let Some(t) = time_s {
+        finite_time(path, t)?;
+    }
+    guarded(path, || {
+        load_gltf_unguarded(path, time_s, Some(environment)).map(|(s, _)| s)
+    })
+}
+
+fn finite_time(path: &Path, time_s: f64) -> Result<(), RenderError> {
+    if time_s.is_finite() {
+        Ok(())
+    } else {
+        Err(RenderError::Scene {
+            path: path.display().to_string(),
+            msg: format!("animation time {time_s} s: must be finite"),
+        })
+    }
 }
 
 /// The world transform of one node of a loaded scene.
@@ -115,13 +144,8 @@ pub fn load_gltf_nodes_at_time(
     path: &Path,
     time_s: f64,
 ) -> Result<(Scene, Vec<NodeWorld>), RenderError> {
-    if !time_s.is_finite() {
-        return Err(RenderError::Scene {
-            path: path.display().to_string(),
-            msg: format!("animation time {time_s} s: must be finite"),
-        });
-    }
-    guarded(path, || load_gltf_unguarded(path, Some(time_s)))
+    finite_time(path, time_s)?;
+    guarded(path, || load_gltf_unguarded(path, Some(time_s), None))
 }
 
 /// Runs a loader, turning a panic of the `gltf` crate's validation into one error line.
@@ -168,6 +192,7 @@ fn guarded<T>(
 fn load_gltf_unguarded(
     path: &Path,
     time_s: Option<f64>,
+    environment: Option<&crate::envmap::EnvironmentSpec>,
 ) -> Result<(Scene, Vec<NodeWorld>), RenderError> {
     let cx = Ctx { path };
     let bytes = std::fs::read(path).map_err(|e| cx.err(format!("cannot read: {e}")))?;
@@ -341,9 +366,13 @@ fn load_gltf_unguarded(
     }
     let mut built = Scene::build(tris, shading, materials, punctual, cameras);
     built.tangents = tangents;
-    // environment lighting named in the scene's extras (Blender: custom properties of the
-    // scene, exported with "Include → Custom Properties")
-    if let Some(spec) = environment_extras(&cx, &scene, base)? {
+    // environment lighting: the caller's override, else the one named in the scene's extras
+    // (Blender: custom properties of the scene, exported with "Include → Custom Properties")
+    let spec = match environment {
+        Some(e) => Some(e.clone()),
+        None => environment_extras(&cx, &scene, base)?,
+    };
+    if let Some(spec) = spec {
         built.set_environment(Some(crate::envmap::load_environment(&spec)?));
     }
     Ok((built, node_worlds))

@@ -133,14 +133,11 @@ pub fn prepare_at_time(job: &RenderJob, time_s: Option<f64>) -> Result<PreparedJ
             }
         }
     }
-    let scene = match time_s {
-        None => load_gltf(&job.scene)?,
-        Some(t) => crate::gltf_load::load_gltf_at_time(&job.scene, t)?,
+    let scene = match (&job.settings.environment, time_s) {
+        (Some(env), t) => crate::gltf_load::load_gltf_with_environment(&job.scene, t, env)?,
+        (None, None) => load_gltf(&job.scene)?,
+        (None, Some(t)) => crate::gltf_load::load_gltf_at_time(&job.scene, t)?,
     };
-    let mut scene = scene;
-    if let Some(spec) = &job.settings.environment {
-        scene.set_environment(Some(crate::envmap::load_environment(spec)?));
-    }
     let sc = pick_camera(&scene, job.camera_name.as_deref()).map_err(|m| RenderError::Scene {
         path: job.scene.display().to_string(),
         msg: m,

@@ -589,6 +589,49 @@ fn environment_settings_and_errors() {
     assert!((env.eval(dir, &wl)[0] / env1.eval(dir, &wl)[0] - 2.0).abs() < 1e-5);
 }
 
+/// An override (`--environment`) replaces the scene's extras without reading them: a scene
+/// whose extras name a missing map fails to load on its own (one line naming the file) and
+/// loads with an override, lit by the override's map (at its strength), also at a time.
+#[test]
+fn environment_override_does_not_read_the_scenes_map() {
+    let d = tempfile::tempdir().unwrap();
+    let exr = d.path().join("sky.exr");
+    write_env_exr(&exr, 8, 4, |x, y| test_env_rgb(x, y, 8, 4));
+    let mut b = GltfBuilder::new();
+    let m = b.material(json!({"name": "white",
+        "extras": {"spectral_reflectance": flat_spectrum(1.0)}}));
+    let mesh = b.mesh("ball", &sphere([0.0, 0.0, -3.0], 1.0, 6, 12, false), m);
+    b.node(json!({"name": "ball", "mesh": mesh}), true);
+    let c = b.camera("cam", 45f64.to_radians(), Some(1.0), 0.01);
+    b.node(json!({"name": "cam", "camera": c}), true);
+    b.scene_extras(json!({"camsim_environment_exr": "missing.exr"}));
+    let p = d.path().join("scene.gltf");
+    b.write(&p).unwrap();
+    let e = load_gltf(&p)
+        .err()
+        .expect("missing map refused")
+        .to_string();
+    assert!(e.contains("missing.exr") && !e.contains('\n'), "{e}");
+    let spec = EnvironmentSpec {
+        exr: exr.clone(),
+        strength: 3.0,
+        rotation_y_deg: 0.0,
+    };
+    let want = camsim_render::envmap::load_environment(&spec).unwrap();
+    let wl = [550.0f32, 450.0, 650.0, 600.0];
+    let dir = Vec3::new(0.2, 0.5, -0.4).normalize();
+    for t in [None, Some(0.0)] {
+        let scene = camsim_render::gltf_load::load_gltf_with_environment(&p, t, &spec).unwrap();
+        let got = scene.environment.as_ref().expect("override applied");
+        assert_eq!(got.eval(dir, &wl), want.eval(dir, &wl));
+    }
+    let e = camsim_render::gltf_load::load_gltf_with_environment(&p, Some(f64::NAN), &spec)
+        .err()
+        .expect("NaN time refused")
+        .to_string();
+    assert!(e.contains("must be finite"), "{e}");
+}
+
 /// Unbiased environment sampling with the bilinear lookup: the irradiance ∫ L(ω) max(0, n·ω)
 /// dω of a map with black texels next to bright ones, estimated with the environment sampler
 /// (L/pdf), equals a fine midpoint quadrature of the same lookup (z-test).
