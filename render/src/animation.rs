@@ -63,7 +63,7 @@ impl TranslationTrack {
 pub fn translation_tracks(
     path: &Path,
     doc: &gltf::Document,
-    buffers: &[Vec<u8>],
+    buffers: &[gltf::buffer::Data],
 ) -> Result<Vec<TranslationTrack>, RenderError> {
     let err = |msg: String| RenderError::Scene {
         path: path.display().to_string(),
@@ -83,7 +83,7 @@ pub fn translation_tracks(
                 )))
                 }
             };
-            let reader = ch.reader(|b| buffers.get(b.index()).map(|v| v.as_slice()));
+            let reader = ch.reader(|b| buffers.get(b.index()).map(|v| &v[..]));
             let times_s: Vec<f64> = reader
                 .read_inputs()
                 .ok_or_else(|| err(format!("{what}: sampler input cannot be read")))?

@@ -217,7 +217,7 @@ fn load_gltf_unguarded(
         .unwrap_or(Path::new("."));
     // 2. buffers
     let mut blob = gltf.blob.clone();
-    let mut buffers: Vec<Vec<u8>> = Vec::new();
+    let mut buffers: Vec<gltf::buffer::Data> = Vec::new();
     for b in gltf.document.buffers() {
         let what = match b.source() {
             gltf::buffer::Source::Uri(u) if u.starts_with("data:") => {
@@ -237,7 +237,7 @@ fn load_gltf_unguarded(
                 b.length()
             )));
         }
-        buffers.push(data.0);
+        buffers.push(data);
     }
     let doc = &gltf.document;
     // animated node translations at the requested time
@@ -611,7 +611,7 @@ fn convert_light(
 fn check_accessor(
     cx: &Ctx,
     a: &gltf::Accessor,
-    buffers: &[Vec<u8>],
+    buffers: &[gltf::buffer::Data],
     what: &str,
 ) -> Result<(), RenderError> {
     if a.sparse().is_some() {
@@ -649,7 +649,7 @@ fn add_mesh(
     node: &gltf::Node,
     mesh: &gltf::Mesh,
     world: &DMat4,
-    buffers: &[Vec<u8>],
+    buffers: &[gltf::buffer::Data],
     default_material: usize,
     tris: &mut Vec<[Vec3; 3]>,
     shading: &mut Vec<TriShading>,
@@ -1130,7 +1130,7 @@ fn convert_material(
     cx: &Ctx,
     m: &gltf::Material,
     base: &Path,
-    buffers: &[Vec<u8>],
+    buffers: &[gltf::buffer::Data],
     textures: &mut HashMap<usize, (u32, u32, Vec<[f32; 3]>)>,
 ) -> Result<Material, RenderError> {
     let name = m
@@ -1339,7 +1339,7 @@ fn image_texture(
     what: &str,
     info: &gltf::texture::Info,
     base: &Path,
-    buffers: &[Vec<u8>],
+    buffers: &[gltf::buffer::Data],
     cache: &mut HashMap<usize, (u32, u32, Vec<[f32; 3]>)>,
     factor: [f32; 3],
 ) -> Result<SpectralTexture, RenderError> {
@@ -1347,41 +1347,12 @@ fn image_texture(
     let img = tex.source();
     let key = img.index();
     if !cache.contains_key(&key) {
-        let bufs: Vec<gltf::buffer::Data> = buffers
+        let (w, h, px) = raw_image(cx, what, "baseColorTexture", &tex, base, buffers)?;
+        let lin = px
             .iter()
-            .map(|b| gltf::buffer::Data(b.clone()))
+            .map(|p| p.map(|v| srgb_to_linear(v as f64 / 255.0) as f32))
             .collect();
-        let data =
-            gltf::image::Data::from_source(img.source(), Some(base), &bufs).map_err(|e| {
-                cx.err(format!(
-                    "{what}: baseColorTexture image {key}: cannot load: {e}"
-                ))
-            })?;
-        use gltf::image::Format;
-        let ch = match data.format {
-            Format::R8 => 1,
-            Format::R8G8 => 2,
-            Format::R8G8B8 => 3,
-            Format::R8G8B8A8 => 4,
-            f => return Err(cx.err(format!("{what}: baseColorTexture image {key}: pixel format {f:?} not supported (8-bit only)"))),
-        };
-        let px: Vec<[f32; 3]> = data
-            .pixels
-            .chunks_exact(ch)
-            .map(|p| {
-                let g = |k: usize| {
-                    srgb_to_linear(p[k.min(ch - 1).min(if ch == 2 { 0 } else { 2 })] as f64 / 255.0)
-                        as f32
-                };
-                if ch >= 3 {
-                    [g(0), g(1), g(2)]
-                } else {
-                    let v = g(0);
-                    [v, v, v]
-                }
-            })
-            .collect();
-        cache.insert(key, (data.width, data.height, px));
+        cache.insert(key, (w, h, lin));
     }
     let (w, h, px) = &cache[&key];
     let coeffs: Vec<SigmoidPoly> = px
@@ -1398,14 +1369,11 @@ fn image_texture(
         let n = coeffs.len().max(1) as f32;
         coeffs.iter().map(|c| c.eval(560.0)).sum::<f32>() / n
     };
-    use gltf::texture::WrappingMode;
-    let s = tex.sampler();
-    let rep = |m: WrappingMode| !matches!(m, WrappingMode::ClampToEdge);
     Ok(SpectralTexture::Image {
         width: *w,
         height: *h,
         coeffs,
-        repeat: [rep(s.wrap_s()), rep(s.wrap_t())],
+        repeat: wrap_modes(&tex),
         mean,
     })
 }
@@ -1425,15 +1393,11 @@ fn raw_image(
     slot: &str,
     tex: &gltf::Texture,
     base: &Path,
-    buffers: &[Vec<u8>],
+    buffers: &[gltf::buffer::Data],
 ) -> Result<(u32, u32, Vec<[u8; 3]>), RenderError> {
     let img = tex.source();
     let key = img.index();
-    let bufs: Vec<gltf::buffer::Data> = buffers
-        .iter()
-        .map(|b| gltf::buffer::Data(b.clone()))
-        .collect();
-    let data = gltf::image::Data::from_source(img.source(), Some(base), &bufs)
+    let data = gltf::image::Data::from_source(img.source(), Some(base), buffers)
         .map_err(|e| cx.err(format!("{what}: {slot} image {key}: cannot load: {e}")))?;
     use gltf::image::Format;
     let ch = match data.format {
