@@ -134,15 +134,17 @@ pub struct EmissionTexture {
 impl EmissionTexture {
     /// From an image (the largest spectral value is found on a 5 nm grid).
     pub fn new(image: RadianceImage, repeat: [bool; 2]) -> Self {
+        use rayon::prelude::*;
+        // the maximum is exact in any order, so the parallel reduction is deterministic
         let max_value = image
             .texels
-            .iter()
+            .par_iter()
             .map(|t| {
                 (0..=94)
                     .map(|i| t.eval(360.0 + 5.0 * i as f32))
                     .fold(0.0f32, f32::max)
             })
-            .fold(0.0f32, f32::max);
+            .reduce(|| 0.0f32, f32::max);
         EmissionTexture {
             image,
             repeat,
