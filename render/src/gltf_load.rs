@@ -834,7 +834,16 @@ fn add_mesh(
             if normal_mapped {
                 let tv = match &tangent_attr {
                     Some(t) => Some([t[a as usize], t[b as usize], t[c as usize]]),
-                    None => crate::normal_map::triangle_tangent(v, uv, ng).map(|t| [t; 3]),
+                    None => {
+                        // handedness on the side the vertex normals face (the shading frame
+                        // is B = w·(N × T) with the interpolated N)
+                        let side = if (n[0] + n[1] + n[2]).dot(ng) < 0.0 {
+                            -ng
+                        } else {
+                            ng
+                        };
+                        crate::normal_map::triangle_tangent(v, uv, side).map(|t| [t; 3])
+                    }
                 };
                 if let Some(tv) = tv {
                     tangent = tangents.len() as u32;

@@ -63,7 +63,8 @@ impl NormalMap {
 }
 
 /// Per-triangle tangent from positions and texture coordinates (see the module docs); None
-/// when the UV mapping is degenerate.
+/// when the UV mapping is degenerate. `ng` is the triangle's unit normal on the side its
+/// vertex normals face, so that w matches the shading frame B = w·(N × T).
 pub fn triangle_tangent(p: [Vec3; 3], uv: [Vec2; 3], ng: Vec3) -> Option<Vec4> {
     let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
     // v′ = −v: the image's +Y

@@ -274,11 +274,12 @@ fn normal_mapped_plane(
     texel: Option<[u8; 3]>,
     from: Vec3,
 ) -> std::path::PathBuf {
-    normal_mapped_plane_with(dir, name, texel, from, None, false)
+    normal_mapped_plane_with(dir, name, texel, from, None, false, false)
 }
 
-/// [`normal_mapped_plane`] with a `TANGENT` attribute (the same for all 4 vertices) and,
-/// optionally, the ground node mirrored in x (scale (−1, 1, 1)).
+/// [`normal_mapped_plane`] with a `TANGENT` attribute (the same for all 4 vertices),
+/// optionally the ground node mirrored in x (scale (−1, 1, 1)) and optionally the triangles
+/// wound clockwise seen from above (geometric normal −y) with the vertex normals still +y.
 fn normal_mapped_plane_with(
     dir: &Path,
     name: &str,
@@ -286,6 +287,7 @@ fn normal_mapped_plane_with(
     from: Vec3,
     tangent: Option<[f32; 4]>,
     mirror_x: bool,
+    flip_winding: bool,
 ) -> std::path::PathBuf {
     let mut b = GltfBuilder::new();
     let mut mat = json!({"name": "ground", "doubleSided": false,
@@ -297,7 +299,10 @@ fn normal_mapped_plane_with(
     }
     let m = b.material(mat);
     let h = 1.0f32;
-    let q = quad([[-h, 0.0, h], [h, 0.0, h], [h, 0.0, -h], [-h, 0.0, -h]]);
+    let mut q = quad([[-h, 0.0, h], [h, 0.0, h], [h, 0.0, -h], [-h, 0.0, -h]]);
+    if flip_winding {
+        q.indices = vec![0, 2, 1, 0, 3, 2];
+    }
     let mesh = match tangent {
         Some(t) => b.mesh_with_tangents("ground", &q, &[t; 4], m),
         None => b.mesh("ground", &q, m),
@@ -741,6 +746,7 @@ fn tangent_attribute_and_mirroring_follow_the_cosine_law() {
                 from,
                 Some(tan),
                 mirror,
+                false,
             );
             let (_, out) = render_file(&p, 8, &settings(2, "400:700:300", 2));
             let want = RHO * E_IRR * n_prime.dot(from).max(0.0) as f64 / std::f64::consts::PI;
@@ -748,6 +754,41 @@ fn tangent_attribute_and_mirroring_follow_the_cosine_law() {
                 assert!(
                     (*v as f64 - want).abs() < 1e-4,
                     "case {k} β {beta_deg}°: {v} vs {want}"
+                );
+            }
+        }
+    }
+}
+
+/// Generated tangents take their handedness from the side the vertex normals face, as the
+/// shading frame B = w·(N × T) does: a plane wound clockwise (geometric normal −y) with vertex
+/// normals +y and a map tilting towards +B (B = ∂p/∂v′ = +z on this plane, v′ = −v) tilts n′
+/// towards +z exactly as the counter-clockwise plane does (ρE·max(0, n′·l)/π, exact). With the
+/// handedness taken from the geometric normal, the clockwise plane tilted towards −z.
+#[test]
+fn generated_tangents_follow_the_vertex_normals_side() {
+    let d = tempfile::tempdir().unwrap();
+    let s2 = std::f32::consts::FRAC_1_SQRT_2;
+    let n_prime = Vec3::new(0.0, s2, s2);
+    for flip in [false, true] {
+        for beta_deg in [0.0f32, 30.0, 60.0, -30.0] {
+            let b = beta_deg.to_radians();
+            let from = Vec3::Y * b.cos() + Vec3::Z * b.sin();
+            let p = normal_mapped_plane_with(
+                d.path(),
+                &format!("w{flip}_{beta_deg}"),
+                Some([128u8, 218, 218]),
+                from,
+                None,
+                false,
+                flip,
+            );
+            let (_, out) = render_file(&p, 8, &settings(2, "400:700:300", 2));
+            let want = RHO * E_IRR * n_prime.dot(from).max(0.0) as f64 / std::f64::consts::PI;
+            for v in &out.band_planes[0] {
+                assert!(
+                    (*v as f64 - want).abs() < 1e-4,
+                    "clockwise {flip} β {beta_deg}°: {v} vs {want}"
                 );
             }
         }
