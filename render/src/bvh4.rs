@@ -759,10 +759,11 @@ mod tests {
         (*s >> 40) as f32 / (1u64 << 24) as f32
     }
 
-    /// A degenerate-depth tree (triangles at x = 1.12^k: the binary BVH is a chain,
-    /// too deep for the fixed traversal stacks) is traversed with a heap stack sized from its
-    /// depth (the 8-wide tree, too deep as well, is not used) and still agrees with brute
-    /// force: rays shot across each triangle hit it, rays beside all of them miss.
+    /// A degenerate-depth tree (triangles at x = 1.12^k: the binary BVH is close to a chain,
+    /// too deep for the 4-wide tree's fixed traversal stack) is traversed with a heap stack
+    /// sized from its depth and finds the right hits: a ray shot down onto a triangle hits it
+    /// at the right distance, a ray beside all of them misses (the 8-wide tree, when the CPU
+    /// has AVX2, fits its stack here and is checked the same way).
     #[test]
     fn deep_tree_uses_a_heap_stack() {
         let n = 700;
@@ -780,16 +781,16 @@ mod tests {
             .collect();
         for simd8 in [false, true] {
             let bvh = Bvh4::build_with(&tris, simd8);
-            assert!(
-                !bvh.uses_simd8(),
-                "the 8-wide tree must not take a chain this deep"
-            );
-            assert!(
-                bvh.stack_len > STACK,
-                "depth {}: the test does not reach the heap stack",
-                (bvh.stack_len - 1) / 3
-            );
-            for &k in &[0usize, 1, 350, 698, 699] {
+            if !bvh.uses_simd8() {
+                assert!(
+                    bvh.stack_len > STACK,
+                    "depth {}: the test does not reach the heap stack",
+                    (bvh.stack_len - 1) / 3
+                );
+            }
+            // (beyond x ≈ 10¹⁴ the Möller–Trumbore products, ∝ size³, overflow f32, in the
+            // tree as in the scalar test, so no ray aims there)
+            for &k in &[0usize, 1, 100, 200, 250] {
                 let t = tris[k];
                 let c = (t[0] + t[1] + t[2]) / 3.0;
                 // straight down onto the centroid from 0.05 x above it
