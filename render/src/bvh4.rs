@@ -23,7 +23,9 @@ pub(crate) const LEAF: u32 = 1 << 31;
 pub(crate) const EMPTY: u32 = u32::MAX;
 /// Barycentric tolerance (closes cracks along shared edges; as `TriGeom::intersect`).
 const BARY_EPS: f32 = 1e-6;
-/// Traversal stack depth (each level pushes ≤ 3 entries; trees are far shallower than 80).
+/// Traversal stack entries kept on the call stack: enough for trees up to 85 levels deep
+/// (each level stacks ≤ 3 children); a deeper tree (a pathological obvhs build) traverses with
+/// a heap stack sized from its depth ([`Bvh4::stack_len`]).
 const STACK: usize = 256;
 /// Up to this many triangles there is no tree: full packs of 4 in BVH order, their boxes in
 /// groups of 4, and every ray tests every group's boxes, then the packs it hits (at ≤ 16
@@ -76,6 +78,8 @@ pub struct Bvh4 {
     root: u32,
     /// Few triangles: test every pack, no node visits (cheaper than any tree walk).
     flat: bool,
+    /// Traversal stack entries the tree can need: 3 per level of the deepest path, plus one.
+    stack_len: usize,
     /// Input index of each triangle in BVH order.
     pub order: Vec<u32>,
     /// Few triangles on a CPU with AVX2 + FMA: the 8-wide packs that replace `nodes`/`packs`
@@ -245,8 +249,10 @@ impl Bvh4 {
             subtree_count(&bvh2, 0, &mut count);
             #[cfg(target_arch = "x86_64")]
             if simd8 && triangles.len() > FLAT_MAX_TRIS && crate::bvh8_tree::Bvh8::supported() {
-                let w = crate::bvh8_tree::Bvh8::build(triangles, &bvh2, &count);
-                wide8 = w.fits_stack().then(|| Box::new(w));
+                let (w, order) = crate::bvh8_tree::Bvh8::build(triangles, &bvh2, &count);
+                if w.fits_stack() {
+                    wide8 = Some((Box::new(w), order));
+                }
             }
             #[cfg(target_arch = "x86_64")]
             if wide8.is_some() {
@@ -257,11 +263,17 @@ impl Bvh4 {
             #[cfg(not(target_arch = "x86_64"))]
             b.collapse(&bvh2, &count, 0).0
         };
+        let stack_len = if b.nodes.is_empty() {
+            1
+        } else {
+            3 * tree_depth(&b.nodes, root) + 1
+        };
         let mut bvh = Bvh4 {
             nodes: b.nodes,
             packs: b.tb.packs,
             root,
             flat: false,
+            stack_len,
             order: b.tb.order,
             #[cfg(target_arch = "x86_64")]
             flat8: None,
@@ -269,8 +281,8 @@ impl Bvh4 {
             wide8: None,
         };
         #[cfg(target_arch = "x86_64")]
-        if let Some(w) = wide8 {
-            bvh.order = w.order.clone();
+        if let Some((w, order)) = wide8 {
+            bvh.order = order;
             bvh.wide8 = Some(w);
         }
         if triangles.len() <= FLAT_MAX_TRIS {
@@ -367,7 +379,30 @@ impl Bvh4 {
             }
             return (best.prim != EMPTY).then_some(best);
         }
-        let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
+        if self.stack_len <= STACK {
+            let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
+            self.intersect_tree(&r, tmax, &mut stack)
+        } else {
+            let mut stack = vec![MaybeUninit::<(u32, f32)>::uninit(); self.stack_len];
+            self.intersect_tree(&r, tmax, &mut stack)
+        }
+    }
+
+    /// The tree walk of [`Bvh4::intersect`] with a stack of at least `stack_len` entries.
+    #[inline(always)]
+    fn intersect_tree(
+        &self,
+        r: &PreparedRay,
+        tmax: f32,
+        stack: &mut [MaybeUninit<(u32, f32)>],
+    ) -> Option<Bvh4Hit> {
+        debug_assert!(stack.len() >= self.stack_len);
+        let mut tmax = tmax;
+        let mut best = Bvh4Hit {
+            t: f32::INFINITY,
+            prim: EMPTY,
+            bary: Vec2::ZERO,
+        };
         let mut sp = 0usize;
         let mut cur = self.root;
         loop {
@@ -467,7 +502,19 @@ impl Bvh4 {
             }
             return true;
         }
-        let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
+        if self.stack_len <= STACK {
+            let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
+            self.unoccluded_tree(&r, tmax, &mut stack)
+        } else {
+            let mut stack = vec![MaybeUninit::<u32>::uninit(); self.stack_len];
+            self.unoccluded_tree(&r, tmax, &mut stack)
+        }
+    }
+
+    /// The tree walk of [`Bvh4::unoccluded`] with a stack of at least `stack_len` entries.
+    #[inline(always)]
+    fn unoccluded_tree(&self, r: &PreparedRay, tmax: f32, stack: &mut [MaybeUninit<u32>]) -> bool {
+        debug_assert!(stack.len() >= self.stack_len);
         let mut sp = 0usize;
         let mut cur = self.root;
         loop {
@@ -498,6 +545,22 @@ impl Bvh4 {
             cur = unsafe { stack[sp].assume_init() };
         }
     }
+}
+
+/// Inner nodes on the deepest root-to-leaf path of a 4-wide tree.
+fn tree_depth(nodes: &[Node4], root: u32) -> usize {
+    let mut deepest = 0;
+    let mut todo = vec![(root, 0usize)];
+    while let Some((c, depth)) = todo.pop() {
+        if c & LEAF != 0 || c == EMPTY {
+            deepest = deepest.max(depth);
+            continue;
+        }
+        for &ch in &nodes[c as usize].child {
+            todo.push((ch, depth + 1));
+        }
+    }
+    deepest
 }
 
 /// Number of primitives under each node of the binary BVH.
@@ -694,6 +757,55 @@ mod tests {
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
         (*s >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// A degenerate-depth tree (triangles at x = 1.12^k: the binary BVH is close to a chain,
+    /// too deep for the 4-wide tree's fixed traversal stack) is traversed with a heap stack
+    /// sized from its depth and finds the right hits: a ray shot down onto a triangle hits it
+    /// at the right distance, a ray beside all of them misses (the 8-wide tree, when the CPU
+    /// has AVX2, fits its stack here and is checked the same way).
+    #[test]
+    fn deep_tree_uses_a_heap_stack() {
+        let n = 700;
+        let tris: Vec<[Vec3; 3]> = (0..n)
+            .map(|k| {
+                // in the plane z = 0, spanning x ± 0.04 x: no two overlap in x
+                let x = 1.12f32.powi(k);
+                let s = 0.04 * x;
+                [
+                    Vec3::new(x - s, -s, 0.0),
+                    Vec3::new(x + s, -s, 0.0),
+                    Vec3::new(x, s, 0.0),
+                ]
+            })
+            .collect();
+        for simd8 in [false, true] {
+            let bvh = Bvh4::build_with(&tris, simd8);
+            if !bvh.uses_simd8() {
+                assert!(
+                    bvh.stack_len > STACK,
+                    "depth {}: the test does not reach the heap stack",
+                    (bvh.stack_len - 1) / 3
+                );
+            }
+            // (beyond x ≈ 10¹⁴ the Möller–Trumbore products, ∝ size³, overflow f32, in the
+            // tree as in the scalar test, so no ray aims there)
+            for &k in &[0usize, 1, 100, 200, 250] {
+                let t = tris[k];
+                let c = (t[0] + t[1] + t[2]) / 3.0;
+                // straight down onto the centroid from 0.05 x above it
+                let o = Vec3::new(c.x, c.y, 0.05 * c.x);
+                let d = Vec3::new(0.0, 0.0, -1.0);
+                let h = bvh.intersect(o, d, 0.0, f32::INFINITY).expect("a hit");
+                assert_eq!(bvh.order[h.prim as usize] as usize, k, "triangle {k}");
+                assert!((h.t - 0.05 * c.x).abs() <= 1e-5 * c.x);
+                assert!(!bvh.unoccluded(o, d, 0.0, f32::INFINITY));
+                // beside the triangle (outside its span in y): nothing in the way
+                let o2 = Vec3::new(c.x, 0.5 * c.x, 0.05 * c.x);
+                assert!(bvh.intersect(o2, d, 0.0, f32::INFINITY).is_none());
+                assert!(bvh.unoccluded(o2, d, 0.0, f32::INFINITY));
+            }
+        }
     }
 
     /// The BVH (flat packs up to 64 triangles — 4-wide portable and 8-wide AVX2 when the CPU

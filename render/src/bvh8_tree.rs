@@ -40,14 +40,13 @@ struct Node8 {
     valid: u32,
 }
 
-/// An 8-wide BVH over triangles; triangle i of the BVH order is `order[i]` of the input.
+/// An 8-wide BVH over triangles in BVH order (the order is returned by [`Bvh8::build`] and
+/// kept once, in [`crate::bvh4::Bvh4::order`]).
 #[derive(Debug, Clone)]
 pub struct Bvh8 {
     nodes: Vec<Node8>,
     packs: Vec<Pack4>,
     root: u32,
-    /// Input index of each triangle in BVH order.
-    pub order: Vec<u32>,
 }
 
 /// A ray splatted over 8 lanes for the box test.
@@ -63,8 +62,13 @@ impl Bvh8 {
         is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
     }
 
-    /// Build from obvhs's binary BVH over `tris` (`count`: triangles under each binary node).
-    pub(crate) fn build(tris: &[[Vec3; 3]], bvh2: &obvhs::bvh2::Bvh2, count: &[u32]) -> Bvh8 {
+    /// Build from obvhs's binary BVH over `tris` (`count`: triangles under each binary node);
+    /// also returns the BVH order (input index of each triangle in BVH order).
+    pub(crate) fn build(
+        tris: &[[Vec3; 3]],
+        bvh2: &obvhs::bvh2::Bvh2,
+        count: &[u32],
+    ) -> (Bvh8, Vec<u32>) {
         let mut b = Builder8 {
             tb: TriBuilder {
                 tris,
@@ -74,12 +78,14 @@ impl Bvh8 {
             nodes: Vec::new(),
         };
         let root = b.collapse(bvh2, count, 0).0;
-        Bvh8 {
-            nodes: b.nodes,
-            packs: b.tb.packs,
-            root,
-            order: b.tb.order,
-        }
+        (
+            Bvh8 {
+                nodes: b.nodes,
+                packs: b.tb.packs,
+                root,
+            },
+            b.tb.order,
+        )
     }
 
     /// True when every root-to-leaf path fits the fixed traversal stack (each level stacks at
