@@ -1355,40 +1355,11 @@ fn fit_falloff(ctx: &Ctx, state: &ModelState) -> Result<FitOutcome, String> {
         s.rates.falloff = Some(c);
     };
     let mut best: Option<(f64, Vec<f64>, f64, ModelState, usize)> = None;
-    // The previous order's optimum, with the new coefficient 0 (same rates, same −lnL).
-    let mut prev: Option<(Vec<f64>, f64)> = None;
     for order in 1..=FALLOFF_MAX_ORDER {
-        let from_cur: Vec<f64> = (0..order)
+        let th0: Vec<f64> = (0..order)
             .map(|k| cur.get(k).copied().unwrap_or(0.0))
             .collect();
-        // Warm start (issue 23): order K starts from order K−1's optimum (its coefficients
-        // and a zero K-th), which is at least as good as the zero start (Gauss–Newton keeps
-        // only improving steps); from the state's own coefficients instead when those are
-        // set and fit better. Either start converges to the same tolerance (a step gaining
-        // < 10⁻³ in lnL ends the fit), in fewer steps from the nearer one.
-        let th0 = match &prev {
-            None => from_cur,
-            Some((p, _)) if from_cur.iter().all(|&x| x == 0.0) => {
-                let mut t = p.clone();
-                t.push(0.0);
-                t
-            }
-            Some((p, fp)) => {
-                let mut t = p.clone();
-                t.push(0.0);
-                let mut s_cur = state.clone();
-                set(&mut s_cur, &from_cur);
-                let f_cur =
-                    neg_ll_base(ctx, &s_cur, &combine(ctx, &b0, &basis[..order], &from_cur));
-                if f_cur < *fp {
-                    from_cur
-                } else {
-                    t
-                }
-            }
-        };
         let (th, f, st) = gauss_newton(ctx, state, &b0, &basis[..order], &th0, None, &set);
-        prev = Some((th.clone(), f));
         let crit = 2.0 * f + order as f64 * n_obs.ln();
         if best.as_ref().is_none_or(|b| crit < b.0) {
             best = Some((crit, th, f, st, order));
