@@ -9,7 +9,7 @@
 use super::effects::Effect;
 use super::like::{Ctx, Rates, RowSel};
 use super::model::{ModelState, RateSpec};
-use super::num::{median, minimize_1d, minimize_1d_coarse_fine, minimize_1d_local};
+use super::num::{median, minimize_1d, minimize_1d_local};
 use camsim_sensor::{ColumnFpn, Crosstalk, HotPixels, Nonlinearity};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -880,18 +880,20 @@ pub(crate) fn fit_effect_warm(
                 let mut v = adc_value.lock().expect("adc value");
                 *v.get_or_insert_with(|| eval_base(st))
             };
-            // A hard well makes the likelihood sharply peaked (pixels switch between
-            // clipped, with no temporal noise, and not): ~2 % steps (121 grid points)
-            // resolve the valley. Searched coarse-then-fine (every third grid point, then the
-            // full grid around the lowest coarse valleys): the 121-point grid's result, bit
-            // for bit, when the likelihood has one valley on the grid, in ≈ 55 instead of 121
-            // evaluations (issue 23).
-            let (st, f) = fit_1d_by(
+            let (st, f) = fit_1d(
                 &eval_well,
                 state,
                 f0,
                 &|st, x| st.sensor.well_capacity_e = x.exp(),
-                &|f| minimize_1d_coarse_fine(f, w0 - 1.6, w0 + 1.1, 121, 3, 1e-5),
+                w0 - 1.6,
+                w0 + 1.1,
+                // A hard well makes the likelihood sharply peaked (pixels switch between
+                // clipped, with no temporal noise, and not): ~2 % steps resolve the valley.
+                // (A coarse-then-fine search of this grid, every third point first, missed
+                // the valley on both full-well sets of the effect matrix: it is narrower
+                // than three grid steps. Issue 23, branch diagsel.)
+                121,
+                1e-5,
             );
             out(st, f, 1)
         }

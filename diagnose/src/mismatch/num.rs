@@ -281,79 +281,6 @@ pub fn minimize_1d(
     }
 }
 
-/// [`minimize_1d`]'s result with fewer evaluations of `f`: of its `grid` evenly spaced
-/// points, first every `stride`-th (and the last), then every point between the coarse
-/// neighbours of the [`REFINED_MINIMA`] lowest coarse local minima; Brent's method then runs
-/// from the best point evaluated, in the bracket of its grid neighbours, as in
-/// [`minimize_1d`]. When `f` is unimodal on the grid (decreasing, then increasing) the
-/// lowest grid point lies between the coarse neighbours of the lowest coarse point, so the
-/// grid point, the bracket, Brent's steps and the result are those of [`minimize_1d`], bit
-/// for bit (ties: the first grid point, as there); with several valleys, each of the
-/// [`REFINED_MINIMA`] lowest coarse ones is searched at full grid resolution. Costs about
-/// `grid/stride + 2·REFINED_MINIMA·(stride − 1)` evaluations instead of `grid`.
-pub fn minimize_1d_coarse_fine(
-    mut f: impl FnMut(f64) -> f64,
-    lo: f64,
-    hi: f64,
-    grid: usize,
-    stride: usize,
-    xtol: f64,
-) -> (f64, f64) {
-    let grid = grid.max(3);
-    let stride = stride.max(1);
-    let x_at = |i: usize| lo + (hi - lo) * i as f64 / (grid - 1) as f64;
-    let mut fs: Vec<Option<f64>> = vec![None; grid];
-    let eval = |i: usize, fs: &mut Vec<Option<f64>>, f: &mut dyn FnMut(f64) -> f64| {
-        if fs[i].is_none() {
-            let v = f(x_at(i));
-            fs[i] = Some(if v.is_finite() { v } else { f64::INFINITY });
-        }
-    };
-    let mut coarse: Vec<usize> = (0..grid).step_by(stride).collect();
-    if coarse.last() != Some(&(grid - 1)) {
-        coarse.push(grid - 1);
-    }
-    for &i in &coarse {
-        eval(i, &mut fs, &mut f);
-    }
-    let cv = |k: usize, fs: &Vec<Option<f64>>| fs[coarse[k]].expect("evaluated");
-    // coarse local minima (≤ both coarse neighbours), lowest first (first index on ties)
-    let mut minima: Vec<usize> = (0..coarse.len())
-        .filter(|&k| {
-            (k == 0 || cv(k, &fs) <= cv(k - 1, &fs))
-                && (k + 1 == coarse.len() || cv(k, &fs) <= cv(k + 1, &fs))
-        })
-        .collect();
-    minima.sort_by(|&a, &b| cv(a, &fs).total_cmp(&cv(b, &fs)).then(a.cmp(&b)));
-    minima.truncate(REFINED_MINIMA);
-    for &k in &minima {
-        let a = if k == 0 { coarse[0] } else { coarse[k - 1] };
-        let b = coarse[(k + 1).min(coarse.len() - 1)];
-        for i in a..=b {
-            eval(i, &mut fs, &mut f);
-        }
-    }
-    // the best point evaluated, the first on ties (minimize_1d's strict `<` in grid order)
-    let mut best = (0usize, f64::INFINITY);
-    for (i, v) in fs.iter().enumerate() {
-        if let Some(v) = *v {
-            if v < best.1 {
-                best = (i, v);
-            }
-        }
-    }
-    let i = best.0;
-    let (bx, bf) = (x_at(i), best.1);
-    let a = x_at(i.saturating_sub(1));
-    let b = x_at((i + 1).min(grid - 1));
-    let (x, fx) = brent(&mut f, a, b, bx, bf, xtol);
-    if fx <= bf {
-        (x, fx)
-    } else {
-        (bx, bf)
-    }
-}
-
 /// Minimum of `f` on [lo, hi] from a start `x0` near it (a warm start): steps of the grid
 /// spacing h = (hi − lo)/(grid − 1) from `x0` downhill, each twice the last, until `f` rises
 /// or a bound is reached, then Brent's method in the bracket of the best point's neighbours
@@ -414,9 +341,6 @@ pub fn minimize_1d_local(
         (bx, bf)
     }
 }
-
-/// Coarse local minima [`minimize_1d_coarse_fine`] searches at full grid resolution.
-pub const REFINED_MINIMA: usize = 3;
 
 /// Brent's minimisation on [a, b] from the point `x` with value `fx`.
 fn brent(
@@ -689,89 +613,6 @@ mod tests {
         let f = |x: f64| (x * x - 4.0).powi(2) + x;
         let (x, _) = minimize_1d(f, -3.0, 3.0, 13, 1e-9);
         assert!(x < 0.0, "{x}");
-    }
-
-    /// The coarse-then-fine search returns minimize_1d's (x, f(x)) bit for bit on the
-    /// full-well fit's grid (121 points, stride 3) for unimodal functions — a smooth valley, a
-    /// V narrower than one coarse step, a V with pixel-switching roughness on its walls, a
-    /// plateau (the wells the ADC clips first) beside a valley, a minimum at either end, ties,
-    /// non-finite values — and for two and three separate valleys (each refined), with
-    /// under half the evaluations.
-    #[test]
-    fn coarse_fine_search_matches_the_full_grid() {
-        let (lo, hi, grid) = (8.0f64.ln() - 1.6, 8.0f64.ln() + 1.1, 121);
-        let cases: Vec<(&str, Box<dyn Fn(f64) -> f64>)> = vec![
-            (
-                "parabola",
-                Box::new(|x: f64| 3e4 * (x - 1.93).powi(2) + 1e6),
-            ),
-            ("narrow V", Box::new(|x: f64| 1e6 + 5e5 * (x - 2.117).abs())),
-            (
-                "rough V",
-                Box::new(|x: f64| 1e6 + 4e5 * (x - 2.4).abs() + 300.0 * (x * 917.0).sin().abs()),
-            ),
-            (
-                "plateau and valley",
-                Box::new(|x: f64| {
-                    if x > 2.5 {
-                        2e6
-                    } else {
-                        1e6 + 8e5 * (x - 2.31).abs()
-                    }
-                }),
-            ),
-            ("at lo", Box::new(|x: f64| x * 10.0)),
-            ("at hi", Box::new(|x: f64| -x * 10.0)),
-            ("flat (ties)", Box::new(|_x: f64| 5.0)),
-            (
-                "infinite left",
-                Box::new(|x: f64| if x < 1.5 { f64::NAN } else { (x - 1.8).powi(2) }),
-            ),
-            ("all infinite", Box::new(|_x: f64| f64::INFINITY)),
-            (
-                "two valleys",
-                Box::new(|x: f64| ((x - 1.2).abs() * 50.0).min((x - 2.9).abs() * 40.0 - 0.7)),
-            ),
-            (
-                "three valleys",
-                Box::new(|x: f64| {
-                    ((x - 0.9).abs() * 90.0)
-                        .min((x - 1.95).abs() * 70.0 - 0.2)
-                        .min((x - 2.95).abs() * 120.0 - 0.4)
-                }),
-            ),
-        ];
-        for (name, f) in &cases {
-            let mut n_full = 0;
-            let full = minimize_1d(
-                |x| {
-                    n_full += 1;
-                    f(x)
-                },
-                lo,
-                hi,
-                grid,
-                1e-5,
-            );
-            let mut n_cf = 0;
-            let cf = minimize_1d_coarse_fine(
-                |x| {
-                    n_cf += 1;
-                    f(x)
-                },
-                lo,
-                hi,
-                grid,
-                3,
-                1e-5,
-            );
-            assert_eq!(
-                (full.0.to_bits(), full.1.to_bits()),
-                (cf.0.to_bits(), cf.1.to_bits()),
-                "{name}: grid {full:?} vs coarse-fine {cf:?}"
-            );
-            assert!(2 * n_cf < n_full, "{name}: {n_cf} vs {n_full} evaluations");
-        }
     }
 
     /// The warm-start search from any start in a unimodal function's valley (at the
