@@ -9,7 +9,7 @@
 use super::effects::Effect;
 use super::like::{Ctx, Rates, RowSel};
 use super::model::{ModelState, RateSpec};
-use super::num::{median, minimize_1d};
+use super::num::{median, minimize_1d, minimize_1d_local};
 use camsim_sensor::{ColumnFpn, Crosstalk, HotPixels, Nonlinearity};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -250,12 +250,25 @@ fn fit_1d(
     grid: usize,
     xtol: f64,
 ) -> (ModelState, f64) {
+    fit_1d_by(eval, state, current_neg_ll, set, &|f| {
+        minimize_1d(f, lo, hi, grid, xtol)
+    })
+}
+
+/// [`fit_1d`] with the 1-D minimiser `search` (given the objective of x, returns (x, f(x))).
+fn fit_1d_by(
+    eval: &dyn Fn(&ModelState) -> f64,
+    state: &ModelState,
+    current_neg_ll: f64,
+    set: &dyn Fn(&mut ModelState, f64),
+    search: &dyn Fn(&dyn Fn(f64) -> f64) -> (f64, f64),
+) -> (ModelState, f64) {
     let f = |x: f64| {
         let mut st = state.clone();
         set(&mut st, x);
         eval(&st)
     };
-    let (x, fx) = minimize_1d(f, lo, hi, grid, xtol);
+    let (x, fx) = search(&f);
     if fx < current_neg_ll {
         let mut st = state.clone();
         set(&mut st, x);
@@ -622,6 +635,55 @@ pub(crate) fn fit_effect(
     effect: Effect,
     state: &ModelState,
 ) -> Result<FitOutcome, String> {
+    fit_effect_warm(ctx, evidence, effect, state, &Warm::default())
+}
+
+/// A warm start of a candidate's 1-D fit (issue 23): the search variable's optimum of the
+/// same candidate in the previous selection round (`prev`), and where this fit's search
+/// ended (`found`, for the next round).
+#[derive(Debug, Default)]
+pub(crate) struct Warm {
+    /// The previous round's optimum of the search variable (None: a cold start, the grid).
+    pub prev: Option<f64>,
+    /// The optimum of this fit's search (set by the 1-D fits).
+    pub found: std::cell::Cell<Option<f64>>,
+}
+
+/// [`fit_1d`] from a warm start: with `warm.prev` inside [lo, hi], a local search from it
+/// ([`minimize_1d_local`]: a downhill walk in steps of the grid spacing, doubling, then
+/// Brent's method in the bracket, to the same tolerance) instead of the grid scan; the grid
+/// scan otherwise. Records the search's optimum in `warm.found`.
+#[allow(clippy::too_many_arguments)]
+fn fit_1d_w(
+    warm: &Warm,
+    eval: &dyn Fn(&ModelState) -> f64,
+    state: &ModelState,
+    current_neg_ll: f64,
+    set: &dyn Fn(&mut ModelState, f64),
+    lo: f64,
+    hi: f64,
+    grid: usize,
+    xtol: f64,
+) -> (ModelState, f64) {
+    fit_1d_by(eval, state, current_neg_ll, set, &|f| {
+        let r = match warm.prev {
+            Some(x0) if x0 >= lo && x0 <= hi => minimize_1d_local(f, lo, hi, grid, xtol, x0),
+            _ => minimize_1d(f, lo, hi, grid, xtol),
+        };
+        warm.found.set(Some(r.0));
+        r
+    })
+}
+
+/// [`fit_effect`] with a warm start for the candidates fitted by one 1-D search
+/// ([`fit_1d_w`]); the others ignore `warm`.
+pub(crate) fn fit_effect_warm(
+    ctx: &Ctx,
+    evidence: &Evidence,
+    effect: Effect,
+    state: &ModelState,
+    warm: &Warm,
+) -> Result<FitOutcome, String> {
     if let Some(why) = evidence.missing(effect) {
         return Ok(FitOutcome::NotTestable(why));
     }
@@ -649,7 +711,8 @@ pub(crate) fn fit_effect(
     match effect {
         Effect::ExposureScale => {
             let x0 = state.exposure_factor.ln();
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -663,7 +726,8 @@ pub(crate) fn fit_effect(
         }
         Effect::ConversionGain => {
             let g0 = s0.conversion_gain_v_per_e;
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -679,7 +743,8 @@ pub(crate) fn fit_effect(
             let b0 = s0.black_level_dn;
             let c = sc.mean_dark;
             let w = (4.0 * c.abs()).max(4.0 * sc.rms_dark).max(8.0);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -694,7 +759,8 @@ pub(crate) fn fit_effect(
         Effect::DarkCurrent => {
             let v0 = s0.dark_voltage_v_per_s;
             let hi = (4.0 * v0).max(4.0 * (v0 + sc.dark_rate_est)).max(1e-7);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -711,7 +777,8 @@ pub(crate) fn fit_effect(
             let hi = (4.0 * r0)
                 .max(2.0 * sc.var_max.sqrt() / sc.k)
                 .max(2.0 * sc.rms_dark / sc.k);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -726,7 +793,8 @@ pub(crate) fn fit_effect(
         Effect::Dsnu => {
             let d0 = s0.dsnu_sigma_v;
             let hi = (4.0 * d0).max(3.0 * sc.rms_dark / sc.k).max(1e-7);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -741,7 +809,8 @@ pub(crate) fn fit_effect(
         Effect::Prnu => {
             let p0 = s0.prnu_sigma_percent;
             let hi = (4.0 * p0).max(300.0 * sc.rel_rms_light).max(0.05);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -756,7 +825,8 @@ pub(crate) fn fit_effect(
         Effect::ColumnFpn => {
             let c0 = s0.column_fpn.map_or(0.0, |c| c.offset_sigma_v);
             let hi = (4.0 * c0).max(3.0 * sc.rms_dark / sc.k).max(1e-7);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -780,7 +850,8 @@ pub(crate) fn fit_effect(
             };
             let v_max = (sc.signal_max / sc.k).max(1e-6);
             let hi = (4.0 * a0).max(1.0 / v_max);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -818,6 +889,9 @@ pub(crate) fn fit_effect(
                 w0 + 1.1,
                 // A hard well makes the likelihood sharply peaked (pixels switch between
                 // clipped, with no temporal noise, and not): ~2 % steps resolve the valley.
+                // (A coarse-then-fine search of this grid, every third point first, missed
+                // the valley on both full-well sets of the effect matrix: it is narrower
+                // than three grid steps. Issue 23, branch diagsel.)
                 121,
                 1e-5,
             );
@@ -826,7 +900,8 @@ pub(crate) fn fit_effect(
         Effect::Crosstalk => {
             let c0 = s0.effects.crosstalk.map_or(0.0, |c| c.total());
             let hi = (2.0 * c0).max(0.3);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -852,7 +927,8 @@ pub(crate) fn fit_effect(
                 neg_ll_base(ctx, st, &combine(ctx, &b0, std::slice::from_ref(&b1), &[g]))
             };
             let hi = (2.0 * g0).max(0.3);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval,
                 state,
                 f0,
@@ -868,7 +944,8 @@ pub(crate) fn fit_effect(
         Effect::RowNoise => {
             let r0 = s0.effects.row_noise.map_or(0.0, |r| r.sigma_v);
             let hi = (4.0 * r0).max(2.0 * sc.var_max.sqrt() / sc.k).max(1e-7);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -886,7 +963,8 @@ pub(crate) fn fit_effect(
             let r0 = s0.effects.black_level_drift.map_or(0.0, |d| d.dn_per_frame);
             let n = (state.frames_in_set.max(2) - 1) as f64;
             let w = (4.0 * r0.abs()).max((4.0 * (sc.mean_dark.abs() + sc.rms_dark) + 8.0) / n);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -920,7 +998,8 @@ pub(crate) fn fit_effect(
                 .effects
                 .dark_temperature
                 .map_or(0.0, |d| 1.0 / d.doubling_temperature_c);
-            let (st, f) = fit_1d(
+            let (st, f) = fit_1d_w(
+                warm,
                 &eval_base,
                 state,
                 f0,
@@ -1269,19 +1348,20 @@ fn fit_falloff(ctx: &Ctx, state: &ModelState) -> Result<FitOutcome, String> {
     }
     let n_obs = ctx.data.pixels() as f64 * ctx.data.shots.len() as f64;
     let cur = state.rates.falloff.clone().unwrap_or_default();
+    let set = |s: &mut ModelState, th: &[f64]| {
+        let mut c = th.to_vec();
+        c.resize(FALLOFF_MAX_ORDER, 0.0);
+        while c.len() > 1 && c.last() == Some(&0.0) {
+            c.pop();
+        }
+        s.rates.falloff = Some(c);
+    };
     let mut best: Option<(f64, Vec<f64>, f64, ModelState, usize)> = None;
     for order in 1..=FALLOFF_MAX_ORDER {
         let th0: Vec<f64> = (0..order)
             .map(|k| cur.get(k).copied().unwrap_or(0.0))
             .collect();
-        let (th, f, st) = gauss_newton(ctx, state, &b0, &basis[..order], &th0, None, &|s, th| {
-            let mut c = th.to_vec();
-            c.resize(FALLOFF_MAX_ORDER, 0.0);
-            while c.len() > 1 && c.last() == Some(&0.0) {
-                c.pop();
-            }
-            s.rates.falloff = Some(c);
-        });
+        let (th, f, st) = gauss_newton(ctx, state, &b0, &basis[..order], &th0, None, &set);
         let crit = 2.0 * f + order as f64 * n_obs.ln();
         if best.as_ref().is_none_or(|b| crit < b.0) {
             best = Some((crit, th, f, st, order));
