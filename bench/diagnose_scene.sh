@@ -3,7 +3,8 @@
 # photon-transfer flats, two colour charts, a slanted edge and a point grid (the demo
 # generator's default set, `camsim demo diagnose --conceal none`, 25 frames) hiding one
 # effect, diagnosed with every candidate. Prints the generator's and diagnose's wall times,
-# the findings, and diagnose's time per stage (DIR/out/timing.json).
+# the findings, and diagnose's wall and user CPU time (GNU time) and time per stage
+# (DIR/out/timing.json).
 # A/B: BASE=/path/to/an/older/camsim runs the same set with that binary first (same run, same
 # machine load).
 # Env: ROWS (default 160), COLS (default 240), EFFECT (default veiling_glare=0.03),
@@ -29,16 +30,19 @@ one() {
   local bin=$1 name=$2
   local s e
   s=$(date +%s.%N)
-  CAMSIM_PROFILE=1 RAYON_NUM_THREADS=$THREADS "$bin" --threads "$THREADS" diagnose "$OUT/set/captures.json" \
+  echo "load before $name: $(uptime | sed 's/.*load average: //')"
+  CAMSIM_PROFILE=1 RAYON_NUM_THREADS=$THREADS /usr/bin/time -f "%U %S" -o "$OUT/time-$name.txt" \
+      "$bin" --threads "$THREADS" diagnose "$OUT/set/captures.json" \
       --out "$OUT/out-$name" 2>"$OUT/diagnose-$name.log" || { cat "$OUT/diagnose-$name.log"; exit 1; }
   e=$(date +%s.%N)
-  python3 - "$OUT/out-$name" "$name" "$s" "$e" <<'PY'
+  python3 - "$OUT/out-$name" "$name" "$s" "$e" "$OUT/time-$name.txt" <<'PY'
 import json, os, sys
-out, name, s, e = sys.argv[1:]
+out, name, s, e, tf = sys.argv[1:]
 r = json.load(open(f"{out}/report.json"))
 f = [(x["effect"], round(x["magnitude"], 5)) for x in r["findings"]]
 u = [x["effects"] for x in r.get("undecided", [])]
-print(f"{name}: diagnose {float(e)-float(s):.1f} s; findings {f}; undecided {u}; chi2/dof {r['fit_before']['chi2_per_dof']:.3f} -> {r['fit_after']['chi2_per_dof']:.3f}")
+user_s, sys_s = open(tf).read().split()[-2:]
+print(f"{name}: diagnose {float(e)-float(s):.1f} s wall, {user_s} s user CPU; findings {f}; undecided {u}; chi2/dof {r['fit_before']['chi2_per_dof']:.3f} -> {r['fit_after']['chi2_per_dof']:.3f}")
 t = f"{out}/timing.json"
 if os.path.exists(t):
     for x in json.load(open(t))["stages"]:

@@ -416,7 +416,7 @@ impl OpticsEffects {
             };
             let mut shift = 0.0f64;
             for l in lams {
-                if let Ok(map) = RadialInverse::new(self, l, r0 * 1.01) {
+                if let Ok(map) = RadialInverse::shared(self, l, r0 * 1.01) {
                     shift = shift.max(map.source_radius(r0) - r0);
                 }
             }
@@ -434,8 +434,49 @@ pub(crate) struct RadialInverse {
     ratio0: f64,
 }
 
+/// Inverse tables already built, by (effects, wavelength, r_max): a forward model warps every
+/// target of a capture set with one optics configuration, and each table (4 097 bisections of
+/// 64 steps) costs more than warping a plane with it. Bounded: cleared beyond
+/// [`INVERSE_MEMO_ENTRIES`] tables.
+static INVERSE_MEMO: std::sync::Mutex<
+    Option<std::collections::HashMap<(String, Option<u64>, u64), std::sync::Arc<RadialInverse>>>,
+> = std::sync::Mutex::new(None);
+
+/// Most inverse tables kept (≈ 33 kB each).
+const INVERSE_MEMO_ENTRIES: usize = 2048;
+
 impl RadialInverse {
     const N: usize = 4097;
+
+    /// [`RadialInverse::new`], shared: the same inputs give the same table (bit for bit: the
+    /// table is a pure function of them), built once while it stays in [`INVERSE_MEMO`].
+    pub(crate) fn shared(
+        fx: &OpticsEffects,
+        wavelength_nm: Option<f64>,
+        r_max_m: f64,
+    ) -> Result<std::sync::Arc<Self>, OpticsError> {
+        let key = (
+            format!("{fx:?}"),
+            wavelength_nm.map(f64::to_bits),
+            r_max_m.to_bits(),
+        );
+        if let Some(m) = INVERSE_MEMO
+            .lock()
+            .ok()
+            .and_then(|g| g.as_ref().and_then(|m| m.get(&key).cloned()))
+        {
+            return Ok(m);
+        }
+        let map = std::sync::Arc::new(Self::new(fx, wavelength_nm, r_max_m)?);
+        if let Ok(mut g) = INVERSE_MEMO.lock() {
+            let m = g.get_or_insert_with(Default::default);
+            if m.len() >= INVERSE_MEMO_ENTRIES {
+                m.clear();
+            }
+            m.insert(key, map.clone());
+        }
+        Ok(map)
+    }
 
     /// Inverse of [`OpticsEffects::warp_forward_m`] at λ on [0, r_max]; an error when the map
     /// is not increasing there (fold-over).
@@ -544,12 +585,12 @@ pub(crate) fn warp_planes(
         None => vec![None; img.planes.len()],
     };
     // One inverse table per distinct wavelength (one for a linear model).
-    let maps: Vec<RadialInverse> = if wavelengths_nm.is_some() {
+    let maps: Vec<std::sync::Arc<RadialInverse>> = if wavelengths_nm.is_some() {
         lams.par_iter()
-            .map(|&l| RadialInverse::new(fx, l, r_max))
+            .map(|&l| RadialInverse::shared(fx, l, r_max))
             .collect::<Result<_, _>>()?
     } else {
-        vec![RadialInverse::new(fx, None, r_max)?]
+        vec![RadialInverse::shared(fx, None, r_max)?]
     };
     img.planes.par_iter_mut().enumerate().for_each_init(
         Vec::new,
@@ -804,6 +845,53 @@ mod tests {
             ..fx
         };
         assert!(RadialInverse::new(&bad, None, 150e-6).is_err());
+    }
+
+    /// The shared inverse tables are the freshly built ones bit for bit, built once per
+    /// (effects, wavelength, r_max), and another lateral colour or wavelength is another
+    /// table.
+    #[test]
+    fn shared_radial_inverse_is_the_built_one() {
+        let fx = OpticsEffects {
+            sensor_width_m: 240e-6,
+            sensor_height_m: 160e-6,
+            distortion: Some(Distortion::Polynomial {
+                k1: 0.031,
+                k2: -0.004,
+            }),
+            lateral_color: Some(LateralColor {
+                kind: LateralColorKind::Linear,
+                displacement_um: 1.37,
+            }),
+            ..Default::default()
+        };
+        let r_max = 150e-6;
+        let a = RadialInverse::shared(&fx, Some(551.0), r_max).unwrap();
+        let b = RadialInverse::shared(&fx, Some(551.0), r_max).unwrap();
+        assert!(std::sync::Arc::ptr_eq(&a, &b));
+        let fresh = RadialInverse::new(&fx, Some(551.0), r_max).unwrap();
+        let bits = |t: &RadialInverse| {
+            let mut v: Vec<u64> = t.table.iter().map(|x| x.to_bits()).collect();
+            v.push(t.ratio0.to_bits());
+            v.push(t.r_max_m.to_bits());
+            v
+        };
+        assert_eq!(bits(&a), bits(&fresh));
+        let other_lam = RadialInverse::shared(&fx, Some(552.0), r_max).unwrap();
+        assert_ne!(bits(&other_lam), bits(&a));
+        let fx2 = OpticsEffects {
+            lateral_color: Some(LateralColor {
+                kind: LateralColorKind::Linear,
+                displacement_um: 1.38,
+            }),
+            ..fx.clone()
+        };
+        let other_fx = RadialInverse::shared(&fx2, Some(551.0), r_max).unwrap();
+        assert_ne!(bits(&other_fx), bits(&a));
+        assert_eq!(
+            bits(&other_fx),
+            bits(&RadialInverse::new(&fx2, Some(551.0), r_max).unwrap())
+        );
     }
 }
 

@@ -9,7 +9,7 @@
 //! the recording with it) and `DIR/report.html` with its figures.
 mod figures;
 
-use crate::chain::{sampling_for, shot_irradiance, wavelength_grid};
+use crate::chain::{sampling_for, shot_irradiance_of_scene, wavelength_grid};
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure};
 use crate::error::CliError;
 use crate::raw_input::read_frame_with;
@@ -68,6 +68,79 @@ struct SimForward {
     shots: Vec<usize>,
     /// Pixel-averaged irradiance planes per optics configuration.
     planes: Mutex<PlaneCache>,
+    /// Scene radiance per target and sampling grid ([`SceneCache`]).
+    scenes: Mutex<SceneCache>,
+}
+
+/// Each target's scene radiance (the chain's [`crate::chain::shot_scene`]) by target and
+/// sampling grid ([`crate::chain::shot_sampling_grid`]). The scene depends on the camera only
+/// through that grid, the focal length and the wavelength grid, none of which the optics
+/// candidates change except the grid's blur margin: a forward run of a candidate optics block
+/// re-runs only the optics stage (the render and its luminance scaling were about half of a
+/// run's time). Least recently used evicted first beyond [`SCENE_CACHE_BYTES`].
+#[derive(Default)]
+struct SceneCache {
+    entries: HashMap<String, (u64, Arc<camsim_core::image::SceneRadiance>)>,
+    bytes: usize,
+    stamp: u64,
+}
+
+/// Memory for cached scenes.
+const SCENE_CACHE_BYTES: usize = 256 << 20;
+
+fn scene_bytes(s: &camsim_core::image::SceneRadiance) -> usize {
+    s.radiance.planes.iter().map(|x| x.len() * 4).sum::<usize>()
+        + s.depth_m.as_ref().map_or(0, |d| d.data.len() * 4)
+}
+
+impl SceneCache {
+    /// What of the camera shapes a target's scene: the sampling grid, the focal length and
+    /// the wavelength grid.
+    fn grid_key(set: &CaptureSet, grid: &camsim_core::WavelengthGrid) -> String {
+        format!(
+            "{:?} f {} λ {:?}",
+            crate::chain::shot_sampling_grid(set, grid),
+            set.camera.optics.focal_length_m,
+            grid.wavelength_nm
+        )
+    }
+
+    /// The scene of shot `si` of `set` (whose camera is the one of this call), from the cache
+    /// or rendered (and kept when it fits); `grid_key` is [`SceneCache::grid_key`] of the
+    /// call's camera.
+    fn scene(
+        &mut self,
+        set: &CaptureSet,
+        si: usize,
+        grid: &camsim_core::WavelengthGrid,
+        grid_key: &str,
+    ) -> Result<Arc<camsim_core::image::SceneRadiance>, String> {
+        let key = format!("{} {grid_key}", set.shots[si].target_key);
+        self.stamp += 1;
+        let st = self.stamp;
+        if let Some(e) = self.entries.get_mut(&key) {
+            e.0 = st;
+            return Ok(e.1.clone());
+        }
+        let scene = Arc::new(crate::chain::shot_scene(set, si, grid).map_err(|e| e.one_line())?);
+        let bytes = scene_bytes(&scene);
+        if bytes <= SCENE_CACHE_BYTES {
+            while self.bytes + bytes > SCENE_CACHE_BYTES && !self.entries.is_empty() {
+                let oldest = self
+                    .entries
+                    .iter()
+                    .min_by_key(|(_, v)| v.0)
+                    .map(|(k, _)| k.clone())
+                    .expect("non-empty");
+                if let Some((_, s)) = self.entries.remove(&oldest) {
+                    self.bytes -= scene_bytes(&s);
+                }
+            }
+            self.bytes += bytes;
+            self.entries.insert(key, (st, scene.clone()));
+        }
+        Ok(scene)
+    }
 }
 
 /// Pixel planes by optics key, then by target key; least recently used evicted first when
@@ -154,6 +227,8 @@ impl Forward for SimForward {
             cached.clone().unwrap_or_default();
         let mut rate_by_target: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
         let mut out = Vec::with_capacity(self.shots.len());
+        // (computed on the first render: the margin of a warp costs an inverse map)
+        let grid_key = std::cell::OnceCell::new();
         for &si in &self.shots {
             let key = set.shots[si].target_key.clone();
             if let Some(r) = rate_by_target.get(&key) {
@@ -163,7 +238,18 @@ impl Forward for SimForward {
             let pp = match by_target.get(&key) {
                 Some(p) => p.clone(),
                 None => {
-                    let irr = shot_irradiance(&set, si, &grid).map_err(|e| e.one_line())?;
+                    let scene = self
+                        .scenes
+                        .lock()
+                        .map_err(|_| "forward model lock poisoned".to_string())?
+                        .scene(
+                            &set,
+                            si,
+                            &grid,
+                            grid_key.get_or_init(|| SceneCache::grid_key(&set, &grid)),
+                        )?;
+                    let irr = shot_irradiance_of_scene(&set, si, &scene, &grid)
+                        .map_err(|e| e.one_line())?;
                     let p = Arc::new(camsim_sensor::pixel_term_planes(&set.camera.sensor, &irr));
                     by_target.insert(key.clone(), p.clone());
                     p
@@ -586,6 +672,7 @@ pub fn run_diagnose(
         camera_path: set.camera_path.clone(),
         shots: used,
         planes: Mutex::new(PlaneCache::default()),
+        scenes: Mutex::new(SceneCache::default()),
     };
     let believed = ModelState {
         sensor: set.camera.sensor.clone(),
@@ -867,8 +954,9 @@ mod tests {
     use crate::chain::shot_electron_rate;
     use crate::demo::{generate_capture_set, Concealment, DemoSpec};
 
-    /// The forward model through cached pixel planes equals `simulate`'s per-shot electron
-    /// rates of the same camera (QE blocks and an optics block applied), also on a cache hit.
+    /// The forward model through cached scenes and pixel planes equals `simulate`'s per-shot
+    /// electron rates of the same camera (QE blocks and optics blocks applied), also on a
+    /// cache hit.
     #[test]
     fn plane_cache_rates_equal_the_simulator_rates() {
         let dir = tempfile::tempdir().unwrap();
@@ -889,6 +977,7 @@ mod tests {
             camera_path: set.camera_path.clone(),
             shots: (0..set.shots.len()).collect(),
             planes: Mutex::new(PlaneCache::default()),
+            scenes: Mutex::new(SceneCache::default()),
         };
         let nch = set.camera.sensor.channel_qe.len();
         let mut qe = vec![0.0; nch];
@@ -899,6 +988,10 @@ mod tests {
         let specs = [
             RateSpec::default(),
             RateSpec {
+                glare_fraction: Some(0.05),
+                ..Default::default()
+            },
+            RateSpec {
                 qe_shift_nm: Some(qe.clone()),
                 ..Default::default()
             },
@@ -908,8 +1001,14 @@ mod tests {
                 glare_fraction: Some(0.05),
                 ..Default::default()
             },
+            RateSpec {
+                defocus_sigma_um: Some(6.0),
+                ..Default::default()
+            },
         ];
+        let mut new_scenes = Vec::new();
         for spec in &specs {
+            let scenes_before = fw.scenes.lock().unwrap().entries.len();
             // The typed blocks are the ones the camera file with the blocks written in gives.
             let mut v = camera_json.clone();
             apply_rate_spec(&mut v, spec, &set.camera.sensor.channel_names);
@@ -937,8 +1036,18 @@ mod tests {
                     );
                 }
             }
+            new_scenes.push(fw.scenes.lock().unwrap().entries.len() - scenes_before);
         }
-        // the QE candidates shared one optics entry; the glare spec added a second
-        assert_eq!(fw.planes.lock().unwrap().entries.len(), 2);
+        // the QE candidates shared one optics entry, the two glare specs a second; the
+        // defocus added a third
+        assert_eq!(fw.planes.lock().unwrap().entries.len(), 3);
+        // Scenes are rendered once per target and grid: the glare spec (same sampling and
+        // wavelength grids as the believed camera) rendered none, the defocus (a wider blur
+        // margin) one per target; the rates above, equal to the simulator's, used them.
+        let targets: std::collections::HashSet<&str> =
+            set.shots.iter().map(|s| s.target_key.as_str()).collect();
+        assert_eq!(new_scenes[0], targets.len());
+        assert_eq!(new_scenes[1], 0, "the glare spec re-rendered the scenes");
+        assert_eq!(new_scenes[4], targets.len());
     }
 }

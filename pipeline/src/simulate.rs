@@ -292,12 +292,8 @@ pub fn shot_scene_cached(
     grid: &WavelengthGrid,
     cache: Option<&crate::gltf_target::RenderCache>,
 ) -> Result<SceneRadiance, CliError> {
-    let cam = &set.camera;
-    let s = &cam.sensor;
     let shot = &set.shots[shot_index];
-    let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
-    let ap = sample_aperture_for(&cam.optics, s, grid, os, set.simulation.sample_aperture);
-    let g = SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin).with_aperture(ap);
+    let g = shot_sampling_grid(set, grid);
     if let Some(t) = &shot.target.gltf {
         let mut scene = crate::gltf_target::render_gltf_target(set, &shot.id, t, &g, grid, cache)?;
         if let Some(l) = shot.target.mean_luminance_cd_m2 {
@@ -311,6 +307,17 @@ pub fn shot_scene_cached(
         return Ok(scene);
     }
     scene_on_grid(set, shot, &g)
+}
+
+/// The grid on which [`shot_scene`] samples every shot's scene for the capture set's camera
+/// (its oversampling, blur margin and sample aperture): two cameras with the same grid, focal
+/// length and wavelength grid give the same scene of a target.
+pub fn shot_sampling_grid(set: &CaptureSet, grid: &WavelengthGrid) -> SamplingGrid {
+    let cam = &set.camera;
+    let s = &cam.sensor;
+    let (os, margin) = sampling_for(&cam.optics, s, grid, set.simulation.oversample);
+    let ap = sample_aperture_for(&cam.optics, s, grid, os, set.simulation.sample_aperture);
+    SamplingGrid::for_sensor(s.rows, s.cols, s.pixel_pitch_m, os, margin).with_aperture(ap)
 }
 
 /// Sensor irradiance of one shot (scene → optics stage).
@@ -332,12 +339,23 @@ pub fn shot_irradiance_cached(
     cache: Option<&crate::gltf_target::RenderCache>,
 ) -> Result<SensorIrradiance, CliError> {
     let scene = shot_scene_cached(set, shot_index, grid, cache)?;
+    shot_irradiance_of_scene(set, shot_index, &scene, grid)
+}
+
+/// The optics stage of [`shot_irradiance`] on the shot's scene (from [`shot_scene`], which
+/// may be kept across cameras with one [`shot_sampling_grid`]).
+pub fn shot_irradiance_of_scene(
+    set: &CaptureSet,
+    shot_index: usize,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<SensorIrradiance, CliError> {
     if scene.depth_m.is_some() {
-        return crate::chain::irradiance_of(set, &scene, grid);
+        return crate::chain::irradiance_of(set, scene, grid);
     }
     let shot = &set.shots[shot_index];
     let extent = target_extent_m(set, shot);
-    crate::chain::optical_image(set, &scene, grid, extent)
+    crate::chain::optical_image(set, scene, grid, extent)
 }
 
 /// Image-plane extent (W, H) of a shot's target with a field of view (`None`: the target
