@@ -57,6 +57,18 @@ pub fn thin_lens_for_camera(
     })
 }
 
+/// The vertical field of view (rad) of a pinhole image of `rows` samples of pitch
+/// `sample_pitch_mm` on the sensor that covers exactly the field a lens of image-side scale
+/// `image_mm_per_tan` (mm of paraxial image height per unit tan θ of the object's chief ray,
+/// [`camsim_lens::LensPrescription::paraxial_image_mm_per_tan`]; a thin lens: its image
+/// distance v) images onto them: the paraxial image height is H·tan θ, so
+/// tan(θ_y/2) = rows·p/(2H). The depth-aware optics' PSFs, distortion (real relative to the
+/// paraxial H·tan θ) and relative illumination are tabulated by sensor position, so the pinhole
+/// radiance they act on must use this mapping.
+pub fn pinhole_yfov_rad(image_mm_per_tan: f64, rows: usize, sample_pitch_mm: f64) -> f64 {
+    2.0 * (0.5 * rows as f64 * sample_pitch_mm / image_mm_per_tan).atan()
+}
+
 /// RMS radius (px) of a kernel about its centroid: √(Σ w·((x − x̄)² + (y − ȳ)²)) (for a uniform
 /// disc of radius c it tends to c/√2).
 pub fn kernel_rms_radius_px(k: &Kernel) -> f64 {
