@@ -226,23 +226,13 @@ const CORNER_FRAC: f64 = 0.6;
 /// blur whose PSF step is off (the PSFs were applied by depth), from the field model of the
 /// same focused lens at the focus distance (the chain's lens blur holds one object distance).
 fn lens_geometry(
-    focus: &camsim_lens::FocusedLens,
+    optics: &camsim_optics::OpticsModel,
     planes: Vec<Vec<f32>>,
     w: usize,
     h: usize,
     pitch_mm: f64,
     grid: &camsim_core::WavelengthGrid,
 ) -> Vec<Vec<f32>> {
-    let model = geometry_model(
-        focus,
-        16,
-        1.1 * 0.5 * pitch_mm * (w as f64).hypot(h as f64),
-        &grid.wavelength_nm,
-    );
-    let mut lb = camsim_optics::LensBlur::from_model_at(model, focus.focus_distance_mm);
-    lb.apply_psf = false;
-    let mut optics = camsim_optics::OpticsModel::diffraction_limited(2.0, 0.05);
-    optics.blur = camsim_optics::Blur::Lens(lb);
     let scene = camsim_core::SceneRadiance {
         radiance: camsim_core::SpectralImage::new(
             h,
@@ -257,10 +247,63 @@ fn lens_geometry(
         depth_m: None,
         sample_aperture: Default::default(),
     };
-    camsim_optics::form_image(&optics, &scene, grid)
+    camsim_optics::form_image(optics, &scene, grid)
         .unwrap()
         .irradiance
         .planes
+}
+
+/// One aperture's real-lens camera and the chain's lens geometry for it (scene-independent).
+struct Aperture {
+    f_number: f64,
+    cam: RealLensCamera,
+    focus: camsim_lens::FocusedLens,
+    pitch_mm: f64,
+    /// `camsim_optics` model with the lens blur's PSF step off.
+    optics: camsim_optics::OpticsModel,
+    /// Largest distortion shift on the film (px).
+    shift_px: f64,
+}
+
+fn apertures(lens: &LensPrescription, w: usize, h: usize, band_nm: &[f64]) -> Vec<Aperture> {
+    [2.0, 4.0, 8.0]
+        .into_iter()
+        .map(|n_f| {
+            let cam = RealLensCamera::new(
+                lens,
+                w as u32,
+                h as u32,
+                &RealLensOptions {
+                    focus_distance_m: Some(FOCUS_M),
+                    f_number: Some(n_f),
+                    film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let focus = cam.info().focus.clone();
+            let pitch_mm = cam.info().pixel_pitch_mm;
+            let r_mm = 0.5 * pitch_mm * (w as f64).hypot(h as f64);
+            let model = geometry_model(&focus, 16, 1.1 * r_mm, band_nm);
+            let t = model.at_distance(focus.focus_distance_mm);
+            let shift_px = band_nm
+                .iter()
+                .map(|wl| (t.real_height_mm_at(r_mm, *wl).abs() - r_mm).abs() / pitch_mm)
+                .fold(0.0, f64::max);
+            let mut lb = camsim_optics::LensBlur::from_model_at(model, focus.focus_distance_mm);
+            lb.apply_psf = false;
+            let mut optics = camsim_optics::OpticsModel::diffraction_limited(2.0, 0.05);
+            optics.blur = camsim_optics::Blur::Lens(lb);
+            Aperture {
+                f_number: n_f,
+                cam,
+                focus,
+                pitch_mm,
+                optics,
+                shift_px,
+            }
+        })
+        .collect()
 }
 
 /// The field model (distortion and relative illumination; 3² geometric PSFs, unused) of the
@@ -309,7 +352,7 @@ struct LensOutcome {
 
 fn check_scene_real_lens(
     spec: &SceneSpec,
-    lens: &LensPrescription,
+    aps: &[Aperture],
     w: usize,
     h: usize,
     spp_lens: u32,
@@ -352,21 +395,8 @@ fn check_scene_real_lens(
     };
     let (xc, yc) = (0.5 * w as f64, 0.5 * h as f64);
     let half_diag = xc.hypot(yc);
-    for (ai, n_f) in [2.0, 4.0, 8.0].into_iter().enumerate() {
-        let cam = RealLensCamera::new(
-            lens,
-            w as u32,
-            h as u32,
-            &RealLensOptions {
-                focus_distance_m: Some(FOCUS_M),
-                f_number: Some(n_f),
-                film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        let focus = cam.info().focus.clone();
-        let pitch_mm = cam.info().pixel_pitch_mm;
+    for (ai, ap) in aps.iter().enumerate() {
+        let (n_f, cam, focus, pitch_mm) = (ap.f_number, &ap.cam, &ap.focus, ap.pitch_mm);
         // The pinhole image covers exactly the field the lens images on the film: the pinhole's
         // vertical field is the one `depth_optics::pinhole_yfov_rad` gives for the lens's
         // image-side scale H (the chain's render of a depth-aware camera).
@@ -382,14 +412,14 @@ fn check_scene_real_lens(
         );
         let real = render(
             &scene,
-            &cam,
+            cam,
             sc.to_world,
             &settings(spp_lens, 100 + ai as u64),
             None,
         );
         let rvar = real.variance_planes.as_ref().unwrap();
         let lk = LensDepthKernels::new(
-            &focus,
+            focus,
             &LensDepthOptions {
                 sample_pitch_mm: pitch_mm,
                 width: w,
@@ -416,16 +446,8 @@ fn check_scene_real_lens(
             LAYERS,
             &DepthKernels::Lens(lk),
         );
-        let b_img = lens_geometry(&focus, dp.planes, w, h, pitch_mm, &grid);
-        // distortion shift at the film corner (px), added to the exclusion margin
-        let shift_px = {
-            let r_mm = half_diag * pitch_mm;
-            let t = geometry_model(&focus, 2, r_mm, &band_nm).at_distance(focus.focus_distance_mm);
-            band_nm
-                .iter()
-                .map(|wl| (t.real_height_mm_at(r_mm, *wl).abs() - r_mm).abs() / pitch_mm)
-                .fold(0.0, f64::max)
-        };
+        let b_img = lens_geometry(&ap.optics, dp.planes, w, h, pitch_mm, &grid);
+        let shift_px = ap.shift_px;
         let margin = kmax + 2 + shift_px.ceil() as usize;
         eprintln!(
             "{} f/{n_f}: pitch {pitch_mm:.4} mm, largest kernel radius {kmax} px, corner distortion shift {shift_px:.2} px, block margin {margin} px",
@@ -568,6 +590,8 @@ fn check_scene_real_lens(
 fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize) {
     let lens = double_gauss();
     let dir = tempfile::tempdir().unwrap();
+    let band_nm: Vec<f64> = (0..3).map(|b| 450.0 + 100.0 * b as f64).collect();
+    let aps = apertures(&lens, w, h, &band_nm);
     let mut failures = Vec::new();
     for spec in scenes(w, h) {
         if let Ok(only) = std::env::var("CAMSIM_XC_SCENE") {
@@ -575,7 +599,7 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize) {
                 continue;
             }
         }
-        let o = check_scene_real_lens(&spec, &lens, w, h, spp_lens, tiles, dir.path());
+        let o = check_scene_real_lens(&spec, &aps, w, h, spp_lens, tiles, dir.path());
         let edge_p = 1.0 - ChiSquared::new(o.edge_n as f64).unwrap().cdf(o.edge_chi2);
         eprintln!(
             "{}: worst block |z| {:.2}, min chi2 p {:.4} ({} block tests beyond {CORNER_FRAC} of the half-diagonal); focus plane worst pixel |z| {:.2}, min chi2 p {:.4}; edges worst |z| {:.2}, chi2 {:.1} over {} profile points (p {:.4}), worst profile difference {:.3} of the contrast",
