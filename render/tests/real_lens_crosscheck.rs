@@ -13,7 +13,7 @@
 //! `pipeline::chain::camera_irradiance_and_blur` does).
 //!
 //! Tolerances, stated (see the test functions).
-use super::crosscheck_scenes::{build, scenes, width_10_90, SceneSpec};
+use super::crosscheck_scenes::{build, scenes, width_10_90, SceneSpec, DEPTHS_M};
 use camsim_lens::{GlassCatalog, LensPrescription};
 use camsim_render::camera::real_lens::{FilmSize, RealLensCamera, RealLensOptions};
 use camsim_render::camera::{Camera, Pinhole};
@@ -46,29 +46,28 @@ fn moments(s: &[(f64, f64)]) -> (f64, f64, f64) {
     (m, m2, m3)
 }
 
-/// PSF orientation and field sampling off axis: a lens inverts the image, the real-lens camera
-/// maps film x with a sign flip and film y without, and the depth optics rotate the field model's
-/// +y PSF to each tile's azimuth and interpolate it between tabulated field heights. For a
-/// defocused, vignetted off-axis point (double Gauss at f/2 focused on 1.5 m, image point 10 mm
-/// (11°) and 16 mm (17°) off axis to the right and downwards, objects at 0.5 and 5 m: cat's-eye
-/// PSFs, skewed radially) the depth path's kernel must have the real-lens camera's shape.
+/// PSF orientation off axis: a lens inverts the image, the real-lens camera maps film x with a
+/// sign flip and film y without, and the depth optics rotate the field model's +y PSF to each
+/// tile's azimuth. For a defocused, vignetted off-axis point (double Gauss at f/2 focused on
+/// 1.5 m, image point 10 mm (11°) and 16 mm (17°) off axis to the right and downwards, objects
+/// at 0.5 and 5 m: cat's-eye PSFs) the depth path's kernel must have the real-lens camera's
+/// shape. Each probe is the centre of the outer tile of a 3-tile strip, where the chain
+/// evaluates the PSF: the field model is tabulated exactly at the tile-centre radii.
 ///
 /// The real-lens PSF is measured through the camera itself: the footprint of a film point (its
-/// rays' hits on the object plane, projected by the pinhole of the same image scale; 400² lens
+/// rays' hits on the object plane, projected by the pinhole of the same image scale; 200² lens
 /// samples) is the PSF point-reflected about the film point (pixel value = Σ_P L(P)·K(f − P)),
-/// so the PSF's radial skewness γ = m3/m2^1.5 is minus the footprint's. Checks: γ of kernel and
-/// PSF within 0.05 + 30 % (measured at 10 mm +0.045/+0.039 at 0.5 m and +0.099/+0.082 at 5 m: a
-/// mirrored kernel, γ → −γ, fails), the radial and tangential RMS widths within 5 % (measured
-/// ≤ 3.8 %). With the 4 field heights the 3 × 3 tiles used to tabulate, the 16 mm kernel had
-/// γ +0.215 against −0.017 and a radial RMS 7 % too wide (fails);
-/// [`camsim_render::depth_optics::MIN_FIELD_HEIGHTS`] fixed it. Printed, not asserted: the
-/// centroid offsets from the chief ray, which differ by 1.4 px (28 µm, 3 % of the 0.86 mm blur
-/// radius) at 10 mm, 0.5 m (docs/render_validation.md).
+/// so the PSF's radial skewness γ = m3/m2^1.5 is minus the footprint's. Checks: the radial and
+/// tangential RMS widths within 5 % (docs/render_validation.md has the measured values); γ of
+/// kernel and PSF within 0.05 + 30 %, asserted only where it has power, i.e. where a mirrored
+/// kernel (γ → −γ) would fail it (|γ| > 0.05/1.7), and at least at two probes. At 16 mm the
+/// real lens's γ is about −0.02: the check has no power there, so orientation is tested at
+/// 10 mm only. Printed, not asserted: the centroid offsets from the chief ray.
 #[test]
 fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
     let lens = double_gauss();
     let pitch_mm = 0.02;
-    let n_film = 1700u32; // ±17 mm
+    let n_film = 1620u32; // ±16.2 mm, just past the outer probe
     let cam = RealLensCamera::new(
         &lens,
         n_film,
@@ -87,6 +86,7 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
         .paraxial_image_mm_per_tan(focus.lens.primary_nm)
         .unwrap();
     let mut failures: Vec<String> = Vec::new();
+    let mut powered = 0usize;
     for off_px in [500usize, 800] {
         for (dir_name, horizontal) in [("right", true), ("down", false)] {
             // a 3-tile strip whose outer tile centre lies off_px from the centre
@@ -128,7 +128,7 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
                 } else {
                     Vec2::new(0.5 * n_film as f32, 0.5 * n_film as f32 + off_px as f32)
                 };
-                let m = 400;
+                let m = 200;
                 // pinhole image position (px, upright: +x right, +y down) of a camera ray's hit on
                 // the object plane z
                 let hit = |o: glam::DVec3, d: glam::DVec3| -> (f64, f64) {
@@ -173,18 +173,24 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
                 let gk = k3 / k2.powf(1.5);
                 let gf = f3 / f2.powf(1.5);
                 eprintln!(
-                "{dir_name} {off_px} px, z {z} m: centroid offset from the chief ray kernel {dk:+.3} / real lens {df:+.3} px; kernel radius {} px, radial RMS kernel {:.2} / footprint {:.2} px, tangential {:.2} / {:.2} px, radial skewness kernel {gk:+.3} / footprint {gf:+.3} ({} rays)",
+                "{dir_name} {off_px} px, z {z} m: centroid offset from the chief ray kernel {dk:+.3} / real lens {df:+.3} px; kernel radius {} px, radial RMS kernel {:.2} / footprint {:.2} px, tangential {:.2} / {:.2} px, radial skewness kernel {gk:+.3} / footprint {gf:+.3} ({} rays){}",
                 k.radius,
                 k2.sqrt(),
                 f2.sqrt(),
                 kt2.sqrt(),
                 ft2.sqrt(),
-                fr.len()
+                fr.len(),
+                if 1.7 * gf.abs() > 0.05 { "" } else { "; skewness check without power" }
             );
                 // the real lens's PSF skewness is minus its footprint's
                 let gr = -gf;
+                // a mirrored kernel fails iff 2|γ| ≥ 0.05 + 0.3|γ|
+                let has_power = 1.7 * gr.abs() > 0.05;
+                if has_power {
+                    powered += 1;
+                }
                 {
-                    if !((gk - gr).abs() < 0.05 + 0.3 * gr.abs()) {
+                    if has_power && !((gk - gr).abs() < 0.05 + 0.3 * gr.abs()) {
                         failures.push(format!(
                         "{dir_name} {off_px} px z {z} m: radial skewness of the depth-path kernel {gk:+.3}, of the real lens's PSF {gr:+.3}"
                     ));
@@ -203,18 +209,24 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
             }
         }
     }
+    if powered < 2 {
+        failures.push(format!(
+            "the skewness check had power at {powered} probes (need 2)"
+        ));
+    }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// Vertical field of view of the scenes' glTF camera: the film's half-diagonal is then 20.9°,
 /// the edge of the double Gauss's field (20°), where it vignettes strongly at f/2.
 const XC_YFOV_DEG: f64 = 24.0;
-/// Model-error floor of the edge profiles (fraction of the edge contrast), added in quadrature
-/// to the Monte Carlo σ: the layered depth path's own error at occluding edges, measured against
-/// the thin-lens camera (whose closed form it is checked against) at 3.4 % of the contrast
-/// (`depth_crosscheck`, docs/render_validation.md). Without it the f/8 edges of the 0.5 m card
-/// reach |z| 5.6 (see docs/render_validation.md).
-const EDGE_MODEL_FLOOR: f64 = 0.03;
+/// Edge-profile tolerance (fraction of the edge contrast): the depth path's edge profiles agree
+/// with the real lens's within it, point by point, as with the thin lens (`depth_crosscheck`).
+/// Asserted only by the full-size test: at CI size (128 spp, 48–56 px along an edge) the Monte
+/// Carlo σ of a profile point is 3–14 % of the contrast and does not resolve it (the CI test
+/// asserts the z-test with that σ instead).
+const EDGE_TOL: f64 = 0.06;
+
 /// Compositing slabs (the chain's `DEPTH_LAYERS`).
 const LAYERS: usize = 16;
 /// Blocks whose centre lies beyond this fraction of the film's half-diagonal count as corner
@@ -321,6 +333,7 @@ fn geometry_model(
         lens,
         &FieldModelOptions {
             n_fields,
+            paraxial_heights_mm: None,
             max_field_deg: Some((max_height_mm / per_tan).atan().to_degrees()),
             wavelengths_nm: Some(wavelengths_nm.to_vec()),
             kind: PsfKind::Geometric,
@@ -343,9 +356,11 @@ struct LensOutcome {
     worst_focus_pixel_z: f64,
     min_focus_chi2_p: f64,
     worst_edge_z: f64,
+    worst_edge_sd: f64,
     edge_chi2: f64,
     edge_n: usize,
     worst_profile_diff: f64,
+    negative_controls: usize,
     corner_blocks: usize,
     failures: Vec<String>,
 }
@@ -357,6 +372,7 @@ fn check_scene_real_lens(
     h: usize,
     spp_lens: u32,
     tiles: usize,
+    assert_profile_tol: bool,
     dir: &Path,
 ) -> LensOutcome {
     use super::crosscheck_scenes::{block_excluded, depth_jump_mask, edge_profile};
@@ -437,6 +453,18 @@ fn check_scene_real_lens(
             .map(|(t, b, v)| lk.kernel(t, b, v).radius)
             .max()
             .unwrap();
+        // largest kernel radius (px) at each card depth
+        let radius_at: Vec<(f64, usize)> = DEPTHS_M
+            .iter()
+            .map(|z| {
+                let r = (0..tiles * tiles)
+                    .flat_map(|t| (0..band_nm.len()).map(move |b| (t, b)))
+                    .map(|(t, b)| lk.kernel(t, b, 1.0 / z).radius)
+                    .max()
+                    .unwrap();
+                (*z, r)
+            })
+            .collect();
         let dp = defocus_by_depth(
             &pin.band_planes,
             &band_nm,
@@ -447,6 +475,8 @@ fn check_scene_real_lens(
             &DepthKernels::Lens(lk),
         );
         let b_img = lens_geometry(&ap.optics, dp.planes, w, h, pitch_mm, &grid);
+        // the negative control: the same chain without the defocus
+        let b_sharp = lens_geometry(&ap.optics, pin.band_planes.clone(), w, h, pitch_mm, &grid);
         let shift_px = ap.shift_px;
         let margin = kmax + 2 + shift_px.ceil() as usize;
         eprintln!(
@@ -534,37 +564,52 @@ fn check_scene_real_lens(
                 ));
             }
             // edges: the edge-spread profiles across every depth edge (averaged along it),
-            // point by point
+            // point by point, z with the Monte Carlo σ only; the profile difference as a
+            // fraction of the edge contrast (asserted < EDGE_TOL where σ resolves it)
             for e in &spec.edges {
                 let half = (kmax + 4) as isize;
                 let n_along = (e.hi - e.lo) as f64;
                 let prof = |img: &[f32]| edge_profile(img, w, e, half);
-                let (pa, pb, pp) = (
+                let (pa, pb, pp, pg) = (
                     prof(&real.band_planes[bnd]),
                     prof(&b_img[bnd]),
                     prof(&pin.band_planes[bnd]),
+                    prof(&b_sharp[bnd]),
                 );
                 let (va, vp) = (prof(&rvar[bnd]), prof(&pvar[bnd]));
                 let contrast = (pb[pb.len() - 1] - pb[0]).abs().max(1e-12);
-                let mut worst = 0f64;
-                for i in 0..pa.len() {
-                    let g = if pp[i] > 0.0 { pb[i] / pp[i] } else { 0.0 };
-                    let var =
-                        (va[i] + g * g * vp[i]) / n_along + (EDGE_MODEL_FLOOR * contrast).powi(2);
-                    let z = (pa[i] - pb[i]) / var.sqrt();
-                    worst = worst.max(z.abs());
+                // z of (a) against a (b)-like profile `q` (pinhole variance scaled by q/pinhole)
+                let zs = |q: &[f64]| -> Vec<(f64, f64)> {
+                    (0..pa.len())
+                        .map(|i| {
+                            let g = if pp[i] > 0.0 { q[i] / pp[i] } else { 0.0 };
+                            let var =
+                                (va[i] + g * g * vp[i]) / n_along + (1e-5 * pa[i].abs()).powi(2);
+                            ((pa[i] - q[i]) / var.sqrt(), var.sqrt())
+                        })
+                        .collect()
+                };
+                let (mut worst_z, mut worst_diff, mut worst_sd) = (0f64, 0f64, 0f64);
+                for (i, (z, sd)) in zs(&pb).into_iter().enumerate() {
+                    worst_z = worst_z.max(z.abs());
+                    worst_sd = worst_sd.max(sd / contrast);
+                    worst_diff = worst_diff.max((pa[i] - pb[i]).abs() / contrast);
                     out.edge_chi2 += z * z;
                     out.edge_n += 1;
-                    out.worst_profile_diff =
-                        out.worst_profile_diff.max((pa[i] - pb[i]).abs() / contrast);
                 }
-                out.worst_edge_z = out.worst_edge_z.max(worst);
-                let (wa, wb) = (width_10_90(&pa), width_10_90(&pb));
-                eprintln!(
-                    "{} f/{n_f} band {bnd} edge at {} ({}): worst profile |z| {worst:.2}; 10-90 % width real lens {wa:.2} px, depth path {wb:.2} px (from the noisy end levels)",
+                out.worst_edge_z = out.worst_edge_z.max(worst_z);
+                out.worst_profile_diff = out.worst_profile_diff.max(worst_diff);
+                out.worst_edge_sd = out.worst_edge_sd.max(worst_sd);
+                let tag = format!(
+                    "{} f/{n_f} band {bnd} edge at {} ({}, near card {} m)",
                     spec.name,
                     e.at,
-                    if e.vertical { "vertical" } else { "horizontal" }
+                    if e.vertical { "vertical" } else { "horizontal" },
+                    e.near_z_m
+                );
+                let (wa, wb) = (width_10_90(&pa), width_10_90(&pb));
+                eprintln!(
+                    "{tag}: worst profile |z| {worst_z:.2}, worst difference {worst_diff:.4} of the contrast (Monte Carlo σ ≤ {worst_sd:.4}); 10-90 % width real lens {wa:.2} px, depth path {wb:.2} px (from the noisy end levels)"
                 );
                 if std::env::var("CAMSIM_XC_DEBUG").is_ok() {
                     for (i, (a, b)) in pa.iter().zip(&pb).enumerate() {
@@ -575,11 +620,38 @@ fn check_scene_real_lens(
                         );
                     }
                 }
-                if worst >= 5.0 {
+                if worst_z >= 5.0 {
+                    out.failures
+                        .push(format!("{tag}: profile |z| {worst_z:.2} (Monte Carlo σ only)"));
+                }
+                if assert_profile_tol && worst_diff >= EDGE_TOL {
                     out.failures.push(format!(
-                        "{} f/{n_f} band {bnd} edge {e:?}: profile |z| {worst:.2}",
-                        spec.name
+                        "{tag}: profiles differ by {worst_diff:.4} of the contrast (tolerance {EDGE_TOL})"
                     ));
+                }
+                // negative control: the chain without the depth-aware defocus (pinhole radiance,
+                // the same lens geometry) fails the same edge z-test at f/2 wherever the near
+                // surface is defocused by more than 2 px
+                let near_radius = radius_at
+                    .iter()
+                    .find(|(z, _)| (z - e.near_z_m).abs() < 1e-9)
+                    .map_or(0, |(_, r)| *r);
+                if n_f == 2.0 && near_radius > 2 {
+                    let zcs = zs(&pg);
+                    let zc = zcs.iter().map(|(z, _)| z.abs()).fold(0.0, f64::max);
+                    let pc = chi2_sf(zcs.iter().map(|(z, _)| z * z).sum(), zcs.len());
+                    let dc = pa
+                        .iter()
+                        .zip(&pg)
+                        .map(|(a, q)| (a - q).abs() / contrast)
+                        .fold(0.0, f64::max);
+                    eprintln!("{tag}: negative control (no defocus): worst |z| {zc:.1}, chi2 p {pc:.1e}, difference {dc:.3} of the contrast");
+                    if !((zc >= 5.0 || pc <= 1e-4) && dc > EDGE_TOL) {
+                        out.failures.push(format!(
+                            "{tag}: without the defocus the profile is within |z| {zc:.2} (chi2 p {pc:.1e}), {dc:.4} of the contrast of the real lens's (the check has no power)"
+                        ));
+                    }
+                    out.negative_controls += 1;
                 }
             }
         }
@@ -587,28 +659,47 @@ fn check_scene_real_lens(
     out
 }
 
-fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize) {
+/// The cross-check at `w` × `h` px, `spp_lens` samples per pixel through the lens, `tiles`²
+/// field tiles; `assert_profile_tol`: also assert the edge profiles within `EDGE_TOL` of the
+/// contrast, and that the Monte Carlo σ resolves it (σ < `EDGE_TOL`/3).
+fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_profile_tol: bool) {
     let lens = double_gauss();
     let dir = tempfile::tempdir().unwrap();
     let band_nm: Vec<f64> = (0..3).map(|b| 450.0 + 100.0 * b as f64).collect();
     let aps = apertures(&lens, w, h, &band_nm);
     let mut failures = Vec::new();
+    let mut controls = 0usize;
+    let only = std::env::var("CAMSIM_XC_SCENE").ok();
     for spec in scenes(w, h) {
-        if let Ok(only) = std::env::var("CAMSIM_XC_SCENE") {
-            if only != spec.name {
-                continue;
-            }
+        if only.as_deref().is_some_and(|o| o != spec.name) {
+            continue;
         }
-        let o = check_scene_real_lens(&spec, &aps, w, h, spp_lens, tiles, dir.path());
-        let edge_p = 1.0 - ChiSquared::new(o.edge_n as f64).unwrap().cdf(o.edge_chi2);
+        let o = check_scene_real_lens(
+            &spec,
+            &aps,
+            w,
+            h,
+            spp_lens,
+            tiles,
+            assert_profile_tol,
+            dir.path(),
+        );
+        let edge_p = chi2_sf(o.edge_chi2, o.edge_n);
         eprintln!(
-            "{}: worst block |z| {:.2}, min chi2 p {:.4} ({} block tests beyond {CORNER_FRAC} of the half-diagonal); focus plane worst pixel |z| {:.2}, min chi2 p {:.4}; edges worst |z| {:.2}, chi2 {:.1} over {} profile points (p {:.4}), worst profile difference {:.3} of the contrast",
-            spec.name, o.worst_block_z, o.min_chi2_p, o.corner_blocks, o.worst_focus_pixel_z, o.min_focus_chi2_p, o.worst_edge_z, o.edge_chi2, o.edge_n, edge_p, o.worst_profile_diff
+            "{}: worst block |z| {:.2}, min chi2 p {:.4} ({} block tests beyond {CORNER_FRAC} of the half-diagonal); focus plane worst pixel |z| {:.2}, min chi2 p {:.4}; edges: worst |z| {:.2}, chi2 {:.1} over {} profile points (p {:.4}), worst profile difference {:.4} of the contrast (tolerance {EDGE_TOL}, Monte Carlo σ ≤ {:.4} of the contrast); {} negative controls",
+            spec.name, o.worst_block_z, o.min_chi2_p, o.corner_blocks, o.worst_focus_pixel_z, o.min_focus_chi2_p, o.worst_edge_z, o.edge_chi2, o.edge_n, edge_p, o.worst_profile_diff, o.worst_edge_sd, o.negative_controls
         );
         failures.extend(o.failures);
         if edge_p <= 1e-4 {
             failures.push(format!("{}: edge profiles chi2 p {edge_p}", spec.name));
         }
+        if assert_profile_tol && o.worst_edge_sd >= EDGE_TOL / 3.0 {
+            failures.push(format!(
+                "{}: edge profile Monte Carlo σ {} of the contrast does not resolve {EDGE_TOL}",
+                spec.name, o.worst_edge_sd
+            ));
+        }
+        controls += o.negative_controls;
         if o.worst_block_z >= 5.0 {
             failures.push(format!("{}: block |z| {}", spec.name, o.worst_block_z));
         }
@@ -625,18 +716,123 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize) {
             failures.push(format!("{}: no block near the corners", spec.name));
         }
     }
+    if only.is_none() && controls == 0 {
+        failures.push("no negative control ran".into());
+    }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// χ² survival function: P(X > `chi2`) for `dof` degrees of freedom (1 when `dof` is 0).
+fn chi2_sf(chi2: f64, dof: usize) -> f64 {
+    if dof == 0 {
+        return 1.0;
+    }
+    1.0 - ChiSquared::new(dof as f64).unwrap().cdf(chi2)
 }
 
 /// CI size: 96 × 64 px, 128 samples per pixel through the lens, the chain's 3 × 3 field tiles.
 #[test]
 fn real_lens_crosscheck_three_scenes_three_apertures() {
-    real_lens_crosscheck(96, 64, 128, 3);
+    real_lens_crosscheck(96, 64, 128, 3, false);
 }
 
 /// Full size (docs/render.md): 384 × 256 px, 1024 samples per pixel.
 #[test]
 #[ignore]
 fn real_lens_crosscheck_full_size() {
-    real_lens_crosscheck(384, 256, 1024, 3);
+    real_lens_crosscheck(384, 256, 1024, 3, true);
+}
+
+/// A defocus whose PSF tables would exceed `LENS_DEPTH_MEMORY_BUDGET_BYTES` is refused before
+/// anything is computed, with one line naming the sizes (double Gauss at f/2 focused on 1.5 m,
+/// 1 µm samples, an object at 0.1 m: a blur radius of several mm, PSFs of ~10⁴ samples a side).
+#[test]
+fn lens_depth_kernels_refuse_a_huge_defocus() {
+    let lens = double_gauss();
+    let focus = focused_f2(&lens);
+    let t = std::time::Instant::now();
+    let err = LensDepthKernels::new(
+        &focus,
+        &LensDepthOptions {
+            sample_pitch_mm: 0.001,
+            width: 64,
+            height: 64,
+            wavelengths_nm: vec![550.0],
+            pupil_n: 32,
+            tiles: 3,
+        },
+        &[1.0 / FOCUS_M, 10.0],
+    )
+    .unwrap_err()
+    .to_string();
+    eprintln!("{err} ({:.3} s)", t.elapsed().as_secs_f64());
+    assert!(!err.contains('\n'), "{err}");
+    assert!(
+        err.contains("GiB budget") && err.contains("distances") && err.contains("field heights"),
+        "{err}"
+    );
+    assert!(t.elapsed().as_secs_f64() < 5.0, "refused only after computing");
+}
+
+/// The field model of the depth optics is tabulated exactly at the tile centres: with 3 × 3
+/// tiles each tile's kernel equals the field model's tabulated PSF at its centre, rotated to its
+/// azimuth (no blend of two heights), and the tile-centre radii are the only heights.
+#[test]
+fn lens_depth_kernels_tabulate_at_tile_centres() {
+    use camsim_lens::field_model::{FieldModel, FieldModelOptions, Focus, PsfKind};
+    let lens = double_gauss();
+    let focus = focused_f2(&lens);
+    // a heights list that is not increasing is refused with one line
+    let bad = FieldModel::compute(
+        &focus.lens,
+        &FieldModelOptions {
+            paraxial_heights_mm: Some(vec![0.0, 2.0, 1.0]),
+            kind: PsfKind::Geometric,
+            focus: Focus::Focused(Box::new(focus.clone())),
+            ..Default::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(bad.contains("paraxial_heights_mm") && !bad.contains('\n'), "{bad}");
+    let m = FieldModel::compute(
+        &focus.lens,
+        &FieldModelOptions {
+            paraxial_heights_mm: Some(vec![0.0, 3.0, 7.5]),
+            kind: PsfKind::Geometric,
+            psf_n: 9,
+            psf_pitch_um: 20.0,
+            pupil_n: 16,
+            pad: 1,
+            ri_grid_n: 8,
+            wavelengths_nm: Some(vec![550.0]),
+            focus: Focus::Focused(Box::new(focus.clone())),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(m.paraxial_height_mm, vec![0.0, 3.0, 7.5]);
+    assert_eq!(m.tables[0].real_height_mm.len(), 3);
+    // real heights increase with the paraxial ones (the heights were traced, not copied)
+    let rh: Vec<f64> = m.tables[0].real_height_mm.iter().map(|r| r[0].abs()).collect();
+    assert!(rh[0].abs() < 1e-9 && rh[1] > 2.9 && rh[2] > rh[1], "{rh:?}");
+}
+
+/// The double Gauss focused by the real-lens camera's focus model on `FOCUS_M` at f/2.
+fn focused_f2(lens: &LensPrescription) -> camsim_lens::FocusedLens {
+    RealLensCamera::new(
+        lens,
+        8,
+        8,
+        &RealLensOptions {
+            focus_distance_m: Some(FOCUS_M),
+            f_number: Some(2.0),
+            film: FilmSize::PixelPitchUm(20.0),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+    .info()
+    .focus
+    .clone()
 }
