@@ -96,13 +96,11 @@ pub fn kernel_rms_radius_px(k: &Kernel) -> f64 {
     (m2 / s).sqrt()
 }
 
-/// Fewest field heights [`LensDepthKernels`] tabulates from the axis to 1.05 × the image's
-/// half-diagonal (evenly spaced in paraxial height; a tile's PSF is interpolated between the two
-/// heights about its centre). With tiles + 1 = 4 heights (3 × 3 tiles) the PSF of the double
-/// Gauss at f/2, 17° off axis, defocused and vignetted, came out with radial skewness +0.22
-/// against the real lens's −0.02 and a radial RMS 7 % too large
-/// (`render/tests/real_lens_crosscheck.rs`).
-pub const MIN_FIELD_HEIGHTS: usize = 9;
+/// Largest memory (bytes) [`LensDepthKernels::new`] may use for its PSF tables: 2 GiB. Its
+/// estimate is the field model's tables (distances × field heights × wavelengths × psf_n² f64),
+/// twice (the per-distance copies), plus the per-tile kernels (tiles² × wavelengths × distances ×
+/// psf_n² f32); above it the call is refused with one line naming the sizes.
+pub const LENS_DEPTH_MEMORY_BUDGET_BYTES: u64 = 2 << 30;
 
 /// Options of [`LensDepthKernels::new`].
 #[derive(Debug, Clone, PartialEq)]
@@ -164,11 +162,6 @@ impl LensDepthKernels {
             |inv: f64| crate::depth_path::vertex_distance_mm(inv, z_ep_mm, "depth optics");
         let per_tan_mm = lens.paraxial_image_mm_per_tan(lens.primary_nm)?;
         let p = opts.sample_pitch_mm;
-        let half_diag_mm = 0.5 * p * (opts.width as f64).hypot(opts.height as f64);
-        let max_field_deg = (1.05 * half_diag_mm / per_tan_mm)
-            .atan()
-            .to_degrees()
-            .max(0.05);
         let v_focus = focus.focus_distance_mm.map_or(0.0, |d| 1e3 / (d + z_ep_mm));
         let mut invs: Vec<f64> = inv_depths_per_m.iter().map(|v| v.max(0.0)).collect();
         invs.sort_by(|a, b| a.total_cmp(b));
@@ -188,11 +181,57 @@ impl LensDepthKernels {
         let mut wls = opts.wavelengths_nm.clone();
         wls.sort_by(|a, b| a.total_cmp(b));
         wls.dedup();
+        // tile centres (samples) → paraxial image positions (mm); the field model is tabulated
+        // exactly at their distinct radii, so that no tile's PSF is interpolated between heights
+        let n = opts.tiles;
+        let (yc, xc) = (
+            (opts.height as f64 - 1.0) / 2.0,
+            (opts.width as f64 - 1.0) / 2.0,
+        );
+        let centres_mm: Vec<(f64, f64)> = (0..n * n)
+            .map(|t| {
+                let (r0, r1) = tile_span(opts.height, n, t / n);
+                let (c0, c1) = tile_span(opts.width, n, t % n);
+                let yi = 0.5 * (r0 + r1) as f64 - 0.5;
+                let xj = 0.5 * (c0 + c1) as f64 - 0.5;
+                ((xj - xc) * p, (yi - yc) * p)
+            })
+            .collect();
+        let mut heights_mm: Vec<f64> = if n == 1 {
+            vec![0.0]
+        } else {
+            centres_mm.iter().map(|(x, y)| x.hypot(*y)).collect()
+        };
+        heights_mm.sort_by(|a, b| a.total_cmp(b));
+        heights_mm.dedup();
+        let (nd, nf, nw) = (distances.len() as u64, heights_mm.len() as u64, wls.len() as u64);
+        let entry_bytes = (psf_n as u64).saturating_pow(2);
+        let need = nd
+            .saturating_mul(nf)
+            .saturating_mul(nw)
+            .saturating_mul(entry_bytes)
+            .saturating_mul(16)
+            .saturating_add(
+                ((n * n) as u64)
+                    .saturating_mul(nw)
+                    .saturating_mul(nd)
+                    .saturating_mul(entry_bytes)
+                    .saturating_mul(4),
+            );
+        if need > LENS_DEPTH_MEMORY_BUDGET_BYTES {
+            return Err(bad(format!(
+                "the PSF tables would need {:.1} GiB ({nd} distances × {nf} field heights × {nw} wavelengths × {psf_n}² samples of {:.4} mm, for up to {max_dv:.3} 1/m of defocus), over the {:.0} GiB budget: use fewer depth layers or wavelengths, a coarser sample pitch or a smaller aperture",
+                need as f64 / (1u64 << 30) as f64,
+                p,
+                LENS_DEPTH_MEMORY_BUDGET_BYTES as f64 / (1u64 << 30) as f64
+            )));
+        }
         let model = FieldModel::compute(
             lens,
             &FieldModelOptions {
-                n_fields: (opts.tiles + 1).max(MIN_FIELD_HEIGHTS),
-                max_field_deg: Some(max_field_deg),
+                n_fields: heights_mm.len(),
+                paraxial_heights_mm: Some(heights_mm),
+                max_field_deg: None,
                 wavelengths_nm: Some(wls.clone()),
                 kind: PsfKind::Geometric,
                 psf_n,
@@ -205,38 +244,25 @@ impl LensDepthKernels {
             },
         )?;
         let tables: Vec<_> = distances.iter().map(|d| model.at_distance(*d)).collect();
-        let n = opts.tiles;
-        let (yc, xc) = (
-            (opts.height as f64 - 1.0) / 2.0,
-            (opts.width as f64 - 1.0) / 2.0,
-        );
         let mut table = Vec::with_capacity(n * n);
-        for ty in 0..n {
-            for tx in 0..n {
-                // tile centre (samples) → paraxial image position (mm)
-                let (r0, r1) = tile_span(opts.height, n, ty);
-                let (c0, c1) = tile_span(opts.width, n, tx);
-                let yi = 0.5 * (r0 + r1) as f64 - 0.5;
-                let xj = 0.5 * (c0 + c1) as f64 - 0.5;
-                let (x_mm, y_mm) = ((xj - xc) * p, (yi - yc) * p);
-                let per_wl = wls
-                    .iter()
-                    .map(|wl| {
-                        invs.iter()
-                            .zip(&tables)
-                            .map(|(v, t)| {
-                                let psf = if n == 1 {
-                                    t.psf_on_y(0.0, *wl)
-                                } else {
-                                    t.psf_at(x_mm, y_mm, *wl)
-                                };
-                                (*v, trim_kernel(&psf, t.psf_n))
-                            })
-                            .collect::<Vec<_>>()
-                    })
-                    .collect();
-                table.push(per_wl);
-            }
+        for (x_mm, y_mm) in centres_mm {
+            let per_wl = wls
+                .iter()
+                .map(|wl| {
+                    invs.iter()
+                        .zip(&tables)
+                        .map(|(v, t)| {
+                            let psf = if n == 1 {
+                                t.psf_on_y(0.0, *wl)
+                            } else {
+                                t.psf_at(x_mm, y_mm, *wl)
+                            };
+                            (*v, trim_kernel(&psf, t.psf_n))
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .collect();
+            table.push(per_wl);
         }
         Ok(LensDepthKernels {
             tiles: n,

@@ -402,6 +402,7 @@ impl LensDefocus {
             &lens,
             &FieldModelOptions {
                 n_fields: 2,
+                paraxial_heights_mm: None,
                 max_field_deg: Some(1.0),
                 wavelengths_nm: Some(opts.wavelengths_nm.clone()),
                 kind: PsfKind::Geometric,
