@@ -18,10 +18,13 @@
 //!   nearest) and per **field tile**: the image is cut into `tiles × tiles` equal rectangles
 //!   and each uses the PSF of its centre's paraxial image position
 //!   ([`camsim_lens::field_model::FieldTable::psf_at`]: the +y PSF at that height rotated to
-//!   the tile's azimuth). Limits: the PSF is piecewise constant over a tile (seams where
-//!   neighbouring tiles differ); the rotation does not mirror the PSF for the image inversion,
-//!   so a comatic off-axis PSF may point radially the wrong way; the geometric PSF omits
-//!   diffraction. Planar depth is taken from the lens's paraxial entrance pupil (the pinhole
+//!   the tile's azimuth), the field model being tabulated exactly at the distinct tile-centre
+//!   radii (no interpolation between heights). The rotated PSF points the way the real lens's
+//!   does: the radial skewness of the kernel matches the real-lens camera's PSF at 10 mm off
+//!   axis to the right and downwards, where a mirrored kernel would fail
+//!   (`render/tests/real_lens_crosscheck.rs`, docs/render_validation.md). Limits: the PSF is
+//!   piecewise constant over a tile (seams where neighbouring tiles differ); the geometric PSF
+//!   omits diffraction; the tables are refused above [`LENS_DEPTH_MEMORY_BUDGET_BYTES`]. Planar depth is taken from the lens's paraxial entrance pupil (the pinhole
 //!   of the render), as by the real-lens camera ([`crate::camera::real_lens`]).
 //!
 //! Both give, besides the defocused planes, the blur size per pixel: the RMS radius of the PSF
