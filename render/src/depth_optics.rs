@@ -55,7 +55,8 @@ pub fn thin_lens_for_camera(
     Ok(ThinLensDefocus {
         aperture_radius_m: focal_length_m / (2.0 * f_number),
         focus_distance_m: focus_distance_m.unwrap_or(f64::INFINITY),
-        yfov_rad: 2.0 * (0.5 * sample_pitch_m / v).atan(),
+        // one sample of pitch p at image scale v (the ratio is unit-free)
+        yfov_rad: pinhole_yfov_rad(v, 1, sample_pitch_m),
         height_px: 1,
     })
 }
@@ -70,6 +71,13 @@ pub fn thin_lens_for_camera(
 /// radiance they act on must use this mapping.
 pub fn pinhole_yfov_rad(image_mm_per_tan: f64, rows: usize, sample_pitch_mm: f64) -> f64 {
     2.0 * (0.5 * rows as f64 * sample_pitch_mm / image_mm_per_tan).atan()
+}
+
+/// The image scale (samples per unit tan θ) of a pinhole image of `rows` samples with vertical
+/// field of view `yfov_rad`: rows/(2 tan(θ_y/2)), the inverse of [`pinhole_yfov_rad`]
+/// (H/p = rows/(2 tan(θ_y/2))).
+pub fn pinhole_pixels_per_tan(yfov_rad: f64, rows: usize) -> f64 {
+    rows as f64 / (2.0 * (0.5 * yfov_rad).tan())
 }
 
 /// RMS radius (px) of a kernel about its centroid: √(Σ w·((x − x̄)² + (y − ȳ)²)) (for a uniform

@@ -100,9 +100,10 @@ pub struct ThinLensDefocus {
 }
 
 impl ThinLensDefocus {
-    /// The image scale (px per unit tan θ) of the camera: H/(2 tan(θ_y/2)).
+    /// The image scale (px per unit tan θ) of the camera: H/(2 tan(θ_y/2))
+    /// ([`crate::depth_optics::pinhole_pixels_per_tan`]).
     pub fn pixels_per_tan(&self) -> f64 {
-        self.height_px as f64 / (2.0 * (0.5 * self.yfov_rad).tan())
+        crate::depth_optics::pinhole_pixels_per_tan(self.yfov_rad, self.height_px)
     }
 
     /// Circle-of-confusion radius (px) of planar depth `z_m` (∞ allowed).

@@ -48,7 +48,7 @@ pub struct SceneSpec {
 /// Pinhole focal length in pixels, H/(2 tan(θ_y/2)), of a film `h` px high with vertical
 /// field of view `yfov_deg`.
 pub fn k_px(h: usize, yfov_deg: f64) -> f64 {
-    h as f64 / (2.0 * (0.5 * yfov_deg.to_radians()).tan())
+    camsim_render::depth_optics::pinhole_pixels_per_tan(yfov_deg.to_radians(), h)
 }
 
 /// Emitters: spectrally distinct so that every band differs.
@@ -363,4 +363,87 @@ pub fn edge_profile(img: &[f32], w: usize, e: &Edge, half: isize) -> Vec<f64> {
                 / n_along
         })
         .collect()
+}
+
+/// χ² survival function: P(X > `chi2`) for `dof` degrees of freedom (1 when `dof` is 0).
+pub fn chi2_sf(chi2: f64, dof: usize) -> f64 {
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    if dof == 0 {
+        return 1.0;
+    }
+    1.0 - ChiSquared::new(dof as f64).unwrap().cdf(chi2)
+}
+
+/// One 8 × 8 block of [`block_z_tests`].
+pub struct BlockZ {
+    /// Block origin (px).
+    pub x0: usize,
+    /// Block origin (px).
+    pub y0: usize,
+    /// Block mean of image (a).
+    pub mean_a: f64,
+    /// Block mean of image (b).
+    pub mean_b: f64,
+    /// Scale of the pinhole variance to (b)'s.
+    pub g: f64,
+    /// z = (mean_a − mean_b)/σ.
+    pub z: f64,
+}
+
+/// The block comparison of the cross-checks: 8 × 8 px blocks clear of the depth edges of
+/// `jump` and of the border by `margin` px ([`block_excluded`]); per block the means of `a`
+/// and `b` and z = Δ/σ, σ² = (Σ var_a + g²·Σ var_pin)/64² + (10⁻⁵·mean_a)², (b)'s variance being
+/// that of the pinhole render `pin` it was computed from, scaled by g = mean_b/mean_pin when
+/// `scale_pinhole_variance` (b in other units, e.g. irradiance), else g = 1.
+#[allow(clippy::too_many_arguments)]
+pub fn block_z_tests(
+    a: &[f32],
+    var_a: &[f32],
+    b: &[f32],
+    pin: &[f32],
+    var_pin: &[f32],
+    jump: &[bool],
+    (w, h): (usize, usize),
+    margin: usize,
+    scale_pinhole_variance: bool,
+) -> Vec<BlockZ> {
+    let mut out = Vec::new();
+    for by in 0..h / 8 {
+        for bx in 0..w / 8 {
+            let (x0, y0) = (bx * 8, by * 8);
+            if block_excluded(jump, w, h, x0, y0, margin) {
+                continue;
+            }
+            let (mut sa, mut sb, mut sp, mut va, mut vp) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for y in y0..y0 + 8 {
+                for x in x0..x0 + 8 {
+                    let q = y * w + x;
+                    sa += a[q] as f64;
+                    sb += b[q] as f64;
+                    sp += pin[q] as f64;
+                    va += var_a[q] as f64;
+                    vp += var_pin[q] as f64;
+                }
+            }
+            let nn = 64.0;
+            let (ma, mb, mp) = (sa / nn, sb / nn, sp / nn);
+            let g = if !scale_pinhole_variance {
+                1.0
+            } else if mp > 0.0 {
+                mb / mp
+            } else {
+                0.0
+            };
+            let var = (va + g * g * vp) / (nn * nn) + (1e-5 * ma.abs()).powi(2);
+            out.push(BlockZ {
+                x0,
+                y0,
+                mean_a: ma,
+                mean_b: mb,
+                g,
+                z: (ma - mb) / var.sqrt(),
+            });
+        }
+    }
+    out
 }

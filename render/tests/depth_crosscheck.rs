@@ -21,7 +21,7 @@
 //! * **circle of confusion**: the camera's thin-lens law (v/pitch scale) equals the render
 //!   camera's (H/(2 tan(θ/2)) scale) to 10⁻⁹.
 use super::crosscheck_scenes::{
-    block_excluded, build, depth_jump_mask, disc_esf, edge_profile, k_px, scenes, width_10_90,
+    block_z_tests, build, chi2_sf, depth_jump_mask, disc_esf, edge_profile, k_px, scenes, width_10_90,
     SceneSpec, DEPTHS_M,
 };
 use camsim_render::camera::{Pinhole, ThinLens};
@@ -29,7 +29,6 @@ use camsim_render::depth_optics::{defocus_by_depth, thin_lens_for_camera, DepthK
 use camsim_render::depth_path::ThinLensDefocus;
 use camsim_render::gltf_load::{load_gltf, pick_camera};
 use camsim_render::{render, Bands, RenderOutput, RenderSettings};
-use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 const YFOV_DEG: f64 = 30.0;
 const FOCAL_M: f64 = 0.1;
@@ -150,38 +149,28 @@ fn check_scene(
         let pvar = pin.variance_planes.as_ref().unwrap();
         for bnd in 0..bands.count {
             // blocks
-            let (mut chi2, mut nblk) = (0.0, 0usize);
-            for by in 0..h / 8 {
-                for bx in 0..w / 8 {
-                    let (x0, y0) = (bx * 8, by * 8);
-                    if block_excluded(&jump, w, h, x0, y0, margin) {
-                        continue;
-                    }
-                    let (mut sa, mut sb, mut va, mut vb) = (0.0, 0.0, 0.0, 0.0);
-                    for y in y0..y0 + 8 {
-                        for x in x0..x0 + 8 {
-                            let q = y * w + x;
-                            sa += thin.band_planes[bnd][q] as f64;
-                            sb += dp.planes[bnd][q] as f64;
-                            va += tvar[bnd][q] as f64;
-                            vb += pvar[bnd][q] as f64;
-                        }
-                    }
-                    let nn = 64.0;
-                    let (ma, mb) = (sa / nn, sb / nn);
-                    let var = (va + vb) / (nn * nn) + (1e-5 * ma.abs()).powi(2);
-                    let z = (ma - mb) / var.sqrt();
-                    out.worst_block_z = out.worst_block_z.max(z.abs());
-                    chi2 += z * z;
-                    nblk += 1;
-                }
+            let blocks = block_z_tests(
+                &thin.band_planes[bnd],
+                &tvar[bnd],
+                &dp.planes[bnd],
+                &pin.band_planes[bnd],
+                &pvar[bnd],
+                &jump,
+                (w, h),
+                margin,
+                false,
+            );
+            let nblk = blocks.len();
+            let chi2: f64 = blocks.iter().map(|b| b.z * b.z).sum();
+            for b in &blocks {
+                out.worst_block_z = out.worst_block_z.max(b.z.abs());
             }
             assert!(
                 nblk >= 6,
                 "{}: only {nblk} blocks away from edges",
                 spec.name
             );
-            let p = 1.0 - ChiSquared::new(nblk as f64).unwrap().cdf(chi2);
+            let p = chi2_sf(chi2, nblk);
             out.min_chi2_p = out.min_chi2_p.min(p);
             eprintln!(
                 "{} f/{n_f} band {bnd}: {nblk} blocks, chi2 {chi2:.1} (p {p:.3})",

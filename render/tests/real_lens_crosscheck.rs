@@ -14,7 +14,8 @@
 //!
 //! Tolerances, stated (see the test functions).
 use super::crosscheck_scenes::{build, scenes, width_10_90, SceneSpec, DEPTHS_M};
-use camsim_lens::{GlassCatalog, LensPrescription};
+use super::test_lenses::double_gauss;
+use camsim_lens::LensPrescription;
 use camsim_render::camera::real_lens::{FilmSize, RealLensCamera, RealLensOptions};
 use camsim_render::camera::{Camera, Pinhole};
 use camsim_render::depth_optics::{
@@ -24,18 +25,10 @@ use camsim_render::depth_path::slab_inverse_depths;
 use camsim_render::gltf_load::{load_gltf, pick_camera};
 use camsim_render::{render, Bands, RenderSettings};
 use glam::Vec2;
-use statrs::distribution::{ChiSquared, ContinuousCDF};
 use std::path::Path;
 
 const FOCUS_M: f64 = 1.5;
 
-fn double_gauss() -> LensPrescription {
-    LensPrescription::from_json_file(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json"),
-        &GlassCatalog::bundled(),
-    )
-    .unwrap()
-}
 
 /// Weighted mean and central moments (m2, m3) of samples `(x, w)`.
 fn moments(s: &[(f64, f64)]) -> (f64, f64, f64) {
@@ -375,7 +368,7 @@ fn check_scene_real_lens(
     assert_profile_tol: bool,
     dir: &Path,
 ) -> LensOutcome {
-    use super::crosscheck_scenes::{block_excluded, depth_jump_mask, edge_profile};
+    use super::crosscheck_scenes::{block_z_tests, chi2_sf, depth_jump_mask, edge_profile};
     let path = dir.join(format!("{}.gltf", spec.name));
     build(spec, w, h, XC_YFOV_DEG).write(&path).unwrap();
     let scene = load_gltf(&path).unwrap();
@@ -471,68 +464,50 @@ fn check_scene_real_lens(
             spec.name
         );
         for bnd in 0..bands.count {
-            let (mut chi2, mut nblk) = (0.0, 0usize);
+            let blocks = block_z_tests(
+                &real.band_planes[bnd],
+                &rvar[bnd],
+                &b_img[bnd],
+                &pin.band_planes[bnd],
+                &pvar[bnd],
+                &jump,
+                (w, h),
+                margin,
+                true,
+            );
+            let nblk = blocks.len();
+            let chi2: f64 = blocks.iter().map(|b| b.z * b.z).sum();
             let (mut fchi2, mut fn_) = (0.0, 0usize);
             let mut ratio = Vec::new();
-            for by in 0..h / 8 {
-                for bx in 0..w / 8 {
-                    let (x0, y0) = (bx * 8, by * 8);
-                    if block_excluded(&jump, w, h, x0, y0, margin) {
-                        continue;
-                    }
-                    let (mut sa, mut sb, mut sp, mut va, mut vp) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for blk in &blocks {
+                let (x0, y0, z, g) = (blk.x0, blk.y0, blk.z, blk.g);
+                let r_frac = (x0 as f64 + 4.0 - xc).hypot(y0 as f64 + 4.0 - yc) / half_diag;
+                if r_frac > CORNER_FRAC {
+                    out.corner_blocks += 1;
+                }
+                ratio.push((r_frac, blk.mean_a / blk.mean_b, z));
+                out.worst_block_z = out.worst_block_z.max(z.abs());
+                // the focus plane, pixel by pixel
+                let on_focus = (pin.depth_z_m[(y0 + 4) * w + x0 + 4] as f64 - FOCUS_M).abs() < 1e-3;
+                if on_focus {
                     for y in y0..y0 + 8 {
                         for x in x0..x0 + 8 {
                             let q = y * w + x;
-                            sa += real.band_planes[bnd][q] as f64;
-                            sb += b_img[bnd][q] as f64;
-                            sp += pin.band_planes[bnd][q] as f64;
-                            va += rvar[bnd][q] as f64;
-                            vp += pvar[bnd][q] as f64;
-                        }
-                    }
-                    let nn = 64.0;
-                    let (ma, mb, mp) = (sa / nn, sb / nn, sp / nn);
-                    // (b)'s variance: the pinhole's, scaled by (b)/pinhole
-                    let g = if mp > 0.0 { mb / mp } else { 0.0 };
-                    let var = (va + g * g * vp) / (nn * nn) + (1e-5 * ma.abs()).powi(2);
-                    let z = (ma - mb) / var.sqrt();
-                    let r_frac = (x0 as f64 + 4.0 - xc).hypot(y0 as f64 + 4.0 - yc) / half_diag;
-                    if r_frac > CORNER_FRAC {
-                        out.corner_blocks += 1;
-                    }
-                    ratio.push((r_frac, ma / mb, z));
-                    out.worst_block_z = out.worst_block_z.max(z.abs());
-                    chi2 += z * z;
-                    nblk += 1;
-                    // the focus plane, pixel by pixel
-                    let on_focus =
-                        (pin.depth_z_m[(y0 + 4) * w + x0 + 4] as f64 - FOCUS_M).abs() < 1e-3;
-                    if on_focus {
-                        for y in y0..y0 + 8 {
-                            for x in x0..x0 + 8 {
-                                let q = y * w + x;
-                                let (a, b) =
-                                    (real.band_planes[bnd][q] as f64, b_img[bnd][q] as f64);
-                                let v = rvar[bnd][q] as f64
-                                    + g * g * pvar[bnd][q] as f64
-                                    + (1e-5 * a.abs()).powi(2);
-                                let z = (a - b) / v.sqrt();
-                                out.worst_focus_pixel_z = out.worst_focus_pixel_z.max(z.abs());
-                                fchi2 += z * z;
-                                fn_ += 1;
-                            }
+                            let (a, b) = (real.band_planes[bnd][q] as f64, b_img[bnd][q] as f64);
+                            let v = rvar[bnd][q] as f64
+                                + g * g * pvar[bnd][q] as f64
+                                + (1e-5 * a.abs()).powi(2);
+                            let z = (a - b) / v.sqrt();
+                            out.worst_focus_pixel_z = out.worst_focus_pixel_z.max(z.abs());
+                            fchi2 += z * z;
+                            fn_ += 1;
                         }
                     }
                 }
             }
-            let p = 1.0 - ChiSquared::new(nblk as f64).unwrap().cdf(chi2);
+            let p = chi2_sf(chi2, nblk);
             out.min_chi2_p = out.min_chi2_p.min(p);
-            let fp = if fn_ > 0 {
-                1.0 - ChiSquared::new(fn_ as f64).unwrap().cdf(fchi2)
-            } else {
-                1.0
-            };
+            let fp = chi2_sf(fchi2, fn_);
             out.min_focus_chi2_p = out.min_focus_chi2_p.min(fp);
             ratio.sort_by(|a, b| a.0.total_cmp(&b.0));
             eprintln!(
@@ -671,7 +646,7 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
             assert_profile_tol,
             dir.path(),
         );
-        let edge_p = chi2_sf(o.edge_chi2, o.edge_n);
+        let edge_p = super::crosscheck_scenes::chi2_sf(o.edge_chi2, o.edge_n);
         eprintln!(
             "{}: worst block |z| {:.2}, min chi2 p {:.4} ({} block tests beyond {CORNER_FRAC} of the half-diagonal); focus plane worst pixel |z| {:.2}, min chi2 p {:.4}; edges: worst |z| {:.2}, chi2 {:.1} over {} profile points (p {:.4}), worst profile difference {:.4} of the contrast (tolerance {EDGE_TOL}, Monte Carlo σ ≤ {:.4} of the contrast); {} negative controls",
             spec.name, o.worst_block_z, o.min_chi2_p, o.corner_blocks, o.worst_focus_pixel_z, o.min_focus_chi2_p, o.worst_edge_z, o.edge_chi2, o.edge_n, edge_p, o.worst_profile_diff, o.worst_edge_sd, o.negative_controls
@@ -707,14 +682,6 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
         failures.push("no negative control ran".into());
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
-}
-
-/// χ² survival function: P(X > `chi2`) for `dof` degrees of freedom (1 when `dof` is 0).
-fn chi2_sf(chi2: f64, dof: usize) -> f64 {
-    if dof == 0 {
-        return 1.0;
-    }
-    1.0 - ChiSquared::new(dof as f64).unwrap().cdf(chi2)
 }
 
 /// CI size: 96 × 64 px, 128 samples per pixel through the lens, the chain's 3 × 3 field tiles.

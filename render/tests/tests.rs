@@ -15,3 +15,4 @@ mod physics;
 mod real_lens;
 mod real_lens_crosscheck;
 mod samplers;
+mod test_lenses;
