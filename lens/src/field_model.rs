@@ -99,8 +99,14 @@ pub const MAX_WAVE_PUPIL_N: usize = 512;
 /// How to build a [`FieldModel`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FieldModelOptions {
-    /// Number of tabulated field heights (≥ 2), evenly spaced in paraxial image height.
+    /// Number of tabulated field heights (≥ 2), evenly spaced in paraxial image height (unless
+    /// `paraxial_heights_mm` is given).
     pub n_fields: usize,
+    /// Explicit paraxial image heights (mm; finite, ≥ 0, strictly increasing, at least one) to
+    /// tabulate instead of `n_fields` evenly spaced up to `max_field_deg` (which are then
+    /// ignored): e.g. exactly the positions a caller evaluates, so that no PSF is interpolated
+    /// between heights.
+    pub paraxial_heights_mm: Option<Vec<f64>>,
     /// Maximum field angle (degrees) **of the first tabulated distance**; default the largest
     /// of the lens's `fields_deg`. It fixes the maximum paraxial image height shared by all
     /// distances.
@@ -133,6 +139,7 @@ impl Default for FieldModelOptions {
     fn default() -> Self {
         FieldModelOptions {
             n_fields: 5,
+            paraxial_heights_mm: None,
             max_field_deg: None,
             wavelengths_nm: None,
             kind: PsfKind::Wave,
@@ -505,7 +512,14 @@ impl FieldModel {
     /// thread count.
     pub fn compute(lens: &LensPrescription, opts: &FieldModelOptions) -> Result<Self, LensError> {
         let bad = |m: String| LensError::Prescription(format!("field model: {m}"));
-        if opts.n_fields < 2 {
+        if let Some(hs) = &opts.paraxial_heights_mm {
+            let increasing = hs.windows(2).all(|w| w[1] > w[0]);
+            if hs.is_empty() || !increasing || hs.iter().any(|h| !(h.is_finite() && *h >= 0.0)) {
+                return Err(bad(format!(
+                    "paraxial_heights_mm = {hs:?} (need at least one finite height ≥ 0 mm, strictly increasing)"
+                )));
+            }
+        } else if opts.n_fields < 2 {
             return Err(bad(format!("n_fields = {} (need ≥ 2)", opts.n_fields)));
         }
         if !(opts.psf_pitch_um > 0.0) || opts.psf_n == 0 || opts.pupil_n < 2 {
@@ -563,7 +577,7 @@ impl FieldModel {
         let max_deg = opts
             .max_field_deg
             .unwrap_or_else(|| lens.fields_deg.iter().cloned().fold(0.0, f64::max));
-        if !(max_deg > 0.0) {
+        if opts.paraxial_heights_mm.is_none() && !(max_deg > 0.0) {
             return Err(bad(format!("maximum field {max_deg}° must be > 0")));
         }
         // Paraxial height is linear in tan θ at every distance.
@@ -571,10 +585,15 @@ impl FieldModel {
             .iter()
             .map(|l| l.paraxial_image_mm_per_tan(lens.primary_nm))
             .collect::<Result<_, _>>()?;
-        let hmax = per_tan[0] * max_deg.to_radians().tan();
-        let paraxial_height_mm: Vec<f64> = (0..opts.n_fields)
-            .map(|k| hmax * k as f64 / (opts.n_fields - 1) as f64)
-            .collect();
+        let paraxial_height_mm: Vec<f64> = match &opts.paraxial_heights_mm {
+            Some(hs) => hs.clone(),
+            None => {
+                let hmax = per_tan[0] * max_deg.to_radians().tan();
+                (0..opts.n_fields)
+                    .map(|k| hmax * k as f64 / (opts.n_fields - 1) as f64)
+                    .collect()
+            }
+        };
         let angles: Vec<Vec<f64>> = per_tan
             .iter()
             .map(|pt| {
@@ -584,7 +603,7 @@ impl FieldModel {
                     .collect()
             })
             .collect();
-        let (nd, nf, nw) = (distances.len(), opts.n_fields, wls.len());
+        let (nd, nf, nw) = (distances.len(), paraxial_height_mm.len(), wls.len());
         // Every (distance, field, wavelength) entry in parallel.
         let entries: Vec<Entry> = (0..nd * nf * nw)
             .into_par_iter()

@@ -338,6 +338,7 @@ impl LensBlur {
         };
         let fm_opts = FieldModelOptions {
             n_fields: opts.n_fields,
+            paraxial_heights_mm: None,
             max_field_deg: Some(theta),
             wavelengths_nm: Some(wls),
             kind,

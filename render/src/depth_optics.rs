@@ -18,10 +18,13 @@
 //!   nearest) and per **field tile**: the image is cut into `tiles × tiles` equal rectangles
 //!   and each uses the PSF of its centre's paraxial image position
 //!   ([`camsim_lens::field_model::FieldTable::psf_at`]: the +y PSF at that height rotated to
-//!   the tile's azimuth). Limits: the PSF is piecewise constant over a tile (seams where
-//!   neighbouring tiles differ); the rotation does not mirror the PSF for the image inversion,
-//!   so a comatic off-axis PSF may point radially the wrong way; the geometric PSF omits
-//!   diffraction. Planar depth is taken from the lens's paraxial entrance pupil (the pinhole
+//!   the tile's azimuth), the field model being tabulated exactly at the distinct tile-centre
+//!   radii (no interpolation between heights). The rotated PSF points the way the real lens's
+//!   does: the radial skewness of the kernel matches the real-lens camera's PSF at 10 mm off
+//!   axis to the right and downwards, where a mirrored kernel would fail
+//!   (`render/tests/real_lens_crosscheck.rs`, docs/render_validation.md). Limits: the PSF is
+//!   piecewise constant over a tile (seams where neighbouring tiles differ); the geometric PSF
+//!   omits diffraction; the tables are refused above [`LENS_DEPTH_MEMORY_BUDGET_BYTES`]. Planar depth is taken from the lens's paraxial entrance pupil (the pinhole
 //!   of the render), as by the real-lens camera ([`crate::camera::real_lens`]).
 //!
 //! Both give, besides the defocused planes, the blur size per pixel: the RMS radius of the PSF
@@ -52,9 +55,29 @@ pub fn thin_lens_for_camera(
     Ok(ThinLensDefocus {
         aperture_radius_m: focal_length_m / (2.0 * f_number),
         focus_distance_m: focus_distance_m.unwrap_or(f64::INFINITY),
-        yfov_rad: 2.0 * (0.5 * sample_pitch_m / v).atan(),
+        // one sample of pitch p at image scale v (the ratio is unit-free)
+        yfov_rad: pinhole_yfov_rad(v, 1, sample_pitch_m),
         height_px: 1,
     })
+}
+
+/// The vertical field of view (rad) of a pinhole image of `rows` samples of pitch
+/// `sample_pitch_mm` on the sensor that covers exactly the field a lens of image-side scale
+/// `image_mm_per_tan` (mm of paraxial image height per unit tan θ of the object's chief ray,
+/// [`camsim_lens::LensPrescription::paraxial_image_mm_per_tan`]; a thin lens: its image
+/// distance v) images onto them: the paraxial image height is H·tan θ, so
+/// tan(θ_y/2) = rows·p/(2H). The depth-aware optics' PSFs, distortion (real relative to the
+/// paraxial H·tan θ) and relative illumination are tabulated by sensor position, so the pinhole
+/// radiance they act on must use this mapping.
+pub fn pinhole_yfov_rad(image_mm_per_tan: f64, rows: usize, sample_pitch_mm: f64) -> f64 {
+    2.0 * (0.5 * rows as f64 * sample_pitch_mm / image_mm_per_tan).atan()
+}
+
+/// The image scale (samples per unit tan θ) of a pinhole image of `rows` samples with vertical
+/// field of view `yfov_rad`: rows/(2 tan(θ_y/2)), the inverse of [`pinhole_yfov_rad`]
+/// (H/p = rows/(2 tan(θ_y/2))).
+pub fn pinhole_pixels_per_tan(yfov_rad: f64, rows: usize) -> f64 {
+    rows as f64 / (2.0 * (0.5 * yfov_rad).tan())
 }
 
 /// RMS radius (px) of a kernel about its centroid: √(Σ w·((x − x̄)² + (y − ȳ)²)) (for a uniform
@@ -83,6 +106,12 @@ pub fn kernel_rms_radius_px(k: &Kernel) -> f64 {
         .sum();
     (m2 / s).sqrt()
 }
+
+/// Largest memory (bytes) [`LensDepthKernels::new`] may use for its PSF tables: 2 GiB. Its
+/// estimate is the field model's tables (distances × field heights × wavelengths × psf_n² f64),
+/// twice (the per-distance copies), plus the per-tile kernels (tiles² × wavelengths × distances ×
+/// psf_n² f32); above it the call is refused with one line naming the sizes.
+pub const LENS_DEPTH_MEMORY_BUDGET_BYTES: u64 = 2 << 30;
 
 /// Options of [`LensDepthKernels::new`].
 #[derive(Debug, Clone, PartialEq)]
@@ -144,11 +173,6 @@ impl LensDepthKernels {
             |inv: f64| crate::depth_path::vertex_distance_mm(inv, z_ep_mm, "depth optics");
         let per_tan_mm = lens.paraxial_image_mm_per_tan(lens.primary_nm)?;
         let p = opts.sample_pitch_mm;
-        let half_diag_mm = 0.5 * p * (opts.width as f64).hypot(opts.height as f64);
-        let max_field_deg = (1.05 * half_diag_mm / per_tan_mm)
-            .atan()
-            .to_degrees()
-            .max(0.05);
         let v_focus = focus.focus_distance_mm.map_or(0.0, |d| 1e3 / (d + z_ep_mm));
         let mut invs: Vec<f64> = inv_depths_per_m.iter().map(|v| v.max(0.0)).collect();
         invs.sort_by(|a, b| a.total_cmp(b));
@@ -168,11 +192,57 @@ impl LensDepthKernels {
         let mut wls = opts.wavelengths_nm.clone();
         wls.sort_by(|a, b| a.total_cmp(b));
         wls.dedup();
+        // tile centres (samples) → paraxial image positions (mm); the field model is tabulated
+        // exactly at their distinct radii, so that no tile's PSF is interpolated between heights
+        let n = opts.tiles;
+        let (yc, xc) = (
+            (opts.height as f64 - 1.0) / 2.0,
+            (opts.width as f64 - 1.0) / 2.0,
+        );
+        let centres_mm: Vec<(f64, f64)> = (0..n * n)
+            .map(|t| {
+                let (r0, r1) = tile_span(opts.height, n, t / n);
+                let (c0, c1) = tile_span(opts.width, n, t % n);
+                let yi = 0.5 * (r0 + r1) as f64 - 0.5;
+                let xj = 0.5 * (c0 + c1) as f64 - 0.5;
+                ((xj - xc) * p, (yi - yc) * p)
+            })
+            .collect();
+        let mut heights_mm: Vec<f64> = if n == 1 {
+            vec![0.0]
+        } else {
+            centres_mm.iter().map(|(x, y)| x.hypot(*y)).collect()
+        };
+        heights_mm.sort_by(|a, b| a.total_cmp(b));
+        heights_mm.dedup();
+        let (nd, nf, nw) = (distances.len() as u64, heights_mm.len() as u64, wls.len() as u64);
+        let entry_bytes = (psf_n as u64).saturating_pow(2);
+        let need = nd
+            .saturating_mul(nf)
+            .saturating_mul(nw)
+            .saturating_mul(entry_bytes)
+            .saturating_mul(16)
+            .saturating_add(
+                ((n * n) as u64)
+                    .saturating_mul(nw)
+                    .saturating_mul(nd)
+                    .saturating_mul(entry_bytes)
+                    .saturating_mul(4),
+            );
+        if need > LENS_DEPTH_MEMORY_BUDGET_BYTES {
+            return Err(bad(format!(
+                "the PSF tables would need {:.1} GiB ({nd} distances × {nf} field heights × {nw} wavelengths × {psf_n}² samples of {:.4} mm, for up to {max_dv:.3} 1/m of defocus), over the {:.0} GiB budget: use fewer depth layers or wavelengths, a coarser sample pitch or a smaller aperture",
+                need as f64 / (1u64 << 30) as f64,
+                p,
+                LENS_DEPTH_MEMORY_BUDGET_BYTES as f64 / (1u64 << 30) as f64
+            )));
+        }
         let model = FieldModel::compute(
             lens,
             &FieldModelOptions {
-                n_fields: (opts.tiles + 1).max(2),
-                max_field_deg: Some(max_field_deg),
+                n_fields: heights_mm.len(),
+                paraxial_heights_mm: Some(heights_mm),
+                max_field_deg: None,
                 wavelengths_nm: Some(wls.clone()),
                 kind: PsfKind::Geometric,
                 psf_n,
@@ -185,38 +255,25 @@ impl LensDepthKernels {
             },
         )?;
         let tables: Vec<_> = distances.iter().map(|d| model.at_distance(*d)).collect();
-        let n = opts.tiles;
-        let (yc, xc) = (
-            (opts.height as f64 - 1.0) / 2.0,
-            (opts.width as f64 - 1.0) / 2.0,
-        );
         let mut table = Vec::with_capacity(n * n);
-        for ty in 0..n {
-            for tx in 0..n {
-                // tile centre (samples) → paraxial image position (mm)
-                let (r0, r1) = tile_span(opts.height, n, ty);
-                let (c0, c1) = tile_span(opts.width, n, tx);
-                let yi = 0.5 * (r0 + r1) as f64 - 0.5;
-                let xj = 0.5 * (c0 + c1) as f64 - 0.5;
-                let (x_mm, y_mm) = ((xj - xc) * p, (yi - yc) * p);
-                let per_wl = wls
-                    .iter()
-                    .map(|wl| {
-                        invs.iter()
-                            .zip(&tables)
-                            .map(|(v, t)| {
-                                let psf = if n == 1 {
-                                    t.psf_on_y(0.0, *wl)
-                                } else {
-                                    t.psf_at(x_mm, y_mm, *wl)
-                                };
-                                (*v, trim_kernel(&psf, t.psf_n))
-                            })
-                            .collect::<Vec<_>>()
-                    })
-                    .collect();
-                table.push(per_wl);
-            }
+        for (x_mm, y_mm) in centres_mm {
+            let per_wl = wls
+                .iter()
+                .map(|wl| {
+                    invs.iter()
+                        .zip(&tables)
+                        .map(|(v, t)| {
+                            let psf = if n == 1 {
+                                t.psf_on_y(0.0, *wl)
+                            } else {
+                                t.psf_at(x_mm, y_mm, *wl)
+                            };
+                            (*v, trim_kernel(&psf, t.psf_n))
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .collect();
+            table.push(per_wl);
         }
         Ok(LensDepthKernels {
             tiles: n,

@@ -100,11 +100,16 @@ pub struct ThinLensDefocus {
 }
 
 impl ThinLensDefocus {
+    /// The image scale (px per unit tan θ) of the camera: H/(2 tan(θ_y/2))
+    /// ([`crate::depth_optics::pinhole_pixels_per_tan`]).
+    pub fn pixels_per_tan(&self) -> f64 {
+        crate::depth_optics::pinhole_pixels_per_tan(self.yfov_rad, self.height_px)
+    }
+
     /// Circle-of-confusion radius (px) of planar depth `z_m` (∞ allowed).
     pub fn coc_radius_px(&self, z_m: f64) -> f64 {
         let inv = if z_m.is_finite() { 1.0 / z_m } else { 0.0 };
-        self.aperture_radius_m * (inv - 1.0 / self.focus_distance_m).abs() * self.height_px as f64
-            / (2.0 * (0.5 * self.yfov_rad).tan())
+        self.aperture_radius_m * (inv - 1.0 / self.focus_distance_m).abs() * self.pixels_per_tan()
     }
 
     /// The pillbox PSF at inverse depth `inv_z` (1/m).
@@ -398,6 +403,7 @@ impl LensDefocus {
             &lens,
             &FieldModelOptions {
                 n_fields: 2,
+                paraxial_heights_mm: None,
                 max_field_deg: Some(1.0),
                 wavelengths_nm: Some(opts.wavelengths_nm.clone()),
                 kind: PsfKind::Geometric,

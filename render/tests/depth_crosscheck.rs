@@ -20,313 +20,19 @@
 //!   pixel box), and the profiles within 6 % of the edge contrast.
 //! * **circle of confusion**: the camera's thin-lens law (v/pitch scale) equals the render
 //!   camera's (H/(2 tan(θ/2)) scale) to 10⁻⁹.
+use super::crosscheck_scenes::{
+    block_z_tests, build, chi2_sf, depth_jump_mask, disc_esf, edge_profile, k_px, scenes, width_10_90,
+    SceneSpec, DEPTHS_M,
+};
 use camsim_render::camera::{Pinhole, ThinLens};
 use camsim_render::depth_optics::{defocus_by_depth, thin_lens_for_camera, DepthKernels};
 use camsim_render::depth_path::ThinLensDefocus;
 use camsim_render::gltf_load::{load_gltf, pick_camera};
-use camsim_render::gltf_write::{flat_spectrum, quad, GltfBuilder, MeshData};
 use camsim_render::{render, Bands, RenderOutput, RenderSettings};
-use serde_json::{json, Value};
-use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 const YFOV_DEG: f64 = 30.0;
 const FOCAL_M: f64 = 0.1;
 const FOCUS_M: f64 = 1.5;
-const DEPTHS_M: [f64; 3] = [0.5, 1.5, 5.0];
-
-/// What covers a pixel rectangle at a depth.
-#[derive(Clone, Copy)]
-enum Fill {
-    /// One emitter (material index).
-    Uniform(usize),
-    /// A checker of 4-px cells (period 8 px) of two emitters, phase at the pixel origin.
-    Checker(usize, usize),
-}
-
-/// A fronto-parallel emitter covering pixels [x0, x1) × [y0, y1) (pinhole projection) at z.
-#[derive(Clone, Copy)]
-struct Card {
-    x0: i32,
-    x1: i32,
-    y0: i32,
-    y1: i32,
-    z_m: f64,
-    fill: Fill,
-}
-
-/// A straight depth edge: vertical (`x` = column boundary) or horizontal, the rows (or
-/// columns) [lo, hi) to average over (whole periods), the side of the nearer surface.
-#[derive(Clone, Copy, Debug)]
-struct Edge {
-    vertical: bool,
-    at: usize,
-    lo: usize,
-    hi: usize,
-    near_z_m: f64,
-}
-
-struct SceneSpec {
-    name: &'static str,
-    cards: Vec<Card>,
-    edges: Vec<Edge>,
-}
-
-fn k_px(h: usize) -> f64 {
-    h as f64 / (2.0 * (0.5 * YFOV_DEG.to_radians()).tan())
-}
-
-/// Emitters: spectrally distinct so that every band differs.
-fn materials(b: &mut GltfBuilder) {
-    let emit = |b: &mut GltfBuilder, name: &str, s: Value| {
-        b.material(json!({"name": name, "doubleSided": true,
-            "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
-            "extras": {"spectral_reflectance": flat_spectrum(0.0), "spectral_emission": s}}))
-    };
-    emit(
-        b,
-        "warm",
-        json!({"wavelength_nm": [360.0, 830.0], "values": [0.2, 2.0]}),
-    ); // 0
-    emit(
-        b,
-        "cool",
-        json!({"wavelength_nm": [360.0, 830.0], "values": [2.0, 0.3]}),
-    ); // 1
-    emit(b, "grey", flat_spectrum(1.0)); // 2
-    emit(b, "dark", flat_spectrum(0.15)); // 3
-    emit(b, "bright", flat_spectrum(3.0)); // 4
-    emit(
-        b,
-        "bright_cool",
-        json!({"wavelength_nm": [360.0, 830.0], "values": [4.0, 1.5]}),
-    ); // 5
-}
-
-fn build(spec: &SceneSpec, w: usize, h: usize) -> GltfBuilder {
-    let mut b = GltfBuilder::new();
-    materials(&mut b);
-    let k = k_px(h);
-    let (wc, hc) = (w as f64 / 2.0, h as f64 / 2.0);
-    for (ci, c) in spec.cards.iter().enumerate() {
-        let z = c.z_m;
-        let corner = |px: i32, py: i32| -> [f32; 2] {
-            [
-                ((px as f64 - wc) * z / k) as f32,
-                ((hc - py as f64) * z / k) as f32,
-            ]
-        };
-        let rect = |x0: i32, x1: i32, y0: i32, y1: i32| -> MeshData {
-            let (a, bb) = (corner(x0, y1), corner(x1, y0));
-            let zz = -z as f32;
-            quad([
-                [a[0], a[1], zz],
-                [bb[0], a[1], zz],
-                [bb[0], bb[1], zz],
-                [a[0], bb[1], zz],
-            ])
-        };
-        match c.fill {
-            Fill::Uniform(m) => {
-                let mesh = b.mesh(&format!("card{ci}"), &rect(c.x0, c.x1, c.y0, c.y1), m);
-                b.node(json!({"name": format!("card{ci}"), "mesh": mesh}), true);
-            }
-            Fill::Checker(m0, m1) => {
-                let mut parts = [MeshData::default(), MeshData::default()];
-                let mut y = c.y0;
-                while y < c.y1 {
-                    let mut x = c.x0;
-                    while x < c.x1 {
-                        let which = ((x.div_euclid(4) + y.div_euclid(4)) & 1) as usize;
-                        parts[which].append(&rect(x, (x + 4).min(c.x1), y, (y + 4).min(c.y1)));
-                        x += 4;
-                    }
-                    y += 4;
-                }
-                for (p, m) in parts.iter().zip([m0, m1]) {
-                    let mesh = b.mesh(&format!("card{ci}_{m}"), p, m);
-                    b.node(json!({"name": format!("card{ci}_{m}"), "mesh": mesh}), true);
-                }
-            }
-        }
-    }
-    let cam = b.camera(
-        "camera",
-        YFOV_DEG.to_radians(),
-        Some(w as f64 / h as f64),
-        0.01,
-    );
-    b.node(json!({"name": "camera", "camera": cam}), true);
-    b
-}
-
-/// The three scenes on a `w × h` film (multiples of 8; the cards extend 16 px past the frame,
-/// which a lens sees).
-fn scenes(w: usize, h: usize) -> Vec<SceneSpec> {
-    let (wi, hi) = (w as i32, h as i32);
-    let bg = Card {
-        x0: -16,
-        x1: wi + 16,
-        y0: -16,
-        y1: hi + 16,
-        z_m: 5.0,
-        fill: Fill::Checker(2, 3),
-    };
-    let third = |n: usize| (w * n / 24) * 8; // column multiple of 8
-    let rows = (8, h - 8);
-    vec![
-        // a near uniform card over the far checker
-        SceneSpec {
-            name: "near_card",
-            cards: vec![
-                bg,
-                Card {
-                    x0: -16,
-                    x1: third(1) as i32,
-                    y0: -16,
-                    y1: hi + 16,
-                    z_m: 0.5,
-                    fill: Fill::Uniform(4),
-                },
-            ],
-            edges: vec![Edge {
-                vertical: true,
-                at: third(1),
-                lo: rows.0,
-                hi: rows.1,
-                near_z_m: 0.5,
-            }],
-        },
-        // an in-focus checker at 1.5 m over the far one, a near card over the in-focus one
-        SceneSpec {
-            name: "steps",
-            cards: vec![
-                bg,
-                Card {
-                    x0: third(1) as i32,
-                    x1: wi + 16,
-                    y0: -16,
-                    y1: hi + 16,
-                    z_m: 1.5,
-                    fill: Fill::Checker(0, 1),
-                },
-                Card {
-                    x0: third(2) as i32,
-                    x1: wi + 16,
-                    y0: -16,
-                    y1: hi + 16,
-                    z_m: 0.5,
-                    fill: Fill::Uniform(5),
-                },
-            ],
-            edges: vec![
-                Edge {
-                    vertical: true,
-                    at: third(1),
-                    lo: rows.0,
-                    hi: rows.1,
-                    near_z_m: 1.5,
-                },
-                Edge {
-                    vertical: true,
-                    at: third(2),
-                    lo: rows.0,
-                    hi: rows.1,
-                    near_z_m: 0.5,
-                },
-            ],
-        },
-        // a near frame (top and bottom bars) over an in-focus checker and the far one
-        SceneSpec {
-            name: "window",
-            cards: vec![
-                bg,
-                Card {
-                    x0: (w / 2) as i32,
-                    x1: wi + 16,
-                    y0: -16,
-                    y1: hi + 16,
-                    z_m: 1.5,
-                    fill: Fill::Checker(0, 1),
-                },
-                Card {
-                    x0: -16,
-                    x1: wi + 16,
-                    y0: -16,
-                    y1: (h / 4) as i32 / 8 * 8,
-                    z_m: 0.5,
-                    fill: Fill::Uniform(4),
-                },
-                Card {
-                    x0: -16,
-                    x1: wi + 16,
-                    y0: (3 * h / 4) as i32 / 8 * 8 + 8,
-                    y1: hi + 16,
-                    z_m: 0.5,
-                    fill: Fill::Uniform(5),
-                },
-            ],
-            edges: vec![
-                Edge {
-                    vertical: false,
-                    at: h / 4 / 8 * 8,
-                    lo: 8,
-                    hi: w / 2 - 8,
-                    near_z_m: 0.5,
-                },
-                Edge {
-                    vertical: false,
-                    at: 3 * h / 4 / 8 * 8 + 8,
-                    lo: w / 2 + 8,
-                    hi: w - 8,
-                    near_z_m: 0.5,
-                },
-                Edge {
-                    vertical: true,
-                    at: w / 2,
-                    lo: h / 4 / 8 * 8 + 16,
-                    hi: 3 * h / 4 / 8 * 8,
-                    near_z_m: 1.5,
-                },
-            ],
-        },
-    ]
-}
-
-/// Fraction of a disc of radius `c` on the side x < `u` of a line at signed offset `u` (the
-/// disc ESF); a step for c = 0.
-fn disc_esf(u: f64, c: f64) -> f64 {
-    if c <= 1e-12 {
-        return if u > 0.0 {
-            1.0
-        } else if u < 0.0 {
-            0.0
-        } else {
-            0.5
-        };
-    }
-    let t = (u / c).clamp(-1.0, 1.0);
-    0.5 + (t * (1.0 - t * t).sqrt() + t.asin()) / std::f64::consts::PI
-}
-
-/// 10–90 % width (px) of a rising or falling profile sampled at unit spacing (linear
-/// interpolation of the crossings, from the levels at the ends).
-fn width_10_90(p: &[f64]) -> f64 {
-    let (a, b) = (p[0], p[p.len() - 1]);
-    let cross = |f: f64| -> f64 {
-        let t = a + f * (b - a);
-        for i in 0..p.len() - 1 {
-            let (u, v) = (
-                (p[i] - t) * (b - a).signum(),
-                (p[i + 1] - t) * (b - a).signum(),
-            );
-            if u <= 0.0 && v > 0.0 {
-                return i as f64 + (-u) / (v - u);
-            }
-        }
-        f64::NAN
-    };
-    cross(0.9) - cross(0.1)
-}
 
 struct Outcome {
     worst_block_z: f64,
@@ -344,7 +50,7 @@ fn check_scene(
     dir: &std::path::Path,
 ) -> Outcome {
     let path = dir.join(format!("{}.gltf", spec.name));
-    build(spec, w, h).write(&path).unwrap();
+    build(spec, w, h, YFOV_DEG).write(&path).unwrap();
     let scene = load_gltf(&path).unwrap();
     let sc = pick_camera(&scene, None).unwrap();
     let bands = Bands::new(400.0, 700.0, 100.0).unwrap();
@@ -386,7 +92,7 @@ fn check_scene(
             e.near_z_m
         );
     }
-    let k = k_px(h);
+    let k = k_px(h, YFOV_DEG);
     let v = 1.0 / (1.0 / FOCAL_M - 1.0 / FOCUS_M);
     let pitch = v / k;
     let mut out = Outcome {
@@ -438,66 +144,33 @@ fn check_scene(
             .map(|z| t.coc_radius_px(*z))
             .fold(0.0, f64::max);
         let margin = cmax.ceil() as usize + 2;
-        // depth-edge mask: a > 10 % jump in 1/z between neighbours
-        let inv: Vec<f64> = pin.depth_z_m.iter().map(|z| 1.0 / *z as f64).collect();
-        let mut jump = vec![false; w * h];
-        for j in 0..h {
-            for i in 0..w {
-                let a = inv[j * w + i];
-                for (di, dj) in [(1, 0), (0, 1)] {
-                    if i + di < w && j + dj < h {
-                        let b = inv[(j + dj) * w + i + di];
-                        if (a - b).abs() > 0.1 * a.max(b) {
-                            jump[j * w + i] = true;
-                            jump[(j + dj) * w + i + di] = true;
-                        }
-                    }
-                }
-            }
-        }
+        let jump = depth_jump_mask(&pin.depth_z_m, w, h);
         let tvar = thin.variance_planes.as_ref().unwrap();
         let pvar = pin.variance_planes.as_ref().unwrap();
         for bnd in 0..bands.count {
             // blocks
-            let (mut chi2, mut nblk) = (0.0, 0usize);
-            for by in 0..h / 8 {
-                for bx in 0..w / 8 {
-                    let (x0, y0) = (bx * 8, by * 8);
-                    let near_edge =
-                        (y0.saturating_sub(margin)..(y0 + 8 + margin).min(h)).any(|y| {
-                            (x0.saturating_sub(margin)..(x0 + 8 + margin).min(w))
-                                .any(|x| jump[y * w + x])
-                        });
-                    let near_border =
-                        x0 < margin || y0 < margin || x0 + 8 + margin > w || y0 + 8 + margin > h;
-                    if near_edge || near_border {
-                        continue;
-                    }
-                    let (mut sa, mut sb, mut va, mut vb) = (0.0, 0.0, 0.0, 0.0);
-                    for y in y0..y0 + 8 {
-                        for x in x0..x0 + 8 {
-                            let q = y * w + x;
-                            sa += thin.band_planes[bnd][q] as f64;
-                            sb += dp.planes[bnd][q] as f64;
-                            va += tvar[bnd][q] as f64;
-                            vb += pvar[bnd][q] as f64;
-                        }
-                    }
-                    let nn = 64.0;
-                    let (ma, mb) = (sa / nn, sb / nn);
-                    let var = (va + vb) / (nn * nn) + (1e-5 * ma.abs()).powi(2);
-                    let z = (ma - mb) / var.sqrt();
-                    out.worst_block_z = out.worst_block_z.max(z.abs());
-                    chi2 += z * z;
-                    nblk += 1;
-                }
+            let blocks = block_z_tests(
+                &thin.band_planes[bnd],
+                &tvar[bnd],
+                &dp.planes[bnd],
+                &pin.band_planes[bnd],
+                &pvar[bnd],
+                &jump,
+                (w, h),
+                margin,
+                false,
+            );
+            let nblk = blocks.len();
+            let chi2: f64 = blocks.iter().map(|b| b.z * b.z).sum();
+            for b in &blocks {
+                out.worst_block_z = out.worst_block_z.max(b.z.abs());
             }
             assert!(
                 nblk >= 6,
                 "{}: only {nblk} blocks away from edges",
                 spec.name
             );
-            let p = 1.0 - ChiSquared::new(nblk as f64).unwrap().cdf(chi2);
+            let p = chi2_sf(chi2, nblk);
             out.min_chi2_p = out.min_chi2_p.min(p);
             eprintln!(
                 "{} f/{n_f} band {bnd}: {nblk} blocks, chi2 {chi2:.1} (p {p:.3})",
@@ -507,24 +180,7 @@ fn check_scene(
             for e in &spec.edges {
                 let half = (cmax.ceil() as usize + 4) as isize;
                 let n_along = (e.hi - e.lo) as f64;
-                let profile = |img: &[f32]| -> Vec<f64> {
-                    (-half..half)
-                        .map(|d| {
-                            let across = (e.at as isize + d) as usize;
-                            (e.lo..e.hi)
-                                .map(|a| {
-                                    let q = if e.vertical {
-                                        a * w + across
-                                    } else {
-                                        across * w + a
-                                    };
-                                    img[q] as f64
-                                })
-                                .sum::<f64>()
-                                / n_along
-                        })
-                        .collect()
-                };
+                let profile = |img: &[f32]| edge_profile(img, w, e, half);
                 let pa = profile(&thin.band_planes[bnd]);
                 let pa_var: Vec<f64> = profile(&tvar[bnd]).iter().map(|v| v / n_along).collect();
                 let pb = profile(&dp.planes[bnd]);

@@ -409,11 +409,7 @@ fn edge_rise_px(
 #[test]
 fn lens_depth_path_matches_the_real_lens_render() {
     use camsim_render::dof_scene::{render_dof, shipped, DofRenderOptions};
-    let lens = camsim_lens::LensPrescription::from_json_file(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json"),
-        &camsim_lens::GlassCatalog::bundled(),
-    )
-    .unwrap();
+    let lens = super::test_lenses::double_gauss();
     let tiles = shipped();
     let o = DofRenderOptions {
         width_px: 128,
@@ -568,11 +564,7 @@ fn lens_depth_path_matches_the_real_lens_render() {
 #[test]
 fn lens_defocus_psf_is_the_entrance_pupil_disc() {
     use camsim_render::depth_path::{LensDefocus, LensDefocusOptions};
-    let lens = camsim_lens::LensPrescription::from_json_file(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json"),
-        &camsim_lens::GlassCatalog::bundled(),
-    )
-    .unwrap();
+    let lens = super::test_lenses::double_gauss();
     let pitch_mm = 0.01;
     let focus_m = 2.0;
     let invs = [0.0, 0.2, 0.8, 1.0, 1.5];

@@ -1,7 +1,6 @@
 //! Real-lens dual-pixel PSFs ([`camsim_render::depth_path::LensDualPixelDefocus`]) against the
 //! thin-lens dual-pixel geometry (`camsim_optics::dual_pixel`).
 use camsim_render::depth_path::{Kernel, LensDualPixelDefocus};
-use std::path::Path;
 
 /// (centroid x, centroid y, RMS radius about the centroid), in samples from the kernel centre.
 fn moments(k: &Kernel) -> (f64, f64, f64) {
@@ -57,11 +56,7 @@ fn full(l: &Kernel, r: &Kernel) -> Kernel {
 /// centroids lie on the axis in y, and the halves are mirror images.
 #[test]
 fn lens_half_pupil_disparity_matches_thin_lens_geometry() {
-    let mut lens = camsim_lens::LensPrescription::from_json_file(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json"),
-        &camsim_lens::GlassCatalog::bundled(),
-    )
-    .unwrap();
+    let mut lens = super::test_lenses::double_gauss();
     lens.aperture = camsim_lens::prescription::Aperture::FNumber(8.0);
     let fo = lens.first_order(lens.primary_nm).unwrap();
     let z_ep_mm = fo.entrance_pupil_z_mm;

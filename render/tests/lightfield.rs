@@ -2,7 +2,6 @@
 //! disparity versus depth, and shift-and-add refocusing. The scene is a textured plane at a
 //! chosen depth, intersected analytically (camera-only tests, no BVH), radiance = texture.
 use camsim_core::rng::stream;
-use camsim_lens::{GlassCatalog, LensPrescription};
 use camsim_render::camera::lightfield::{refocus, LightFieldCamera, MainLens};
 use camsim_render::camera::real_lens::{FilmSize, RealLensCamera, RealLensOptions};
 use camsim_render::camera::{Camera, OutputQuantity};
@@ -10,7 +9,6 @@ use glam::Vec2;
 use rand::RngExt;
 use rayon::prelude::*;
 use std::f64::consts::PI;
-use std::path::Path;
 
 const N: u32 = 9; // pixels per microlens
 const M: u32 = 33; // microlenses per side (odd: one sits on the axis)
@@ -322,8 +320,7 @@ fn refocusing_brings_a_plane_into_focus() {
 /// through the same lens: exit-pupil sampling from the sensor vs microlens sampling).
 #[test]
 fn prescription_main_lens_flux_matches_the_real_lens_camera() {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json");
-    let lens = LensPrescription::from_json_file(p, &GlassCatalog::bundled()).unwrap();
+    let lens = super::test_lenses::double_gauss();
     let main = LightFieldCamera::prescription_main_lens(&lens, 2.0, Some(4.0), 100.0).unwrap();
     let cam = LightFieldCamera::new(
         MainLens::Prescription(Box::new(main)),

@@ -6,7 +6,7 @@
 //! fixed seeds.
 use camsim_core::rng::stream;
 use camsim_lens::prescription::Aperture;
-use camsim_lens::{FieldModel, FieldModelOptions, GlassCatalog, LensPrescription, PsfKind};
+use camsim_lens::{FieldModel, FieldModelOptions, LensPrescription, PsfKind};
 use camsim_render::camera::real_lens::LensExit;
 use camsim_render::camera::real_lens::{FilmSize, RealLensCamera, RealLensOptions};
 use camsim_render::camera::{Camera, OutputQuantity};
@@ -14,12 +14,10 @@ use glam::{Vec2, Vec3};
 use rand::RngExt;
 use rayon::prelude::*;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
-use std::path::Path;
 use std::sync::OnceLock;
 
 fn dgauss() -> LensPrescription {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../lenses/double_gauss_50mm_f2.json");
-    LensPrescription::from_json_file(p, &GlassCatalog::bundled()).unwrap()
+    super::test_lenses::double_gauss()
 }
 
 /// 64×64 film whose paraxial field is ±15° vertically (half-diagonal ≈ 19 mm, past 20°).

@@ -4,6 +4,7 @@
 mod animation;
 mod blender_features;
 mod bvh;
+mod crosscheck_scenes;
 mod depth_crosscheck;
 mod depth_path;
 mod dual_pixel_lens;
@@ -12,4 +13,6 @@ mod lightfield;
 mod mitsuba;
 mod physics;
 mod real_lens;
+mod real_lens_crosscheck;
 mod samplers;
+mod test_lenses;
