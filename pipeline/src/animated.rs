@@ -46,6 +46,9 @@ pub struct GridRender<'a> {
     pub spp: u32,
     /// Longest path (Mitsuba's convention, −1 = unlimited).
     pub max_depth: i32,
+    /// Vertical field of view (rad) of the render; `None`: the glTF camera's
+    /// ([`crate::chain::FieldOfView`]).
+    pub yfov_rad: Option<f64>,
 }
 
 /// The render job of `gltf` on the scene sampling grid of `g` ((rows + 2·margin)·os ×
@@ -78,6 +81,7 @@ pub fn grid_render_job(
         height: Some(((sensor.rows + 2 * margin) * os) as u32),
         aperture_radius_m: None,
         focus_distance_m: None,
+        yfov_rad: g.yfov_rad,
         settings: camsim_render::RenderSettings {
             spp: g.spp,
             seed,
@@ -140,6 +144,7 @@ pub fn grid_job(
         margin_px: margin,
         spp: scene.spp,
         max_depth: -1,
+        yfov_rad: None,
     };
     Ok((grid_render_job(&scene.gltf, &g, seed, grid)?, os))
 }

@@ -769,6 +769,57 @@ pub fn camera_defocuses_by_depth(cam: &Camera) -> bool {
         || matches!(&cam.optics.blur, camsim_optics::Blur::Lens(l) if l.focus.is_some())
 }
 
+/// Which field of view a glTF render on the sensor's grid covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FieldOfView {
+    /// The glTF camera's own `yfov` spans the grid (the framing set in the scene).
+    #[default]
+    Camera,
+    /// The field the camera's optics image onto the grid ([`optics_yfov_rad`]): what a sensor
+    /// behind that lens would see.
+    Optics,
+}
+
+impl FieldOfView {
+    /// From the configuration value `"camera"` or `"optics"` (error: what was expected).
+    pub fn parse(v: &str) -> Result<Self, String> {
+        match v {
+            "camera" => Ok(FieldOfView::Camera),
+            "optics" => Ok(FieldOfView::Optics),
+            _ => Err(format!("\"{v}\": expected \"camera\" or \"optics\"")),
+        }
+    }
+}
+
+/// The vertical field of view (rad) that `cam`'s optics image onto a grid of `rows` samples
+/// of pitch `sample_pitch_m` ([`camsim_render::depth_optics::pinhole_yfov_rad`] with the
+/// image-side scale H: the focused prescription's paraxial H of a lens blur with a focus,
+/// else the thin lens's image distance v at `optics.focus_distance_m`, or its focal length
+/// when focused at infinity), so that the radiance (by angle) and the PSFs, distortion and
+/// illumination (by position on the sensor) share one mapping.
+pub fn optics_yfov_rad(cam: &Camera, rows: usize, sample_pitch_m: f64) -> Result<f64, String> {
+    use camsim_render::depth_optics::{pinhole_yfov_rad, thin_lens_for_camera};
+    let pitch_mm = sample_pitch_m * 1e3;
+    let h_mm = match &cam.optics.blur {
+        camsim_optics::Blur::Lens(lb) if lb.focus.is_some() => {
+            let f = lb.focus.as_ref().expect("checked");
+            f.lens
+                .paraxial_image_mm_per_tan(f.lens.primary_nm)
+                .map_err(|e| e.to_string())?
+        }
+        _ => {
+            let t = thin_lens_for_camera(
+                cam.optics.focal_length_m,
+                cam.optics.f_number,
+                cam.thin_lens_focus_m,
+                sample_pitch_m,
+            )?;
+            t.pixels_per_tan() * pitch_mm
+        }
+    };
+    Ok(pinhole_yfov_rad(h_mm, rows, pitch_mm))
+}
+
 /// A glTF scene to path-trace on a shot's scene sampling grid ([`render_gltf_on_grid`]).
 #[derive(Debug, Clone)]
 pub struct GltfOnGrid<'a> {
@@ -788,11 +839,13 @@ pub struct GltfOnGrid<'a> {
     /// Render bands (band centres; None: the simulation grid); the render is resampled onto
     /// the simulation grid.
     pub bands: Option<&'a WavelengthGrid>,
+    /// The field the render covers (default: the glTF camera's).
+    pub field_of_view: FieldOfView,
 }
 
 /// The scene radiance of a glTF scene path-traced on the scene sampling grid of `set`'s
 /// sensor ((rows + 2·margin)·os × (cols + 2·margin)·os samples of pitch pixel_pitch/os, the
-/// margin and os of [`sampling_for`]; the glTF camera's field of view spans the grid;
+/// margin and os of [`sampling_for`]; the field of [`GltfOnGrid::field_of_view`] spans the grid;
 /// [`crate::animated::grid_render_job`], [`crate::animated::render_job_radiance`]), on the
 /// simulation wavelengths `grid`, with the render's planar depth: the scene of `camsim run`'s
 /// `render` section and of a `gltf` capture target alike.
@@ -829,6 +882,17 @@ pub fn render_gltf_on_grid(
     }
     let (os, margin) = sampling_for(&cam.optics, sensor, grid, set.simulation.oversample);
     let render_grid = r.bands.unwrap_or(grid);
+    let yfov_rad = match r.field_of_view {
+        FieldOfView::Camera => None,
+        FieldOfView::Optics => Some(
+            optics_yfov_rad(
+                cam,
+                (sensor.rows + 2 * margin) * os,
+                sensor.pixel_pitch_m / os as f64,
+            )
+            .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))?,
+        ),
+    };
     let g = crate::animated::GridRender {
         camera_name: r.camera_name.clone(),
         camera,
@@ -837,6 +901,7 @@ pub fn render_gltf_on_grid(
         margin_px: margin,
         spp: r.spp,
         max_depth: r.max_depth,
+        yfov_rad,
     };
     let job = crate::animated::grid_render_job(r.scene, &g, r.seed, render_grid)?;
     let mut scene = crate::guard::guarded(r.scene, || {

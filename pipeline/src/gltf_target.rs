@@ -24,6 +24,7 @@ pub const GLTF_KEYS: &[&str] = &[
     "bands",
     "max_depth",
     "depth_optics",
+    "field_of_view",
 ];
 
 /// The largest `spp` a target may ask for (the work budget then bounds spp × samples).
@@ -51,6 +52,9 @@ pub struct GltfTarget {
     /// Keep the render's depth so the optics stage defocuses by depth (default true; the
     /// camera needs `optics.focus_distance_m` or `blur.kind = "lens"` for it to act).
     pub depth_optics: bool,
+    /// The field the sensor sees (`"camera"`, default: the glTF camera's; `"optics"`: the
+    /// field the camera's lens images onto the sensor).
+    pub field_of_view: crate::chain::FieldOfView,
 }
 
 /// Parse the keys of a `gltf` target (`m`, already checked for unknown keys). Errors start
@@ -139,6 +143,17 @@ pub fn gltf_target(m: &Map<String, Value>, dir: &Path) -> Result<GltfTarget, Str
         Some(Value::Bool(b)) => *b,
         Some(_) => return Err(".depth_optics: must be true or false".into()),
     };
+    let field_of_view = match m.get("field_of_view") {
+        None => crate::chain::FieldOfView::Camera,
+        Some(Value::String(v)) => {
+            crate::chain::FieldOfView::parse(v).map_err(|e| format!(".field_of_view: {e}"))?
+        }
+        Some(v) => {
+            return Err(format!(
+                ".field_of_view: {v}: expected \"camera\" or \"optics\""
+            ))
+        }
+    };
     let bands = match m.get("bands") {
         None => None,
         Some(v) => {
@@ -162,6 +177,7 @@ pub fn gltf_target(m: &Map<String, Value>, dir: &Path) -> Result<GltfTarget, Str
         bands,
         max_depth,
         depth_optics,
+        field_of_view,
     })
 }
 
@@ -177,13 +193,14 @@ impl GltfTarget {
     fn cache_key(&self, g: &SamplingGrid, sim: &WavelengthGrid) -> String {
         let r = self.render_grid(sim);
         format!(
-            "{}|{:?}|{}|{}|{}|{}|{:?}|{:?}|{}x{}|{:e}",
+            "{}|{:?}|{}|{}|{}|{}|{:?}|{:?}|{:?}|{}x{}|{:e}",
             self.file_identity,
             self.camera_name,
             self.spp,
             self.seed,
             self.max_depth,
             self.depth_optics,
+            self.field_of_view,
             r.wavelength_nm,
             sim.wavelength_nm,
             g.rows,
@@ -267,6 +284,7 @@ pub fn render_gltf_target(
             max_depth: t.max_depth,
             seed: t.seed,
             bands: t.bands.as_ref(),
+            field_of_view: t.field_of_view,
         },
         sim,
     )

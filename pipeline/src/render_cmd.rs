@@ -99,6 +99,7 @@ pub fn job_from_args(a: &RenderArgs) -> Result<RenderJob, CliError> {
         height: a.height,
         aperture_radius_m: a.aperture_radius,
         focus_distance_m: a.focus_distance,
+        yfov_rad: None,
         settings: RenderSettings {
             spp: a.spp,
             seed: a.seed,

@@ -88,6 +88,11 @@ pub struct RenderRunFile {
     /// Mitsuba-style path-length limit (default −1, unlimited).
     #[serde(default)]
     pub max_depth: Option<i32>,
+    /// The field the sensor sees: `camera` (default: the glTF camera's yfov spans the sensor)
+    /// or `optics` (the field the camera's lens images onto the sensor,
+    /// [`crate::chain::optics_yfov_rad`]).
+    #[serde(default)]
+    pub field_of_view: Option<String>,
 }
 
 /// `processor` section.
@@ -616,6 +621,12 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                 max_depth: rf.max_depth.unwrap_or(-1),
                 seed: r.seed,
                 bands: None,
+                field_of_view: match &rf.field_of_view {
+                    None => crate::chain::FieldOfView::Camera,
+                    Some(v) => crate::chain::FieldOfView::parse(v).map_err(|e| {
+                        CliError::input(&set.path, format!("render.field_of_view = {e}"))
+                    })?,
+                },
             },
             &grid,
         )?,

@@ -30,6 +30,7 @@ fn main() {
         height: None,
         aperture_radius_m: None,
         focus_distance_m: None,
+        yfov_rad: None,
         settings: RenderSettings {
             spp,
             bands: camsim_render::Bands::parse("380:780:10").unwrap(),

@@ -215,7 +215,11 @@ impl LensDepthKernels {
         };
         heights_mm.sort_by(|a, b| a.total_cmp(b));
         heights_mm.dedup();
-        let (nd, nf, nw) = (distances.len() as u64, heights_mm.len() as u64, wls.len() as u64);
+        let (nd, nf, nw) = (
+            distances.len() as u64,
+            heights_mm.len() as u64,
+            wls.len() as u64,
+        );
         let entry_bytes = (psf_n as u64).saturating_pow(2);
         let need = nd
             .saturating_mul(nf)

@@ -66,6 +66,11 @@ pub struct RenderJob {
     pub aperture_radius_m: Option<f64>,
     /// Thin-lens focus distance override (m).
     pub focus_distance_m: Option<f64>,
+    /// Vertical field of view override (rad) of the pinhole and thin-lens perspective (and of
+    /// the film a `lens:FILE` camera without a pixel pitch fits); `None` = the glTF camera's
+    /// `yfov`. The camera chain sets it to the field its depth-aware optics image onto the
+    /// render grid ([`crate::depth_optics::pinhole_yfov_rad`]).
+    pub yfov_rad: Option<f64>,
     /// Integrator settings.
     pub settings: RenderSettings,
 }
@@ -86,6 +91,30 @@ pub struct PreparedJob {
 
 fn settings_err(msg: String) -> RenderError {
     RenderError::Settings(msg)
+}
+
+/// The film size (width, height in px) and the perspective of `job` seen from the glTF
+/// camera `sc`: the height from the job, else from the camera's aspect ratio (else square);
+/// the vertical field from the job's override, else the camera's `yfov`.
+fn job_perspective(
+    job: &RenderJob,
+    sc: &crate::scene::SceneCamera,
+) -> Result<(u32, u32, crate::camera::Perspective), RenderError> {
+    let width = job.width;
+    let height = job.height.unwrap_or_else(|| match sc.aspect_ratio {
+        Some(a) if a > 0.0 => ((width as f32 / a).round() as u32).max(1),
+        _ => width,
+    });
+    let mut persp = sc.perspective(width, height);
+    if let Some(y) = job.yfov_rad {
+        if !(y.is_finite() && y > 0.0 && y < std::f64::consts::PI) {
+            return Err(settings_err(format!(
+                "vertical field of view {y} rad: must lie in (0, π)"
+            )));
+        }
+        persp.yfov_rad = y as f32;
+    }
+    Ok((width, height, persp))
 }
 
 /// Load the scene and build the camera.
@@ -142,12 +171,7 @@ pub fn prepare_at_time(job: &RenderJob, time_s: Option<f64>) -> Result<PreparedJ
         path: job.scene.display().to_string(),
         msg: m,
     })?;
-    let width = job.width;
-    let height = job.height.unwrap_or_else(|| match sc.aspect_ratio {
-        Some(a) if a > 0.0 => ((width as f32 / a).round() as u32).max(1),
-        _ => width,
-    });
-    let persp = sc.perspective(width, height);
+    let (width, height, persp) = job_perspective(job, sc)?;
     let thin = || -> Option<(f32, f32)> {
         let (a, f) = sc.thinlens.unzip();
         let a = job.aperture_radius_m.map(|v| v as f32).or(a)?;
@@ -185,7 +209,7 @@ pub fn prepare_at_time(job: &RenderJob, time_s: Option<f64>) -> Result<PreparedJ
                 file,
                 width,
                 height,
-                sc.yfov_rad as f64,
+                persp.yfov_rad as f64,
                 job.focus_distance_m.or(sc.thinlens.map(|t| t.1 as f64)),
             )
             .map_err(|e| settings_err(e.to_string()))?;
@@ -237,10 +261,8 @@ pub fn node_film_position_px(
         .ok_or_else(|| scene_err(format!("no node named \"{node_name}\"")))?;
     let world = node.to_world.transform_point3(glam::DVec3::ZERO);
     let cam = sc.to_world.as_dmat4().inverse().transform_point3(world);
-    let width = job.width;
-    let height = job.height.unwrap_or(width);
-    let p = sc
-        .perspective(width, height)
+    let p = job_perspective(job, sc)?
+        .2
         .project(cam.as_vec3())
         .ok_or_else(|| scene_err(format!("node \"{node_name}\" is behind the camera")))?;
     Ok([p.x as f64, p.y as f64])

@@ -25,6 +25,7 @@ fn job(path: &Path, w: u32, h: u32, spp: u32) -> RenderJob {
         height: Some(h),
         aperture_radius_m: None,
         focus_distance_m: None,
+        yfov_rad: None,
         settings: RenderSettings {
             spp,
             seed: 7,

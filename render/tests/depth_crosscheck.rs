@@ -21,8 +21,8 @@
 //! * **circle of confusion**: the camera's thin-lens law (v/pitch scale) equals the render
 //!   camera's (H/(2 tan(θ/2)) scale) to 10⁻⁹.
 use super::crosscheck_scenes::{
-    block_z_tests, build, chi2_sf, depth_jump_mask, disc_esf, edge_profile, k_px, scenes, width_10_90,
-    SceneSpec, DEPTHS_M,
+    block_z_tests, build, chi2_sf, depth_jump_mask, disc_esf, edge_profile, k_px, scenes,
+    width_10_90, SceneSpec, DEPTHS_M,
 };
 use camsim_render::camera::{Pinhole, ThinLens};
 use camsim_render::depth_optics::{defocus_by_depth, thin_lens_for_camera, DepthKernels};

@@ -30,7 +30,6 @@ use std::path::Path;
 
 const FOCUS_M: f64 = 1.5;
 
-
 /// Weighted mean and central moments (m2, m3) of samples `(x, w)`.
 fn moments(s: &[(f64, f64)]) -> (f64, f64, f64) {
     let sw: f64 = s.iter().map(|(_, w)| w).sum();
@@ -585,8 +584,9 @@ fn check_scene_real_lens(
                     }
                 }
                 if worst_z >= 5.0 {
-                    out.failures
-                        .push(format!("{tag}: profile |z| {worst_z:.2} (Monte Carlo σ only)"));
+                    out.failures.push(format!(
+                        "{tag}: profile |z| {worst_z:.2} (Monte Carlo σ only)"
+                    ));
                 }
                 if assert_profile_tol && worst_diff >= EDGE_TOL {
                     out.failures.push(format!(
@@ -727,7 +727,10 @@ fn lens_depth_kernels_refuse_a_huge_defocus() {
         err.contains("GiB budget") && err.contains("distances") && err.contains("field heights"),
         "{err}"
     );
-    assert!(t.elapsed().as_secs_f64() < 5.0, "refused only after computing");
+    assert!(
+        t.elapsed().as_secs_f64() < 5.0,
+        "refused only after computing"
+    );
 }
 
 /// The field model of the depth optics is tabulated exactly at the tile centres: with 3 × 3
@@ -750,7 +753,10 @@ fn lens_depth_kernels_tabulate_at_tile_centres() {
     )
     .unwrap_err()
     .to_string();
-    assert!(bad.contains("paraxial_heights_mm") && !bad.contains('\n'), "{bad}");
+    assert!(
+        bad.contains("paraxial_heights_mm") && !bad.contains('\n'),
+        "{bad}"
+    );
     let m = FieldModel::compute(
         &focus.lens,
         &FieldModelOptions {
@@ -770,7 +776,11 @@ fn lens_depth_kernels_tabulate_at_tile_centres() {
     assert_eq!(m.paraxial_height_mm, vec![0.0, 3.0, 7.5]);
     assert_eq!(m.tables[0].real_height_mm.len(), 3);
     // real heights increase with the paraxial ones (the heights were traced, not copied)
-    let rh: Vec<f64> = m.tables[0].real_height_mm.iter().map(|r| r[0].abs()).collect();
+    let rh: Vec<f64> = m.tables[0]
+        .real_height_mm
+        .iter()
+        .map(|r| r[0].abs())
+        .collect();
     assert!(rh[0].abs() < 1e-9 && rh[1] > 2.9 && rh[2] > rh[1], "{rh:?}");
 }
 
@@ -811,10 +821,14 @@ fn real_lens_chief_rays_follow_the_pinhole_field() {
     let (w, h) = (96usize, 64usize);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("field.gltf");
-    build(&scenes(w, h)[0], w, h, XC_YFOV_DEG).write(&path).unwrap();
+    build(&scenes(w, h)[0], w, h, XC_YFOV_DEG)
+        .write(&path)
+        .unwrap();
     let scene = load_gltf(&path).unwrap();
     let pin = Pinhole {
-        perspective: pick_camera(&scene, None).unwrap().perspective(w as u32, h as u32),
+        perspective: pick_camera(&scene, None)
+            .unwrap()
+            .perspective(w as u32, h as u32),
     };
     let cam = RealLensCamera::new(
         &lens,
@@ -839,13 +853,25 @@ fn real_lens_chief_rays_follow_the_pinhole_field() {
     let (xc, yc) = (0.5 * w as f32, 0.5 * h as f32);
     // film pixels: near the axis, then along the diagonals to the corner pixel centres
     let near = [(0.5f32, 0.5f32), (-1.5, 0.5), (1.5, -2.5)];
-    let far = [(24.0f32, 16.0f32), (-36.0, 24.0), (47.5, -31.5), (-47.5, 31.5), (47.5, 31.5)];
+    let far = [
+        (24.0f32, 16.0f32),
+        (-36.0, 24.0),
+        (47.5, -31.5),
+        (-47.5, 31.5),
+        (47.5, 31.5),
+    ];
     for (dx, dy) in near {
         let f = Vec2::new(xc + dx, yc + dy);
-        let (a, b) = (tan_xy(&cam.center_ray(f).unwrap()), tan_xy(&pin.center_ray(f).unwrap()));
+        let (a, b) = (
+            tan_xy(&cam.center_ray(f).unwrap()),
+            tan_xy(&pin.center_ray(f).unwrap()),
+        );
         let err_px = (a.0 - b.0).hypot(a.1 - b.1) * per_tan / p_mm;
         eprintln!("film ({dx:+}, {dy:+}) px: lens tan ({:+.6}, {:+.6}), pinhole ({:+.6}, {:+.6}): {err_px:.2e} px", a.0, a.1, b.0, b.1);
-        assert!(err_px < 1e-3, "near the axis the chief ray is {err_px} px off the pinhole's");
+        assert!(
+            err_px < 1e-3,
+            "near the axis the chief ray is {err_px} px off the pinhole's"
+        );
     }
     // paraxial heights H·tan θ of the back-traced chief rays; the forward-traced real heights
     let rays: Vec<((f32, f32), (f64, f64), (f64, f64))> = far
@@ -859,7 +885,10 @@ fn real_lens_chief_rays_follow_the_pinhole_field() {
             )
         })
         .collect();
-    let mut heights: Vec<f64> = rays.iter().map(|(_, a, _)| per_tan * a.0.hypot(a.1)).collect();
+    let mut heights: Vec<f64> = rays
+        .iter()
+        .map(|(_, a, _)| per_tan * a.0.hypot(a.1))
+        .collect();
     heights.sort_by(|a, b| a.total_cmp(b));
     heights.dedup();
     let model = FieldModel::compute(
@@ -894,9 +923,15 @@ fn real_lens_chief_rays_follow_the_pinhole_field() {
             (real_px - r_film_px).abs() < 0.1 * dist_px.abs(),
             "film radius {r_film_px} px, pinhole + distortion {real_px} px (distortion {dist_px} px)"
         );
-        assert!((pin_px - r_film_px).abs() < 1e-3, "the pinhole maps {r_film_px} px to {pin_px} px");
+        assert!(
+            (pin_px - r_film_px).abs() < 1e-3,
+            "the pinhole maps {r_film_px} px to {pin_px} px"
+        );
         assert!(daz < 1e-4, "azimuth off by {daz} rad");
         worst_pin_px = worst_pin_px.max((h_par / p_mm - r_film_px).abs());
     }
-    assert!(worst_pin_px > 1.0, "the distortion is not resolved ({worst_pin_px} px)");
+    assert!(
+        worst_pin_px > 1.0,
+        "the distortion is not resolved ({worst_pin_px} px)"
+    );
 }
