@@ -15,15 +15,14 @@ fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         let Ok(rd) = std::fs::read_dir(d) else {
             return;
         };
-        for e in rd {
-            let p = e.unwrap().path();
+        // a live staging folder changes while it is read (temporary files are renamed or
+        // removed between the listing and the read): entries that vanish are skipped
+        for e in rd.flatten() {
+            let p = e.path();
             if p.is_dir() {
                 walk(base, &p, out);
-            } else {
-                out.insert(
-                    p.strip_prefix(base).unwrap().display().to_string(),
-                    std::fs::read(&p).unwrap(),
-                );
+            } else if let Ok(bytes) = std::fs::read(&p) {
+                out.insert(p.strip_prefix(base).unwrap().display().to_string(), bytes);
             }
         }
     }
