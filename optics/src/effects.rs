@@ -455,8 +455,16 @@ impl RadialInverse {
         wavelength_nm: Option<f64>,
         r_max_m: f64,
     ) -> Result<std::sync::Arc<Self>, OpticsError> {
+        // what the table reads: the warp blocks and the sensor size (not fall-off, glare,
+        // defocus or exposure, so those candidates share one table)
         let key = (
-            format!("{fx:?}"),
+            format!(
+                "{:?}|{:?}|{:x}|{:x}",
+                fx.distortion,
+                fx.lateral_color,
+                fx.sensor_width_m.to_bits(),
+                fx.sensor_height_m.to_bits()
+            ),
             wavelength_nm.map(f64::to_bits),
             r_max_m.to_bits(),
         );
@@ -867,8 +875,6 @@ mod tests {
         };
         let r_max = 150e-6;
         let a = RadialInverse::shared(&fx, Some(551.0), r_max).unwrap();
-        let b = RadialInverse::shared(&fx, Some(551.0), r_max).unwrap();
-        assert!(std::sync::Arc::ptr_eq(&a, &b));
         let fresh = RadialInverse::new(&fx, Some(551.0), r_max).unwrap();
         let bits = |t: &RadialInverse| {
             let mut v: Vec<u64> = t.table.iter().map(|x| x.to_bits()).collect();
@@ -877,6 +883,18 @@ mod tests {
             v
         };
         assert_eq!(bits(&a), bits(&fresh));
+        // blocks the warp does not read share the table (same bits as a fresh build)
+        let fx_glare = OpticsEffects {
+            veiling_glare: Some(0.03),
+            exposure_scale: Some(1.1),
+            ..fx.clone()
+        };
+        let b = RadialInverse::shared(&fx_glare, Some(551.0), r_max).unwrap();
+        assert_eq!(
+            bits(&b),
+            bits(&RadialInverse::new(&fx_glare, Some(551.0), r_max).unwrap())
+        );
+        assert_eq!(bits(&b), bits(&a));
         let other_lam = RadialInverse::shared(&fx, Some(552.0), r_max).unwrap();
         assert_ne!(bits(&other_lam), bits(&a));
         let fx2 = OpticsEffects {

@@ -94,8 +94,10 @@ fn scene_bytes(s: &camsim_core::image::SceneRadiance) -> usize {
 }
 
 impl SceneCache {
-    /// What of the camera shapes a target's scene: the sampling grid, the focal length and
-    /// the wavelength grid.
+    /// What of the camera shapes a target's scene that a candidate can change: the sampling
+    /// grid, the focal length and the wavelength grid. The rest (focus, sensor size, render
+    /// settings) is the believed camera's, fixed for one [`SimForward`], which the cache
+    /// belongs to.
     fn grid_key(set: &CaptureSet, grid: &camsim_core::WavelengthGrid) -> String {
         format!(
             "{:?} f {} λ {:?}",

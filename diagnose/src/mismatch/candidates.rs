@@ -667,7 +667,16 @@ fn fit_1d_w(
 ) -> (ModelState, f64) {
     fit_1d_by(eval, state, current_neg_ll, set, &|f| {
         let r = match warm.prev {
-            Some(x0) if x0 >= lo && x0 <= hi => minimize_1d_local(f, lo, hi, grid, xtol, x0),
+            Some(x0) if x0 >= lo && x0 <= hi => {
+                // a start where the likelihood is undefined all around cannot walk downhill:
+                // scan the grid as a cold fit would
+                let r = minimize_1d_local(f, lo, hi, grid, xtol, x0);
+                if r.1.is_finite() {
+                    r
+                } else {
+                    minimize_1d(f, lo, hi, grid, xtol)
+                }
+            }
             _ => minimize_1d(f, lo, hi, grid, xtol),
         };
         warm.found.set(Some(r.0));
