@@ -255,12 +255,17 @@ fn run_with_a_lens_blur_uses_the_lens_psfs_by_depth() {
 
 /// `render.field_of_view = "optics"`: the sensor sees the field its lens images onto it
 /// ([`camsim_pipeline::chain::optics_yfov_rad`]) instead of the glTF camera's. A thin lens
-/// (f = 8 mm, focused at 2.5 m, image distance v) on pixels of pitch p = v·tan(yfov/2)/rows
-/// images half the glTF camera's field (in tan θ), so pixel (i, j) of the optics run looks
-/// along the direction of pixel ((i + ½)/2 + rows/4 − ½, (j + ½)/2 + cols/4 − ½) of the
-/// camera-field run: the planar depths agree there wherever the camera run's depth is
-/// uniform around that point (planar depth is the same along one ray in both renders). The
-/// default is the camera's field (as before), and an unknown value is refused naming the key.
+/// (f = 8 mm, focused at 2.5 m: image distance v, not f) on pixels of pitch
+/// p = v·tan(yfov/2)/rows, with no blur (so the render grid is the sensor, no margin), images
+/// half the glTF camera's field (in tan θ): pixel (i, j) of the optics run looks along the
+/// direction of the fractional pixel ((i + ½)/2 + rows/4 − ½, (j + ½)/2 + cols/4 − ½) of the
+/// camera-field run. Planar depth is the same along one ray in both renders, and on a plane
+/// 1/z is affine in the image coordinates, so where the camera run's 1/z is affine around that
+/// point (second differences below 10⁻⁶ of 1/z) its bilinear interpolation must give the
+/// optics run's depth within 2·10⁻⁵. On tilted surfaces this resolves a field error far below
+/// v/f − 1 = 0.3 % (a shift of 0.07 px at the frame edge moves 1/z by ≈ 10⁻³ there); the test
+/// requires such pixels. The default is the camera's field, and an unknown value is refused
+/// naming the key.
 #[test]
 fn field_of_view_optics_images_the_lens_field() {
     let d = tempfile::tempdir().unwrap();
@@ -277,6 +282,7 @@ fn field_of_view_optics_images_the_lens_field() {
     cam["sensor"]["pixel_pitch_um"] = json!(pitch_um);
     cam["optics"]["focal_length_mm"] = json!(f_mm);
     cam["optics"]["focus_distance_m"] = json!(focus_m);
+    cam["optics"]["blur"] = json!({"kind": "none"});
     let run = |field: Option<&str>, name: &str| -> std::process::Output {
         let mut render = json!({"scene": scene, "spp": 1});
         if let Some(f) = field {
@@ -303,7 +309,8 @@ fn field_of_view_optics_images_the_lens_field() {
     }
     let (_, _, zc) = channel(&d.path().join("camera/depth.exr"), "Z");
     let (_, _, zo) = channel(&d.path().join("optics/depth.exr"), "Z");
-    let (mut checked, mut differ_from_same_pixel) = (0usize, 0usize);
+    let inv = |y: usize, x: usize| 1.0 / zc[y * cols + x] as f64;
+    let (mut checked, mut tilted) = (0usize, 0usize);
     for i in 0..rows {
         for j in 0..cols {
             let (y, x) = (
@@ -311,31 +318,51 @@ fn field_of_view_optics_images_the_lens_field() {
                 (j as f64 + 0.5) / 2.0 + cols as f64 / 4.0 - 0.5,
             );
             let (y0, x0) = (y.floor() as usize, x.floor() as usize);
-            let near = [
-                zc[y0 * cols + x0],
-                zc[y0 * cols + x0 + 1],
-                zc[(y0 + 1) * cols + x0],
-                zc[(y0 + 1) * cols + x0 + 1],
-            ];
-            let z0 = near[0];
-            if !z0.is_finite() || near.iter().any(|z| (z - z0).abs() > 1e-4 * z0) {
+            // the 4 × 4 patch around the cell: finite, 1/z affine (a plane)
+            let patch = |f: &dyn Fn(usize, usize) -> bool| {
+                (y0 - 1..=y0 + 2).all(|yy| (x0 - 1..=x0 + 2).all(|xx| f(yy, xx)))
+            };
+            if !patch(&|yy, xx| inv(yy, xx).is_finite() && inv(yy, xx) > 0.0) {
                 continue;
             }
-            let got = zo[i * cols + j];
+            let scale = inv(y0, x0);
+            let affine = patch(&|yy, xx| {
+                let row_ok = xx == x0 - 1
+                    || xx == x0 + 2
+                    || (inv(yy, xx - 1) - 2.0 * inv(yy, xx) + inv(yy, xx + 1)).abs() < 1e-6 * scale;
+                let col_ok = yy == y0 - 1
+                    || yy == y0 + 2
+                    || (inv(yy - 1, xx) - 2.0 * inv(yy, xx) + inv(yy + 1, xx)).abs() < 1e-6 * scale;
+                row_ok && col_ok
+            });
+            if !affine {
+                continue;
+            }
+            let (fy, fx) = (y - y0 as f64, x - x0 as f64);
+            let w = (1.0 - fy) * ((1.0 - fx) * inv(y0, x0) + fx * inv(y0, x0 + 1))
+                + fy * ((1.0 - fx) * inv(y0 + 1, x0) + fx * inv(y0 + 1, x0 + 1));
+            let want = 1.0 / w;
+            let got = zo[i * cols + j] as f64;
             assert!(
-                (got - z0).abs() <= 1e-4 * z0,
-                "optics pixel ({i}, {j}): depth {got} m, camera-field depth along that ray {z0} m"
+                (got - want).abs() <= 2e-5 * want,
+                "optics pixel ({i}, {j}): depth {got} m, camera-field depth along that ray {want} m"
             );
             checked += 1;
-            if (zc[i * cols + j] - z0).abs() > 1e-3 * z0 {
-                differ_from_same_pixel += 1;
+            if (inv(y0, x0 + 1) - inv(y0, x0))
+                .abs()
+                .max((inv(y0 + 1, x0) - inv(y0, x0)).abs())
+                > 1e-3 * scale
+            {
+                tilted += 1;
             }
         }
     }
-    eprintln!("field_of_view optics: {checked} pixels checked, {differ_from_same_pixel} where the same pixel of the camera field sees another depth");
+    eprintln!("field_of_view optics: {checked} pixels checked, {tilted} on tilted surfaces");
     assert!(checked > rows * cols / 4, "only {checked} pixels checked");
-    // the check has power: the same pixel of the camera-field run often sees something else
-    assert!(differ_from_same_pixel > 10, "{differ_from_same_pixel}");
+    assert!(
+        tilted > 20,
+        "only {tilted} pixels on tilted surfaces: the check has no power"
+    );
     let st = run(Some("lens"), "bad");
     assert!(!st.status.success());
     let err = String::from_utf8_lossy(&st.stderr);

@@ -52,8 +52,8 @@ pub struct GridRender<'a> {
 }
 
 /// The render job of `gltf` on the scene sampling grid of `g` ((rows + 2·margin)·os ×
-/// (cols + 2·margin)·os samples of pitch pixel_pitch/os; the glTF camera's vertical field of
-/// view spans the grid's height), bands centred on the simulation wavelengths `grid`.
+/// (cols + 2·margin)·os samples of pitch pixel_pitch/os; the vertical field of view of
+/// [`GridRender::yfov_rad`], else the glTF camera's, spans the grid's height), bands centred on the simulation wavelengths `grid`.
 pub fn grid_render_job(
     gltf: &std::path::Path,
     g: &GridRender,

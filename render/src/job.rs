@@ -107,12 +107,14 @@ fn job_perspective(
     });
     let mut persp = sc.perspective(width, height);
     if let Some(y) = job.yfov_rad {
-        if !(y.is_finite() && y > 0.0 && y < std::f64::consts::PI) {
+        // checked as the f32 the perspective keeps (a value just below π rounds up to it)
+        let y32 = y as f32;
+        if !(y32.is_finite() && y32 > 0.0 && y32 < std::f32::consts::PI) {
             return Err(settings_err(format!(
                 "vertical field of view {y} rad: must lie in (0, π)"
             )));
         }
-        persp.yfov_rad = y as f32;
+        persp.yfov_rad = y32;
     }
     Ok((width, height, persp))
 }
