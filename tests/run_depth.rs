@@ -373,4 +373,12 @@ fn field_of_view_optics_images_the_lens_field() {
         "{err}"
     );
     assert!(!d.path().join("bad").exists());
+    // The value is validated with the rest of the configuration, before any work.
+    let e = camsim_pipeline::run::check_config(Some(&d.path().join("bad.json")))
+        .expect_err("check_config accepted field_of_view = \"lens\"")
+        .one_line();
+    assert!(
+        e.contains("render.field_of_view") && e.contains("\"lens\""),
+        "{e}"
+    );
 }

@@ -188,6 +188,8 @@ fn bad(path: &Path, msg: impl std::fmt::Display) -> CliError {
 struct Run {
     set: CaptureSet,
     render: Option<RenderRunFile>,
+    /// `render.field_of_view`, validated when the configuration is loaded.
+    field_of_view: crate::chain::FieldOfView,
     seed: u64,
     demosaic: DemosaicMethod,
     white_balance: String,
@@ -250,6 +252,11 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
         r.scene = dir.join(&r.scene);
         r
     });
+    let field_of_view = match render.as_ref().and_then(|r| r.field_of_view.as_deref()) {
+        None => crate::chain::FieldOfView::Camera,
+        Some(v) => crate::chain::FieldOfView::parse(v)
+            .map_err(|e| bad(&path, format!("render.field_of_view = {e}")))?,
+    };
     let target = match (&render, &raw.target) {
         (Some(_), Value::Null) => crate::targets::ParsedTarget {
             target: Target::Dark,
@@ -437,6 +444,7 @@ fn load(config: Option<&Path>) -> Result<Run, CliError> {
     Ok(Run {
         set,
         render,
+        field_of_view,
         seed: raw.seed.unwrap_or(0),
         demosaic,
         white_balance,
@@ -621,12 +629,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                 max_depth: rf.max_depth.unwrap_or(-1),
                 seed: r.seed,
                 bands: None,
-                field_of_view: match &rf.field_of_view {
-                    None => crate::chain::FieldOfView::Camera,
-                    Some(v) => crate::chain::FieldOfView::parse(v).map_err(|e| {
-                        CliError::input(&set.path, format!("render.field_of_view = {e}"))
-                    })?,
-                },
+                field_of_view: r.field_of_view,
             },
             &grid,
         )?,
