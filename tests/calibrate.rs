@@ -2,7 +2,7 @@
 //! `camsim simulate`, calibrate it, and check the estimates against the truth within their
 //! reported uncertainties; figures are real; incomplete sets still give the rest.
 use crate::cli::{camera, write_set};
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -46,25 +46,15 @@ fn simulate_and_calibrate(dir: &Path, narrowband: bool, one_exposure: bool) -> V
         &cam,
         &captures_for_calibration(narrowband, one_exposure),
     );
-    let st = camsim()
-        .args(["simulate", "captures.json", "--out", ".", "--seed", "3"])
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--out", ".", "--seed", "3"])
+            .current_dir(dir),
     );
-    let st = camsim()
-        .args(["calibrate", "captures.json", "--out", "cal"])
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["calibrate", "captures.json", "--out", "cal"])
+            .current_dir(dir),
     );
     serde_json::from_str(&std::fs::read_to_string(dir.join("cal/calibration.json")).unwrap())
         .unwrap()
@@ -228,12 +218,7 @@ fn appendix_b_through_diffraction(width_nm: f64) {
         vec!["simulate", "captures.json", "--out", ".", "--seed", "5"],
         vec!["calibrate", "captures.json", "--out", "cal"],
     ] {
-        let st = camsim().args(&args).current_dir(d.path()).output().unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
-        );
+        camsim_ok(camsim().args(&args).current_dir(d.path()));
     }
     let c: Value = serde_json::from_str(
         &std::fs::read_to_string(d.path().join("cal/calibration.json")).unwrap(),

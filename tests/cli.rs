@@ -1,7 +1,7 @@
 //! End-to-end tests of `camsim simulate` as ../shared/spec/capture-format.md specifies it:
 //! outputs, the expected image against the closed-form baseline model, determinism across
 //! thread counts, and one clear error line (and nothing written) for bad input.
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -86,15 +86,10 @@ fn expected_matches_closed_form_baseline() {
     let (l, t) = (0.002, 0.02);
     write_set(dir.path(), &camera(rows, cols), &captures(l, t));
     let out = dir.path().join("out");
-    let st = camsim()
-        .args(["simulate", "captures.json", "--expected", "--out", "out"])
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--expected", "--out", "out"])
+            .current_dir(dir.path()),
     );
     let (r, c, y) = read_exr_y(&out.join("flat.exr"));
     assert_eq!((r, c), (rows, cols));
@@ -120,24 +115,19 @@ fn frames_are_16bit_png_at_their_paths_and_deterministic_across_threads() {
     let mut outs = Vec::new();
     for threads in ["1", "2"] {
         let out = format!("out{threads}");
-        let st = camsim()
-            .args([
-                "--threads",
-                threads,
-                "simulate",
-                "captures.json",
-                "--out",
-                &out,
-                "--seed",
-                "7",
-            ])
-            .current_dir(dir.path())
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+        camsim_ok(
+            camsim()
+                .args([
+                    "--threads",
+                    threads,
+                    "simulate",
+                    "captures.json",
+                    "--out",
+                    &out,
+                    "--seed",
+                    "7",
+                ])
+                .current_dir(dir.path()),
         );
         outs.push(dir.path().join(out));
     }
@@ -264,17 +254,12 @@ fn bad_input_gives_one_clear_line_and_writes_nothing() {
 fn shipped_example_runs() {
     let dir = tempfile::tempdir().unwrap();
     let ex = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/table1/captures.json");
-    let st = camsim()
-        .args(["simulate"])
-        .arg(&ex)
-        .arg("--out")
-        .arg(dir.path().join("o"))
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate"])
+            .arg(&ex)
+            .arg("--out")
+            .arg(dir.path().join("o")),
     );
     let f = camsim_pipeline::frames::read_png16(&dir.path().join("o/raw/macbeth-0.png")).unwrap();
     assert_eq!((f.rows, f.cols), (480, 640));
@@ -289,15 +274,10 @@ fn frames_are_written_in_the_recording_format() {
     let mut caps = captures(0.002, 0.02);
     caps["shots"][1]["frames"] = json!(["raw/flat-0.tif", "raw/flat-1.png"]);
     write_set(dir.path(), &camera(16, 24), &caps);
-    let st = camsim()
-        .args(["simulate", "captures.json", "--out", "o", "--seed", "5"])
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--out", "o", "--seed", "5"])
+            .current_dir(dir.path()),
     );
     let tif = camsim_pipeline::raw_input::read_frame(&dir.path().join("o/raw/flat-0.tif")).unwrap();
     assert_eq!((tif.rows, tif.cols), (16, 24));
@@ -333,24 +313,19 @@ fn scene_command_writes_spectral_exr_and_linear_model_error() {
     let mut errs = Vec::new();
     for k in ["1", "3", "6"] {
         let out = format!("s{k}");
-        let st = camsim()
-            .args([
-                "scene",
-                "captures.json",
-                "--shot",
-                "chart",
-                "--basis",
-                k,
-                "--out",
-                &out,
-            ])
-            .current_dir(dir.path())
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+        camsim_ok(
+            camsim()
+                .args([
+                    "scene",
+                    "captures.json",
+                    "--shot",
+                    "chart",
+                    "--basis",
+                    k,
+                    "--out",
+                    &out,
+                ])
+                .current_dir(dir.path()),
         );
         let rep: Value = serde_json::from_str(
             &std::fs::read_to_string(dir.path().join(&out).join("chart_scene.json")).unwrap(),
@@ -386,15 +361,10 @@ fn headerless_raw_frames_round_trip_and_real_raw_reads() {
     caps["shots"][1]["frames"] = json!(["raw/flat-0.raw", "raw/flat-1.png"]);
     caps["raw_format"] = json!({"bits_per_sample": 16, "endianness": "big", "header_bytes": 4});
     write_set(dir.path(), &camera(16, 24), &caps);
-    let st = camsim()
-        .args(["simulate", "captures.json", "--out", "o", "--seed", "5"])
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--out", "o", "--seed", "5"])
+            .current_dir(dir.path()),
     );
     let bytes = std::fs::read(dir.path().join("o/raw/flat-0.raw")).unwrap();
     assert_eq!(bytes.len(), 4 + 16 * 24 * 2);

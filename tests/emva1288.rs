@@ -2,7 +2,7 @@
 //! against the reference implementation `emva1288` 1.0.2 (installed into .venv-emva1288 by
 //! tools/emva1288_setup.sh), against the reference's own camera simulator, and against the
 //! configured camera (docs/emva1288.md).
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -203,14 +203,13 @@ fn emva1288_matches_the_reference_implementation_on_three_cameras() {
         }
         // `calibrate --emva1288` on the written series gives the same datasheet
         let out2 = dir.path().join(format!("{label}_calibrate"));
-        let o = camsim()
-            .args(["calibrate", "--emva1288"])
-            .arg(out.join("EMVA1288descriptor.txt"))
-            .arg("--out")
-            .arg(&out2)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        camsim_ok(
+            camsim()
+                .args(["calibrate", "--emva1288"])
+                .arg(out.join("EMVA1288descriptor.txt"))
+                .arg("--out")
+                .arg(&out2),
+        );
         // same numbers up to the descriptor's 0.1 ns rounding of the exposure times
         let again = datasheet(&out2);
         for (name, v) in ds["values"].as_object().unwrap() {
@@ -255,14 +254,13 @@ fn emva1288_recovers_the_reference_simulators_inputs() {
         ],
     );
     let out = dir.path().join("camsim");
-    let o = camsim()
-        .args(["calibrate", "--emva1288"])
-        .arg(peer.join("EMVA1288descriptor.txt"))
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    camsim_ok(
+        camsim()
+            .args(["calibrate", "--emva1288"])
+            .arg(peer.join("EMVA1288descriptor.txt"))
+            .arg("--out")
+            .arg(&out),
+    );
     let ds = datasheet(&out);
     let t = |k: &str| truth[k].as_f64().unwrap();
     for (name, extra_rel) in [

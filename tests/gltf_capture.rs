@@ -3,7 +3,7 @@
 //! `camsim run` on the same scene and camera within the render's Monte Carlo noise, shots of
 //! one scene render once, bad input is one line naming the key, and the frames are the same
 //! bits at any thread count.
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -143,15 +143,10 @@ fn simulate_on_a_gltf_target_matches_run() {
     let cfg = json!({"camera": camera(), "render": {"scene": "thinlens.gltf", "spp": 16},
                      "auto_exposure": 0.5, "seed": 3, "simulation": {"oversample": 1}});
     std::fs::write(d.path().join("run.json"), cfg.to_string()).unwrap();
-    let st = camsim()
-        .args(["run", "run.json", "--out", "run_out"])
-        .current_dir(d.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["run", "run.json", "--out", "run_out"])
+            .current_dir(d.path()),
     );
     let summary: Value = serde_json::from_str(
         &std::fs::read_to_string(d.path().join("run_out/summary.json")).unwrap(),
@@ -169,37 +164,27 @@ fn simulate_on_a_gltf_target_matches_run() {
                 "target": {"kind": "gltf", "file": "thinlens.gltf", "spp": 16, "seed": 3,
                            "depth_optics": false}}]),
     );
-    let st = camsim()
-        .args(["simulate", "captures.json", "--out", "sim", "--seed", "5"])
-        .current_dir(d.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--out", "sim", "--seed", "5"])
+            .current_dir(d.path()),
     );
     // irradiance: simulate's shot b (run's render seed) and c (no depth optics) vs run
     let (run_nm, run_rows, run_cols, run_irr) =
         read_irradiance(&d.path().join("run_out/sensor_irradiance.exr"));
     assert_eq!((run_rows, run_cols), (ROWS, COLS));
     let scene_irr = |id: &str| {
-        let st = camsim()
-            .args([
-                "scene",
-                "captures.json",
-                "--shot",
-                id,
-                "--out",
-                &format!("sc_{id}"),
-            ])
-            .current_dir(d.path())
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+        camsim_ok(
+            camsim()
+                .args([
+                    "scene",
+                    "captures.json",
+                    "--shot",
+                    id,
+                    "--out",
+                    &format!("sc_{id}"),
+                ])
+                .current_dir(d.path()),
         );
         read_irradiance(&d.path().join(format!("sc_{id}/{id}_irradiance.exr")))
     };
@@ -341,15 +326,10 @@ fn gltf_shots_of_one_scene_render_once() {
     );
     assert!(scenes[0].depth_m.is_some());
     // camsim scene: radiance, irradiance and the report for a glTF shot
-    let st = camsim()
-        .args(["scene", "captures.json", "--shot", "a", "--out", "sc"])
-        .current_dir(d.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["scene", "captures.json", "--shot", "a", "--out", "sc"])
+            .current_dir(d.path()),
     );
     for f in ["a_radiance.exr", "a_irradiance.exr", "a_scene.json"] {
         assert!(d.path().join("sc").join(f).is_file(), "{f} missing");
@@ -452,24 +432,19 @@ fn gltf_target_frames_are_the_same_at_any_thread_count() {
     let mut outs = Vec::new();
     for threads in ["1", "2"] {
         let out = format!("out{threads}");
-        let st = camsim()
-            .args([
-                "--threads",
-                threads,
-                "simulate",
-                "captures.json",
-                "--out",
-                &out,
-                "--seed",
-                "9",
-            ])
-            .current_dir(d.path())
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+        camsim_ok(
+            camsim()
+                .args([
+                    "--threads",
+                    threads,
+                    "simulate",
+                    "captures.json",
+                    "--out",
+                    &out,
+                    "--seed",
+                    "9",
+                ])
+                .current_dir(d.path()),
         );
         outs.push(
             ["a0.png", "a1.png"].map(|f| std::fs::read(d.path().join(&out).join(f)).unwrap()),
@@ -497,15 +472,10 @@ fn gltf_target_renders_with_runs_camera_policy() {
         let cfg = json!({"camera": cam, "render": render, "auto_exposure": 0.5, "seed": seed,
                          "simulation": {"oversample": 1}});
         std::fs::write(d.path().join(format!("{name}.json")), cfg.to_string()).unwrap();
-        let st = camsim()
-            .args(["run", &format!("{name}.json"), "--out", name])
-            .current_dir(d.path())
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+        camsim_ok(
+            camsim()
+                .args(["run", &format!("{name}.json"), "--out", name])
+                .current_dir(d.path()),
         );
         read_irradiance(&d.path().join(format!("{name}/sensor_irradiance.exr")))
     };
@@ -526,15 +496,10 @@ fn gltf_target_renders_with_runs_camera_policy() {
         .to_string(),
     )
     .unwrap();
-    let st = camsim()
-        .args(["scene", "captures.json", "--shot", "a", "--out", "sc"])
-        .current_dir(d.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["scene", "captures.json", "--shot", "a", "--out", "sc"])
+            .current_dir(d.path()),
     );
     let (s_nm, gr, gc, sim) = read_irradiance(&d.path().join("sc/a_irradiance.exr"));
     let peak = auto.iter().flatten().fold(0f64, |m, v| m.max(*v as f64));

@@ -1,7 +1,7 @@
 //! `optics.blur.kind = "lens"` end to end: a camera.json naming a lens prescription loads and
 //! `camsim simulate --expected` runs with it; a missing lens file is one error line naming it.
 use crate::cli::{camera, captures, write_set};
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::json;
 use std::path::Path;
 
@@ -26,15 +26,10 @@ fn centre_dn(dir: &Path) -> (usize, usize, f64) {
 }
 
 fn simulate(dir: &Path) {
-    let st = camsim()
-        .args(["simulate", "captures.json", "--expected", "--out", "out"])
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--expected", "--out", "out"])
+            .current_dir(dir),
     );
 }
 

@@ -4,7 +4,7 @@
 //! file and the offending tag or size. A `captures.json` whose frames are `.dng` calibrates to
 //! the same numbers as the same frames stored as PNG.
 use crate::cli::{camera, write_set};
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use camsim_pipeline::raw_input::{dng::read_dng, read_frame, read_raw, RawFormat};
 use serde_json::{json, Value};
 use std::io::Cursor;
@@ -541,15 +541,10 @@ fn calibrate_reads_dng_frames_end_to_end() {
     }
     let caps = json!({"camera": "camera.json", "shots": shots});
     write_set(dir, &cam, &caps);
-    let st = camsim()
-        .args(["simulate", "captures.json", "--out", ".", "--seed", "5"])
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--out", ".", "--seed", "5"])
+            .current_dir(dir),
     );
     // re-store every frame as a DNG with a 2-pixel masked border around the active area
     let mut dng_caps = caps.clone();
@@ -583,15 +578,10 @@ fn calibrate_reads_dng_frames_end_to_end() {
     }
     std::fs::write(dir.join("captures_dng.json"), dng_caps.to_string()).unwrap();
     let run = |caps: &str, out: &str| -> Value {
-        let st = camsim()
-            .args(["calibrate", caps, "--out", out])
-            .current_dir(dir)
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+        camsim_ok(
+            camsim()
+                .args(["calibrate", caps, "--out", out])
+                .current_dir(dir),
         );
         serde_json::from_str(
             &std::fs::read_to_string(dir.join(out).join("calibration.json")).unwrap(),

@@ -1,5 +1,5 @@
 //! `camsim render` and `camsim run` with a glTF scene, end to end through the binary.
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -11,33 +11,28 @@ fn scenes() -> PathBuf {
 fn render_writes_a_spectral_exr_with_depth_and_harness_channels() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("u.exr");
-    let st = camsim()
-        .args(["render"])
-        .arg(scenes().join("uniform_emitter.gltf"))
-        .args([
-            "--width",
-            "16",
-            "--spp",
-            "16",
-            "--seed",
-            "3",
-            "--bands",
-            "400:700:100",
-        ])
-        .args([
-            "--variance",
-            "--mitsuba-channels",
-            "--depth-spp",
-            "2",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    let st = camsim_ok(
+        camsim()
+            .args(["render"])
+            .arg(scenes().join("uniform_emitter.gltf"))
+            .args([
+                "--width",
+                "16",
+                "--spp",
+                "16",
+                "--seed",
+                "3",
+                "--bands",
+                "400:700:100",
+            ])
+            .args([
+                "--variance",
+                "--mitsuba-channels",
+                "--depth-spp",
+                "2",
+                "--out",
+            ])
+            .arg(&out),
     );
     let summary: Value = serde_json::from_slice(&st.stdout).unwrap();
     assert_eq!(summary["width"], 16);
@@ -155,17 +150,12 @@ fn run_accepts_a_gltf_scene() {
     });
     let p = d.path().join("run.json");
     std::fs::write(&p, cfg.to_string()).unwrap();
-    let st = camsim()
-        .arg("run")
-        .arg(&p)
-        .arg("--out")
-        .arg(d.path().join("o"))
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .arg("run")
+            .arg(&p)
+            .arg("--out")
+            .arg(d.path().join("o")),
     );
     let o = d.path().join("o");
     for f in [

@@ -3,7 +3,7 @@
 //! period measured on simulated frames against `v · row_time` and `(1/f)/row_time`), the
 //! camera and shot keys (one-line errors), and the dark-current temperature law through
 //! `camera.json`.
-use crate::util::{camsim, num, repo, study_rows};
+use crate::util::{camsim, camsim_ok, num, repo, study_rows};
 use camsim_pipeline::config::{camera_from_file, CameraFile};
 use serde_json::{json, Value};
 use std::path::Path;
@@ -254,16 +254,12 @@ fn simulate_writes_a_video_whose_bands_drift_and_edge_advances() {
     let p = dir.path().join("captures.json");
     std::fs::write(&p, caps.to_string()).unwrap();
     let out = dir.path().join("out");
-    let o = camsim()
-        .args([
-            "simulate",
-            p.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    camsim_ok(camsim().args([
+        "simulate",
+        p.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
     let black = 64.0;
     let period = (1.0 / f_led) / row_time; // 50 rows
     let (rows, cols) = (200, 96);

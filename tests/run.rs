@@ -1,16 +1,11 @@
 //! `camsim run`: the paper's §3 study end to end (issue: processor, display, metrics).
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use camsim_pipeline::plots::check_figure;
 use serde_json::{json, Value};
 use std::path::Path;
 
 fn run_ok(args: &[&str], dir: &Path) -> Value {
-    let st = camsim().args(args).current_dir(dir).output().unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
+    camsim_ok(camsim().args(args).current_dir(dir));
     let out = args
         .iter()
         .position(|a| *a == "--out")

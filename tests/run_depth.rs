@@ -1,7 +1,7 @@
 //! `camsim run` on a user's glTF scene with depth-aware optics (issue 18, acceptance 4): the
 //! report plus a depth map (metres) and a blur-size map (PSF RMS radius, µm), checked against
 //! the thin-lens closed form, and the irradiance's power against the camera equation.
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -32,18 +32,7 @@ fn run_on_a_gltf_scene_writes_depth_and_blur_maps() {
     let p = d.path().join("run.json");
     std::fs::write(&p, cfg.to_string()).unwrap();
     let o = d.path().join("o");
-    let st = camsim()
-        .arg("run")
-        .arg(&p)
-        .arg("--out")
-        .arg(&o)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
+    camsim_ok(camsim().arg("run").arg(&p).arg("--out").arg(&o));
     let s: Value =
         serde_json::from_str(&std::fs::read_to_string(o.join("summary.json")).unwrap()).unwrap();
     let listed: Vec<&str> = s["files"]
@@ -192,18 +181,7 @@ fn run_with_a_lens_blur_uses_the_lens_psfs_by_depth() {
     let p = d.path().join("run.json");
     std::fs::write(&p, cfg.to_string()).unwrap();
     let o = d.path().join("o");
-    let st = camsim()
-        .arg("run")
-        .arg(&p)
-        .arg("--out")
-        .arg(&o)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
+    camsim_ok(camsim().arg("run").arg(&p).arg("--out").arg(&o));
     let s: Value =
         serde_json::from_str(&std::fs::read_to_string(o.join("summary.json")).unwrap()).unwrap();
     let dz = &s["depth_optics"];

@@ -2,7 +2,7 @@
 //! (examples/study_codesign/spec_ci.json), MTF50 against the closed-form product of the
 //! diffraction and pixel-aperture MTFs, resumability (points counted), the local engine against
 //! the Ray engine on a local Ray cluster, report figures, and one-line errors.
-use crate::util::{camsim, num};
+use crate::util::{camsim, camsim_ok, num};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -200,14 +200,13 @@ fn job_array_recipe_gives_the_local_table() {
     let dirs: Vec<&str> = list.lines().collect();
     assert_eq!(dirs.len(), 6);
     for d in &dirs {
-        let o = camsim()
-            .args(["--threads", "1", "study-point"])
-            .arg(Path::new(d).join("point.json"))
-            .arg("--out")
-            .arg(d)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        camsim_ok(
+            camsim()
+                .args(["--threads", "1", "study-point"])
+                .arg(Path::new(d).join("point.json"))
+                .arg("--out")
+                .arg(d),
+        );
     }
     let e = study(&spec, &out, &[]);
     assert_eq!(counts(&e), (0, 6, 0), "{e}");
@@ -900,14 +899,13 @@ fn lens_point_is_independent_of_threads_and_process() {
     let folder = rows(&out)[0]["folder"].as_str().unwrap().to_string();
     let a = out.join("points").join(&folder);
     let b = dir.path().join("alone");
-    let o = camsim()
-        .args(["--threads", "1", "study-point"])
-        .arg(a.join("point.json"))
-        .arg("--out")
-        .arg(&b)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    camsim_ok(
+        camsim()
+            .args(["--threads", "1", "study-point"])
+            .arg(a.join("point.json"))
+            .arg("--out")
+            .arg(&b),
+    );
     let ra: Value =
         serde_json::from_str(&std::fs::read_to_string(a.join("result.json")).unwrap()).unwrap();
     let rb: Value =

@@ -31,6 +31,13 @@ pub fn camsim() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_camsim"))
 }
 
+/// Run a camsim command and return its output, panicking with camsim's stderr when it fails.
+pub fn camsim_ok(cmd: &mut std::process::Command) -> std::process::Output {
+    let o = cmd.output().expect("camsim could not be started");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
 /// The repository root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -39,14 +46,7 @@ pub fn repo() -> PathBuf {
 /// Run `camsim study SPEC --out OUT` and return the rows of OUT/table.json (panicking with
 /// camsim's stderr when the study fails).
 pub fn study_rows(spec: &Path, out: &Path) -> Vec<Value> {
-    let o = camsim()
-        .arg("study")
-        .arg(spec)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    camsim_ok(camsim().arg("study").arg(spec).arg("--out").arg(out));
     let t: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
     t["rows"].as_array().expect("table.json rows").clone()

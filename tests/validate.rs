@@ -3,7 +3,7 @@
 //! a camera whose conversion gain is 20 % off (the mismatch is found); the figures are real;
 //! a recording of the wrong size is one clear error and nothing is written.
 use crate::cli::{camera, write_set};
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use camsim_pipeline::config::load_captures;
 use camsim_pipeline::validate_cmd::run_validate;
 use serde_json::{json, Value};
@@ -48,16 +48,11 @@ fn captures() -> Value {
 /// Writes the set and records it with `camsim simulate --seed RECORD_SEED`.
 fn recorded_set(dir: &Path) {
     write_set(dir, &colour_camera(), &captures());
-    let st = camsim()
-        .args(["simulate", "captures.json", "--out", "."])
-        .args(["--seed", &RECORD_SEED.to_string()])
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args(["simulate", "captures.json", "--out", "."])
+            .args(["--seed", &RECORD_SEED.to_string()])
+            .current_dir(dir),
     );
 }
 

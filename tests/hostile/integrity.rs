@@ -3,7 +3,7 @@
 //! of simulate, run, render, study, calibrate, validate and diagnose are byte-identical across
 //! runs and at 1 and 2 threads.
 use crate::cli::{camera, write_set};
-use crate::util::camsim;
+use crate::util::{camsim, camsim_ok};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -227,18 +227,13 @@ fn outputs_are_byte_identical_across_runs_and_thread_counts() {
     let d = tempfile::tempdir().unwrap();
     let p = d.path();
     // Inputs: a generated capture set (with frames), a small run config, a two-point study.
-    let st = camsim()
-        .args([
-            "demo", "diagnose", "--effect", "prnu=1.5", "--rows", "16", "--cols", "24", "--out",
-            "set",
-        ])
-        .current_dir(p)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    camsim_ok(
+        camsim()
+            .args([
+                "demo", "diagnose", "--effect", "prnu=1.5", "--rows", "16", "--cols", "24",
+                "--out", "set",
+            ])
+            .current_dir(p),
     );
     let mut cam: Value = serde_json::from_str(camsim_pipeline::run::TABLE1_CAMERA).unwrap();
     cam["sensor"]["rows"] = json!(24);
