@@ -12,7 +12,7 @@
 //! the number of threads.
 use crate::camera::{Camera, CameraRay, OutputQuantity};
 use crate::sampling::Frame;
-use crate::scene::{Scene, SpectralTexture};
+use crate::scene::{interpolate_uv, shading_normal, Scene, SpectralTexture};
 use crate::spectral::{Bands, TabulatedSpectrum, N_WL};
 use camsim_core::rng::{stream, CamRng};
 use glam::{Mat4, Vec2, Vec3};
@@ -284,24 +284,23 @@ fn trace_path(
             break;
         };
         let prim = hit.prim as usize;
-        let sh = &scene.tri_records[prim];
+        let sh = &scene.shading[prim];
         let b = hit.bary;
         let p = o + d * hit.t;
-        let ns_mesh = scene.shading_normal(sh, b);
+        let ns_mesh = shading_normal(sh, b);
         let mut ns = ns_mesh;
         let wi_w = -d;
         let mat = &scene.materials[sh.material as usize];
         // normal mapping (and then the side-consistency check of normal_map.rs)
         let mut bumped = false;
         if let Some(nm) = &mat.normal_map {
-            let tangent = scene.tri_tangent[prim];
-            if tangent != u32::MAX {
-                let tv = &scene.tangents[tangent as usize];
+            if sh.tangent != u32::MAX {
+                let tv = &scene.tangents[sh.tangent as usize];
                 let tan = tv[0] * (1.0 - b.x - b.y) + tv[1] * b.x + tv[2] * b.y;
                 let tan = tan
                     .truncate()
                     .extend(if tv[0].w < 0.0 { -1.0 } else { 1.0 });
-                let n2 = crate::normal_map::perturb(ns, sh.ng, tan, nm.eval(scene.interpolate_uv(sh, b)));
+                let n2 = crate::normal_map::perturb(ns, sh.ng, tan, nm.eval(interpolate_uv(sh, b)));
                 bumped = n2 != ns;
                 ns = n2;
             }
@@ -311,7 +310,7 @@ fn trace_path(
         if mat.emits() {
             if ns_mesh.dot(wi_w) > 0.0 {
                 let le = match (&mat.emission_texture, &mat.emission) {
-                    (Some(t), _) => t.eval(scene.interpolate_uv(sh, b), wl),
+                    (Some(t), _) => t.eval(interpolate_uv(sh, b), wl),
                     (None, Some(e)) => spectra.emission(e, sh.material, wl),
                     (None, None) => [0.0; N_WL],
                 };
@@ -331,7 +330,7 @@ fn trace_path(
         }
         let frame = Frame::from_normal(ns);
         let wi = frame.to_local(wi_w);
-        let refl = spectra.reflectance(mat, sh.material, || scene.interpolate_uv(sh, b), wl);
+        let refl = spectra.reflectance(mat, sh.material, || interpolate_uv(sh, b), wl);
         let bsdf = &mat.bsdf;
         // next-event estimation
         let ul = next_f32(rng);

@@ -64,8 +64,7 @@ impl TriGeom {
     }
 }
 
-/// Shading attributes of one triangle, as the scene builders produce them ([`Scene::build`]
-/// stores them compactly: [`TriRecord`] + per-vertex arrays).
+/// Shading attributes of one triangle.
 #[derive(Debug, Clone, Copy)]
 pub struct TriShading {
     /// Unit geometric normal (right-handed from the CCW winding).
@@ -82,46 +81,6 @@ pub struct TriShading {
     pub area: f32,
     /// Index in [`Scene::tangents`] (per-vertex tangents for normal mapping), or u32::MAX.
     pub tangent: u32,
-}
-
-/// The per-hit record of one triangle (32 bytes, one per triangle in BVH order): the shading
-/// normals and texture coordinates are stored once per distinct vertex
-/// ([`Scene::vertex_normals`], [`Scene::vertex_uvs`]) and referenced by index, the area-light
-/// and tangent indices (needed on emitter and normal-mapped hits only) in side arrays.
-#[derive(Debug, Clone, Copy)]
-#[repr(C, align(32))]
-pub struct TriRecord {
-    /// Unit geometric normal (right-handed from the CCW winding).
-    pub ng: Vec3,
-    /// Indices of the three corners in [`Scene::vertex_normals`] / [`Scene::vertex_uvs`].
-    pub vert: [u32; 3],
-    /// Material index.
-    pub material: u32,
-    /// Area (m²).
-    pub area: f32,
-}
-
-/// FxHash-style hasher for the vertex deduplication of [`Scene::build`] (keys are bit
-/// patterns, hashed 8 bytes at a time).
-#[derive(Default)]
-struct VertexKeyHasher(u64);
-
-impl std::hash::Hasher for VertexKeyHasher {
-    #[inline]
-    fn write(&mut self, bytes: &[u8]) {
-        for c in bytes.chunks(8) {
-            let mut w = [0u8; 8];
-            w[..c.len()].copy_from_slice(c);
-            self.0 = (self.0.rotate_left(5) ^ u64::from_le_bytes(w))
-                .wrapping_mul(0x517c_c1b7_2722_0a95);
-        }
-    }
-    #[inline]
-    fn write_usize(&mut self, _: usize) {}
-    #[inline]
-    fn finish(&self) -> u64 {
-        self.0
-    }
 }
 
 /// A spectral reflectance that may vary over the surface.
@@ -289,16 +248,8 @@ impl SceneCamera {
 pub struct Scene {
     /// Triangles in BVH order.
     pub tris: Vec<TriGeom>,
-    /// Per-hit shading records in BVH order.
-    pub tri_records: Vec<TriRecord>,
-    /// Distinct vertex shading normals (unit), indexed by [`TriRecord::vert`].
-    pub vertex_normals: Vec<Vec3>,
-    /// Texture coordinates of the same vertices, indexed by [`TriRecord::vert`].
-    pub vertex_uvs: Vec<Vec2>,
-    /// Index in the area-light list of each triangle (BVH order), or u32::MAX.
-    pub tri_light: Vec<u32>,
-    /// Index in [`Scene::tangents`] of each triangle (BVH order), or u32::MAX.
-    pub tri_tangent: Vec<u32>,
+    /// Shading attributes in BVH order.
+    pub shading: Vec<TriShading>,
     /// The 4-wide BVH over `tris` (primitive i of the BVH is `tris[i]`).
     pub bvh: Option<Bvh4>,
     /// Materials.
@@ -318,7 +269,7 @@ pub struct Scene {
     /// Environment lighting (selected after the punctual lights), if any.
     pub environment: Option<EnvMap>,
     /// Per-vertex tangents (xyz unit, w = ±1 bitangent sign) of normal-mapped triangles,
-    /// indexed by [`Scene::tri_tangent`].
+    /// indexed by [`TriShading::tangent`].
     pub tangents: Vec<[Vec4; 3]>,
 }
 
@@ -392,56 +343,16 @@ impl Scene {
         };
         // area lights
         let mut area_lights = Vec::new();
-        let mut tri_light = vec![u32::MAX; shading.len()];
-        for (i, s) in shading.iter().enumerate() {
+        for (i, s) in shading.iter_mut().enumerate() {
+            s.light = u32::MAX;
             if area_light_weight(&materials[s.material as usize], s.area) > 0.0 {
-                tri_light[i] = area_lights.len() as u32;
+                s.light = area_lights.len() as u32;
                 area_lights.push(i as u32);
             }
         }
-        // distinct (normal, uv) corners, numbered in order of first use along the BVH order
-        // (so that the vertices of neighbouring triangles are neighbours in memory)
-        let mut ids: std::collections::HashMap<
-            [u32; 5],
-            u32,
-            std::hash::BuildHasherDefault<VertexKeyHasher>,
-        > = Default::default();
-        let (mut vertex_normals, mut vertex_uvs) = (Vec::new(), Vec::new());
-        let mut tri_records = Vec::with_capacity(shading.len());
-        for s in &shading {
-            let mut vert = [0u32; 3];
-            for k in 0..3 {
-                let (n, uv) = (s.n[k], s.uv[k]);
-                let key = [
-                    n.x.to_bits(),
-                    n.y.to_bits(),
-                    n.z.to_bits(),
-                    uv.x.to_bits(),
-                    uv.y.to_bits(),
-                ];
-                vert[k] = *ids.entry(key).or_insert_with(|| {
-                    vertex_normals.push(n);
-                    vertex_uvs.push(uv);
-                    (vertex_normals.len() - 1) as u32
-                });
-            }
-            tri_records.push(TriRecord {
-                ng: s.ng,
-                vert,
-                material: s.material,
-                area: s.area,
-            });
-        }
-        drop(ids);
-        let tri_tangent = shading.iter().map(|s| s.tangent).collect();
-        drop(shading);
         let mut scene = Scene {
             tris,
-            tri_records,
-            vertex_normals,
-            vertex_uvs,
-            tri_light,
-            tri_tangent,
+            shading,
             bvh,
             materials,
             area_lights,
@@ -477,7 +388,7 @@ impl Scene {
             .area_lights
             .iter()
             .map(|&i| {
-                let s = &self.tri_records[i as usize];
+                let s = &self.shading[i as usize];
                 area_light_weight(&self.materials[s.material as usize], s.area)
             })
             .collect();
@@ -545,15 +456,14 @@ impl Scene {
     /// `prim` from distance `dist` with cos θ at the light `cos_l` (for MIS on emitter hits).
     #[inline]
     pub fn area_light_pdf(&self, prim: u32, dist: f32, cos_l: f32) -> f32 {
-        let s = &self.tri_records[prim as usize];
-        let light = self.tri_light[prim as usize];
+        let s = &self.shading[prim as usize];
         let Some(d) = &self.light_distr else {
             return 0.0;
         };
-        if light == u32::MAX || cos_l <= 0.0 {
+        if s.light == u32::MAX || cos_l <= 0.0 {
             return 0.0;
         }
-        d.pmf(light as usize) / s.area * dist * dist / cos_l
+        d.pmf(s.light as usize) / s.area * dist * dist / cos_l
     }
 
     /// Sample a light as seen from `p` (next-event estimation). `u` picks the light, `u2` the
@@ -596,7 +506,7 @@ impl Scene {
         if li < self.area_lights.len() {
             let prim = self.area_lights[li] as usize;
             let g = &self.tris[prim];
-            let s = &self.tri_records[prim];
+            let s = &self.shading[prim];
             let b = square_to_triangle(u2);
             let q: Vec3 = (g.v0 + g.e1 * b.x + g.e2 * b.y).into();
             let to = q - p;
@@ -607,7 +517,7 @@ impl Scene {
             let dist = d2.sqrt();
             let dir = to * (1.0 / dist);
             // one-sided emitter: the shading normal decides the front, as in Mitsuba
-            let ns = self.shading_normal(s, b);
+            let ns = shading_normal(s, b);
             if ns.dot(-dir) <= 0.0 {
                 return None;
             }
@@ -624,7 +534,7 @@ impl Scene {
             }
             let mat = &self.materials[s.material as usize];
             let le = match &mat.emission_texture {
-                Some(t) => t.eval(self.interpolate_uv(s, b), wl),
+                Some(t) => t.eval(interpolate_uv(s, b), wl),
                 None => emission(mat.emission.as_ref()?, s.material),
             };
             Some(LightSample {
@@ -693,68 +603,21 @@ fn area_light_weight(m: &Material, area: f32) -> f64 {
 /// Interpolated texture coordinates at barycentrics b = (b1, b2).
 #[inline]
 pub fn interpolate_uv(s: &TriShading, b: Vec2) -> Vec2 {
-    interpolate_uv3(&s.uv, b)
-}
-
-#[inline(always)]
-fn interpolate_uv3(uv: &[Vec2; 3], b: Vec2) -> Vec2 {
-    uv[0] * (1.0 - b.x - b.y) + uv[1] * b.x + uv[2] * b.y
+    s.uv[0] * (1.0 - b.x - b.y) + s.uv[1] * b.x + s.uv[2] * b.y
 }
 
 /// Interpolated unit shading normal at barycentrics b = (b1, b2).
 #[inline]
 pub fn shading_normal(s: &TriShading, b: Vec2) -> Vec3 {
-    shading_normal3(&s.n, s.ng, b)
-}
-
-#[inline(always)]
-fn shading_normal3(n: &[Vec3; 3], ng: Vec3, b: Vec2) -> Vec3 {
     // equal (unit) vertex normals: the interpolation is that normal, no normalisation needed
-    if n[0] == n[1] && n[1] == n[2] {
-        return n[0];
+    if s.n[0] == s.n[1] && s.n[1] == s.n[2] {
+        return s.n[0];
     }
-    let n = n[0] * (1.0 - b.x - b.y) + n[1] * b.x + n[2] * b.y;
+    let n = s.n[0] * (1.0 - b.x - b.y) + s.n[1] * b.x + s.n[2] * b.y;
     let l = n.length();
     if l > 0.0 && l.is_finite() {
         n / l
     } else {
-        ng
-    }
-}
-
-impl Scene {
-    /// Number of triangles.
-    #[inline]
-    pub fn tri_count(&self) -> usize {
-        self.tri_records.len()
-    }
-
-    /// The full shading attributes of triangle `prim` (BVH order), as given to
-    /// [`Scene::build`] except `light`, which is the triangle's area-light index.
-    pub fn tri_shading(&self, prim: usize) -> TriShading {
-        let r = &self.tri_records[prim];
-        TriShading {
-            ng: r.ng,
-            n: r.vert.map(|v| self.vertex_normals[v as usize]),
-            uv: r.vert.map(|v| self.vertex_uvs[v as usize]),
-            material: r.material,
-            light: self.tri_light[prim],
-            area: r.area,
-            tangent: self.tri_tangent[prim],
-        }
-    }
-
-    /// Interpolated texture coordinates of triangle record `r` at barycentrics b = (b1, b2)
-    /// (the same arithmetic as [`interpolate_uv`]).
-    #[inline]
-    pub fn interpolate_uv(&self, r: &TriRecord, b: Vec2) -> Vec2 {
-        interpolate_uv3(&r.vert.map(|v| self.vertex_uvs[v as usize]), b)
-    }
-
-    /// Interpolated unit shading normal of triangle record `r` at barycentrics b = (b1, b2)
-    /// (the same arithmetic as [`shading_normal`]).
-    #[inline]
-    pub fn shading_normal(&self, r: &TriRecord, b: Vec2) -> Vec3 {
-        shading_normal3(&r.vert.map(|v| self.vertex_normals[v as usize]), r.ng, b)
+        s.ng
     }
 }

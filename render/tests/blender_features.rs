@@ -347,7 +347,7 @@ fn flat_normal_map_changes_nothing() {
     let (sb, ob) = render_file(&b, 12, &s);
     assert!(sa.materials[0].normal_map.is_none());
     assert!(sb.materials[0].normal_map.is_some());
-    assert!(sb.tri_tangent.iter().all(|&t| t != u32::MAX));
+    assert!(sb.shading.iter().all(|t| t.tangent != u32::MAX));
     assert_eq!(oa.band_planes, ob.band_planes);
 }
 

@@ -109,7 +109,7 @@ fn node_hierarchy_and_mirroring() {
     for t in &s.tris {
         assert!(((t.v0.z) + 2.0).abs() < 1e-6);
     }
-    for sh in (0..s.tri_count()).map(|i| s.tri_shading(i)) {
+    for sh in &s.shading {
         assert!(sh.ng.z > 0.99, "normal {:?}", sh.ng);
         assert!(sh.n[0].z > 0.99, "shading normal {:?}", sh.n[0]);
     }

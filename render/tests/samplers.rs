@@ -413,7 +413,7 @@ fn area_light_sampling_matches_its_density() {
             let d = frame.to_world(w).normalize();
             match scene.intersect(p, d, 0.0, f32::INFINITY) {
                 Some(h) => {
-                    let s = &scene.tri_records[h.prim as usize];
+                    let s = &scene.shading[h.prim as usize];
                     if s.ng.dot(-d) <= 0.0 {
                         return 0.0;
                     }
