@@ -70,36 +70,112 @@ pub(crate) fn rail_stats(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
     })
 }
 
+/// Beyond this many standard deviations Φ is exact to the last bit at 0 or 1 in the sums of
+/// [`rail_stats_calc`]: for x ≥ `TAIL` `norm_cdf(x)` is 1.0 (½·(2 − erfc(x/√2)) with
+/// erfc(9/√2) ≈ 2.3·10⁻¹⁹ below half an ulp of 2), so 1 − Φ(x) is 0.0; for x ≤ −`TAIL`,
+/// Φ(x) ≤ 1.2·10⁻¹⁹ < 2⁻⁵⁴, so 1 − Φ(x) is 1.0 and 1 − Φ(x) − q is 1 − q
+/// (test `tail_shortcuts_are_exact`).
+const TAIL: f64 = 9.0;
+
+/// ln of the 24-point Gauss–Hermite weights (the bits `w.ln()` gives each time).
+fn gh24_ln_weights() -> &'static [f64] {
+    static LN: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    LN.get_or_init(|| {
+        crate::mismatch::num::gauss_hermite_24()
+            .iter()
+            .map(|&(_, w)| w.ln())
+            .collect()
+    })
+}
+
+/// The log-likelihood [`rail_stats_calc`] returns when every node's rail probabilities
+/// enter as exactly 1 (every logarithm of a count's probability is 0): the log-sum of the
+/// weights, computed by the same expressions (per node count: 24 or 1).
+fn all_certain_ll(ln_w: &[f64]) -> f64 {
+    let lmax = ln_w.iter().fold(f64::NEG_INFINITY, |a, &l| a.max(l));
+    let sum: f64 = ln_w.iter().map(|&l| (l - lmax).exp()).sum();
+    lmax + sum.ln()
+}
+
 /// [`rail_stats`], computed (reads only `y`, `s2_t`, `s2_f` and `hi` of the prediction).
+///
+/// The same sums as the plain quadrature (each node: p_lo, p_hi by `norm_cdf`, the count
+/// terms n·ln p, then a log-sum over the nodes; test
+/// `rail_stats_is_the_plain_quadrature_bit_for_bit`) with the work that cannot change a bit
+/// left out: Φ beyond ±[`TAIL`] σ (exactly 0 or 1, or a p_lo below 2⁻⁵⁴ that only enters
+/// 1 − p_lo − p_hi), ln 1 = 0, the weights' logarithms (a table), and the log-sum when every
+/// node's count terms are 0 (a fully saturated or fully mid-range pixel-shot: a constant).
+/// `mean` is within 10⁻¹⁸·F of the plain sum (p_lo below 2⁻⁵⁴ counts as 0 there).
 fn rail_stats_calc(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
+    use crate::mismatch::num::{gauss_hermite_24, norm_cdf};
+    static ONE: [(f64, f64); 1] = [(0.0, 1.0)];
+    static ONE_LN: [f64; 1] = [0.0];
     let nmid = f - nlo - nhi;
-    let nodes = rail_nodes(p);
+    let (s_t, s_f) = (p.s2_t.sqrt(), p.s2_f.sqrt());
+    let (nodes, ln_w): (&[(f64, f64)], &[f64]) = if s_f > 1e-9 * s_t.max(1e-300) {
+        (gauss_hermite_24(), gh24_ln_weights())
+    } else {
+        (&ONE, &ONE_LN)
+    };
+    let st = s_t.max(1e-9);
     let mut lmax = f64::NEG_INFINITY;
-    let mut terms = [(0.0f64, 0.0f64, 0.0f64); 24];
+    let mut terms = [0.0f64; 24];
     let mut m1 = 0.0;
-    for (k, (w, plo, phi)) in nodes.iter().enumerate() {
-        let pm = (1.0 - plo - phi).max(0.0);
+    // every count term of every node 0 so far
+    let mut certain = true;
+    // ln p, with ln 1 = +0 exactly
+    let ln_p = |x: f64| if x == 1.0 { 0.0 } else { x.max(1e-300).ln() };
+    for (k, &(z, w)) in nodes.iter().enumerate() {
+        let y = p.y + s_f * z;
+        let (a, b) = ((0.5 - y) / st, (p.hi - 0.5 - y) / st);
+        let phi = if b <= -TAIL {
+            1.0
+        } else if b >= TAIL {
+            0.0
+        } else {
+            1.0 - norm_cdf(b)
+        };
+        // p_lo's value is needed for ln p_lo, or in 1 − p_lo − p_hi unless below 2⁻⁵⁴
+        let plo = if a >= TAIL {
+            1.0
+        } else if a <= -TAIL && nlo == 0.0 {
+            0.0
+        } else {
+            norm_cdf(a)
+        };
         let mut l = 0.0;
         if nlo > 0.0 {
-            l += nlo * plo.max(1e-300).ln();
+            let t = ln_p(plo);
+            certain &= t == 0.0;
+            l += nlo * t;
         }
         if nhi > 0.0 {
-            l += nhi * phi.max(1e-300).ln();
+            let t = ln_p(phi);
+            certain &= t == 0.0;
+            l += nhi * t;
         }
         if nmid > 0.0 {
-            l += nmid * pm.max(1e-300).ln();
+            let t = ln_p((1.0 - plo - phi).max(0.0));
+            certain &= t == 0.0;
+            l += nmid * t;
         }
-        let l = l + w.ln();
+        let l = l + ln_w[k];
         lmax = lmax.max(l);
-        terms[k] = (l, 0.0, 0.0);
+        terms[k] = l;
         let pr = (plo + phi).min(1.0);
         m1 += w * pr;
     }
-    let sum: f64 = terms[..nodes.n].iter().map(|t| (t.0 - lmax).exp()).sum();
-    RailStat {
-        ll: lmax + sum.ln(),
-        mean: f * m1,
-    }
+    let ll = if certain {
+        // (the weights' log-sum: the same terms as below)
+        thread_local! {
+            static C: (f64, f64) = (all_certain_ll(gh24_ln_weights()), all_certain_ll(&ONE_LN));
+        }
+        C.with(|c| if nodes.len() == 1 { c.1 } else { c.0 })
+    } else {
+        let sum: f64 = terms[..nodes.len()].iter().map(|t| (t - lmax).exp()).sum();
+        lmax + sum.ln()
+    };
+    RailStat { ll, mean: f * m1 }
 }
 
 /// Deviance of a pixel-shot's rail counts (frames at the low rail, at the high rail, between):
@@ -264,6 +340,116 @@ impl ExpectedDevianceCache {
 mod tests {
     use super::*;
     use crate::mismatch::num::norm_cdf;
+
+    /// The plain 24-node quadrature (the implementation before the shortcuts of
+    /// [`rail_stats_calc`]): every node's Φ, every logarithm, every exponential.
+    fn rail_stats_plain(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
+        let nmid = f - nlo - nhi;
+        let nodes = rail_nodes(p);
+        let mut lmax = f64::NEG_INFINITY;
+        let mut terms = [0.0f64; 24];
+        let mut m1 = 0.0;
+        for (k, (w, plo, phi)) in nodes.iter().enumerate() {
+            let pm = (1.0 - plo - phi).max(0.0);
+            let mut l = 0.0;
+            if nlo > 0.0 {
+                l += nlo * plo.max(1e-300).ln();
+            }
+            if nhi > 0.0 {
+                l += nhi * phi.max(1e-300).ln();
+            }
+            if nmid > 0.0 {
+                l += nmid * pm.max(1e-300).ln();
+            }
+            let l = l + w.ln();
+            lmax = lmax.max(l);
+            terms[k] = l;
+            m1 += w * (plo + phi).min(1.0);
+        }
+        let sum: f64 = terms[..nodes.n].iter().map(|t| (t - lmax).exp()).sum();
+        RailStat {
+            ll: lmax + sum.ln(),
+            mean: f * m1,
+        }
+    }
+
+    /// Φ beyond ±TAIL is what the shortcuts of `rail_stats_calc` assume, bit for bit: 1 at
+    /// x ≥ TAIL (so 1 − Φ = 0), 1 − Φ(x) = 1 and Φ(x) < 2⁻⁵⁴ at x ≤ −TAIL (so 1 − Φ(x) − q
+    /// = 1 − q), on a dense grid up to 40 and a geometric one up to 10³⁰⁰.
+    #[test]
+    fn tail_shortcuts_are_exact() {
+        let mut xs: Vec<f64> = (0..=31_000).map(|i| TAIL + i as f64 * 1e-3).collect();
+        xs.extend((0..=600).map(|i| 40.0 * 10f64.powf(i as f64 * 0.5)));
+        xs.push(f64::INFINITY);
+        for &x in &xs {
+            assert_eq!(norm_cdf(x), 1.0, "Φ({x})");
+            assert_eq!(1.0 - norm_cdf(x), 0.0, "1 − Φ({x})");
+            let q = norm_cdf(-x);
+            assert!(q < 2f64.powi(-54), "Φ(−{x}) = {q}");
+            assert_eq!(1.0 - q, 1.0, "1 − Φ(−{x})");
+            for &r in &[0.0, 1e-300, 1e-17, 0.25, 0.5, 0.999_999] {
+                assert_eq!((1.0 - q - r).to_bits(), (1.0 - 0.0 - r).to_bits());
+            }
+        }
+    }
+
+    /// `rail_stats_calc` (with its shortcuts) returns the plain quadrature's log-likelihood
+    /// bit for bit, and its mean within 10⁻¹⁸·F, over predictions from the low rail to past
+    /// the high one, with and without fixed pattern, and every rail-count pattern.
+    #[test]
+    fn rail_stats_is_the_plain_quadrature_bit_for_bit() {
+        let mut rng = Rng(0x5EED_0023);
+        let mut checked = 0usize;
+        let mut certain = 0usize;
+        for _ in 0..40_000 {
+            let hi = if rng.unif() < 0.5 { 4095.0 } else { 255.0 };
+            // y anywhere from below 0 to well above hi, often near a rail
+            let y = match (rng.u64() % 4) as u8 {
+                0 => hi * (1.3 * rng.unif() - 0.15),
+                1 => hi + 200.0 * (rng.unif() - 0.3),
+                2 => 60.0 * (rng.unif() - 0.3),
+                _ => hi + 5000.0 * rng.unif(),
+            };
+            let s2_t = 10f64.powf(4.0 * rng.unif() - 1.0);
+            let s2_f = match rng.u64() % 3 {
+                0 => 0.0,
+                1 => s2_t * 1e-20,
+                _ => 10f64.powf(5.0 * rng.unif() - 2.0),
+            };
+            let p = Pred {
+                y,
+                s2_t,
+                s2_f,
+                hi,
+                ..Default::default()
+            };
+            let nf = 1 + (rng.u64() % 8) as usize;
+            let lo = (rng.u64() % (nf as u64 + 1)) as usize;
+            let hi_n = (rng.u64() % ((nf - lo) as u64 + 1)) as usize;
+            let (f, nlo, nhi) = (nf as f64, lo as f64, hi_n as f64);
+            let want = rail_stats_plain(&p, f, nlo, nhi);
+            let got = rail_stats_calc(&p, f, nlo, nhi);
+            assert_eq!(
+                got.ll.to_bits(),
+                want.ll.to_bits(),
+                "y {y} s2_t {s2_t} s2_f {s2_f} hi {hi} F {f} lo {nlo} hi {nhi}: {} vs {}",
+                got.ll,
+                want.ll
+            );
+            assert!(
+                (got.mean - want.mean).abs() <= 1e-18 * f,
+                "mean {} vs {}",
+                got.mean,
+                want.mean
+            );
+            checked += 1;
+            if want.ll == rail_stats_plain(&Pred { y: hi + 1e9, ..p }, f, 0.0, f).ll {
+                certain += 1;
+            }
+        }
+        // the shortcut of fully certain nodes was exercised too
+        assert!(checked == 40_000 && certain > 1000, "certain {certain}");
+    }
 
     /// Without fixed pattern the rail counts are multinomial: the deviance must equal the
     /// closed-form binomial deviance 2[n ln(n/(Fp)) + (F−n) ln((F−n)/(F(1−p)))] with
