@@ -12,7 +12,8 @@
 # Env: ROWS (default 3000), COLS (default 4000), EFFECT (default veiling_glare=0.03),
 #      THREADS (default 2), MAX_MEMORY (passed as --max-memory to both, e.g. 12G; default: the
 #      tools' own limit), OUT (default target/bench-diagnose-12mp), SET (reuse this existing
-#      set folder instead of generating one), BASE, CARGO_TARGET_DIR.
+#      set folder instead of generating one), BASE, BIN (the binary to test; default: build
+#      this tree's), CARGO_TARGET_DIR.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROWS=${ROWS:-3000}
@@ -22,8 +23,10 @@ THREADS=${THREADS:-2}
 OUT=${OUT:-target/bench-diagnose-12mp}
 MEM=()
 if [ -n "${MAX_MEMORY:-}" ]; then MEM=(--max-memory "$MAX_MEMORY"); fi
-cargo build --release -q --bin camsim
-BIN=${CARGO_TARGET_DIR:-target}/release/camsim
+if [ -z "${BIN:-}" ]; then
+  cargo build --release -q --bin camsim
+  BIN=${CARGO_TARGET_DIR:-target}/release/camsim
+fi
 mkdir -p "$OUT"
 echo "machine: $(nproc) cores, $(free -g | awk '/Mem:/ {print $2}') GB; load before: $(uptime | sed 's/.*load average: //')"
 if [ -n "${SET:-}" ]; then
