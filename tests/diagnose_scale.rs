@@ -55,7 +55,10 @@ fn report_names_the_fit_rows_and_the_full_resolution_fit() {
         assert!(w[0].1 + 1 < w[1].0, "runs {runs:?}");
     }
     for &(a, b) in &runs {
-        assert!(a <= b && b < rows && a % 2 == 0 && (b - a + 1) % 2 == 0, "runs {runs:?}");
+        assert!(
+            a <= b && b < rows && a % 2 == 0 && (b - a + 1) % 2 == 0,
+            "runs {runs:?}"
+        );
     }
     let fit_rows: usize = runs.iter().map(|(a, b)| b - a + 1).sum();
     assert_eq!(n(&s["fit_rows"]), fit_rows);
