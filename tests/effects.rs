@@ -1131,6 +1131,17 @@ fn demo_concealment_variants_shape_the_capture_set() {
         &[("relative_illumination", 0.2), ("prnu", 1.0)],
     );
     assert!(count(&mim, "image") >= 1);
+    // Charts (the 12 MP benchmark's set): the default dark and flat series, three charts
+    // (two illuminants, two levels), no edge or points.
+    let ch = shots(Concealment::Charts, &[]);
+    assert_eq!(count(&ch, "dark"), count(&none, "dark"));
+    assert_eq!(count(&ch, "uniform"), count(&none, "uniform"));
+    assert_eq!(count(&ch, "macbeth"), 3);
+    assert_eq!(count(&ch, "slanted_edge") + count(&ch, "point_array"), 0);
+    let ids: Vec<&str> = ch.iter().map(|x| x.0.as_str()).collect();
+    for id in ["chart-d65-35", "chart-d65-70", "chart-a-70"] {
+        assert!(ids.contains(&id), "{id} missing from {ids:?}");
+    }
 }
 
 #[test]

@@ -3,6 +3,7 @@ mod calibrate;
 mod cli;
 mod develop;
 mod diagnose;
+mod diagnose_scale;
 mod dual_pixel;
 mod effects;
 mod emva1288;

@@ -67,6 +67,10 @@ pub enum Concealment {
     /// [`Concealment::OneIlluminant`] plus the same flats under a second illuminant (a
     /// 6500 K blackbody), which separates a spectral change from a gain.
     TwoIlluminants,
+    /// The dark and photon-transfer flat series of [`Concealment::None`] and three chart
+    /// shots (D65 at 35 % and 70 % of full scale, illuminant A at 70 %), nothing else: the
+    /// set of the 12 MP scale benchmark (issue 23, bench/diagnose_12mp.sh).
+    Charts,
 }
 
 /// What to generate.
@@ -448,6 +452,17 @@ fn plan_shots(spec: &DemoSpec, dir: &Path) -> Result<Vec<Plan>, CliError> {
         Concealment::OneIlluminant => {
             let mut p = darks(&DARK_T, 4);
             p.extend(flats(&FLATS_85, 4));
+            p
+        }
+        Concealment::Charts => {
+            let mut p = darks(&DARK_T, 3);
+            p.extend(flats(&PTC, 2));
+            // D65 at 35 % and 70 %, A at 70 % (charts() pairs each level with both).
+            p.extend(
+                charts(&[0.35, 0.7], 1)
+                    .into_iter()
+                    .filter(|c| c.id != "chart-a-35"),
+            );
             p
         }
         Concealment::TwoIlluminants => {

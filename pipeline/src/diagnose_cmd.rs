@@ -801,6 +801,31 @@ fn timing_json(d: &Diagnosis, data: &DataSet, load_s: f64) -> Value {
     })
 }
 
+/// report.json `subsampled`: what the candidate fits read (the fit rows as runs of
+/// consecutive rows, their pixels and pixel-shots) and the full-resolution confirmation (the
+/// all-rows χ²/dof of the believed and the fitted camera, i.e. `fit_before`/`fit_after`).
+fn subsampled_json(d: &Diagnosis, data: &DataSet) -> Value {
+    // the fit rows as inclusive [first, last] runs
+    let mut runs: Vec<[usize; 2]> = Vec::new();
+    for &r in &d.fit_rows {
+        match runs.last_mut() {
+            Some(run) if run[1] + 1 == r => run[1] = r,
+            _ => runs.push([r, r]),
+        }
+    }
+    let shots = data.shots.len();
+    json!({"fit_pixels": d.fit_pixels, "sensor_pixels": data.pixels(),
+           "fits_subsampled": d.fit_pixels < data.pixels(),
+           "fit_rows": d.fit_rows.len(), "sensor_rows": data.rows,
+           "fit_row_runs": runs,
+           "fit_pixel_shots": d.fit_pixels * shots,
+           "sensor_pixel_shots": data.pixels() * shots,
+           "full_resolution": {"pixels": data.pixels(),
+                               "chi2_per_dof_believed": r4(d.before.chi2_per_dof),
+                               "chi2_per_dof_fitted": r4(d.after.chi2_per_dof)},
+           "rule": "candidate fits and selection use whole 2-row groups evenly spread over the sensor (fit_row_runs, inclusive) when it has more than fit_pixels pixels; the reported fit (fit_before/fit_after, repeated in full_resolution), locate, figures and the final fit check use every pixel"})
+}
+
 fn r4(x: f64) -> Value {
     if x.is_finite() {
         json!(x)
@@ -943,9 +968,7 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
                    "hot_pixels_classified": {"before": d.before.hot_pixels, "after": d.after.hot_pixels}},
         "settings": {"fit_pixels": d.fit_pixels, "observations": d.selection.n_obs,
                      "bic_threshold": d.bic_threshold},
-        "subsampled": {"fit_pixels": d.fit_pixels, "sensor_pixels": data.pixels(),
-                       "fits_subsampled": d.fit_pixels < data.pixels(),
-                       "rule": "candidate fits and selection use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels; the reported fit (fit_before/fit_after), locate, figures and the final fit check use every pixel"},
+        "subsampled": subsampled_json(d, data),
         "skipped_shots": skipped,
     })
 }

@@ -107,6 +107,9 @@ pub struct Diagnosis {
     pub maps: Vec<(usize, ShotMaps, ShotMaps)>,
     /// Pixels used while fitting.
     pub fit_pixels: usize,
+    /// Sensor rows used while fitting, ascending (every row when the fits are not
+    /// subsampled).
+    pub fit_rows: Vec<usize>,
     /// The ΔBIC acceptance threshold used.
     pub bic_threshold: f64,
     /// Wall time per stage of this diagnosis (not deterministic: kept out of report.json).
@@ -207,6 +210,7 @@ pub fn diagnose(
         findings,
         maps,
         fit_pixels: ctx.fit_rows.len() * data.cols,
+        fit_rows: ctx.fit_rows.clone(),
         bic_threshold: opts.select.bic_threshold,
         timing,
     })
