@@ -459,7 +459,8 @@ pub(crate) struct RadialInverse {
 
 /// Inverse tables already built, by (effects, wavelength, r_max): a forward model warps every
 /// target of a capture set with one optics configuration, and each table (4 097 bisections of
-/// 64 steps) costs more than warping a plane with it. Bounded: cleared beyond
+/// 64 steps, ≈ 18 map evaluations each with [`bisect_guarded`]) costs more than warping a
+/// plane with it. Bounded: cleared beyond
 /// [`INVERSE_MEMO_ENTRIES`] tables.
 static INVERSE_MEMO: std::sync::Mutex<
     Option<std::collections::HashMap<(String, Option<u64>, u64), std::sync::Arc<RadialInverse>>>,
@@ -601,7 +602,9 @@ fn eps_ratio(fwd: &dyn Fn(f64) -> f64, hd: f64) -> f64 {
 ///   function), so the steps after the bracket has shrunk to adjacent floats cost nothing;
 /// - around an approximate root x* (Newton steps from `guess` with the fixed slope `slope`)
 ///   a band [lo, hi] is verified: with |fwd_float − fwd| ≤ `noise` everywhere on [0, r_hi]
-///   and fwd increasing (which [`RadialInverse::new`] checks), `fwd(lo) + 2·noise < target`
+///   and fwd increasing (which [`RadialInverse::new`] checks at its table's sample radii
+///   only: a map with a dip narrower than that spacing and deeper than 2·noise, i.e. one
+///   at the point of folding over, may get a different last bit), `fwd(lo) + 2·noise < target`
 ///   gives `fwd(c) < target` for every c ≤ lo, and `fwd(hi) − 2·noise ≥ target` gives
 ///   `fwd(c) ≥ target` for every c ≥ hi, so the midpoints outside the band are decided without
 ///   evaluating `fwd`. When no band verifies (or there is no guess) every midpoint inside
@@ -631,7 +634,7 @@ fn bisect_guarded(
             let mut half = 8.0 * noise / slope;
             for _ in 0..4 {
                 let (l, h) = (x - half, x + half);
-                if !(l.is_finite() && h.is_finite()) {
+                if !(l.is_finite() && h.is_finite()) || l >= r_hi || h <= 0.0 {
                     break;
                 }
                 let low_ok = l <= 0.0 || fwd(l) + 2.0 * noise < target;
@@ -720,14 +723,30 @@ impl Tap {
 /// irradiance is resampled (a uniform field stays uniform); a point's centroid moves to
 /// `h·D(h)` (+ the lateral-colour shift).
 ///
+/// Most bytes [`warp_planes`] spends on the radius and tap tables it shares between planes
+/// (8 + 48 bytes per sample); larger images compute both per sample and plane instead.
+pub(crate) const WARP_SHARED_TABLE_BYTES: usize = 256 << 20;
+
 /// The sample radii are computed once for all planes, and with one map (no lateral colour)
-/// the bilinear taps too ([`Tap`]); each plane's result is the same arithmetic as sampling
-/// it alone.
+/// the bilinear taps too ([`Tap`]), when these tables fit in [`WARP_SHARED_TABLE_BYTES`];
+/// each plane's result is the same arithmetic as sampling it alone (so the same bits with
+/// or without the tables).
 pub(crate) fn warp_planes(
     fx: &OpticsEffects,
     img: &mut SpectralImage,
     dx: f64,
     wavelengths_nm: Option<&[f64]>,
+) -> Result<(), OpticsError> {
+    warp_planes_within(fx, img, dx, wavelengths_nm, WARP_SHARED_TABLE_BYTES)
+}
+
+/// [`warp_planes`] with `table_budget_bytes` for its shared tables.
+fn warp_planes_within(
+    fx: &OpticsEffects,
+    img: &mut SpectralImage,
+    dx: f64,
+    wavelengths_nm: Option<&[f64]>,
+    table_budget_bytes: usize,
 ) -> Result<(), OpticsError> {
     let (rows, cols) = (img.rows, img.cols);
     let yc = (rows as f64 - 1.0) / 2.0;
@@ -745,20 +764,32 @@ pub(crate) fn warp_planes(
     } else {
         vec![RadialInverse::shared(fx, None, r_max)?]
     };
-    // The image radius of every output sample (shared by the planes).
-    let mut radius = vec![0f64; rows * cols];
-    radius
-        .par_chunks_mut(cols.max(1))
-        .enumerate()
-        .for_each(|(i, row)| {
-            let y = (i as f64 - yc) * dx;
-            for (j, r) in row.iter_mut().enumerate() {
-                let x = (j as f64 - xc) * dx;
-                *r = x.hypot(y);
-            }
-        });
+    let radius_at = |i: usize, j: usize| -> f64 {
+        let y = (i as f64 - yc) * dx;
+        let x = (j as f64 - xc) * dx;
+        x.hypot(y)
+    };
+    let n = rows * cols;
+    let radius_bytes = n.saturating_mul(std::mem::size_of::<f64>());
+    let tap_bytes = n.saturating_mul(std::mem::size_of::<Tap>());
+    // The image radius of every output sample (shared by the planes), within the budget.
+    let radius: Option<Vec<f64>> = (radius_bytes <= table_budget_bytes).then(|| {
+        let mut radius = vec![0f64; n];
+        radius
+            .par_chunks_mut(cols.max(1))
+            .enumerate()
+            .for_each(|(i, row)| {
+                for (j, r) in row.iter_mut().enumerate() {
+                    *r = radius_at(i, j);
+                }
+            });
+        radius
+    });
     let tap_of = |map: &RadialInverse, i: usize, j: usize| -> Tap {
-        let r = radius[i * cols + j];
+        let r = match &radius {
+            Some(v) => v[i * cols + j],
+            None => radius_at(i, j),
+        };
         let g = if r > 0.0 {
             map.source_radius(r) / r
         } else {
@@ -771,7 +802,7 @@ pub(crate) fn warp_planes(
             xc + (j as f64 - xc) * g,
         )
     };
-    if maps.len() == 1 {
+    if maps.len() == 1 && radius_bytes.saturating_add(tap_bytes) <= table_budget_bytes {
         let map = &maps[0];
         let mut taps = vec![Tap::default(); rows * cols];
         taps.par_chunks_mut(cols.max(1))
@@ -793,7 +824,7 @@ pub(crate) fn warp_planes(
     img.planes.par_iter_mut().enumerate().for_each_init(
         Vec::new,
         |out: &mut Vec<f32>, (k, plane)| {
-            let map = &maps[k];
+            let map = &maps[if maps.len() == 1 { 0 } else { k }];
             out.clear();
             out.resize(rows * cols, 0.0);
             for i in 0..rows {
@@ -1268,11 +1299,18 @@ pub(crate) mod warp_tests {
             }),
             ..Default::default()
         };
-        let mut img = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
-        warp_planes(&fx, &mut img, dx, None).unwrap();
-        for (k, p) in img.planes.iter().enumerate() {
-            let got: Vec<u32> = p.iter().map(|v| v.to_bits()).collect();
-            assert_eq!(got, reference(&fx, &planes[k], None), "plane {k}");
+        // with the shared radius and tap tables, and without them (over the table budget)
+        for budget in [WARP_SHARED_TABLE_BYTES, 0] {
+            let mut img = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
+            warp_planes_within(&fx, &mut img, dx, None, budget).unwrap();
+            for (k, p) in img.planes.iter().enumerate() {
+                let got: Vec<u32> = p.iter().map(|v| v.to_bits()).collect();
+                assert_eq!(
+                    got,
+                    reference(&fx, &planes[k], None),
+                    "plane {k}, budget {budget}"
+                );
+            }
         }
         // lateral colour: one map per plane's wavelength
         let fx = OpticsEffects {
@@ -1283,8 +1321,14 @@ pub(crate) mod warp_tests {
             ..fx
         };
         let lams = [430.0, 550.0, 680.0];
+        let mut without = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
+        warp_planes_within(&fx, &mut without, dx, Some(&lams), 0).unwrap();
         let mut img = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
         warp_planes(&fx, &mut img, dx, Some(&lams)).unwrap();
+        assert_eq!(
+            img.planes, without.planes,
+            "lateral colour without the radius table"
+        );
         for (k, p) in img.planes.iter().enumerate() {
             let got: Vec<u32> = p.iter().map(|v| v.to_bits()).collect();
             assert_eq!(got, reference(&fx, &planes[k], Some(lams[k])), "plane {k}");
