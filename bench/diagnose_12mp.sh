@@ -7,7 +7,7 @@
 # diagnose's wall, user CPU, peak memory, findings, full-resolution chi2/dof, what the fits
 # subsampled and the time per stage (DIR/out-*/timing.json); the progress log (time per
 # candidate) is DIR/diagnose-*.log. A generator or diagnose that refuses the size (memory
-# limit, docs/limits.md) prints its one error line and the script stops with its status.
+# limit, docs/limits.md) prints its one error line and the script stops (exit status 1).
 # A/B: BASE=/path/to/an/older/camsim runs the same set with that binary first.
 # Env: ROWS (default 3000), COLS (default 4000), EFFECT (default veiling_glare=0.03),
 #      THREADS (default 2), MAX_MEMORY (passed as --max-memory to both, e.g. 12G; default: the
@@ -62,8 +62,10 @@ r = json.load(open(f"{out}/report.json"))
 f = [(x["effect"], round(x["magnitude"], 5)) for x in r["findings"]]
 u = [x["effects"] for x in r.get("undecided", [])]
 wall, user, rss = open(tf).read().split()[-3:]
+def c(x):
+    return "null" if x is None else f"{x:.3f}"
 print(f"{name}: diagnose {float(wall):.1f} s wall, {user} s user CPU, {int(rss)//1024} MB peak; findings {f}; undecided {u}; "
-      f"chi2/dof (every pixel) {r['fit_before']['chi2_per_dof']:.3f} -> {r['fit_after']['chi2_per_dof']:.3f}")
+      f"chi2/dof (every pixel) {c(r['fit_before']['chi2_per_dof'])} -> {c(r['fit_after']['chi2_per_dof'])}")
 print(f"  subsampled: {json.dumps(r.get('subsampled'))}")
 t = f"{out}/timing.json"
 if os.path.exists(t):

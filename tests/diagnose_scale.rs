@@ -10,8 +10,8 @@ use serde_json::Value;
 
 /// Diagnoses a generated dark/flat set (one illuminant, nothing hidden) of `rows × cols` with
 /// the exposure_scale candidate alone (the test reads the subsampling, not the selection);
-/// returns report.json and the number of shots.
-fn report(rows: usize, cols: usize) -> (Value, usize) {
+/// returns report.json, the number of shots and the most frames of a shot.
+fn report(rows: usize, cols: usize) -> (Value, usize, usize) {
     let dir = tempfile::tempdir().unwrap();
     let spec = DemoSpec {
         effects: Vec::new(),
@@ -27,7 +27,8 @@ fn report(rows: usize, cols: usize) -> (Value, usize) {
         ..Default::default()
     };
     let r = run_diagnose(&set, &dir.path().join("out"), &opts).unwrap();
-    (r.json, set.shots.len())
+    let max_frames = set.shots.iter().map(|s| s.frames.len()).max().unwrap_or(0);
+    (r.json, set.shots.len(), max_frames)
 }
 
 fn n(v: &Value) -> usize {
@@ -37,8 +38,11 @@ fn n(v: &Value) -> usize {
 #[test]
 fn report_names_the_fit_rows_and_the_full_resolution_fit() {
     // 180 × 192 = 34 560 pixels > 2^15: subsampled.
-    let (rows, cols) = (180, 192);
-    let (r, shots) = report(rows, cols);
+    // 512 × 256: the fits keep 128 of the 512 rows, under a third, so a fit check that used
+    // only the fit rows (at most 3 frames, 3 degrees of freedom, per pixel-shot) would have
+    // fewer degrees of freedom than the sensor has pixel-shots.
+    let (rows, cols) = (512, 256);
+    let (r, shots, max_frames) = report(rows, cols);
     let s = &r["subsampled"];
     assert_eq!(s["fits_subsampled"], Value::Bool(true), "{s}");
     assert_eq!(n(&s["sensor_rows"]), rows);
@@ -73,13 +77,28 @@ fn report_names_the_fit_rows_and_the_full_resolution_fit() {
     // The confirmation at full resolution is the reported fit.
     let fr = &s["full_resolution"];
     assert_eq!(n(&fr["pixels"]), rows * cols);
+    // Every uncensored pixel-shot of F frames adds F degrees of freedom (a censored one its
+    // expected deviance): every pixel of the sensor gives at least 0.9 per pixel-shot, the fit
+    // rows alone at most F_max per fit pixel-shot, fewer than that here.
+    let dof = fr["dof_believed"].as_f64().expect("dof_believed");
+    let sensor_pixel_shots = (rows * cols * shots) as f64;
+    let fit_rows_bound = (fit_rows * cols * shots * max_frames) as f64;
+    assert!(
+        fit_rows_bound < 0.9 * sensor_pixel_shots,
+        "the check has no power: {fit_rows} fit rows, {max_frames} frames"
+    );
+    assert!(
+        dof >= 0.9 * sensor_pixel_shots,
+        "dof {dof} for {sensor_pixel_shots} pixel-shots, fits on {fit_rows} rows"
+    );
+    assert_eq!(fr["dof_believed"], r["fit_before"]["dof"]);
     assert_eq!(fr["chi2_per_dof_believed"], r["fit_before"]["chi2_per_dof"]);
     assert_eq!(fr["chi2_per_dof_fitted"], r["fit_after"]["chi2_per_dof"]);
     assert!(fr["chi2_per_dof_fitted"].as_f64().unwrap().is_finite());
 
     // A small sensor: every row, one run.
     let (rows, cols) = (32, 48);
-    let (r, shots) = report(rows, cols);
+    let (r, shots, _) = report(rows, cols);
     let s = &r["subsampled"];
     assert_eq!(s["fits_subsampled"], Value::Bool(false), "{s}");
     assert_eq!(s["fit_row_runs"], serde_json::json!([[0, rows - 1]]));

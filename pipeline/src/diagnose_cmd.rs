@@ -820,7 +820,7 @@ fn subsampled_json(d: &Diagnosis, data: &DataSet) -> Value {
            "fit_row_runs": runs,
            "fit_pixel_shots": d.fit_pixels * shots,
            "sensor_pixel_shots": data.pixels() * shots,
-           "full_resolution": {"pixels": data.pixels(),
+           "full_resolution": {"pixels": data.pixels(), "dof_believed": d.before.dof,
                                "chi2_per_dof_believed": r4(d.before.chi2_per_dof),
                                "chi2_per_dof_fitted": r4(d.after.chi2_per_dof)},
            "rule": "candidate fits and selection use whole 2-row groups evenly spread over the sensor (fit_row_runs, inclusive) when it has more than fit_pixels pixels; the reported fit (fit_before/fit_after, repeated in full_resolution), locate, figures and the final fit check use every pixel"})

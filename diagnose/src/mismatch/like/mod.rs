@@ -234,7 +234,8 @@ pub struct Eval {
 impl<'a> Ctx<'a> {
     pub fn new(data: &'a DataSet, forward: &'a dyn Forward, max_fit_pixels: usize) -> Self {
         let all_rows: Vec<usize> = (0..data.rows).collect();
-        let fit_rows = if data.pixels() <= max_fit_pixels {
+        // (a sensor of fewer than 2 rows has no 2-row group: its rows are the fit rows)
+        let fit_rows = if data.pixels() <= max_fit_pixels || data.rows < 2 {
             all_rows.clone()
         } else {
             // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
