@@ -37,7 +37,6 @@ fn n(v: &Value) -> usize {
 
 #[test]
 fn report_names_the_fit_rows_and_the_full_resolution_fit() {
-    // 180 × 192 = 34 560 pixels > 2^15: subsampled.
     // 640 × 256: the fits keep 128 of the 640 rows, a fifth, so a fit check that used only
     // the fit rows (at most 4 frames, 4 degrees of freedom, per pixel-shot) would have fewer
     // degrees of freedom than 0.9 per pixel-shot of the sensor.
