@@ -80,13 +80,67 @@ struct SimForward {
 /// run's time). Least recently used evicted first beyond [`SCENE_CACHE_BYTES`].
 #[derive(Default)]
 struct SceneCache {
-    entries: HashMap<String, (u64, Arc<camsim_core::image::SceneRadiance>)>,
-    bytes: usize,
-    stamp: u64,
+    lru: LruBytes<Arc<camsim_core::image::SceneRadiance>, SCENE_CACHE_BYTES>,
 }
 
 /// Memory for cached scenes.
 const SCENE_CACHE_BYTES: usize = 256 << 20;
+
+/// A map from keys to values that keeps its values' bytes within `BUDGET`, evicting the least
+/// recently used first (the forward model's caches of scenes and pixel planes).
+struct LruBytes<V, const BUDGET: usize> {
+    /// Value, its last-use stamp and its bytes, by key.
+    entries: HashMap<String, (u64, V, usize)>,
+    bytes: usize,
+    stamp: u64,
+}
+
+impl<V, const BUDGET: usize> Default for LruBytes<V, BUDGET> {
+    fn default() -> Self {
+        LruBytes {
+            entries: HashMap::new(),
+            bytes: 0,
+            stamp: 0,
+        }
+    }
+}
+
+impl<V: Clone, const BUDGET: usize> LruBytes<V, BUDGET> {
+    /// The value of `key` (marked as used now), if kept.
+    fn get(&mut self, key: &str) -> Option<V> {
+        self.stamp += 1;
+        let st = self.stamp;
+        self.entries.get_mut(key).map(|e| {
+            e.0 = st;
+            e.1.clone()
+        })
+    }
+
+    /// Keep `value` of `bytes` under `key` when it fits in the budget, evicting the least
+    /// recently used values first.
+    fn insert(&mut self, key: String, value: V, bytes: usize) {
+        if bytes > BUDGET {
+            return;
+        }
+        if let Some((_, _, b)) = self.entries.remove(&key) {
+            self.bytes -= b;
+        }
+        while self.bytes + bytes > BUDGET && !self.entries.is_empty() {
+            let oldest = self
+                .entries
+                .iter()
+                .min_by_key(|(_, v)| v.0)
+                .map(|(k, _)| k.clone())
+                .expect("non-empty");
+            if let Some((_, _, b)) = self.entries.remove(&oldest) {
+                self.bytes -= b;
+            }
+        }
+        self.stamp += 1;
+        self.bytes += bytes;
+        self.entries.insert(key, (self.stamp, value, bytes));
+    }
+}
 
 fn scene_bytes(s: &camsim_core::image::SceneRadiance) -> usize {
     s.radiance.planes.iter().map(|x| x.len() * 4).sum::<usize>()
@@ -118,41 +172,18 @@ impl SceneCache {
         grid_key: &str,
     ) -> Result<Arc<camsim_core::image::SceneRadiance>, String> {
         let key = format!("{} {grid_key}", set.shots[si].target_key);
-        self.stamp += 1;
-        let st = self.stamp;
-        if let Some(e) = self.entries.get_mut(&key) {
-            e.0 = st;
-            return Ok(e.1.clone());
+        if let Some(scene) = self.lru.get(&key) {
+            return Ok(scene);
         }
         let scene = Arc::new(crate::chain::shot_scene(set, si, grid).map_err(|e| e.one_line())?);
-        let bytes = scene_bytes(&scene);
-        if bytes <= SCENE_CACHE_BYTES {
-            while self.bytes + bytes > SCENE_CACHE_BYTES && !self.entries.is_empty() {
-                let oldest = self
-                    .entries
-                    .iter()
-                    .min_by_key(|(_, v)| v.0)
-                    .map(|(k, _)| k.clone())
-                    .expect("non-empty");
-                if let Some((_, s)) = self.entries.remove(&oldest) {
-                    self.bytes -= scene_bytes(&s);
-                }
-            }
-            self.bytes += bytes;
-            self.entries.insert(key, (st, scene.clone()));
-        }
+        self.lru.insert(key, scene.clone(), scene_bytes(&scene));
         Ok(scene)
     }
 }
 
 /// Pixel planes by optics key, then by target key; least recently used evicted first when
 /// the planes exceed [`PLANE_CACHE_BYTES`].
-#[derive(Default)]
-struct PlaneCache {
-    entries: HashMap<String, (u64, HashMap<String, Arc<PixelTermPlanes>>)>,
-    bytes: usize,
-    stamp: u64,
-}
+type PlaneCache = LruBytes<HashMap<String, Arc<PixelTermPlanes>>, PLANE_CACHE_BYTES>;
 
 /// Memory for cached pixel planes.
 const PLANE_CACHE_BYTES: usize = 384 << 20;
@@ -218,12 +249,7 @@ impl Forward for SimForward {
                 .planes
                 .lock()
                 .map_err(|_| "forward model lock poisoned".to_string())?;
-            pc.stamp += 1;
-            let st = pc.stamp;
-            pc.entries.get_mut(&okey).map(|e| {
-                e.0 = st;
-                e.1.clone()
-            })
+            pc.get(&okey)
         };
         let mut by_target: HashMap<String, Arc<PixelTermPlanes>> =
             cached.clone().unwrap_or_default();
@@ -266,26 +292,11 @@ impl Forward for SimForward {
         }
         // Keep the planes (when they fit in the cache's memory).
         let bytes = planes_bytes(&by_target);
-        if cached.is_none() && bytes <= PLANE_CACHE_BYTES {
-            let mut pc = self
-                .planes
+        if cached.is_none() {
+            self.planes
                 .lock()
-                .map_err(|_| "forward model lock poisoned".to_string())?;
-            while pc.bytes + bytes > PLANE_CACHE_BYTES && !pc.entries.is_empty() {
-                let oldest = pc
-                    .entries
-                    .iter()
-                    .min_by_key(|(_, v)| v.0)
-                    .map(|(k, _)| k.clone())
-                    .expect("non-empty");
-                if let Some((_, m)) = pc.entries.remove(&oldest) {
-                    pc.bytes -= planes_bytes(&m);
-                }
-            }
-            pc.stamp += 1;
-            let st = pc.stamp;
-            pc.bytes += bytes;
-            pc.entries.insert(okey, (st, by_target));
+                .map_err(|_| "forward model lock poisoned".to_string())?
+                .insert(okey, by_target, bytes);
         }
         Ok(out)
     }
@@ -979,6 +990,26 @@ mod tests {
     use crate::chain::shot_electron_rate;
     use crate::demo::{generate_capture_set, Concealment, DemoSpec};
 
+    /// The caches' LRU: within the byte budget, the least recently used evicted first, a
+    /// value over the budget not kept, a replaced key's bytes not counted twice.
+    #[test]
+    fn lru_bytes_evicts_the_least_recently_used_within_its_budget() {
+        let mut c: LruBytes<u32, 10> = LruBytes::default();
+        c.insert("a".into(), 1, 4);
+        c.insert("b".into(), 2, 4);
+        assert_eq!(c.get("a"), Some(1)); // a is now more recent than b
+        c.insert("c".into(), 3, 4); // 12 > 10: b goes
+        assert_eq!(
+            (c.get("a"), c.get("b"), c.get("c")),
+            (Some(1), None, Some(3))
+        );
+        assert_eq!(c.bytes, 8);
+        c.insert("d".into(), 4, 11); // over the budget: not kept, nothing evicted
+        assert_eq!((c.get("d"), c.bytes), (None, 8));
+        c.insert("c".into(), 5, 6); // replaced: 4 + 6 = 10 fits, a stays
+        assert_eq!((c.get("a"), c.get("c"), c.bytes), (Some(1), Some(5), 10));
+    }
+
     /// The forward model through cached scenes and pixel planes equals `simulate`'s per-shot
     /// electron rates of the same camera (QE blocks and optics blocks applied), also on a
     /// cache hit.
@@ -1033,7 +1064,7 @@ mod tests {
         ];
         let mut new_scenes = Vec::new();
         for spec in &specs {
-            let scenes_before = fw.scenes.lock().unwrap().entries.len();
+            let scenes_before = fw.scenes.lock().unwrap().lru.entries.len();
             // The typed blocks are the ones the camera file with the blocks written in gives.
             let mut v = camera_json.clone();
             apply_rate_spec(&mut v, spec, &set.camera.sensor.channel_names);
@@ -1061,7 +1092,7 @@ mod tests {
                     );
                 }
             }
-            new_scenes.push(fw.scenes.lock().unwrap().entries.len() - scenes_before);
+            new_scenes.push(fw.scenes.lock().unwrap().lru.entries.len() - scenes_before);
         }
         // the QE candidates shared one optics entry, the two glare specs a second; the
         // defocus added a third
