@@ -2,7 +2,10 @@
 //! `depth_crosscheck` (thin lens) and `real_lens_crosscheck` (the double Gauss): fronto-parallel
 //! emitter cards at 0.5, 1.5 and 5 m (a depth range of 10×) placed by their pinhole projection,
 //! with their straight depth edges, and the edge statistics.
+use camsim_render::gltf_load::load_gltf;
 use camsim_render::gltf_write::{flat_spectrum, quad, GltfBuilder, MeshData};
+use camsim_render::scene::Scene;
+use camsim_render::{Bands, RenderSettings};
 use serde_json::{json, Value};
 
 /// The card depths (m).
@@ -446,4 +449,38 @@ pub fn block_z_tests(
         }
     }
     out
+}
+
+/// Writes the scene of `spec` (`w × h`, vertical field `yfov_deg`) into `dir` and loads it.
+pub fn write_and_load(
+    spec: &SceneSpec,
+    w: usize,
+    h: usize,
+    yfov_deg: f64,
+    dir: &std::path::Path,
+) -> Scene {
+    let path = dir.join(format!("{}.gltf", spec.name));
+    build(spec, w, h, yfov_deg).write(&path).unwrap();
+    load_gltf(&path).unwrap()
+}
+
+/// The cross-checks' bands (400–700 nm in 100 nm steps) and their centres (nm).
+pub fn xc_bands() -> (Bands, Vec<f64>) {
+    let bands = Bands::new(400.0, 700.0, 100.0).unwrap();
+    let band_nm = (0..bands.count).map(|b| bands.center_nm(b)).collect();
+    (bands, band_nm)
+}
+
+/// The cross-checks' render settings: `spp` samples with `seed`, direct light only (the cards
+/// are emitters), per-pixel variances, no depth samples.
+pub fn xc_settings(bands: &Bands, spp: u32, seed: u64) -> RenderSettings {
+    RenderSettings {
+        spp,
+        seed,
+        bands: bands.clone(),
+        max_depth: 1,
+        variance: true,
+        depth_spp: 0,
+        ..Default::default()
+    }
 }

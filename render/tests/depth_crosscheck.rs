@@ -21,14 +21,14 @@
 //! * **circle of confusion**: the camera's thin-lens law (v/pitch scale) equals the render
 //!   camera's (H/(2 tan(θ/2)) scale) to 10⁻⁹.
 use super::crosscheck_scenes::{
-    block_z_tests, build, chi2_sf, depth_jump_mask, disc_esf, edge_profile, k_px, scenes,
-    width_10_90, SceneSpec, DEPTHS_M,
+    block_z_tests, chi2_sf, depth_jump_mask, disc_esf, edge_profile, k_px, scenes, width_10_90,
+    SceneSpec, DEPTHS_M,
 };
 use camsim_render::camera::{Pinhole, ThinLens};
 use camsim_render::depth_optics::{defocus_by_depth, thin_lens_for_camera, DepthKernels};
 use camsim_render::depth_path::ThinLensDefocus;
-use camsim_render::gltf_load::{load_gltf, pick_camera};
-use camsim_render::{render, Bands, RenderOutput, RenderSettings};
+use camsim_render::gltf_load::pick_camera;
+use camsim_render::{render, RenderOutput};
 
 const YFOV_DEG: f64 = 30.0;
 const FOCAL_M: f64 = 0.1;
@@ -49,21 +49,10 @@ fn check_scene(
     spp_lens: u32,
     dir: &std::path::Path,
 ) -> Outcome {
-    let path = dir.join(format!("{}.gltf", spec.name));
-    build(spec, w, h, YFOV_DEG).write(&path).unwrap();
-    let scene = load_gltf(&path).unwrap();
+    let scene = super::crosscheck_scenes::write_and_load(spec, w, h, YFOV_DEG, dir);
     let sc = pick_camera(&scene, None).unwrap();
-    let bands = Bands::new(400.0, 700.0, 100.0).unwrap();
-    let band_nm: Vec<f64> = (0..bands.count).map(|b| bands.center_nm(b)).collect();
-    let settings = |spp: u32, seed: u64| RenderSettings {
-        spp,
-        seed,
-        bands: bands.clone(),
-        max_depth: 1,
-        variance: true,
-        depth_spp: 0,
-        ..Default::default()
-    };
+    let (bands, band_nm) = super::crosscheck_scenes::xc_bands();
+    let settings = |spp: u32, seed: u64| super::crosscheck_scenes::xc_settings(&bands, spp, seed);
     let persp = sc.perspective(w as u32, h as u32);
     let pin = render(
         &scene,

@@ -24,7 +24,7 @@ use camsim_render::depth_optics::{
 };
 use camsim_render::depth_path::slab_inverse_depths;
 use camsim_render::gltf_load::{load_gltf, pick_camera};
-use camsim_render::{render, Bands, RenderSettings};
+use camsim_render::render;
 use glam::Vec2;
 use std::path::Path;
 
@@ -370,22 +370,11 @@ fn check_scene_real_lens(
     dir: &Path,
 ) -> LensOutcome {
     use super::crosscheck_scenes::{block_z_tests, chi2_sf, depth_jump_mask, edge_profile};
-    let path = dir.join(format!("{}.gltf", spec.name));
-    build(spec, w, h, XC_YFOV_DEG).write(&path).unwrap();
-    let scene = load_gltf(&path).unwrap();
+    let scene = super::crosscheck_scenes::write_and_load(spec, w, h, XC_YFOV_DEG, dir);
     let sc = pick_camera(&scene, None).unwrap();
-    let bands = Bands::new(400.0, 700.0, 100.0).unwrap();
-    let band_nm: Vec<f64> = (0..bands.count).map(|b| bands.center_nm(b)).collect();
+    let (bands, band_nm) = super::crosscheck_scenes::xc_bands();
     let grid = camsim_core::WavelengthGrid::new(band_nm.clone()).unwrap();
-    let settings = |spp: u32, seed: u64| RenderSettings {
-        spp,
-        seed,
-        bands: bands.clone(),
-        max_depth: 1,
-        variance: true,
-        depth_spp: 0,
-        ..Default::default()
-    };
+    let settings = |spp: u32, seed: u64| super::crosscheck_scenes::xc_settings(&bands, spp, seed);
     let pin = render(
         &scene,
         &Pinhole {
