@@ -146,7 +146,13 @@ impl LogProd {
     /// Multiplies `x^k` into the product.
     #[inline]
     pub fn mul_pow(&mut self, x: f64, k: u32) {
-        let xk = x.powi(k as i32);
+        // (k = 1, 2 written out: the bits `powi` gives — r = 1·x, r = 1·(x·x) in its
+        // square-and-multiply — without the library call; test `mul_pow_is_powi`)
+        let xk = match k {
+            1 => x,
+            2 => x * x,
+            _ => x.powi(k as i32),
+        };
         if k <= 32 && xk > 1e-150 && xk < 1e150 {
             self.mul(xk);
         } else {
@@ -589,6 +595,30 @@ mod tests {
         sub.mul(1e-310);
         sub.mul(4.0);
         assert!((sub.ln() - (1e-310f64.ln() + 4f64.ln())).abs() < 1e-12);
+    }
+
+    /// The written-out powers of `LogProd::mul_pow` are `powi`'s bits.
+    #[test]
+    fn mul_pow_is_powi() {
+        let mut x = 0.37f64;
+        for i in 0..100_000 {
+            x = (x * 3.9 * (1.0 - x)).clamp(1e-9, 1.0 - 1e-9);
+            let v = x * 10f64.powi(i % 400 - 200);
+            for k in 1..=2u32 {
+                let mut a = LogProd::default();
+                a.mul_pow(v, k);
+                let mut b = LogProd::default();
+                let vk = std::hint::black_box(v).powi(std::hint::black_box(k as i32));
+                if vk > 1e-150 && vk < 1e150 {
+                    b.mul(vk);
+                } else {
+                    for _ in 0..k {
+                        b.mul(v);
+                    }
+                }
+                assert_eq!(a.ln().to_bits(), b.ln().to_bits(), "{v}^{k}");
+            }
+        }
     }
 
     #[test]

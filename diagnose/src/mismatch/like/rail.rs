@@ -109,6 +109,9 @@ fn all_certain_ll(ln_w: &[f64]) -> f64 {
 /// can round a later addition the other way).
 fn rail_stats_calc(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
     use crate::mismatch::num::{gauss_hermite_24, norm_cdf};
+    if f == 1.0 {
+        return rail_stats_single(p, nlo, nhi);
+    }
     static ONE: [(f64, f64); 1] = [(0.0, 1.0)];
     static ONE_LN: [f64; 1] = [0.0];
     let nmid = f - nlo - nhi;
@@ -181,6 +184,41 @@ fn rail_stats_calc(p: &Pred, f: f64, nlo: f64, nhi: f64) -> RailStat {
     RailStat { ll, mean: f * m1 }
 }
 
+/// The rail probabilities of a single-frame pixel-shot, the fixed-pattern mixture integrated
+/// in closed form: with z ~ N(0, s_f²), E_z Φ((c − y − z)/s_t) = Φ((c − y)/√(s_t² + s_f²))
+/// (the sum of the independent temporal and fixed-pattern normals; Owen, "A table of normal
+/// integrals", Commun. Statist. Simul. Comput. 9(4), 1980, formula 10,010.8:
+/// ∫ Φ(a + bx) φ(x) dx = Φ(a/√(1 + b²))). Returns (P_lo, P_hi) = (Φ((0.5 − y)/S),
+/// Φ((y − (M − 0.5))/S)), S = √(s_t² + s_f²) (at least 10⁻⁹, as the quadrature's s_t).
+fn single_frame_rail_probs(p: &Pred) -> (f64, f64) {
+    use crate::mismatch::num::norm_cdf;
+    let s = (p.s2_t + p.s2_f).sqrt().max(1e-9);
+    (
+        norm_cdf((0.5 - p.y) / s),
+        norm_cdf((p.y - (p.hi - 0.5)) / s),
+    )
+}
+
+/// [`rail_stats_calc`] for F = 1: the mixture over the fixed offset is the single normal of
+/// [`single_frame_rail_probs`] (exact; the 24-node quadrature errs where s_f ≫ s_t, e.g. by
+/// 10⁻² in P when s_f = 30 s_t, test `single_frame_rail_stats_is_the_exact_mixture`), so the
+/// frame's outcome costs one or two `erfc` and one `ln` instead of up to 48 `erfc` and 25
+/// `exp`/`ln`. The logarithms are clamped at 10⁻³⁰⁰ as the quadrature's are.
+fn rail_stats_single(p: &Pred, nlo: f64, nhi: f64) -> RailStat {
+    let (plo, phi) = single_frame_rail_probs(p);
+    let pr = if nlo > 0.0 {
+        plo
+    } else if nhi > 0.0 {
+        phi
+    } else {
+        (1.0 - plo - phi).max(0.0)
+    };
+    RailStat {
+        ll: pr.max(1e-300).ln(),
+        mean: (plo + phi).min(1.0),
+    }
+}
+
 /// Deviance of a pixel-shot's rail counts (frames at the low rail, at the high rail, between):
 /// G² = 2·(Σ_k n_k ln(n_k/F) − lnL_model) ≥ 0, since the model (a mixture of multinomials) is
 /// never more likely than the saturated multinomial with the observed frequencies.
@@ -208,6 +246,9 @@ pub(crate) fn rail_expected_deviance(p: &Pred, f: f64, given_rail: bool) -> f64 
     let nf = f.round().max(0.0) as usize;
     if nf == 0 {
         return 0.0;
+    }
+    if nf == 1 {
+        return single_frame_expected_deviance(p, given_rail);
     }
     let nodes = rail_nodes(p);
     let mut ln_node = [(0.0f64, 0.0f64, 0.0f64, 0.0f64); 24];
@@ -292,6 +333,48 @@ pub(crate) fn rail_expected_deviance(p: &Pred, f: f64, given_rail: bool) -> f64 
         sg += w * g2;
     }
     sg / sp
+}
+
+/// [`rail_expected_deviance`] for F = 1, with the outcome probabilities of
+/// [`rail_stats_single`] (the same likelihood the fit maximises): the outcomes low, high,
+/// mid with probability P_k have G² = −2 ln P_k (the saturated term of one frame is 0), so
+/// E[G²] = Σ_k P_k·(−2 ln P_k) over the outcomes kept by the rule of the general sum (a rail
+/// reached with P < 10⁻¹⁵ left out; `given_rail`: the mid outcome left out and the rest
+/// renormalised, the likelier rail kept when both are left out).
+fn single_frame_expected_deviance(p: &Pred, given_rail: bool) -> f64 {
+    let (plo, phi) = single_frame_rail_probs(p);
+    let pm = (1.0 - plo - phi).max(0.0);
+    let mut lo_on = plo >= 1e-15;
+    let mut hi_on = phi >= 1e-15;
+    if given_rail && !lo_on && !hi_on {
+        if plo >= phi {
+            lo_on = true;
+        } else {
+            hi_on = true;
+        }
+    }
+    let mut outcomes: Vec<f64> = Vec::with_capacity(3);
+    if !given_rail {
+        outcomes.push(pm);
+    }
+    if lo_on {
+        outcomes.push(plo);
+    }
+    if hi_on {
+        outcomes.push(phi);
+    }
+    let (mut sp, mut sg) = (0.0, 0.0);
+    for &pr in &outcomes {
+        let g2 = (-2.0 * pr.max(1e-300).ln()).max(0.0);
+        sp += pr;
+        sg += pr * g2;
+    }
+    if sp > 0.0 {
+        sg / sp
+    } else {
+        // (every kept outcome underflowed: the likelier rail's own deviance)
+        (-2.0 * plo.max(phi).max(1e-300).ln()).max(0.0)
+    }
 }
 
 /// Memo of [`rail_expected_deviance`] within one block of an evaluation: the pixel-shots of a
@@ -426,7 +509,8 @@ mod tests {
                 hi,
                 ..Default::default()
             };
-            let nf = 1 + (rng.u64() % 8) as usize;
+            // (F = 1 has its closed form: `single_frame_rail_stats_is_the_exact_mixture`)
+            let nf = 2 + (rng.u64() % 8) as usize;
             let lo = (rng.u64() % (nf as u64 + 1)) as usize;
             let hi_n = (rng.u64() % ((nf - lo) as u64 + 1)) as usize;
             let (f, nlo, nhi) = (nf as f64, lo as f64, hi_n as f64);
@@ -452,6 +536,71 @@ mod tests {
         }
         // the shortcut of fully certain nodes was exercised too
         assert!(checked == 40_000 && certain > 1000, "certain {certain}");
+    }
+
+    /// F = 1: the closed form (`rail_stats_single`) is the mixture over the fixed offset
+    /// integrated numerically (midpoint rule over ±12 s_f, 40 000 points) to 10⁻⁹ in P
+    /// (relative, or 10⁻¹² absolute), for every outcome and predictions from below the low
+    /// rail to past the high one, s_f from 0 to 300 s_t; the 24-node quadrature it replaced
+    /// misses the same integral by more than 10⁻³ where s_f ≫ s_t (so this test fails on the
+    /// old code).
+    #[test]
+    fn single_frame_rail_stats_is_the_exact_mixture() {
+        let mut rng = Rng(0x5EED_0001);
+        let mut worst_quadrature = 0f64;
+        for case in 0..3000 {
+            let hi = if rng.unif() < 0.5 { 4095.0 } else { 255.0 };
+            let s2_t = 10f64.powf(3.0 * rng.unif() - 1.0);
+            let s2_f = match case % 3 {
+                0 => 0.0,
+                1 => s2_t * 10f64.powf(2.0 * rng.unif() - 2.0),
+                _ => s2_t * 10f64.powf(5.0 * rng.unif()),
+            };
+            let s = (s2_t + s2_f).sqrt();
+            let y = match rng.u64() % 3 {
+                0 => 0.5 + 8.0 * s * (rng.unif() - 0.5),
+                1 => hi - 0.5 + 8.0 * s * (rng.unif() - 0.5),
+                _ => hi * rng.unif(),
+            };
+            let p = Pred {
+                y,
+                s2_t,
+                s2_f,
+                hi,
+                ..Default::default()
+            };
+            // the mixture by the midpoint rule (one node when there is no fixed pattern)
+            let (s_t, s_f) = (s2_t.sqrt(), s2_f.sqrt());
+            let n = if s_f > 0.0 { 40_000 } else { 1 };
+            let (mut plo, mut phi) = (0.0, 0.0);
+            for k in 0..n {
+                let (z, w) = if n == 1 {
+                    (0.0, 1.0)
+                } else {
+                    let x = -12.0 + 24.0 * (k as f64 + 0.5) / n as f64;
+                    (x * s_f, 24.0 / n as f64 * crate::mismatch::num::norm_pdf(x))
+                };
+                plo += w * norm_cdf((0.5 - y - z) / s_t);
+                phi += w * norm_cdf((y + z - (hi - 0.5)) / s_t);
+            }
+            let pm = 1.0 - plo - phi;
+            for (nlo, nhi, want) in [(1.0, 0.0, plo), (0.0, 1.0, phi), (0.0, 0.0, pm)] {
+                if want < 1e-250 {
+                    continue;
+                }
+                let got = rail_stats_calc(&p, 1.0, nlo, nhi).ll.exp();
+                assert!(
+                    (got - want).abs() <= 1e-9 * want + 1e-12,
+                    "y {y} s2_t {s2_t} s2_f {s2_f} hi {hi} lo {nlo} hi {nhi}: {got} vs {want}"
+                );
+                let quad = rail_stats_plain(&p, 1.0, nlo, nhi).ll.exp();
+                worst_quadrature = worst_quadrature.max((quad - want).abs());
+            }
+        }
+        assert!(
+            worst_quadrature > 1e-3,
+            "quadrature error {worst_quadrature}"
+        );
     }
 
     /// Without fixed pattern the rail counts are multinomial: the deviance must equal the
@@ -606,6 +755,9 @@ mod tests {
             (0.05, 1.0, 8, false),
             (0.3, 2.0, 2, false),
             (0.01, 0.7, 4, true),
+            (0.05, 1.0, 1, false),
+            (0.02, 3.0, 1, false),
+            (0.01, 0.7, 1, true),
         ] {
             let pred = dark_pred(p_lo, s_f);
             let want = rail_expected_deviance(&pred, f as f64, given);
