@@ -93,6 +93,76 @@ pub fn camera_optical_image(
     result.map_err(|e| CliError::input(camera_path, format!("optics: {e}")))
 }
 
+/// The optics stage of a shot on its sensor channels' planes: with [`ChannelIrradiance`] the
+/// optics act on one plane per CFA channel instead of one per basis term of the scene (25
+/// for a colour chart, 33 once split into bands).
+pub struct ChannelIrradiance {
+    /// Channel index of each irradiance plane.
+    pub channels: Vec<usize>,
+    /// The irradiance whose plane j is `∫ QE'_c(λ) E(x, λ) dλ` of channel `channels[j]`
+    /// (its basis is a placeholder: the planes are spectral integrals already).
+    pub irradiance: SensorIrradiance,
+}
+
+/// Whether the camera's optics act alike at every wavelength, so that they commute with the
+/// spectral sum of pixel integration ([`camsim_sensor::ChannelPlanes`]): the default optics
+/// path (not the uncropped ISETCam image), a Gaussian, pillbox or no blur, no lateral colour,
+/// a constant transmittance. The camera equation, relative illumination, fall-off,
+/// distortion, the diffuser, defocus and veiling glare act on every plane alike.
+pub fn optics_alike_at_every_wavelength(camera: &Camera) -> bool {
+    use camsim_optics::Blur;
+    let o = &camera.optics;
+    !camera.uncropped_optical_image
+        && matches!(
+            o.blur,
+            Blur::None | Blur::Gaussian { .. } | Blur::Pillbox { .. }
+        )
+        && o.effects.lateral_color.is_none()
+        && matches!(
+            o.transmittance,
+            camsim_core::Spectrum::Affine { slope_per_nm, .. } if slope_per_nm == 0.0
+        )
+}
+
+/// [`shot_irradiance_of_scene`] on the channel planes of `scene` (the same optics stage, on
+/// [`camsim_sensor::channel_planes`] of the scene radiance for the camera's sensor) when the
+/// optics act alike at every wavelength ([`optics_alike_at_every_wavelength`]) and the scene
+/// has no depth; `None` otherwise. The pixel average of plane j, times p²·FF, is the electron
+/// rate of channel `channels[j]` ([`camsim_sensor::electron_rate_from_channel_planes`]),
+/// equal to [`shot_electron_rate`]'s without pixel optics within f32 rounding (linearity).
+pub fn shot_channel_irradiance_of_scene(
+    set: &CaptureSet,
+    shot_index: usize,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<Option<ChannelIrradiance>, CliError> {
+    if scene.depth_m.is_some() || !optics_alike_at_every_wavelength(&set.camera) {
+        return Ok(None);
+    }
+    let ch = camsim_sensor::channel_planes(&set.camera.sensor, &scene.radiance);
+    let n = ch.planes.len();
+    let radiance = camsim_core::SpectralImage::new(
+        scene.radiance.rows,
+        scene.radiance.cols,
+        camsim_core::image::SpectralBasis::Spectra(vec![camsim_core::Spectrum::constant(1.0); n]),
+        ch.planes,
+    )
+    .map_err(|e| CliError::input(&set.camera_path, format!("channel planes: {e}")))?;
+    let channel_scene = SceneRadiance {
+        radiance,
+        sample_pitch_m: scene.sample_pitch_m,
+        object_distance_m: scene.object_distance_m,
+        illuminant: None,
+        depth_m: None,
+        sample_aperture: scene.sample_aperture,
+    };
+    let irradiance = shot_irradiance_of_scene(set, shot_index, &channel_scene, grid)?;
+    Ok(Some(ChannelIrradiance {
+        channels: ch.channels,
+        irradiance,
+    }))
+}
+
 /// Depth-layered compositing slabs of the depth-aware optics (uniform in 1/z).
 pub const DEPTH_LAYERS: usize = 16;
 /// Field tiles per side of the real-lens depth-aware optics (PSF of each tile's centre).

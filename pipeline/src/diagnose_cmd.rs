@@ -9,7 +9,9 @@
 //! the recording with it) and `DIR/report.html` with its figures.
 mod figures;
 
-use crate::chain::{sampling_for, shot_irradiance_of_scene, wavelength_grid};
+use crate::chain::{
+    optics_alike_at_every_wavelength, sampling_for, shot_irradiance_of_scene, wavelength_grid,
+};
 use crate::config::{camera_from_file, CameraFile, CaptureSet, Exposure};
 use crate::error::CliError;
 use crate::raw_input::read_frame_with;
@@ -253,46 +255,70 @@ impl Forward for SimForward {
         };
         let mut by_target: HashMap<String, Arc<PixelTermPlanes>> =
             cached.clone().unwrap_or_default();
+        let mut added = false;
         let mut rate_by_target: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
         let mut out = Vec::with_capacity(self.shots.len());
         // (computed on the first render: the margin of a warp costs an inverse map)
         let grid_key = std::cell::OnceCell::new();
+        // The QE blocks of the believed camera: the optics then act on the channel planes
+        // (see `channel_rate`); a candidate QE reads the cached term planes instead.
+        let believed_qe = set.camera.sensor.effects.qe_shift
+            == self.believed.sensor.effects.qe_shift
+            && set.camera.sensor.effects.ir_leakage == self.believed.sensor.effects.ir_leakage;
         for &si in &self.shots {
             let key = set.shots[si].target_key.clone();
             if let Some(r) = rate_by_target.get(&key) {
                 out.push(r.clone());
                 continue;
             }
-            let pp = match by_target.get(&key) {
-                Some(p) => p.clone(),
-                None => {
-                    let scene = self
-                        .scenes
-                        .lock()
-                        .map_err(|_| "forward model lock poisoned".to_string())?
-                        .scene(
-                            &set,
-                            si,
-                            &grid,
-                            grid_key.get_or_init(|| SceneCache::grid_key(&set, &grid)),
-                        )?;
-                    let irr = shot_irradiance_of_scene(&set, si, &scene, &grid)
-                        .map_err(|e| e.one_line())?;
-                    let p = Arc::new(camsim_sensor::pixel_term_planes(&set.camera.sensor, &irr));
-                    by_target.insert(key.clone(), p.clone());
-                    p
+            let scene_of = || -> Result<Arc<camsim_core::image::SceneRadiance>, String> {
+                self.scenes
+                    .lock()
+                    .map_err(|_| "forward model lock poisoned".to_string())?
+                    .scene(
+                        &set,
+                        si,
+                        &grid,
+                        grid_key.get_or_init(|| SceneCache::grid_key(&set, &grid)),
+                    )
+            };
+            // The path is a function of the camera and the target alone (not of what is
+            // cached), so a call's rates do not depend on the calls before it.
+            let mut scene = None;
+            let channel = if believed_qe && optics_alike_at_every_wavelength(&set.camera) {
+                let sc = scene_of()?;
+                let r = channel_rate(&set, si, &sc, &grid)?;
+                scene = Some(sc);
+                r
+            } else {
+                None
+            };
+            let r = match (channel, by_target.get(&key)) {
+                (Some(r), _) => r,
+                (None, Some(pp)) => {
+                    camsim_sensor::electron_rate_from_term_planes(&set.camera.sensor, pp)
+                }
+                (None, None) => {
+                    let sc = match scene {
+                        Some(sc) => sc,
+                        None => scene_of()?,
+                    };
+                    let irr =
+                        shot_irradiance_of_scene(&set, si, &sc, &grid).map_err(|e| e.one_line())?;
+                    let pp = camsim_sensor::pixel_term_planes(&set.camera.sensor, &irr);
+                    let r = camsim_sensor::electron_rate_from_term_planes(&set.camera.sensor, &pp);
+                    by_target.insert(key.clone(), Arc::new(pp));
+                    added = true;
+                    r
                 }
             };
-            let r = Arc::new(camsim_sensor::electron_rate_from_term_planes(
-                &set.camera.sensor,
-                &pp,
-            ));
+            let r = Arc::new(r);
             rate_by_target.insert(key, r.clone());
             out.push(r);
         }
         // Keep the planes (when they fit in the cache's memory).
         let bytes = planes_bytes(&by_target);
-        if cached.is_none() {
+        if added {
             self.planes
                 .lock()
                 .map_err(|_| "forward model lock poisoned".to_string())?
@@ -300,6 +326,39 @@ impl Forward for SimForward {
         }
         Ok(out)
     }
+}
+
+/// The electron rates of shot `si` through the optics on the sensor channels' planes
+/// ([`crate::chain::shot_channel_irradiance_of_scene`]) when that is cheaper than the basis
+/// terms' path and exact to f32 rounding: the optics act alike at every wavelength and the
+/// scene has more basis terms than the CFA has channels (a colour chart: 25 terms, 3–4
+/// channels). The caller takes it only with the believed camera's QE blocks: a QE candidate
+/// reuses the cached term planes of its optics instead (one weighted sum per pixel).
+/// `None`: take the basis terms' path.
+fn channel_rate(
+    set: &CaptureSet,
+    si: usize,
+    scene: &camsim_core::image::SceneRadiance,
+    grid: &camsim_core::WavelengthGrid,
+) -> Result<Option<Vec<f32>>, String> {
+    let sensor = &set.camera.sensor;
+    let used = (0..sensor.channel_qe.len())
+        .filter(|&c| sensor.cfa.tile.iter().flatten().any(|&t| t == c))
+        .count();
+    if scene.radiance.terms() <= used {
+        return Ok(None);
+    }
+    let Some(ch) = crate::chain::shot_channel_irradiance_of_scene(set, si, scene, grid)
+        .map_err(|e| e.one_line())?
+    else {
+        return Ok(None);
+    };
+    let pp = camsim_sensor::pixel_term_planes(sensor, &ch.irradiance);
+    Ok(Some(camsim_sensor::electron_rate_from_channel_planes(
+        sensor,
+        &ch.channels,
+        &pp,
+    )))
 }
 
 /// Sets the blocks of `spec` on a validated camera, in their fitted forms (the typed twin of
@@ -1008,6 +1067,85 @@ mod tests {
         assert_eq!((c.get("d"), c.bytes), (None, 8));
         c.insert("c".into(), 5, 6); // replaced: 4 + 6 = 10 fits, a stays
         assert_eq!((c.get("a"), c.get("c"), c.bytes), (Some(1), Some(5), 10));
+    }
+
+    /// Optics that act alike at every wavelength run on the channel planes of a chart (25
+    /// basis terms, 3 channels) and give `simulate`'s electron rates to f32 rounding, with
+    /// every wavelength-independent optics block set; lateral colour (per wavelength) and a
+    /// candidate QE take the basis terms' path.
+    #[test]
+    fn channel_plane_optics_equal_the_basis_term_optics() {
+        let dir = tempfile::tempdir().unwrap();
+        let spec = DemoSpec {
+            effects: vec![("veiling_glare".into(), 0.03)],
+            concealment: Concealment::None,
+            rows: 24,
+            cols: 32,
+            seed: 1,
+        };
+        let truth = generate_capture_set(&spec, dir.path()).unwrap();
+        let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
+        let fw = SimForward {
+            set: Mutex::new(set.clone()),
+            believed: set.camera.clone(),
+            camera_path: set.camera_path.clone(),
+            shots: (0..set.shots.len()).collect(),
+            planes: Mutex::new(PlaneCache::default()),
+            scenes: Mutex::new(SceneCache::default()),
+        };
+        let nch = set.camera.sensor.channel_qe.len();
+        let all_blocks = RateSpec {
+            glare_fraction: Some(0.05),
+            defocus_sigma_um: Some(3.0),
+            distortion: Some([0.02, 0.01]),
+            falloff: Some(vec![-0.1, 0.05]),
+            ..Default::default()
+        };
+        let cases = [
+            (RateSpec::default(), true),
+            (all_blocks.clone(), true),
+            (
+                RateSpec {
+                    lateral_color_um: Some(1.5),
+                    ..all_blocks.clone()
+                },
+                false,
+            ),
+            (
+                RateSpec {
+                    qe_shift_nm: Some(vec![3.0; nch]),
+                    ..all_blocks
+                },
+                false,
+            ),
+        ];
+        let mut charts = 0;
+        for (spec, channel_path) in &cases {
+            let got = fw.rates(spec).unwrap();
+            let mut s2 = set.clone();
+            s2.camera = fw.camera_for(spec).unwrap();
+            let grid = wavelength_grid(&s2);
+            for (si, g) in got.iter().enumerate() {
+                let scene = crate::chain::shot_scene(&s2, si, &grid).unwrap();
+                let via_channels = channel_rate(&s2, si, &scene, &grid).unwrap().is_some();
+                let chart = scene.radiance.terms() > nch;
+                charts += usize::from(chart);
+                let alike = optics_alike_at_every_wavelength(&s2.camera);
+                assert_eq!(via_channels, chart && alike, "{spec:?} shot {si}");
+                assert_eq!(alike, *channel_path || spec.qe_shift_nm.is_some());
+                let want = shot_electron_rate(&s2, si, &grid).unwrap().electrons_per_s;
+                let scale = want.iter().fold(0f32, |m, &x| m.max(x.abs())).max(1e-30);
+                let err = want
+                    .iter()
+                    .zip(g.iter())
+                    .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                assert!(
+                    err <= 2e-6 * scale,
+                    "{spec:?} shot {si}: max |Δ| {err} of {scale}"
+                );
+            }
+        }
+        assert!(charts > 0, "the set has no chart");
     }
 
     /// The forward model through cached scenes and pixel planes equals `simulate`'s per-shot

@@ -216,6 +216,60 @@ pub fn electron_rate_from_term_planes(sensor: &SensorModel, pp: &PixelTermPlanes
     out
 }
 
+/// The irradiance (or radiance) of one image summed spectrally per sensor channel before the
+/// pixel average: `C_c(x) = Σ_k w_ck a_k(x)`, with `w_ck = ∫ QE'_c(λ) B_k(λ) dλ` the
+/// weights of [`electron_rate`] (QE shift and IR leakage blocks included), one plane per
+/// channel the CFA uses (`channels`, ascending). Pixel integration is linear in the planes,
+/// so the pixel average of these planes is [`electron_rate`]'s `∫ QE_c Ē dλ` with the sum
+/// taken first; an operator that acts on every plane alike (a wavelength-independent blur or
+/// warp, a spatial scale, a mean added) commutes with the sum, so it may act on these planes
+/// instead of the basis terms' (Goodman, *Introduction to Fourier Optics*, 2005, §6.1:
+/// incoherent imaging is linear in intensity).
+#[derive(Debug, Clone)]
+pub struct ChannelPlanes {
+    /// Channel index of each plane.
+    pub channels: Vec<usize>,
+    /// Row-major planes of the input image's size, one per entry of `channels`.
+    pub planes: Vec<Vec<f32>>,
+}
+
+/// [`ChannelPlanes`] of `img` for `sensor`'s channels and effective QE.
+pub fn channel_planes(sensor: &SensorModel, img: &camsim_core::SpectralImage) -> ChannelPlanes {
+    let channels: Vec<usize> = (0..sensor.channel_qe.len())
+        .filter(|&c| sensor.cfa.tile.iter().flatten().any(|&t| t == c))
+        .collect();
+    let planes = channels
+        .iter()
+        .map(|&c| img.combine(&crate::effects::channel_term_integrals(sensor, img, c)))
+        .collect();
+    ChannelPlanes { channels, planes }
+}
+
+/// Mean photo-electron rate of every pixel from its pixel-averaged channel planes
+/// (`pixel`: [`pixel_term_planes`] of an irradiance whose planes are [`ChannelPlanes`] in the
+/// order of `channels`): `p²·FF·C̄_c(i)`, c pixel i's CFA channel ([`electron_rate`]'s
+/// equation with the spectral sum taken before the area average). No crosstalk.
+pub fn electron_rate_from_channel_planes(
+    sensor: &SensorModel,
+    channels: &[usize],
+    pixel: &PixelTermPlanes,
+) -> Vec<f32> {
+    let mut plane_of = vec![usize::MAX; sensor.channel_qe.len()];
+    for (j, &c) in channels.iter().enumerate() {
+        plane_of[c] = j;
+    }
+    let k = sensor.pixel_pitch_m * sensor.pixel_pitch_m * sensor.fill_factor;
+    let cols = sensor.cols;
+    let mut out = vec![0f32; sensor.rows * cols];
+    out.par_chunks_mut(cols).enumerate().for_each(|(r, row)| {
+        for (c, o) in row.iter_mut().enumerate() {
+            let p = &pixel.planes[plane_of[sensor.cfa.channel_at(r, c)]];
+            *o = (k * p[r * cols + c] as f64) as f32;
+        }
+    });
+    out
+}
+
 pub(crate) fn channel_maps(
     sensor: &SensorModel,
     f: impl Fn(&camsim_core::Spectrum) -> Vec<f32> + Sync,

@@ -57,7 +57,8 @@ pub use hdr::{
     expose_hdr, ChargePacket, HdrFrame, HdrModel, HdrReadout, HdrReadoutModel, USABLE_FRACTION,
 };
 pub use integrate::{
-    box_weights, electron_rate, electron_rate_from_term_planes, pixel_term_planes, PixelTermPlanes,
+    box_weights, channel_planes, electron_rate, electron_rate_from_channel_planes,
+    electron_rate_from_term_planes, pixel_term_planes, ChannelPlanes, PixelTermPlanes,
 };
 pub use line_noise::{
     dark_voltage_at, row_offsets_v, rtn_offsets_v, rtn_pixel_count, rtn_pixel_map, rtn_state,
