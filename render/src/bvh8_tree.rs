@@ -8,10 +8,9 @@
 //! node visit waits on memory, so a wider, shallower tree makes fewer dependent loads per ray
 //! (about log₈ instead of log₄ of the triangle count).
 //!
-//! * A node stores its 8 child boxes as structure-of-arrays, quantised to 8 bits per bound
-//!   (128 bytes, two cache lines; see [`Node8`]); one slab test (Kay & Kajiya 1986) runs on
-//!   the 8 decoded boxes at once with the same arithmetic as the 4-wide test,
-//!   `(bound − o)·(1/d)`, and the hit children are visited nearest first.
+//! * A node stores its 8 child boxes as structure-of-arrays (256 bytes, cache-line aligned);
+//!   one slab test (Kay & Kajiya 1986) runs on the 8 boxes at once with the same arithmetic
+//!   as the 4-wide test, `(bound − o)·(1/d)`, and the hit children are visited nearest first.
 //! * Leaves are the 4-wide triangle packs of [`crate::bvh4`] (Möller–Trumbore, the scalar
 //!   test's barycentric tolerance), so a hit has the same t, triangle and barycentrics as in
 //!   the 4-wide tree.
@@ -27,69 +26,18 @@ use std::mem::MaybeUninit;
 /// Traversal stack depth (each level pushes ≤ 7 entries).
 const STACK: usize = 512;
 
-/// 8 child boxes, quantised to 8 bits per bound on a grid of the node's own box, in 128
-/// bytes (2 cache lines; 256 bytes, 4 lines, with f32 bounds): bound = q·scale + origin,
-/// evaluated with one fused multiply-add, per axis, with scale a power of two. The grid is
-/// rounded outward at build time and checked there against that same fused multiply-add
-/// ([`quantise_lo`], [`quantise_hi`]), so a decoded box contains the padded f32 box: every ray
-/// that hits the f32 box hits the decoded one (the traversal visits a superset of nodes and
-/// finds the same closest hit; a compressed wide BVH in the manner of Ylitie, Karras &
-/// Laine, "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs", 2017).
+/// 8 child boxes, structure-of-arrays.
 #[repr(C, align(64))]
 #[derive(Debug, Clone, Copy)]
 struct Node8 {
-    /// Grid origin per axis: the minimum of the node's box.
-    origin: [f32; 3],
-    /// Grid step per axis (a power of two, ≥ the box extent / 255).
-    scale: [f32; 3],
-    /// Child box minima per axis, one lane per child, in grid steps (empty lanes never hit).
-    qlo: [[u8; 8]; 3],
-    /// Child box maxima in grid steps.
-    qhi: [[u8; 8]; 3],
+    /// Child box minima per axis, one lane per child (padded; empty lanes never hit).
+    min: [[f32; 8]; 3],
+    /// Child box maxima.
+    max: [[f32; 8]; 3],
     /// Child references: node index, LEAF | pack index, or EMPTY.
     child: [u32; 8],
     /// Lanes that hold a child.
     valid: u32,
-}
-
-/// The decoded bound q·scale + origin, rounded once (the traversal's `_mm256_fmadd_ps`).
-fn decode(q: u8, scale: f32, origin: f32) -> f32 {
-    (q as f32).mul_add(scale, origin)
-}
-
-/// The grid step of an axis whose box spans `extent`: the smallest power of two with
-/// 255 steps ≥ extent (positive also for a flat box).
-fn grid_scale(extent: f32) -> f32 {
-    let x = extent / 255.0;
-    if !(x > f32::MIN_POSITIVE) {
-        return f32::MIN_POSITIVE;
-    }
-    // the power of two of x's exponent, doubled when x has a fraction (then once more if the
-    // division rounded down)
-    let mut s = f32::from_bits(x.to_bits() & 0x7f80_0000);
-    while 255.0 * s < extent || s < x {
-        s *= 2.0;
-    }
-    s
-}
-
-/// The largest grid step whose decoded bound is ≤ `lo` (0 decodes to the origin ≤ `lo`).
-fn quantise_lo(lo: f32, scale: f32, origin: f32) -> u8 {
-    let mut q = (((lo - origin) as f64 / scale as f64).floor()).clamp(0.0, 255.0) as u8;
-    while q > 0 && decode(q, scale, origin) > lo {
-        q -= 1;
-    }
-    q
-}
-
-/// The smallest grid step whose decoded bound is ≥ `hi` (≤ 255 when `hi` ≤ the node's box
-/// maximum: 255·scale ≥ the extent, and rounding to nearest keeps origin + 255·scale ≥ it).
-fn quantise_hi(hi: f32, scale: f32, origin: f32) -> u8 {
-    let mut q = (((hi - origin) as f64 / scale as f64).ceil()).clamp(0.0, 255.0) as u8;
-    while q < 255 && decode(q, scale, origin) < hi {
-        q += 1;
-    }
-    q
 }
 
 /// An 8-wide BVH over triangles in BVH order (the order is returned by [`Bvh8::build`] and
@@ -172,7 +120,7 @@ impl Bvh8 {
                 3,
             )
         } else {
-            (self.nodes.as_ptr().wrapping_add(c as usize) as *const i8, 2)
+            (self.nodes.as_ptr().wrapping_add(c as usize) as *const i8, 4)
         };
         for l in 0..lines {
             // SAFETY: a prefetch never faults, whatever the address
@@ -320,18 +268,10 @@ impl Ray8 {
     #[inline]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn boxes(&self, n: &Node8, tmax: f32) -> (__m256, u32) {
-        // the 8 grid steps of a bound, widened to f32
-        let q = |a: &[u8; 8]| {
-            _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(
-                a.as_ptr() as *const __m128i
-            )))
-        };
+        let ld = |a: &[f32; 8]| _mm256_load_ps(a.as_ptr());
         let slab = |ax: usize| {
-            let (sc, or) = (_mm256_set1_ps(n.scale[ax]), _mm256_set1_ps(n.origin[ax]));
-            let lo = _mm256_fmadd_ps(q(&n.qlo[ax]), sc, or);
-            let hi = _mm256_fmadd_ps(q(&n.qhi[ax]), sc, or);
-            let t0 = _mm256_mul_ps(_mm256_sub_ps(lo, self.o[ax]), self.inv[ax]);
-            let t1 = _mm256_mul_ps(_mm256_sub_ps(hi, self.o[ax]), self.inv[ax]);
+            let t0 = _mm256_mul_ps(_mm256_sub_ps(ld(&n.min[ax]), self.o[ax]), self.inv[ax]);
+            let t1 = _mm256_mul_ps(_mm256_sub_ps(ld(&n.max[ax]), self.o[ax]), self.inv[ax]);
             (_mm256_min_ps(t0, t1), _mm256_max_ps(t0, t1))
         };
         let (nx, fx) = slab(0);
@@ -371,10 +311,8 @@ impl Builder8<'_> {
 
     fn push_node(&mut self) -> usize {
         self.nodes.push(Node8 {
-            origin: [0.0; 3],
-            scale: [1.0; 3],
-            qlo: [[0; 8]; 3],
-            qhi: [[0; 8]; 3],
+            min: [[0.0; 8]; 3],
+            max: [[0.0; 8]; 3],
             child: [EMPTY; 8],
             valid: 0,
         });
@@ -383,30 +321,18 @@ impl Builder8<'_> {
 
     /// Store ≤ 8 children in node `idx` (boxes padded as in the 4-wide tree).
     fn fill_node(&mut self, idx: usize, children: &[ChildBox]) -> ChildBox {
-        let padded: Vec<(u32, Vec3, Vec3)> = children
-            .iter()
-            .map(|&(r, a, b)| {
-                let (a, b) = crate::bvh4::pad_box(a, b);
-                (r, a, b)
-            })
-            .collect();
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for &(_, a, b) in &padded {
-            lo = lo.min(a);
-            hi = hi.max(b);
-        }
         let n = &mut self.nodes[idx];
-        for ax in 0..3 {
-            n.origin[ax] = lo[ax];
-            n.scale[ax] = grid_scale(hi[ax] - lo[ax]);
-        }
-        for (c, &(r, a, b)) in padded.iter().enumerate() {
+        for (c, &(r, a, b)) in children.iter().enumerate() {
+            let (a, b) = crate::bvh4::pad_box(a, b);
             for ax in 0..3 {
-                n.qlo[ax][c] = quantise_lo(a[ax], n.scale[ax], n.origin[ax]);
-                n.qhi[ax][c] = quantise_hi(b[ax], n.scale[ax], n.origin[ax]);
+                n.min[ax][c] = a[ax];
+                n.max[ax][c] = b[ax];
             }
             n.child[c] = r;
             n.valid |= 1 << c;
+            lo = lo.min(a);
+            hi = hi.max(b);
         }
         (idx as u32, lo, hi)
     }
@@ -421,67 +347,5 @@ impl Builder8<'_> {
         let per = prims.len().div_ceil(8);
         let children: Vec<ChildBox> = prims.chunks(per).map(|c| self.child_over(c)).collect();
         self.fill_node(idx, &children)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every quantised child box contains its padded f32 box (so the 8-bit tree visits every
-    /// node the f32 tree would), for boxes of all sizes, flat ones and ones far from the
-    /// origin (where the fused multiply-add rounds), and the grid is not too coarse: each
-    /// decoded bound lies within two grid steps of the padded one.
-    #[test]
-    fn quantised_boxes_contain_the_padded_boxes() {
-        let mut s = 0x2545_f491u64;
-        let mut r = || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        let tris: Vec<[Vec3; 3]> = Vec::new();
-        let mut b = Builder8 {
-            tb: TriBuilder {
-                tris: &tris,
-                packs: Vec::new(),
-                order: Vec::new(),
-            },
-            nodes: Vec::new(),
-        };
-        let mut checked = 0;
-        for case in 0..3000 {
-            let offset = [0.0, 1.0e3, -3.7e5, 2.0e6][case % 4];
-            let size = [1.0e-4, 0.3, 10.0, 1.0e3][(case / 4) % 4];
-            let k = 1 + case % 8;
-            let children: Vec<ChildBox> = (0..k)
-                .map(|c| {
-                    let a = Vec3::new(r(), r(), r()) * size + Vec3::splat(offset);
-                    let mut e = Vec3::new(r(), r(), r()) * size * 0.5;
-                    if (case + c) % 5 == 0 {
-                        e.y = 0.0; // a flat box
-                    }
-                    (c as u32, a, a + e)
-                })
-                .collect();
-            let idx = b.push_node();
-            b.fill_node(idx, &children);
-            let n = b.nodes[idx];
-            for (c, &(_, a, e)) in children.iter().enumerate() {
-                let (pa, pb) = crate::bvh4::pad_box(a, e);
-                for ax in 0..3 {
-                    let lo = decode(n.qlo[ax][c], n.scale[ax], n.origin[ax]);
-                    let hi = decode(n.qhi[ax][c], n.scale[ax], n.origin[ax]);
-                    assert!(lo <= pa[ax], "case {case}: min {lo} > {}", pa[ax]);
-                    assert!(hi >= pb[ax], "case {case}: max {hi} < {}", pb[ax]);
-                    let step = n.scale[ax] as f64 + 4.0 * (pa[ax].abs() as f64) * 1.2e-7;
-                    assert!((pa[ax] - lo) as f64 <= 2.0 * step, "case {case}: loose min");
-                    assert!((hi - pb[ax]) as f64 <= 2.0 * step, "case {case}: loose max");
-                    checked += 1;
-                }
-            }
-        }
-        assert!(checked > 30_000);
     }
 }
