@@ -1429,11 +1429,11 @@ pub(crate) mod warp_tests {
             dx,
             Some(&lams),
             0,
-            RowWindow::whole(without.rows),
+            RowWindow::whole(rows),
         )
         .unwrap();
         let mut img = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
-        warp_planes(&fx, &mut img, dx, Some(&lams), RowWindow::whole(img.rows)).unwrap();
+        warp_planes(&fx, &mut img, dx, Some(&lams), RowWindow::whole(rows)).unwrap();
         assert_eq!(
             img.planes, without.planes,
             "lateral colour without the radius table"
@@ -1469,7 +1469,7 @@ pub(crate) mod warp_tests {
         for lam in [450.0, 650.0] {
             for (x0, y0) in [(60.0, 40.0), (-70.0, 20.0), (0.0, 0.0)] {
                 let mut img = spot_s(rows, cols, x0, y0, 3.0);
-                warp_planes(&fx, &mut img, dx, Some(&[lam]), RowWindow::whole(img.rows)).unwrap();
+                warp_planes(&fx, &mut img, dx, Some(&[lam]), RowWindow::whole(rows)).unwrap();
                 // Reference: forward-map every output position's inverse by bisection.
                 let inv = |r: f64| -> f64 {
                     let (mut a, mut b) = (0.0, 2.0 * r + 1e-6);
