@@ -369,6 +369,39 @@ impl OpticsEffects {
         r
     }
 
+    /// The largest radial displacement |r − r_s| of the warp (m) over the image radii up to
+    /// `r_max_m`, at every wavelength of `wavelengths_nm` (lateral colour; `None` without
+    /// it): how far a warped sample's source lies from it, so how much a row window
+    /// ([`RowWindow`]) must be widened to hold every source of its rows (inward ones too,
+    /// which an image's outer margin does not need). Sampled at 4 097 scene radii from 0 to
+    /// the one imaged at `r_max_m` ([`OpticsEffects::warp_forward_m`]).
+    pub fn max_warp_displacement_m(&self, r_max_m: f64, wavelengths_nm: Option<&[f64]>) -> f64 {
+        let lams: Vec<Option<f64>> = match wavelengths_nm {
+            Some(w) if self.lateral_color.is_some() => w.iter().map(|&l| Some(l)).collect(),
+            _ => vec![None],
+        };
+        let r_lim = self.distortion.map_or(f64::INFINITY, |d| d.h_limit()) * self.half_diagonal_m();
+        let mut worst = 0f64;
+        for l in lams {
+            let fwd = |r: f64| self.warp_forward_m(r, l);
+            let mut r_hi = r_max_m.min(0.999 * r_lim);
+            let mut tries = 0;
+            while fwd(r_hi) < r_max_m && tries < 200 {
+                let next = (r_hi * 1.1).min(0.999 * r_lim + 0.001 * r_hi);
+                if next <= r_hi {
+                    break;
+                }
+                r_hi = next;
+                tries += 1;
+            }
+            for i in 0..=4096 {
+                let r = r_hi * i as f64 / 4096.0;
+                worst = worst.max((fwd(r) - r).abs());
+            }
+        }
+        worst
+    }
+
     /// A bound on the rounding error of [`OpticsEffects::warp_forward_m`] (f64) anywhere on
     /// [0, r_hi] at λ: 64 ε times the sum of the magnitudes of its terms (each term has a few
     /// roundings; a division model's `1 − k·h²` loses relative accuracy as `1/(1 − k·h²)`).
@@ -731,13 +764,18 @@ pub(crate) const WARP_SHARED_TABLE_BYTES: usize = 256 << 20;
 /// the bilinear taps too ([`Tap`]), when these tables fit in [`WARP_SHARED_TABLE_BYTES`];
 /// each plane's result is the same arithmetic as sampling it alone (so the same bits with
 /// or without the tables).
+///
+/// `window`: where `img`'s rows lie in the field ([`RowWindow::whole`] for the whole image):
+/// the radii, the inverse table's range and the taps are those of the whole field's grid, so
+/// a window's rows get the whole image's samples wherever their taps fall inside the window.
 pub(crate) fn warp_planes(
     fx: &OpticsEffects,
     img: &mut SpectralImage,
     dx: f64,
     wavelengths_nm: Option<&[f64]>,
+    window: RowWindow,
 ) -> Result<(), OpticsError> {
-    warp_planes_within(fx, img, dx, wavelengths_nm, WARP_SHARED_TABLE_BYTES)
+    warp_planes_within(fx, img, dx, wavelengths_nm, WARP_SHARED_TABLE_BYTES, window)
 }
 
 /// [`warp_planes`] with `table_budget_bytes` for its shared tables.
@@ -747,9 +785,11 @@ fn warp_planes_within(
     dx: f64,
     wavelengths_nm: Option<&[f64]>,
     table_budget_bytes: usize,
+    window: RowWindow,
 ) -> Result<(), OpticsError> {
     let (rows, cols) = (img.rows, img.cols);
-    let yc = (rows as f64 - 1.0) / 2.0;
+    let yc = window.centre_row();
+    let row0 = window.row0 as f64;
     let xc = (cols as f64 - 1.0) / 2.0;
     let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001 + 1e-12;
     let lams: Vec<Option<f64>> = match wavelengths_nm {
@@ -765,7 +805,7 @@ fn warp_planes_within(
         vec![RadialInverse::shared(fx, None, r_max)?]
     };
     let radius_at = |i: usize, j: usize| -> f64 {
-        let y = (i as f64 - yc) * dx;
+        let y = (window.field_row(i) - yc) * dx;
         let x = (j as f64 - xc) * dx;
         x.hypot(y)
     };
@@ -795,10 +835,12 @@ fn warp_planes_within(
         } else {
             map.ratio0
         };
+        // (the whole field's source row, then the window's: an integer off a float ≥ it is
+        // exact, so a window's taps and weights are the whole image's)
         Tap::new(
             rows,
             cols,
-            yc + (i as f64 - yc) * g,
+            yc + (window.field_row(i) - yc) * g - row0,
             xc + (j as f64 - xc) * g,
         )
     };
@@ -862,9 +904,51 @@ pub(crate) fn apply_defocus(
     }
 }
 
-/// Veiling glare: adds `f ×` the mean over the sensor of each plane to that plane (the mean
-/// irradiance at every wavelength, since the image is linear in its planes).
-pub(crate) fn apply_veiling_glare(fx: &OpticsEffects, f: f64, img: &mut SpectralImage, dx: f64) {
+/// Where an image's rows lie in the field: rows `row0 .. row0 + rows` of a grid of
+/// `full_rows` rows with the same columns (a band of the scene sampling grid). The field's
+/// centre, and with it every field coordinate (relative illumination, fall-off, warps), is the
+/// whole grid's; [`RowWindow::whole`] is the image itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RowWindow {
+    /// The whole grid's row of the image's first row.
+    pub row0: usize,
+    /// Rows of the whole grid.
+    pub full_rows: usize,
+}
+
+impl RowWindow {
+    /// The whole image of `rows` rows.
+    pub fn whole(rows: usize) -> Self {
+        RowWindow {
+            row0: 0,
+            full_rows: rows,
+        }
+    }
+
+    /// The field centre's row, in the whole grid's rows.
+    pub fn centre_row(&self) -> f64 {
+        (self.full_rows as f64 - 1.0) / 2.0
+    }
+
+    /// The whole grid's row of the image's row `i`.
+    pub fn field_row(&self, i: usize) -> f64 {
+        (i + self.row0) as f64
+    }
+}
+
+/// What the veiling-glare block adds: the sum over the samples whose centres lie on the
+/// sensor of each plane of the image before the glare, and their count (the glare of plane k
+/// is `f · sums[k] / count`). A row window takes the whole field's ([`crate::glare_sums`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GlareSums {
+    /// Sum per plane.
+    pub sums: Vec<f64>,
+    /// Samples summed per plane.
+    pub count: f64,
+}
+
+/// [`GlareSums`] of a whole image.
+pub(crate) fn veiling_glare_sums(fx: &OpticsEffects, img: &SpectralImage, dx: f64) -> GlareSums {
     let (rows, cols) = (img.rows, img.cols);
     let yc = (rows as f64 - 1.0) / 2.0;
     let xc = (cols as f64 - 1.0) / 2.0;
@@ -886,17 +970,34 @@ pub(crate) fn apply_veiling_glare(fx: &OpticsEffects, f: f64, img: &mut Spectral
     let (r0, r1) = inside(rows, yc, fx.sensor_height_m);
     let (c0, c1) = inside(cols, xc, fx.sensor_width_m);
     let count = ((r1 - r0) * (c1 - c0)) as f64;
-    img.planes.par_iter_mut().for_each(|p| {
-        let mut sum = 0.0f64;
-        for r in r0..r1 {
-            sum += p[r * cols + c0..r * cols + c1]
-                .iter()
-                .map(|&v| v as f64)
-                .sum::<f64>();
-        }
-        let add = (f * sum / count) as f32;
-        p.iter_mut().for_each(|v| *v += add);
-    });
+    let sums = img
+        .planes
+        .par_iter()
+        .map(|p| {
+            let mut sum = 0.0f64;
+            for r in r0..r1 {
+                sum += p[r * cols + c0..r * cols + c1]
+                    .iter()
+                    .map(|&v| v as f64)
+                    .sum::<f64>();
+            }
+            sum
+        })
+        .collect();
+    GlareSums { sums, count }
+}
+
+/// Veiling glare: adds `f ×` the mean over the sensor of each plane to that plane (the mean
+/// irradiance at every wavelength, since the image is linear in its planes); the means are
+/// `glare`'s ([`veiling_glare_sums`] of the whole image before the glare).
+pub(crate) fn apply_veiling_glare(f: f64, img: &mut SpectralImage, glare: &GlareSums) {
+    img.planes
+        .par_iter_mut()
+        .zip(glare.sums.par_iter())
+        .for_each(|(p, &sum)| {
+            let add = (f * sum / glare.count) as f32;
+            p.iter_mut().for_each(|v| *v += add);
+        });
 }
 
 #[cfg(test)]
@@ -1302,7 +1403,7 @@ pub(crate) mod warp_tests {
         // with the shared radius and tap tables, and without them (over the table budget)
         for budget in [WARP_SHARED_TABLE_BYTES, 0] {
             let mut img = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
-            warp_planes_within(&fx, &mut img, dx, None, budget).unwrap();
+            warp_planes_within(&fx, &mut img, dx, None, budget, RowWindow::whole(rows)).unwrap();
             for (k, p) in img.planes.iter().enumerate() {
                 let got: Vec<u32> = p.iter().map(|v| v.to_bits()).collect();
                 assert_eq!(
@@ -1322,9 +1423,17 @@ pub(crate) mod warp_tests {
         };
         let lams = [430.0, 550.0, 680.0];
         let mut without = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
-        warp_planes_within(&fx, &mut without, dx, Some(&lams), 0).unwrap();
+        warp_planes_within(
+            &fx,
+            &mut without,
+            dx,
+            Some(&lams),
+            0,
+            RowWindow::whole(rows),
+        )
+        .unwrap();
         let mut img = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
-        warp_planes(&fx, &mut img, dx, Some(&lams)).unwrap();
+        warp_planes(&fx, &mut img, dx, Some(&lams), RowWindow::whole(rows)).unwrap();
         assert_eq!(
             img.planes, without.planes,
             "lateral colour without the radius table"
@@ -1360,7 +1469,7 @@ pub(crate) mod warp_tests {
         for lam in [450.0, 650.0] {
             for (x0, y0) in [(60.0, 40.0), (-70.0, 20.0), (0.0, 0.0)] {
                 let mut img = spot_s(rows, cols, x0, y0, 3.0);
-                warp_planes(&fx, &mut img, dx, Some(&[lam])).unwrap();
+                warp_planes(&fx, &mut img, dx, Some(&[lam]), RowWindow::whole(rows)).unwrap();
                 // Reference: forward-map every output position's inverse by bisection.
                 let inv = |r: f64| -> f64 {
                     let (mut a, mut b) = (0.0, 2.0 * r + 1e-6);

@@ -47,7 +47,7 @@ pub use dual_pixel::{
 };
 pub use effects::{
     equivalent_gaussian_sigma_um, two_circle_overlap_fraction, Defocus, Distortion, Falloff,
-    LateralColor, LateralColorKind, OpticsEffects,
+    GlareSums, LateralColor, LateralColorKind, OpticsEffects, RowWindow,
 };
 pub use error::OpticsError;
 pub use formulas::{
@@ -265,7 +265,101 @@ pub fn form_image(
     scene: &SceneRadiance,
     bands: &WavelengthGrid,
 ) -> Result<SensorIrradiance, OpticsError> {
-    form_image_with(optics, scene, bands, true).map(|u| u.irradiance)
+    form_image_with(optics, scene, bands, true, Field::whole(scene)).map(|u| u.irradiance)
+}
+
+/// [`form_image`] of a band of rows of a scene: `scene` holds rows `window.row0 ..` of a
+/// scene sampling grid of `window.full_rows` rows (same columns and pitch), and the result is
+/// the whole grid's optical image on those rows, except within the blur's and the warps'
+/// reach of the band's own top and bottom edges (where the band continues the image as
+/// `padding` says instead of with the rows beyond it): the caller widens the band by the
+/// optics' margin. Every field-dependent step is evaluated at the band's true field
+/// coordinates (relative illumination, fall-off, distortion and lateral colour about the
+/// whole grid's centre); the veiling glare adds the whole field's mean, `glare`
+/// ([`glare_sums`] of the whole scene; required when the block is set). Only the local blurs
+/// (none, Gaussian, pillbox; diffuser and defocus blocks) are windowed: a diffraction,
+/// wavefront, PSF or lens blur reaches far and is refused, as is the uncropped image.
+pub fn form_image_rows(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+    window: RowWindow,
+    glare: Option<&GlareSums>,
+) -> Result<SensorIrradiance, OpticsError> {
+    if !matches!(
+        optics.blur,
+        Blur::None | Blur::Gaussian { .. } | Blur::Pillbox { .. }
+    ) {
+        return Err(OpticsError::Scene(
+            "a row window needs a local blur (none, gaussian, pillbox)".into(),
+        ));
+    }
+    let rows = scene.radiance.rows;
+    if window.row0.saturating_add(rows) > window.full_rows {
+        return Err(OpticsError::Scene(format!(
+            "row window {}..{} beyond the grid's {} rows",
+            window.row0,
+            window.row0.saturating_add(rows),
+            window.full_rows
+        )));
+    }
+    let glare_on = optics.effects.veiling_glare.is_some_and(|f| f > 0.0);
+    let glare = match glare {
+        Some(g) => g.clone(),
+        None if glare_on => {
+            return Err(OpticsError::Scene(
+                "veiling glare of a row window needs the whole field's sums (glare_sums)".into(),
+            ))
+        }
+        None => GlareSums {
+            sums: vec![],
+            count: 1.0,
+        },
+    };
+    let field = Field {
+        window,
+        glare: Some(glare),
+    };
+    form_image_with(optics, scene, bands, true, field).map(|u| u.irradiance)
+}
+
+/// What the veiling-glare block of `optics` adds to `scene`'s optical image: the sums over the
+/// sensor of each plane of the image before the glare ([`GlareSums`]), from [`form_image`]'s
+/// steps without the glare on the whole scene; `None` without the block. The input of
+/// [`form_image_rows`]'s glare.
+pub fn glare_sums(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+) -> Result<Option<GlareSums>, OpticsError> {
+    if !optics.effects.veiling_glare.is_some_and(|f| f > 0.0) {
+        return Ok(None);
+    }
+    let mut o = optics.clone();
+    o.effects.veiling_glare = None;
+    let img = form_image_with(&o, scene, bands, true, Field::whole(scene))?.irradiance;
+    Ok(Some(effects::veiling_glare_sums(
+        &optics.effects,
+        &img.irradiance,
+        img.sample_pitch_m,
+    )))
+}
+
+/// Where [`form_image_with`]'s scene lies in the field, and the glare's whole-field sums
+/// (`None`: from the image itself, which is then the whole field).
+#[derive(Debug, Clone)]
+struct Field {
+    window: RowWindow,
+    glare: Option<GlareSums>,
+}
+
+impl Field {
+    fn whole(scene: &SceneRadiance) -> Self {
+        Field {
+            window: RowWindow::whole(scene.radiance.rows),
+            glare: None,
+        }
+    }
 }
 
 /// The optical image without ISETCam's final crop (`oiCompute` with `crop = false`): the
@@ -296,7 +390,7 @@ pub fn form_image_uncropped(
                 .into(),
         ));
     }
-    form_image_with(optics, scene, bands, false)
+    form_image_with(optics, scene, bands, false, Field::whole(scene))
 }
 
 /// [`form_image_uncropped`]'s result: the padded irradiance and the ring's width.
@@ -340,8 +434,10 @@ fn form_image_with(
     scene: &SceneRadiance,
     bands: &WavelengthGrid,
     crop: bool,
+    field: Field,
 ) -> Result<UncroppedIrradiance, OpticsError> {
     optics.validate()?;
+    let window = field.window;
     let dx = scene.sample_pitch_m;
     check_positive("sample_pitch_m", dx, false)?;
     if let Some(d) = scene.object_distance_m {
@@ -388,16 +484,16 @@ fn form_image_with(
         if !fx.is_empty() {
             let s = fx.exposure_scale.unwrap_or(1.0);
             if fx.falloff.is_some() {
-                let map = radial_map(rows, cols, dx, fx, |_| s);
+                let map = radial_map(rows, cols, dx, fx, window, |_| s);
                 img.scale_spatially(&map);
             } else if s != 1.0 {
                 img.scale(s);
             }
             if fx.has_warp() {
                 let wl = Some(band_wl.as_slice()).filter(|_| fx.lateral_color.is_some());
-                effects::warp_planes(fx, &mut img, dx, wl)?;
+                effects::warp_planes(fx, &mut img, dx, wl, window)?;
             }
-            apply_defocus_and_glare(optics, &mut img, dx)?;
+            apply_defocus_and_glare(optics, &mut img, dx, field.glare.as_ref())?;
         }
         return Ok(UncroppedIrradiance {
             irradiance: SensorIrradiance {
@@ -432,28 +528,29 @@ fn form_image_with(
     };
 
     // 2. Relative illumination R(x), folded with the scalar factor into one spatial map.
-    let yc = (rows as f64 - 1.0) / 2.0;
+    let yc = window.centre_row();
     let xc = (cols as f64 - 1.0) / 2.0;
     let f = optics.focal_length_m;
     match optics.relative_illumination {
         RelativeIllumination::None if falloff.is_none() => img.scale(k),
         RelativeIllumination::None => {
-            let map = radial_map(rows, cols, dx, &optics.effects, |_| k);
+            let map = radial_map(rows, cols, dx, &optics.effects, window, |_| k);
             img.scale_spatially(&map);
         }
         ri => {
-            // ISETCam evaluates the diagonal on the padded optical image.
+            // ISETCam evaluates the diagonal on the padded optical image (of the whole field).
+            let full_rows = window.full_rows;
             let (pr, pc) = match optics.padding {
                 Padding::Zero => (
-                    rows + 2 * fft::isetcam_pad(rows),
+                    full_rows + 2 * fft::isetcam_pad(full_rows),
                     cols + 2 * fft::isetcam_pad(cols),
                 ),
-                Padding::Replicate => (rows, cols),
+                Padding::Replicate => (full_rows, cols),
             };
             let diag = dx * ((pr * pr + pc * pc) as f64).sqrt();
             let mut map = vec![0f32; rows * cols];
             map.par_chunks_mut(cols).enumerate().for_each(|(i, row)| {
-                let y = (i as f64 - yc) * dx;
+                let y = (window.field_row(i) - yc) * dx;
                 for (j, v) in row.iter_mut().enumerate() {
                     let x = (j as f64 - xc) * dx;
                     let r = match ri {
@@ -493,7 +590,7 @@ fn form_image_with(
         let wl = band_wl
             .as_deref()
             .filter(|_| optics.effects.lateral_color.is_some());
-        effects::warp_planes(&optics.effects, &mut img, dx, wl)?;
+        effects::warp_planes(&optics.effects, &mut img, dx, wl, window)?;
     }
     let band_wl = band_wl.unwrap_or_default();
 
@@ -603,7 +700,7 @@ fn form_image_with(
     apply_diffuser(optics, &mut img, dx);
 
     // 5. Defocus and veiling glare blocks.
-    apply_defocus_and_glare(optics, &mut img, dx)?;
+    apply_defocus_and_glare(optics, &mut img, dx, field.glare.as_ref())?;
 
     Ok(UncroppedIrradiance {
         irradiance: SensorIrradiance {
@@ -615,20 +712,22 @@ fn form_image_with(
     })
 }
 
-/// `scalar(h) · F(h)` at every sample (F: the fall-off block, h: field height).
+/// `scalar(h) · F(h)` at every sample (F: the fall-off block, h: field height; the image's
+/// rows lie in the field as `window` says).
 fn radial_map(
     rows: usize,
     cols: usize,
     dx: f64,
     fx: &OpticsEffects,
+    window: RowWindow,
     scalar: impl Fn(f64) -> f64 + Sync,
 ) -> Vec<f32> {
-    let yc = (rows as f64 - 1.0) / 2.0;
+    let yc = window.centre_row();
     let xc = (cols as f64 - 1.0) / 2.0;
     let hd = fx.half_diagonal_m();
     let mut map = vec![0f32; rows * cols];
     map.par_chunks_mut(cols).enumerate().for_each(|(i, row)| {
-        let y = (i as f64 - yc) * dx;
+        let y = (window.field_row(i) - yc) * dx;
         for (j, v) in row.iter_mut().enumerate() {
             let h = ((j as f64 - xc) * dx).hypot(y) / hd;
             let f = fx.falloff.as_ref().map_or(1.0, |f| f.factor(h));
@@ -638,11 +737,13 @@ fn radial_map(
     map
 }
 
-/// The defocus block's blur, then the veiling-glare block.
+/// The defocus block's blur, then the veiling-glare block (the means of `glare`, or of the
+/// image itself when `None`).
 fn apply_defocus_and_glare(
     optics: &OpticsModel,
     img: &mut SpectralImage,
     dx: f64,
+    glare: Option<&GlareSums>,
 ) -> Result<(), OpticsError> {
     let fx = &optics.effects;
     if let Some(d) = &fx.defocus {
@@ -650,7 +751,20 @@ fn apply_defocus_and_glare(
     }
     if let Some(f) = fx.veiling_glare {
         if f > 0.0 {
-            effects::apply_veiling_glare(fx, f, img, dx);
+            match glare {
+                Some(g) if g.sums.len() != img.planes.len() => {
+                    return Err(OpticsError::Scene(format!(
+                        "veiling glare of a row window: {} plane sums for {} planes",
+                        g.sums.len(),
+                        img.planes.len()
+                    )))
+                }
+                Some(g) => effects::apply_veiling_glare(f, img, g),
+                None => {
+                    let g = effects::veiling_glare_sums(fx, img, dx);
+                    effects::apply_veiling_glare(f, img, &g);
+                }
+            }
         }
     }
     Ok(())

@@ -8,6 +8,7 @@
 //! | scene radiance of a `gltf` target (path-traced with depth on the shot's grid, cached per scene file and settings; `camsim run`'s `render` section) | [`shot_scene`], [`shot_scene_cached`], [`render_gltf_on_grid`] (camera policy: pinhole when the camera defocuses by depth, else the glTF camera's own) | [`crate::gltf_target::render_gltf_target`] → [`crate::animated::grid_render_job`], [`crate::animated::render_job_radiance`] |
 //! | optics | [`shot_irradiance`], [`shot_irradiance_of_scene`] (on a scene kept per [`shot_sampling_grid`]), [`irradiance_of`], [`irradiance_and_blur_of`] (depth-aware for scenes with depth), [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`]; [`camsim_render::depth_optics::defocus_by_depth`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
+//! | a band of pixel rows by itself (the optics on the band's scene rows plus margin, at their true field coordinates; the whole field's glare) | [`RowBand`], [`band_core_rows`], [`band_scene_rows`], [`scene_rows`], [`band_irradiance`], [`shot_glare_sums`], [`band_sensor`] | [`camsim_optics::form_image_rows`], [`camsim_optics::glare_sums`] |
 //! | pixel optics (`sensor.pixel_optics`: CRA shading, optical crosstalk) | [`apply_pixel_optics`] (inside [`shot_electron_rate`]) | [`camsim_sensor::pixel_optics::apply_pixel_optics`] |
 //! | exposure | [`shot_exposure`] | [`camsim_sensor::auto_exposure_s`] |
 //! | time within the exposure (rolling shutter, PWM light, motion) | [`shot_time_rate`], [`shot_time_rate_from`] (frame k of a video) | [`camsim_sensor::time_averaged_rate`], [`camsim_sensor::time_averaged_rate_from`] |
@@ -341,6 +342,188 @@ pub fn apply_pixel_optics(camera: &Camera, rate: &mut ElectronRate) {
     if let Some(po) = &camera.pixel_optics {
         let map = po.response_map(rate.rows, rate.cols);
         camsim_sensor::pixel_optics::apply_pixel_optics(&map, rate);
+    }
+}
+
+/// A band of the sensor's pixel rows, `start..end`, through the chain by itself: the optics
+/// stage on the band's scene rows plus the optics' margin ([`band_scene_rows`]) at their true
+/// field coordinates ([`band_irradiance`]), then the pixel integration of the band
+/// ([`band_sensor`]). `start` is a multiple of the CFA tile's rows, so the band's pixels keep
+/// their colours.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct RowBand {
+    /// First pixel row.
+    pub start: usize,
+    /// One past the last pixel row.
+    pub end: usize,
+}
+
+impl RowBand {
+    /// Pixel rows in the band.
+    pub fn rows(&self) -> usize {
+        self.end - self.start
+    }
+}
+
+/// Why `set`'s camera cannot run `band` by itself (`None`: it can): the optics must be local
+/// ([`camsim_optics::form_image_rows`]: no diffraction, wavefront, PSF or lens blur, not the
+/// uncropped image), no pixel optics (their response map is the whole sensor's), and the band
+/// must lie on the sensor starting at a CFA tile row.
+pub fn band_refusal(set: &CaptureSet, band: RowBand) -> Option<String> {
+    use camsim_optics::Blur;
+    let cam = &set.camera;
+    let s = &cam.sensor;
+    if !matches!(
+        cam.optics.blur,
+        Blur::None | Blur::Gaussian { .. } | Blur::Pillbox { .. }
+    ) {
+        return Some("a row band needs a local blur (none, gaussian, pillbox)".into());
+    }
+    if cam.uncropped_optical_image {
+        return Some("a row band of an uncropped optical image".into());
+    }
+    if cam.pixel_optics.is_some() {
+        return Some("a row band with sensor.pixel_optics".into());
+    }
+    if band.start >= band.end || band.end > s.rows || band.start % s.cfa.tile_rows() != 0 {
+        return Some(format!(
+            "row band {}..{} of a {}-row sensor (start a multiple of the CFA tile's {} rows)",
+            band.start,
+            band.end,
+            s.rows,
+            s.cfa.tile_rows()
+        ));
+    }
+    None
+}
+
+/// The rows `r0..r1` of the scene sampling grid ([`shot_sampling_grid`]) whose optical image
+/// `band` integrates: its pixel rows plus the optics' margin ([`sampling_for`]: the blur's,
+/// the diffuser's and the defocus block's reach and a warp's outward displacement) on each
+/// side; the whole grid's rows are `(rows + 2·margin)·os`.
+pub fn band_core_rows(set: &CaptureSet, grid: &WavelengthGrid, band: RowBand) -> (usize, usize) {
+    let cam = &set.camera;
+    let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
+    (band.start * os, (band.end + 2 * margin) * os)
+}
+
+/// The rows of the scene grid the optics stage of `band` reads ([`band_irradiance`]): its
+/// [`band_core_rows`] widened on each side by a warp's largest radial displacement
+/// ([`camsim_optics::OpticsEffects::max_warp_displacement_m`] over the grid, + 2 samples: a
+/// pincushion warp's sources lie inward, which the margin does not cover), within the grid.
+pub fn band_scene_rows(set: &CaptureSet, grid: &WavelengthGrid, band: RowBand) -> (usize, usize) {
+    let cam = &set.camera;
+    let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
+    let (r0, r1) = band_core_rows(set, grid, band);
+    let fx = &cam.optics.effects;
+    let full_rows = (cam.sensor.rows + 2 * margin) * os;
+    let widen = if fx.has_warp() {
+        let dx = cam.sensor.pixel_pitch_m / os as f64;
+        let full_cols = (cam.sensor.cols + 2 * margin) * os;
+        let (yc, xc) = (
+            (full_rows as f64 - 1.0) / 2.0,
+            (full_cols as f64 - 1.0) / 2.0,
+        );
+        let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001;
+        let d = fx.max_warp_displacement_m(r_max, Some(&grid.wavelength_nm));
+        ((d / dx).ceil() as usize).saturating_add(2)
+    } else {
+        0
+    };
+    (
+        r0.saturating_sub(widen),
+        r1.saturating_add(widen).min(full_rows),
+    )
+}
+
+/// Rows `r0..r1` of a scene (the band a [`band_scene_rows`] names).
+pub fn scene_rows(scene: &SceneRadiance, r0: usize, r1: usize) -> SceneRadiance {
+    let cols = scene.radiance.cols;
+    let crop = |p: &Vec<f32>| p[r0 * cols..r1 * cols].to_vec();
+    SceneRadiance {
+        radiance: camsim_core::image::SpectralImage {
+            rows: r1 - r0,
+            cols,
+            basis: scene.radiance.basis.clone(),
+            planes: scene.radiance.planes.iter().map(crop).collect(),
+        },
+        sample_pitch_m: scene.sample_pitch_m,
+        object_distance_m: scene.object_distance_m,
+        illuminant: scene.illuminant.clone(),
+        depth_m: scene.depth_m.as_ref().map(|d| Plane {
+            rows: r1 - r0,
+            cols,
+            data: d.data[r0 * cols..r1 * cols].to_vec(),
+        }),
+        sample_aperture: scene.sample_aperture,
+    }
+}
+
+/// What the veiling-glare block of `set`'s camera adds to the optical image of a shot's whole
+/// `scene` ([`camsim_optics::glare_sums`]); `None` without the block. A band's glare is the
+/// whole field's ([`band_irradiance`]).
+pub fn shot_glare_sums(
+    set: &CaptureSet,
+    scene: &SceneRadiance,
+    grid: &WavelengthGrid,
+) -> Result<Option<camsim_optics::GlareSums>, CliError> {
+    camsim_optics::glare_sums(&set.camera.optics, scene, grid)
+        .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
+}
+
+/// The optics stage ([`shot_irradiance_of_scene`]) of `band` alone, on its
+/// [`band_core_rows`]: `scene_band` is the shot's scene on the grid rows [`band_scene_rows`]
+/// names ([`scene_rows`]), `glare` the whole
+/// field's [`shot_glare_sums`] when the camera has veiling glare. The pixel integration of the
+/// result with [`band_sensor`] gives the band's pixels of the whole sensor's electron rate
+/// (within f32 rounding: test `chain::tests::band_rates_equal_the_whole_sensor_rates`).
+pub fn band_irradiance(
+    set: &CaptureSet,
+    scene_band: &SceneRadiance,
+    grid: &WavelengthGrid,
+    band: RowBand,
+    glare: Option<&camsim_optics::GlareSums>,
+) -> Result<SensorIrradiance, CliError> {
+    let err = |e: String| CliError::input(&set.camera_path, format!("optics: {e}"));
+    if let Some(r) = band_refusal(set, band) {
+        return Err(err(r));
+    }
+    if scene_band.depth_m.is_some() {
+        return Err(err("a row band of a scene with depth".into()));
+    }
+    let cam = &set.camera;
+    let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
+    let (r0, r1) = band_scene_rows(set, grid, band);
+    if scene_band.radiance.rows != r1 - r0 {
+        return Err(err(format!(
+            "the band's scene has {} rows, its grid rows {r0}..{r1}",
+            scene_band.radiance.rows
+        )));
+    }
+    let window = camsim_optics::RowWindow {
+        row0: r0,
+        full_rows: (cam.sensor.rows + 2 * margin) * os,
+    };
+    let mut irr = camsim_optics::form_image_rows(&cam.optics, scene_band, grid, window, glare)
+        .map_err(|e| err(e.to_string()))?;
+    // the core rows, centred on the band's pixels as the pixel integration expects
+    let (c0, c1) = band_core_rows(set, grid, band);
+    if (c0, c1) != (r0, r1) {
+        let img = &mut irr.irradiance;
+        let cols = img.cols;
+        for p in img.planes.iter_mut() {
+            *p = p[(c0 - r0) * cols..(c1 - r0) * cols].to_vec();
+        }
+        img.rows = c1 - c0;
+    }
+    Ok(irr)
+}
+
+/// The sensor that integrates a [`band_irradiance`]: the camera's with `band`'s rows.
+pub fn band_sensor(set: &CaptureSet, band: RowBand) -> SensorModel {
+    SensorModel {
+        rows: band.rows(),
+        ..set.camera.sensor.clone()
     }
 }
 

@@ -40,6 +40,20 @@ pub trait Forward: Sync {
     /// of the data set's shots, for the believed camera with `spec` applied; no crosstalk (the
     /// diagnosis applies it), no dark current.
     fn rates(&self, spec: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String>;
+
+    /// [`Forward::rates`] where only the pixel rows `rows` (ascending) must hold the model's
+    /// values, the others may be 0. Default: [`Forward::rates`].
+    fn rates_rows(&self, spec: &RateSpec, rows: &[usize]) -> Result<Vec<Arc<Vec<f32>>>, String> {
+        let _ = rows;
+        self.rates(spec)
+    }
+
+    /// Whether [`Forward::rates_rows`] of `rows` costs less than [`Forward::rates`] (it runs
+    /// only bands of rows around them). Default: no.
+    fn row_window(&self, rows: &[usize]) -> bool {
+        let _ = rows;
+        false
+    }
 }
 
 /// Everything the diagnosis can change in the camera.

@@ -97,6 +97,31 @@ const PRED_STORE: usize = 1 << 20;
 /// Fewest rows for the column decomposition.
 pub(crate) const MIN_COLUMN_ROWS: usize = 8;
 
+/// The fit rows are [`fit_bands`] when they are at most this fraction (1/n) of the sensor's
+/// rows: a forward model that runs bands of rows by itself then runs a few bands, each with
+/// the optics' margin, instead of one per 2-row group (most of the sensor).
+pub(crate) const FIT_BAND_SPARSITY: usize = 8;
+/// Bands of [`fit_bands`].
+pub(crate) const FIT_BANDS: usize = 5;
+
+/// About `n` fit rows of a `rows`-row sensor as [`FIT_BANDS`] contiguous bands of equal even
+/// length (at least `n` rows in all; CFA phases balanced), spread evenly over the field
+/// height from the top row to the bottom one (the corners' field heights included), each
+/// starting at an even row.
+pub(crate) fn fit_bands(rows: usize, n: usize) -> Vec<usize> {
+    let len = (n.div_ceil(FIT_BANDS).div_ceil(2) * 2)
+        .max(2)
+        .min(rows / FIT_BANDS / 2 * 2);
+    let mut out = Vec::new();
+    for k in 0..FIT_BANDS {
+        let start = (k * (rows - len) / (FIT_BANDS - 1)) / 2 * 2;
+        out.extend(start..start + len);
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
 /// Per-shot rate images.
 pub(crate) type Rates = Vec<Arc<Vec<f32>>>;
 
@@ -114,6 +139,10 @@ pub(crate) struct Ctx<'a> {
     /// for a fit-row evaluation (crosstalk reads the neighbours). Empty when the fit rows are
     /// all rows.
     pub calc_rows: Vec<usize>,
+    /// Whether the forward model computes [`Ctx::calc_rows`] alone for less than every row
+    /// ([`Forward::row_window`]): the fits then read rate images that hold only those rows
+    /// ([`Ctx::base_rates`]).
+    pub fit_window: bool,
     /// The data of the fit rows, pixel-major: ((row position in `fit_rows`)·cols + column)·
     /// shots + shot.
     fit_pix: Vec<PixShot>,
@@ -238,16 +267,20 @@ impl<'a> Ctx<'a> {
         let fit_rows = if data.pixels() <= max_fit_pixels || data.rows < 2 {
             all_rows.clone()
         } else {
-            // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
             let keep = (max_fit_pixels / data.cols.max(1)).max(16) / 2;
             let groups = data.rows / 2;
-            let mut rows = Vec::new();
-            for k in 0..keep.min(groups) {
-                let g = k * groups / keep.min(groups);
-                rows.push(2 * g);
-                rows.push(2 * g + 1);
+            if data.rows >= FIT_BAND_SPARSITY * 2 * keep.min(groups) {
+                fit_bands(data.rows, 2 * keep.min(groups))
+            } else {
+                // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
+                let mut rows = Vec::new();
+                for k in 0..keep.min(groups) {
+                    let g = k * groups / keep.min(groups);
+                    rows.push(2 * g);
+                    rows.push(2 * g + 1);
+                }
+                rows
             }
-            rows
         };
         let col_excluded = outlier_pixels(data);
         let calc_rows = if fit_rows.len() == data.rows {
@@ -271,7 +304,9 @@ impl<'a> Ctx<'a> {
                     gather_pixel(data, r * data.cols + j, &mut row[j * ns..(j + 1) * ns]);
                 }
             });
+        let fit_window = !calc_rows.is_empty() && forward.row_window(&calc_rows);
         Ctx {
+            fit_window,
             calc_rows,
             fit_pix,
             data,
@@ -305,7 +340,7 @@ impl<'a> Ctx<'a> {
         if let Some(e) = self.memo_get(state, sel) {
             return Ok(e);
         }
-        let rates = self.rates(state)?;
+        let rates = self.rates_for(state, sel)?;
         Ok(self.evaluate_memo(state, &rates, sel))
     }
 

@@ -1,14 +1,34 @@
 //! Rate images: the forward model's results by rate spec (cached), and the exposure factor
 //! and crosstalk applied to them.
-use super::{prof, Ctx, Rates};
+use super::{prof, Ctx, Rates, RowSel};
 use crate::mismatch::model::{crosstalk_image, ModelState, RateSpec};
 use rayon::prelude::*;
 use std::sync::Arc;
 
 impl Ctx<'_> {
-    /// Rates of the forward model for `spec` (cached; the cache holds up to ~512 MB).
+    /// Rates of the forward model for `spec` on the rows a fit-row evaluation reads
+    /// ([`Ctx::calc_rows`]; every row when the forward model computes them all anyway, see
+    /// [`Ctx::fit_window`]); elsewhere possibly 0. Cached (the cache holds up to ~512 MB).
     pub fn base_rates(&self, spec: &RateSpec) -> Result<Arc<Rates>, String> {
-        let key = spec.key();
+        if !self.fit_window {
+            return self.all_base_rates(spec);
+        }
+        self.cached_rates(format!("rows|{}", spec.key()), || {
+            self.forward.rates_rows(spec, &self.calc_rows)
+        })
+    }
+
+    /// Rates of the forward model for `spec` on every row (cached with [`Ctx::base_rates`]).
+    pub fn all_base_rates(&self, spec: &RateSpec) -> Result<Arc<Rates>, String> {
+        self.cached_rates(spec.key(), || self.forward.rates(spec))
+    }
+
+    /// The cache entry `key`, or `compute`d and kept.
+    fn cached_rates(
+        &self,
+        key: String,
+        compute: impl FnOnce() -> Result<Rates, String>,
+    ) -> Result<Arc<Rates>, String> {
         let next = || {
             self.stamp
                 .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
@@ -18,7 +38,7 @@ impl Ctx<'_> {
             return Ok(r.1.clone());
         }
         let t0 = std::time::Instant::now();
-        let r = self.forward.rates(spec)?;
+        let r = compute()?;
         prof::add(2, t0);
         if r.len() != self.data.shots.len() {
             return Err(format!(
@@ -54,8 +74,17 @@ impl Ctx<'_> {
 
     /// Rates with the state's exposure factor and crosstalk applied.
     pub fn rates(&self, state: &ModelState) -> Result<Rates, String> {
-        let base = self.base_rates(&state.rates)?;
+        let base = self.all_base_rates(&state.rates)?;
         Ok(self.transform(&base, state))
+    }
+
+    /// [`Ctx::rates`] for an evaluation on `sel`'s rows (on the fit rows: from
+    /// [`Ctx::base_rates`], right on the fit rows).
+    pub fn rates_for(&self, state: &ModelState, sel: RowSel) -> Result<Rates, String> {
+        match sel {
+            RowSel::All => self.rates(state),
+            RowSel::Fit => Ok(self.transform(&*self.base_rates(&state.rates)?, state)),
+        }
     }
 
     /// Exposure factor and crosstalk applied to base rates (shots sharing an image share the
