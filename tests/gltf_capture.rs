@@ -531,3 +531,35 @@ fn gltf_target_renders_with_runs_camera_policy() {
         "the pinhole render is the same: {control_max}"
     );
 }
+
+/// diagnose's forward model runs only the fit rows' bands when the camera allows it
+/// (`chain::band_refusal`); a glTF target with depth-aware optics (defocus by depth over the
+/// whole field) must refuse, else every fit-row run of a large gltf capture set fails on
+/// `band_irradiance`'s depth check. Without depth optics the same camera runs bands.
+#[test]
+fn gltf_targets_with_depth_refuse_row_bands() {
+    use camsim_pipeline::chain::{band_refusal, RowBand};
+    for depth in [true, false] {
+        let d = tempfile::tempdir().unwrap();
+        copy_scene(d.path());
+        let mut cam = camera();
+        cam["optics"]["blur"] = json!({"kind": "gaussian", "sigma_um": 1.2});
+        let mut tgt = json!({"kind": "gltf", "file": "thinlens.gltf", "spp": 2, "seed": 1});
+        tgt["depth_optics"] = json!(depth);
+        std::fs::write(d.path().join("camera.json"), cam.to_string()).unwrap();
+        std::fs::write(
+            d.path().join("captures.json"),
+            json!({"camera": "camera.json", "simulation": {"oversample": 1},
+                   "shots": [{"id": "a", "exposure_s": 0.01, "frames": ["a.png"], "target": tgt}]})
+            .to_string(),
+        )
+        .unwrap();
+        let set =
+            camsim_pipeline::config::load_captures(&d.path().join("captures.json"), None).unwrap();
+        let r = band_refusal(&set, RowBand { start: 0, end: 2 });
+        assert_eq!(r.is_some(), depth, "depth_optics {depth}: {r:?}");
+        if let Some(r) = r {
+            assert!(r.contains("glTF"), "{r}");
+        }
+    }
+}

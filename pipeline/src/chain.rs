@@ -367,8 +367,9 @@ impl RowBand {
 
 /// Why `set`'s camera cannot run `band` by itself (`None`: it can): the optics must be local
 /// ([`camsim_optics::form_image_rows`]: no diffraction, wavefront, PSF or lens blur, not the
-/// uncropped image), no pixel optics (their response map is the whole sensor's), and the band
-/// must lie on the sensor starting at a CFA tile row.
+/// uncropped image), no pixel optics (their response map is the whole sensor's), no glTF target
+/// with depth-aware optics (its defocus by depth acts on the whole field), and the band must lie
+/// on the sensor starting at a CFA tile row.
 pub fn band_refusal(set: &CaptureSet, band: RowBand) -> Option<String> {
     use camsim_optics::Blur;
     let cam = &set.camera;
@@ -384,6 +385,14 @@ pub fn band_refusal(set: &CaptureSet, band: RowBand) -> Option<String> {
     }
     if cam.pixel_optics.is_some() {
         return Some("a row band with sensor.pixel_optics".into());
+    }
+    // a glTF scene keeps its depth (depth-aware defocus acts on the whole field)
+    if set
+        .shots
+        .iter()
+        .any(|sh| sh.target.gltf.as_ref().is_some_and(|g| g.depth_optics))
+    {
+        return Some("a row band of a glTF target with depth_optics".into());
     }
     if band.start >= band.end || band.end > s.rows || band.start % s.cfa.tile_rows() != 0 {
         return Some(format!(

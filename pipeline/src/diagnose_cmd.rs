@@ -1073,7 +1073,7 @@ fn timing_json(d: &Diagnosis, data: &DataSet, load_s: f64) -> Value {
         "stages": stages,
         "note": "the first stages are sequential wall times; the counters (likelihood, forward model, identifiability) are parts of them",
         "subsampled": {"fit_pixels": d.fit_pixels, "sensor_pixels": data.pixels(),
-                       "rule": "fits use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels; the reported fit (fit_before/fit_after, locate) uses every pixel"},
+                       "rule": "fits use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels (5 contiguous bands from top to bottom when the fit rows are at most 1/8 of the rows and the forward model runs bands of rows by themselves); the reported fit (fit_before/fit_after, locate) uses every pixel"},
     })
 }
 
@@ -1099,7 +1099,7 @@ fn subsampled_json(d: &Diagnosis, data: &DataSet) -> Value {
            "full_resolution": {"pixels": data.pixels(), "dof_believed": d.before.dof,
                                "chi2_per_dof_believed": r4(d.before.chi2_per_dof),
                                "chi2_per_dof_fitted": r4(d.after.chi2_per_dof)},
-           "rule": "candidate fits and selection use whole 2-row groups evenly spread over the sensor (fit_row_runs, inclusive) when it has more than fit_pixels pixels; the reported fit (fit_before/fit_after, repeated in full_resolution), locate, figures and the final fit check use every pixel"})
+           "rule": "candidate fits and selection use whole 2-row groups evenly spread over the sensor (fit_row_runs, inclusive) when it has more than fit_pixels pixels (5 contiguous bands from top to bottom when the fit rows are at most 1/8 of the rows and the forward model runs bands of rows by themselves); the reported fit (fit_before/fit_after, repeated in full_resolution), locate, figures and the final fit check use every pixel"})
 }
 
 fn r4(x: f64) -> Value {
@@ -1298,6 +1298,7 @@ mod tests {
             shots: (0..set.shots.len()).collect(),
             planes: Mutex::new(PlaneCache::default()),
             scenes: Mutex::new(SceneCache::default()),
+            glare: Mutex::new(HashMap::new()),
         };
         let nch = set.camera.sensor.channel_qe.len();
         let all_blocks = RateSpec {

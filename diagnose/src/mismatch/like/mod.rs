@@ -105,13 +105,11 @@ pub(crate) const FIT_BAND_SPARSITY: usize = 8;
 pub(crate) const FIT_BANDS: usize = 5;
 
 /// About `n` fit rows of a `rows`-row sensor as [`FIT_BANDS`] contiguous bands of equal even
-/// length (at least `n` rows in all; CFA phases balanced), spread evenly over the field
+/// length (at most `n` rows in all, at least 2 per band; CFA phases balanced), spread evenly over the field
 /// height from the top row to the bottom one (the corners' field heights included), each
 /// starting at an even row.
 pub(crate) fn fit_bands(rows: usize, n: usize) -> Vec<usize> {
-    let len = (n.div_ceil(FIT_BANDS).div_ceil(2) * 2)
-        .max(2)
-        .min(rows / FIT_BANDS / 2 * 2);
+    let len = (n / FIT_BANDS / 2 * 2).max(2).min(rows / FIT_BANDS / 2 * 2);
     let mut out = Vec::new();
     for k in 0..FIT_BANDS {
         let start = (k * (rows - len) / (FIT_BANDS - 1)) / 2 * 2;
@@ -263,29 +261,12 @@ pub struct Eval {
 impl<'a> Ctx<'a> {
     pub fn new(data: &'a DataSet, forward: &'a dyn Forward, max_fit_pixels: usize) -> Self {
         let all_rows: Vec<usize> = (0..data.rows).collect();
-        // (a sensor of fewer than 2 rows has no 2-row group: its rows are the fit rows)
-        let fit_rows = if data.pixels() <= max_fit_pixels || data.rows < 2 {
-            all_rows.clone()
-        } else {
-            let keep = (max_fit_pixels / data.cols.max(1)).max(16) / 2;
-            let groups = data.rows / 2;
-            if data.rows >= FIT_BAND_SPARSITY * 2 * keep.min(groups) {
-                fit_bands(data.rows, 2 * keep.min(groups))
-            } else {
-                // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
-                let mut rows = Vec::new();
-                for k in 0..keep.min(groups) {
-                    let g = k * groups / keep.min(groups);
-                    rows.push(2 * g);
-                    rows.push(2 * g + 1);
-                }
-                rows
+        // The rows the fit-row evaluations must compute: the fit rows and their neighbours
+        // (crosstalk); empty when the fit rows are all rows.
+        let calc_rows_of = |fit_rows: &[usize]| -> Vec<usize> {
+            if fit_rows.len() == data.rows {
+                return Vec::new();
             }
-        };
-        let col_excluded = outlier_pixels(data);
-        let calc_rows = if fit_rows.len() == data.rows {
-            Vec::new()
-        } else {
             let mut v: Vec<usize> = fit_rows
                 .iter()
                 .flat_map(|&r| [r.saturating_sub(1), r, (r + 1).min(data.rows - 1)])
@@ -294,6 +275,30 @@ impl<'a> Ctx<'a> {
             v.dedup();
             v
         };
+        // (a sensor of fewer than 2 rows has no 2-row group: its rows are the fit rows)
+        let fit_rows = if data.pixels() <= max_fit_pixels || data.rows < 2 {
+            all_rows.clone()
+        } else {
+            let keep = (max_fit_pixels / data.cols.max(1)).max(16) / 2;
+            let groups = data.rows / 2;
+            // Contiguous bands only where the forward model runs them by themselves
+            // (`Forward::row_window`): elsewhere they would buy nothing and move the fits.
+            let bands = (data.rows >= FIT_BAND_SPARSITY * 2 * keep.min(groups))
+                .then(|| fit_bands(data.rows, 2 * keep.min(groups)))
+                .filter(|b| !b.is_empty() && forward.row_window(&calc_rows_of(b)));
+            bands.unwrap_or_else(|| {
+                // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
+                let mut rows = Vec::new();
+                for k in 0..keep.min(groups) {
+                    let g = k * groups / keep.min(groups);
+                    rows.push(2 * g);
+                    rows.push(2 * g + 1);
+                }
+                rows
+            })
+        };
+        let col_excluded = outlier_pixels(data);
+        let calc_rows = calc_rows_of(&fit_rows);
         let ns = data.shots.len();
         let mut fit_pix = vec![PixShot::default(); fit_rows.len() * data.cols * ns];
         fit_pix
@@ -734,5 +739,50 @@ fn gather_pixel(d: &DataSet, i: usize, out: &mut [PixShot]) {
             censored: sh.censored[i],
             rail_only: sh.rail_only[i],
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{fit_bands, FIT_BANDS};
+
+    /// The fit bands: FIT_BANDS runs of one even length starting at even rows, at most `n`
+    /// rows in all (at least 2 per band), the first at the top, the last ending within one row
+    /// of the bottom, sorted and distinct; none on a sensor too short for FIT_BANDS 2-row bands.
+    #[test]
+    fn fit_bands_are_even_runs_from_top_to_bottom_within_the_budget() {
+        for (rows, n) in [
+            (3000, 16),
+            (3000, 64),
+            (1024, 32),
+            (480, 50),
+            (100, 2),
+            (40, 4),
+        ] {
+            let b = fit_bands(rows, n);
+            assert!(b.windows(2).all(|w| w[0] < w[1]), "{rows} {n}: not sorted");
+            let mut runs: Vec<(usize, usize)> = Vec::new();
+            for &r in &b {
+                match runs.last_mut() {
+                    Some(l) if l.1 + 1 == r => l.1 = r,
+                    _ => runs.push((r, r)),
+                }
+            }
+            assert_eq!(runs.len(), FIT_BANDS, "{rows} {n}: {runs:?}");
+            let len = runs[0].1 - runs[0].0 + 1;
+            assert!(len >= 2 && len % 2 == 0, "{rows} {n}: length {len}");
+            assert!(
+                runs.iter().all(|r| r.1 - r.0 + 1 == len && r.0 % 2 == 0),
+                "{rows} {n}: {runs:?}"
+            );
+            assert!(
+                b.len() <= n.max(2 * FIT_BANDS),
+                "{rows} {n}: {} rows",
+                b.len()
+            );
+            assert_eq!(runs[0].0, 0);
+            assert!(runs[FIT_BANDS - 1].1 + 2 >= rows, "{rows} {n}: {runs:?}");
+        }
+        assert!(fit_bands(9, 4).is_empty());
     }
 }
