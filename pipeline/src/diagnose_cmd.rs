@@ -77,6 +77,22 @@ struct SimForward {
     glare: Mutex<HashMap<String, Arc<camsim_optics::GlareSums>>>,
 }
 
+impl SimForward {
+    /// The forward model of `set`'s camera (the believed one) on the shots `shots`, with empty
+    /// caches.
+    fn new(set: &CaptureSet, shots: Vec<usize>) -> Self {
+        SimForward {
+            set: Mutex::new(set.clone()),
+            believed: set.camera.clone(),
+            camera_path: set.camera_path.clone(),
+            shots,
+            planes: Mutex::new(PlaneCache::default()),
+            scenes: Mutex::new(SceneCache::default()),
+            glare: Mutex::new(HashMap::new()),
+        }
+    }
+}
+
 /// Each target's scene radiance (the chain's [`crate::chain::shot_scene`]) by target and
 /// sampling grid ([`crate::chain::shot_sampling_grid`]). The scene depends on the camera only
 /// through that grid, the focal length and the wavelength grid, none of which the optics
@@ -943,15 +959,7 @@ pub fn run_diagnose(
     let t_load = std::time::Instant::now();
     let (data, used, skipped) = load_data(set, opts.progress)?;
     let load_s = t_load.elapsed().as_secs_f64();
-    let forward = SimForward {
-        set: Mutex::new(set.clone()),
-        believed: set.camera.clone(),
-        camera_path: set.camera_path.clone(),
-        shots: used,
-        planes: Mutex::new(PlaneCache::default()),
-        scenes: Mutex::new(SceneCache::default()),
-        glare: Mutex::new(HashMap::new()),
-    };
+    let forward = SimForward::new(set, used);
     let believed = ModelState {
         sensor: set.camera.sensor.clone(),
         exposure_factor: 1.0,
@@ -1253,7 +1261,7 @@ fn report_json(d: &Diagnosis, data: &DataSet, skipped: &[String]) -> Value {
 mod tests {
     use super::*;
     use crate::chain::shot_electron_rate;
-    use crate::demo::{generate_capture_set, Concealment, DemoSpec};
+    use crate::demo::Concealment;
 
     /// The caches' LRU: within the byte budget, the least recently used evicted first, a
     /// value over the budget not kept, a replaced key's bytes not counted twice.
@@ -1281,25 +1289,13 @@ mod tests {
     /// candidate QE take the basis terms' path.
     #[test]
     fn channel_plane_optics_equal_the_basis_term_optics() {
-        let dir = tempfile::tempdir().unwrap();
-        let spec = DemoSpec {
-            effects: vec![("veiling_glare".into(), 0.03)],
-            concealment: Concealment::None,
-            rows: 24,
-            cols: 32,
-            seed: 1,
-        };
-        let truth = generate_capture_set(&spec, dir.path()).unwrap();
-        let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
-        let fw = SimForward {
-            set: Mutex::new(set.clone()),
-            believed: set.camera.clone(),
-            camera_path: set.camera_path.clone(),
-            shots: (0..set.shots.len()).collect(),
-            planes: Mutex::new(PlaneCache::default()),
-            scenes: Mutex::new(SceneCache::default()),
-            glare: Mutex::new(HashMap::new()),
-        };
+        let (_dir, set) = demo_set(
+            vec![("veiling_glare".into(), 0.03)],
+            Concealment::None,
+            24,
+            32,
+        );
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
         let nch = set.camera.sensor.channel_qe.len();
         let all_blocks = RateSpec {
             glare_fraction: Some(0.05),
@@ -1360,27 +1356,15 @@ mod tests {
     /// cache hit.
     #[test]
     fn plane_cache_rates_equal_the_simulator_rates() {
-        let dir = tempfile::tempdir().unwrap();
-        let spec = DemoSpec {
-            effects: vec![("qe_shift".into(), -6.0)],
-            concealment: Concealment::Mimicked,
-            rows: 16,
-            cols: 24,
-            seed: 1,
-        };
-        let truth = generate_capture_set(&spec, dir.path()).unwrap();
-        let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
+        let (_dir, set) = demo_set(
+            vec![("qe_shift".into(), -6.0)],
+            Concealment::Mimicked,
+            16,
+            24,
+        );
         let camera_json: Value =
             serde_json::from_str(&std::fs::read_to_string(&set.camera_path).unwrap()).unwrap();
-        let fw = SimForward {
-            set: Mutex::new(set.clone()),
-            believed: set.camera.clone(),
-            camera_path: set.camera_path.clone(),
-            shots: (0..set.shots.len()).collect(),
-            planes: Mutex::new(PlaneCache::default()),
-            scenes: Mutex::new(SceneCache::default()),
-            glare: Mutex::new(HashMap::new()),
-        };
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
         let nch = set.camera.sensor.channel_qe.len();
         let mut qe = vec![0.0; nch];
         qe[0] = 4.0;
@@ -1454,10 +1438,32 @@ mod tests {
     }
 }
 
+/// A demo capture set written to a temporary directory (kept alive by the returned handle)
+/// and loaded, for the forward model's tests.
+#[cfg(test)]
+fn demo_set(
+    effects: Vec<(String, f64)>,
+    concealment: crate::demo::Concealment,
+    rows: usize,
+    cols: usize,
+) -> (tempfile::TempDir, CaptureSet) {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = crate::demo::DemoSpec {
+        effects,
+        concealment,
+        rows,
+        cols,
+        seed: 1,
+    };
+    let truth = crate::demo::generate_capture_set(&spec, dir.path()).unwrap();
+    let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
+    (dir, set)
+}
+
 #[cfg(test)]
 mod band_tests {
     use super::*;
-    use crate::demo::{generate_capture_set, Concealment, DemoSpec};
+    use crate::demo::Concealment;
 
     /// The forward model of fit-row bands ([`Forward::rates_rows`]: each band through the
     /// chain by itself, [`crate::chain::band_irradiance`]) equals the whole-sensor run
@@ -1469,25 +1475,8 @@ mod band_tests {
     /// the middle, on a charts set (chart shots, flats, darks).
     #[test]
     fn band_rates_equal_the_whole_sensor_rates() {
-        let dir = tempfile::tempdir().unwrap();
-        let spec = DemoSpec {
-            effects: vec![],
-            concealment: Concealment::Charts,
-            rows: 640,
-            cols: 24,
-            seed: 1,
-        };
-        let truth = generate_capture_set(&spec, dir.path()).unwrap();
-        let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
-        let fw = SimForward {
-            set: Mutex::new(set.clone()),
-            believed: set.camera.clone(),
-            camera_path: set.camera_path.clone(),
-            shots: (0..set.shots.len()).collect(),
-            planes: Mutex::new(PlaneCache::default()),
-            scenes: Mutex::new(SceneCache::default()),
-            glare: Mutex::new(HashMap::new()),
-        };
+        let (_dir, set) = demo_set(vec![], Concealment::Charts, 640, 24);
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
         // fit rows 0..4, 318..322, 636..640 and their neighbours (what the diagnosis asks for)
         let fit: Vec<usize> = (0..4).chain(318..322).chain(636..640).collect();
         let mut rows: Vec<usize> = fit
