@@ -416,29 +416,43 @@ pub fn band_core_rows(set: &CaptureSet, grid: &WavelengthGrid, band: RowBand) ->
     (band.start * os, (band.end + 2 * margin) * os)
 }
 
+/// How many scene-grid rows a row band must be widened by on each side to hold every source
+/// of a warp ([`camsim_optics::OpticsEffects::max_warp_displacement_m`] over the grid, + 2
+/// samples: a pincushion warp's sources lie inward, which the margin does not cover); 0
+/// without a warp. A function of the camera and the grid alone: compute it once per forward
+/// run and pass it to [`band_scene_rows`] and [`band_irradiance`].
+pub fn band_warp_widening(set: &CaptureSet, grid: &WavelengthGrid) -> usize {
+    let cam = &set.camera;
+    let fx = &cam.optics.effects;
+    if !fx.has_warp() {
+        return 0;
+    }
+    let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
+    let full_rows = (cam.sensor.rows + 2 * margin) * os;
+    let dx = cam.sensor.pixel_pitch_m / os as f64;
+    let full_cols = (cam.sensor.cols + 2 * margin) * os;
+    let (yc, xc) = (
+        (full_rows as f64 - 1.0) / 2.0,
+        (full_cols as f64 - 1.0) / 2.0,
+    );
+    let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001;
+    let d = fx.max_warp_displacement_m(r_max, Some(&grid.wavelength_nm));
+    ((d / dx).ceil() as usize).saturating_add(2)
+}
+
 /// The rows of the scene grid the optics stage of `band` reads ([`band_irradiance`]): its
-/// [`band_core_rows`] widened on each side by a warp's largest radial displacement
-/// ([`camsim_optics::OpticsEffects::max_warp_displacement_m`] over the grid, + 2 samples: a
-/// pincushion warp's sources lie inward, which the margin does not cover), within the grid.
-pub fn band_scene_rows(set: &CaptureSet, grid: &WavelengthGrid, band: RowBand) -> (usize, usize) {
+/// [`band_core_rows`] widened on each side by `widen` rows ([`band_warp_widening`]), within
+/// the grid.
+pub fn band_scene_rows(
+    set: &CaptureSet,
+    grid: &WavelengthGrid,
+    band: RowBand,
+    widen: usize,
+) -> (usize, usize) {
     let cam = &set.camera;
     let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
     let (r0, r1) = band_core_rows(set, grid, band);
-    let fx = &cam.optics.effects;
     let full_rows = (cam.sensor.rows + 2 * margin) * os;
-    let widen = if fx.has_warp() {
-        let dx = cam.sensor.pixel_pitch_m / os as f64;
-        let full_cols = (cam.sensor.cols + 2 * margin) * os;
-        let (yc, xc) = (
-            (full_rows as f64 - 1.0) / 2.0,
-            (full_cols as f64 - 1.0) / 2.0,
-        );
-        let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001;
-        let d = fx.max_warp_displacement_m(r_max, Some(&grid.wavelength_nm));
-        ((d / dx).ceil() as usize).saturating_add(2)
-    } else {
-        0
-    };
     (
         r0.saturating_sub(widen),
         r1.saturating_add(widen).min(full_rows),
@@ -491,6 +505,7 @@ pub fn band_irradiance(
     scene_band: &SceneRadiance,
     grid: &WavelengthGrid,
     band: RowBand,
+    widen: usize,
     glare: Option<&camsim_optics::GlareSums>,
 ) -> Result<SensorIrradiance, CliError> {
     let err = |e: String| CliError::input(&set.camera_path, format!("optics: {e}"));
@@ -502,7 +517,7 @@ pub fn band_irradiance(
     }
     let cam = &set.camera;
     let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
-    let (r0, r1) = band_scene_rows(set, grid, band);
+    let (r0, r1) = band_scene_rows(set, grid, band, widen);
     if scene_band.radiance.rows != r1 - r0 {
         return Err(err(format!(
             "the band's scene has {} rows, its grid rows {r0}..{r1}",

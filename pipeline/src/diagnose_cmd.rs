@@ -295,12 +295,13 @@ const BAND_GRID_FRACTION: f64 = 0.5;
 /// consecutive rows, widened to whole CFA tiles, bands whose scene rows (with the optics'
 /// margin, [`crate::chain::band_scene_rows`]) overlap merged. `None` when the camera cannot
 /// run a band by itself ([`crate::chain::band_refusal`]) or the bands' scene rows exceed
-/// [`BAND_GRID_FRACTION`] of the grid's.
+/// [`BAND_GRID_FRACTION`] of the grid's. With the bands, their warp widening
+/// ([`crate::chain::band_warp_widening`], computed once here for the whole forward run).
 fn row_bands(
     set: &CaptureSet,
     grid: &camsim_core::WavelengthGrid,
     rows: &[usize],
-) -> Option<Vec<crate::chain::RowBand>> {
+) -> Option<(Vec<crate::chain::RowBand>, usize)> {
     use crate::chain::{band_refusal, band_scene_rows, RowBand};
     let s = &set.camera.sensor;
     let tile = s.cfa.tile_rows().max(1);
@@ -323,15 +324,16 @@ fn row_bands(
     if bands.is_empty() || bands.iter().any(|b| band_refusal(set, *b).is_some()) {
         return None;
     }
+    let widen = crate::chain::band_warp_widening(set, grid);
     let scene_rows: usize = bands
         .iter()
         .map(|b| {
-            let (r0, r1) = band_scene_rows(set, grid, *b);
+            let (r0, r1) = band_scene_rows(set, grid, *b, widen);
             r1 - r0
         })
         .sum();
     let grid_rows = (s.rows + 2 * margin) * os;
-    (scene_rows as f64 <= BAND_GRID_FRACTION * grid_rows as f64).then_some(bands)
+    (scene_rows as f64 <= BAND_GRID_FRACTION * grid_rows as f64).then_some((bands, widen))
 }
 
 impl Forward for SimForward {
@@ -359,7 +361,7 @@ impl Forward for SimForward {
         let mut set = self.set.lock().map_err(lock_err)?;
         set.camera = cam;
         let grid = wavelength_grid(&set);
-        let Some(bands) = row_bands(&set, &grid, rows) else {
+        let Some((bands, widen)) = row_bands(&set, &grid, rows) else {
             drop(set);
             return self.rates(spec);
         };
@@ -420,7 +422,7 @@ impl Forward for SimForward {
             if !missing.is_empty() {
                 let ranges: Vec<(usize, usize)> = missing
                     .iter()
-                    .map(|&bi| crate::chain::band_scene_rows(&set, &grid, bands[bi]))
+                    .map(|&bi| crate::chain::band_scene_rows(&set, &grid, bands[bi], widen))
                     .collect();
                 let scenes = self
                     .scenes
@@ -429,9 +431,15 @@ impl Forward for SimForward {
                     .scene_bands(&set, si, &grid, gk, &ranges)?;
                 for (&bi, scene) in missing.iter().zip(&scenes) {
                     let band = bands[bi];
-                    let irr =
-                        crate::chain::band_irradiance(&set, scene, &grid, band, glare.as_deref())
-                            .map_err(|e| e.one_line())?;
+                    let irr = crate::chain::band_irradiance(
+                        &set,
+                        scene,
+                        &grid,
+                        band,
+                        widen,
+                        glare.as_deref(),
+                    )
+                    .map_err(|e| e.one_line())?;
                     let sensor = crate::chain::band_sensor(&set, band);
                     let p = Arc::new(camsim_sensor::pixel_term_planes(&sensor, &irr));
                     by_band.insert(bkey(bi), p);
@@ -1556,7 +1564,7 @@ mod band_tests {
                 );
                 let why =
                     crate::chain::band_refusal(&s2, crate::chain::RowBand { start: 0, end: 6 });
-                let bands = row_bands(&s2, &grid, &rows).unwrap_or_else(|| {
+                let (bands, _) = row_bands(&s2, &grid, &rows).unwrap_or_else(|| {
                     panic!("{spec:?}: not run as bands (os {os}, margin {margin}: {why:?})")
                 });
                 assert_eq!(bands.len(), 3, "{spec:?}: {bands:?}");
