@@ -269,8 +269,9 @@ impl Bvh4 {
             3 * tree_depth(&b.nodes, root) + 1
         };
         let mut bvh = Bvh4 {
-            nodes: b.nodes,
-            packs: b.tb.packs,
+            // read at scattered places while tracing: in huge pages (render/src/huge_pages.rs)
+            nodes: crate::huge_pages::copy(&b.nodes),
+            packs: crate::huge_pages::copy(&b.tb.packs),
             root,
             flat: false,
             stack_len,

@@ -80,8 +80,9 @@ impl Bvh8 {
         let root = b.collapse(bvh2, count, 0).0;
         (
             Bvh8 {
-                nodes: b.nodes,
-                packs: b.tb.packs,
+                // read at scattered places while tracing: in huge pages (render/src/huge_pages.rs)
+                nodes: crate::huge_pages::copy(&b.nodes),
+                packs: crate::huge_pages::copy(&b.tb.packs),
                 root,
             },
             b.tb.order,

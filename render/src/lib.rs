@@ -34,6 +34,7 @@ pub mod envmap;
 pub mod error;
 pub mod gltf_load;
 pub mod gltf_write;
+mod huge_pages;
 pub mod integrator;
 pub mod job;
 pub mod normal_map;

@@ -327,18 +327,21 @@ impl Scene {
             let bvh = Bvh4::build(&triangles);
             // reorder so that BVH primitive i is triangle i (no indirection while tracing)
             let order: Vec<usize> = bvh.order.iter().map(|&i| i as usize).collect();
-            let tris = order
-                .iter()
-                .map(|&i| {
-                    let t = &triangles[i];
-                    TriGeom {
-                        v0: t[0].into(),
-                        e1: (t[1] - t[0]).into(),
-                        e2: (t[2] - t[0]).into(),
-                    }
-                })
-                .collect();
-            shading = order.iter().map(|&i| shading[i]).collect();
+            // read at scattered places while tracing: in huge pages (render/src/huge_pages.rs)
+            let mut tris = crate::huge_pages::with_capacity(order.len());
+            tris.extend(order.iter().map(|&i| {
+                let t = &triangles[i];
+                TriGeom {
+                    v0: t[0].into(),
+                    e1: (t[1] - t[0]).into(),
+                    e2: (t[2] - t[0]).into(),
+                }
+            }));
+            crate::huge_pages::finish(&tris);
+            let mut reordered = crate::huge_pages::with_capacity(order.len());
+            reordered.extend(order.iter().map(|&i| shading[i]));
+            crate::huge_pages::finish(&reordered);
+            shading = reordered;
             (tris, Some(bvh))
         };
         // area lights
