@@ -49,8 +49,11 @@
 //!     "real_height_mm": [[0, 0, 0], [7.01, 7.02, 7.03], ...],     // [field][wavelength]
 //!     "relative_illumination": [1.0, 0.93, 0.78],                 // [field]
 //!     "psf": [[[...n² values...], ...], ...]},                    // [field][wavelength]
-//!    {"object_distance_mm": 2000.0, ...}]}
+//!    {"object_distance_mm": 2000.0, ...}],
+//!  "axial_irradiance_sr": [0.0392, 0.0390, 0.0389]}   // [wavelength] (sr); optional
 //! ```
+//! `axial_irradiance_sr` (written since it exists; absent = unknown, the paraxial camera
+//! equation then applies) is [`FieldModel::axial_irradiance_sr`].
 //! Version 1 files (one distance: `object_distance_mm`, `field_angles_deg`,
 //! `real_height_mm`, `relative_illumination` and `psf` at the top level, the lens focused on
 //! that distance) are still read, as a model with that single distance.
@@ -210,6 +213,12 @@ pub struct FieldModel {
     pub psf_pitch_um: f64,
     /// One table per object distance, by increasing vergence 1/d (infinity first).
     pub tables: Vec<FieldTable>,
+    /// Film irradiance on the axis per unit scene radiance (sr) at each tabulated wavelength,
+    /// traced from the film through the lens with its physical stop
+    /// ([`crate::pupil::axial_irradiance_per_radiance_sr`]): the real lens's camera-equation
+    /// factor, for any object distance (a film-side integral). Empty when unknown (a lens that
+    /// cannot be traced from the sensor, a file without it): the paraxial π/(4N_w²) applies.
+    pub axial_irradiance_sr: Vec<f64>,
     /// Wave-PSF entries whose OPD slope needed a pupil grid finer than [`MAX_WAVE_PUPIL_N`]
     /// (their PSFs alias; callers should warn). Not saved; 0 for a loaded model.
     pub aliased_entries: usize,
@@ -244,6 +253,8 @@ struct FileV2 {
     psf_n: usize,
     psf_pitch_um: f64,
     distances: Vec<DistanceFile>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    axial_irradiance_sr: Vec<f64>,
 }
 
 /// A version-1 file (one distance, the lens focused on it).
@@ -621,6 +632,9 @@ impl FieldModel {
                     .map(|r| r.relative_illumination)
             })
             .collect::<Result<_, _>>()?;
+        // the film-side camera-equation factor (refused lenses, e.g. with mirrors: unknown)
+        let axial_irradiance_sr =
+            crate::pupil::axial_irradiance_per_radiance_sr(&focused, &wls).unwrap_or_default();
         let aliased_entries = entries.iter().filter(|e| e.aliased).count();
         let mut entries = entries.into_iter();
         let mut tables = Vec::with_capacity(nd);
@@ -666,7 +680,23 @@ impl FieldModel {
             psf_n,
             psf_pitch_um: opts.psf_pitch_um,
             tables,
+            axial_irradiance_sr,
             aliased_entries,
+        })
+    }
+
+    /// [`FieldModel::axial_irradiance_sr`] at `wavelength_nm`, linear between the tabulated
+    /// wavelengths (the end values outside); `None` when unknown.
+    pub fn axial_irradiance_sr_at(&self, wavelength_nm: f64) -> Option<f64> {
+        let (w, e) = (&self.wavelengths_nm, &self.axial_irradiance_sr);
+        if e.is_empty() || e.len() != w.len() || e.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+            return None;
+        }
+        let (i, t) = bracket(w, wavelength_nm);
+        Some(if i + 1 < e.len() {
+            (1.0 - t) * e[i] + t * e[i + 1]
+        } else {
+            e[i]
         })
     }
 
@@ -764,6 +794,7 @@ impl FieldModel {
                     psf: t.psf.clone(),
                 })
                 .collect(),
+            axial_irradiance_sr: self.axial_irradiance_sr.clone(),
         };
         let text = serde_json::to_string(&f)?;
         std::fs::write(p, text).map_err(|e| LensError::Io {
@@ -824,6 +855,7 @@ impl FieldModel {
                     psf_n: f.psf_n,
                     psf_pitch_um: f.psf_pitch_um,
                     tables,
+                    axial_irradiance_sr: f.axial_irradiance_sr,
                     aliased_entries: 0,
                 }
             }
@@ -858,6 +890,7 @@ impl FieldModel {
                     psf_n: f.psf_n,
                     psf_pitch_um: f.psf_pitch_um,
                     tables: vec![table],
+                    axial_irradiance_sr: Vec::new(),
                     aliased_entries: 0,
                 }
             }

@@ -648,6 +648,18 @@ impl LensPrescription {
             .collect()
     }
 
+    /// The lens with its aperture stop's clear radius set to the paraxial stop radius that its
+    /// aperture specification implies (at the primary wavelength; a smaller clear radius is
+    /// kept): the physical stop a camera built from the prescription has, which limits the real
+    /// rays (the stop of an `FNumber` or `Epd` aperture is otherwise only the paraxial one).
+    pub fn with_aperture_stop_clear(&self) -> Result<Self, LensError> {
+        let stop_sd = self.first_order(self.primary_nm)?.stop_semi_diameter_mm;
+        let mut lens = self.clone();
+        let s = &mut lens.surfaces[lens.stop_index];
+        s.semi_diameter_mm = Some(s.semi_diameter_mm.map_or(stop_sd, |v| v.min(stop_sd)));
+        Ok(lens)
+    }
+
     /// A copy with the image distance (last thickness) set to `image_distance_mm`.
     pub fn with_image_distance(&self, image_distance_mm: f64) -> Self {
         let mut l = self.clone();

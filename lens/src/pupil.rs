@@ -286,6 +286,74 @@ impl SensorSideLens {
         [d[0] / l, d[1] / l, d[2] / l]
     }
 
+    /// Film irradiance per unit scene radiance (sr) at the centre of the film, at
+    /// `wavelength_nm`, for a scene of uniform radiance in every direction the lens sees:
+    ///
+    ///   E/L = ∫ cos⁴θ / d² dA
+    ///
+    /// over the rear-plane points q through which a ray from the film centre gets through the
+    /// lens (θ the ray's angle to the axis, d the film-to-rear-plane distance; radiance is
+    /// conserved along the ray, T = 1). This is the integral the real-lens camera's estimator
+    /// samples (module docs; pbrt-v4 §5.3.3, `RealisticCamera`'s weight cos⁴θ·A/d²), here by
+    /// the midpoint rule: the bundle's bounds on a 48² grid over the rear surface's clear
+    /// aperture, widened by one cell, then `grid`² points over them. For an aplanatic lens whose
+    /// film lies at the paraxial image it is the paraxial camera equation π/(4N_w²) (paper
+    /// Eq. 1); a real lens departs from it by its pupil's spherical aberration, the pupil's
+    /// change with wavelength, and a film moved to the best focus. 0 when no ray gets through.
+    pub fn axial_irradiance_per_radiance_sr(&self, wavelength_nm: f64, grid: usize) -> f64 {
+        let h = self.surfaces[0]
+            .surface
+            .semi_diameter_mm
+            .unwrap_or(self.rear_plane_mm)
+            .max(1e-9);
+        let coarse = 48;
+        let start = PupilBounds {
+            x0_mm: -h,
+            x1_mm: h,
+            y0_mm: -h,
+            y1_mm: h,
+        };
+        let Some(b) = self.scan(0.0, start, coarse, &[wavelength_nm]) else {
+            return 0.0;
+        };
+        let cell = 2.0 * h / coarse as f64;
+        let b = PupilBounds {
+            x0_mm: b.x0_mm - cell,
+            x1_mm: b.x1_mm + cell,
+            y0_mm: b.y0_mm - cell,
+            y1_mm: b.y1_mm + cell,
+        };
+        let n = grid.max(8);
+        let (wx, wy) = (
+            (b.x1_mm - b.x0_mm) / n as f64,
+            (b.y1_mm - b.y0_mm) / n as f64,
+        );
+        let d2 = self.rear_plane_mm * self.rear_plane_mm;
+        // per-row sums, added in row order (the same bits at any thread count)
+        let rows: Vec<f64> = (0..n)
+            .into_par_iter()
+            .map(|iy| {
+                let y = b.y0_mm + wy * (iy as f64 + 0.5);
+                (0..n)
+                    .map(|ix| {
+                        let q = [b.x0_mm + wx * (ix as f64 + 0.5), y];
+                        let dir = self.direction_to([0.0, 0.0], q);
+                        match self.trace(
+                            [0.0, 0.0, 0.0],
+                            dir,
+                            wavelength_nm,
+                            Clipping::SemiDiameters,
+                        ) {
+                            Some(_) => dir[2].powi(4) / d2,
+                            None => 0.0,
+                        }
+                    })
+                    .sum::<f64>()
+            })
+            .collect();
+        rows.iter().sum::<f64>() * wx * wy
+    }
+
     /// Bounds of the rear-plane points through which rays from (r, 0) get through, at the
     /// given wavelengths, on a `g`×`g` grid over `b`; `None` when none gets through.
     fn scan(&self, r: f64, b: PupilBounds, g: usize, wls: &[f64]) -> Option<PupilBounds> {
@@ -497,4 +565,22 @@ impl ExitPupilTable {
         };
         Some([c * a, s * a])
     }
+}
+
+/// Rear-plane grid per side of [`axial_irradiance_per_radiance_sr`].
+pub const AXIAL_IRRADIANCE_GRID: usize = 384;
+
+/// [`SensorSideLens::axial_irradiance_per_radiance_sr`] of `lens` as focused (its image plane
+/// is the film), with the aperture stop's clear radius set to the paraxial value the aperture
+/// implies ([`LensPrescription::with_aperture_stop_clear`], as the real-lens camera does), at
+/// each of `wavelengths_nm`.
+pub fn axial_irradiance_per_radiance_sr(
+    lens: &LensPrescription,
+    wavelengths_nm: &[f64],
+) -> Result<Vec<f64>, LensError> {
+    let side = SensorSideLens::new(&lens.with_aperture_stop_clear()?)?;
+    Ok(wavelengths_nm
+        .iter()
+        .map(|w| side.axial_irradiance_per_radiance_sr(*w, AXIAL_IRRADIANCE_GRID))
+        .collect())
 }

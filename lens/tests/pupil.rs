@@ -8,6 +8,10 @@
 //!   the film point's azimuth), its pdf is 1 / box area, and every transmitted ray starts inside
 //!   its box (rays from a square 4× the largest box).
 //! * The chief-ray aim crosses the stop at its centre.
+//! * The film irradiance per unit radiance on the axis (the real lens's camera equation)
+//!   against closed forms: a bare circular stop (the disc's projected solid angle), the
+//!   paraxial camera equation at a small aperture, and the film moved along the axis (the exit
+//!   pupil's solid angle from the film).
 use camsim_core::rng::stream;
 use camsim_lens::pupil::{ExitPupilOptions, ExitPupilTable, SensorSideLens};
 use camsim_lens::{Clipping, GlassCatalog, LensPrescription, Ray};
@@ -20,13 +24,10 @@ fn lens() -> LensPrescription {
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../lenses/double_gauss_50mm_f2.json");
     let l = LensPrescription::from_json_file(p, &GlassCatalog::bundled()).unwrap();
-    let mut l = l.focused(l.primary_nm).unwrap();
-    let fo = l.first_order(l.primary_nm).unwrap();
-    let s = &mut l.surfaces[l.stop_index];
-    s.semi_diameter_mm = Some(s.semi_diameter_mm.map_or(fo.stop_semi_diameter_mm, |v| {
-        v.min(fo.stop_semi_diameter_mm)
-    }));
-    l
+    l.focused(l.primary_nm)
+        .unwrap()
+        .with_aperture_stop_clear()
+        .unwrap()
 }
 
 /// Film radius of the table (mm): 15° of field of the 50-mm lens.
@@ -200,4 +201,69 @@ fn exit_pupil_bounds_hold_every_transmitted_ray_and_the_chief_ray_hits_the_stop_
             "film radius {r} mm: chief ray misses the stop centre by {off:.2e} mm"
         );
     }
+}
+
+/// A bare circular stop of radius R (no power, air on both sides) with the film d behind it:
+/// E/L = ∫ cos⁴θ/d² dA over the disc = π sin²θ_max = π R²/(R² + d²) (the disc's projected
+/// solid angle). The midpoint rule on the bundle's bounds is within 2·10⁻³ of it.
+#[test]
+fn axial_irradiance_of_a_bare_stop_is_the_projected_solid_angle_of_its_disc() {
+    for (r_mm, d_mm) in [(5.0, 20.0), (10.0, 10.0), (1.0, 40.0)] {
+        let text = format!(
+            r#"{{"name": "stop", "units": "mm",
+              "surfaces": [{{"radius_mm": null, "thickness_mm": {d_mm}, "material": "air",
+                            "stop": true, "semi_diameter_mm": {r_mm}}}],
+              "object_distance_mm": null, "fields_deg": [0], "wavelengths_nm": [550],
+              "aperture": {{"epd_mm": {}}}}}"#,
+            2.0 * r_mm
+        );
+        let l = LensPrescription::from_json_str(&text, &GlassCatalog::bundled()).unwrap();
+        let side = SensorSideLens::new(&l).unwrap();
+        let got = side.axial_irradiance_per_radiance_sr(550.0, 384);
+        let want = std::f64::consts::PI * r_mm * r_mm / (r_mm * r_mm + d_mm * d_mm);
+        eprintln!("R {r_mm} mm, d {d_mm} mm: E/L {got:.6} sr, closed form {want:.6} sr");
+        assert!((got / want - 1.0).abs() < 2e-3, "{got} vs {want}");
+    }
+}
+
+/// The double Gauss stopped down to f/16 (pupil aberrations negligible) with the film at the
+/// paraxial image: E/L is the paraxial camera equation π/(4N_w²) (paper Eq. 1) within 0.3 %.
+/// Moving the film towards the lens by δ raises it by the exit pupil's solid angle from the
+/// film, (z_xp/(z_xp − δ))², z_xp the paraxial exit pupil's distance from the image (within
+/// 0.2 % of that ratio); at f/2 the real pupil's spherical aberration adds more than 0.5 %.
+#[test]
+fn axial_irradiance_is_the_paraxial_camera_equation_at_a_small_aperture() {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../lenses/double_gauss_50mm_f2.json");
+    let base = LensPrescription::from_json_file(p, &GlassCatalog::bundled()).unwrap();
+    let w = base.primary_nm;
+    let mut l16 = base.clone();
+    l16.aperture = camsim_lens::prescription::Aperture::FNumber(16.0);
+    let l16 = l16.focused(w).unwrap();
+    let fo = l16.first_order(w).unwrap();
+    let parax = std::f64::consts::PI / (4.0 * fo.working_f_number * fo.working_f_number);
+    let e = camsim_lens::pupil::axial_irradiance_per_radiance_sr(&l16, &[w]).unwrap()[0];
+    eprintln!("f/16 at the paraxial image: E/L {e:.6e} sr, π/(4N_w²) {parax:.6e} sr");
+    assert!((e / parax - 1.0).abs() < 3e-3, "{e} vs {parax}");
+    // the film 0.3 mm closer to the lens
+    let delta = 0.3;
+    let moved = l16.with_image_distance(l16.image_distance_mm() - delta);
+    let em = camsim_lens::pupil::axial_irradiance_per_radiance_sr(&moved, &[w]).unwrap()[0];
+    let z_xp = fo.exit_pupil_from_image_mm.abs();
+    let want = (z_xp / (z_xp - delta)).powi(2);
+    eprintln!(
+        "film moved {delta} mm: ratio {:.5}, exit-pupil solid angle {want:.5}",
+        em / e
+    );
+    assert!((em / e / want - 1.0).abs() < 2e-3, "{} vs {want}", em / e);
+    // f/2: the real pupil is larger than the paraxial one
+    let l2 = base.focused(w).unwrap();
+    let fo2 = l2.first_order(w).unwrap();
+    let parax2 = std::f64::consts::PI / (4.0 * fo2.working_f_number * fo2.working_f_number);
+    let e2 = camsim_lens::pupil::axial_irradiance_per_radiance_sr(&l2, &[w]).unwrap()[0];
+    eprintln!(
+        "f/2 at the paraxial image: E/L / π/(4N_w²) = {:.5}",
+        e2 / parax2
+    );
+    assert!(e2 / parax2 > 1.005, "{e2} vs {parax2}");
 }

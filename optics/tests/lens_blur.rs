@@ -198,8 +198,8 @@ fn point_sources_land_on_the_traced_spot_with_the_traced_rms() {
 }
 
 /// A uniform scene through a nearly aberration-free lens (the 50 mm f/2 double Gauss scaled
-/// to 2 mm: spots of ~1.5 µm against 8 µm samples) keeps its irradiance equal to
-/// π/(4 N_w²) × the *traced* relative illumination at the field whose traced real chief ray
+/// to 2 mm: spots of ~1.5 µm against 8 µm samples) keeps its irradiance equal to the traced
+/// axial E/L (the lens's camera equation) × the *traced* relative illumination at the field whose traced real chief ray
 /// lands on the sample (within 1 %), and the shift-variant blur conserves the energy of the
 /// distorted, shaded image (within 0.2 %).
 #[test]
@@ -212,7 +212,12 @@ fn uniform_scene_keeps_energy_up_to_the_traced_relative_illumination() {
     let lf = lb.focus.as_ref().unwrap().lens.clone();
     let nw = lb.working_f_number;
     assert!((nw - 2.0).abs() < 0.01, "working F/# {nw}");
-    let k = camera_equation_factor(nw, 0.0);
+    // the lens's camera equation: its film irradiance per unit radiance on the axis, traced
+    // (camsim_lens::pupil), within 3 % of the paraxial π/(4N_w²) for this lens at f/2
+    let k = lb.model.axial_irradiance_sr_at(550.0).unwrap();
+    let k_parax = camera_equation_factor(nw, 0.0);
+    eprintln!("traced E/L {k:.5} sr, paraxial π/(4N_w²) {k_parax:.5} sr");
+    assert!((k / k_parax - 1.0).abs() < 0.03, "{k} vs {k_parax}");
     let grid = WavelengthGrid::new(vec![450.0, 550.0, 650.0]).unwrap();
     let sc = scene(n, n, dx, vec![1.0; n * n]);
     let irr = form_image(&optics(lb.clone()), &sc, &grid).unwrap();
@@ -252,8 +257,7 @@ fn uniform_scene_keeps_energy_up_to_the_traced_relative_illumination() {
         }
     }
     assert!(worst < 0.01, "worst relative error {worst}");
-    // The camera equation uses the lens's own F-number (not the OpticsModel's f/11): on axis
-    // E = π/(4·2²).
+    // The camera equation is the lens's own (not the OpticsModel's f/11): on axis E = k.
     let c = img[60 * n + 60] as f64;
     assert!((c / k - 1.0).abs() < 0.01, "axis {c} vs {k}");
 }

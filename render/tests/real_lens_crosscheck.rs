@@ -623,6 +623,12 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
     let mut failures = Vec::new();
     let mut controls = 0usize;
     let only = std::env::var("CAMSIM_XC_SCENE").ok();
+    // field tiles per side (an experiment's override; the tests state their own)
+    let tiles = std::env::var("CAMSIM_XC_TILES")
+        .ok()
+        .and_then(|t| t.parse::<usize>().ok())
+        .filter(|&t| t > 0)
+        .unwrap_or(tiles);
     for spec in scenes(w, h) {
         if only.as_deref().is_some_and(|o| o != spec.name) {
             continue;

@@ -283,9 +283,7 @@ impl RealLensCamera {
             )));
         }
         // The aperture stop's clear radius: the paraxial value the aperture spec implies.
-        let stop_sd = fo.stop_semi_diameter_mm;
-        let s = &mut lens.surfaces[lens.stop_index];
-        s.semi_diameter_mm = Some(s.semi_diameter_mm.map_or(stop_sd, |v| v.min(stop_sd)));
+        lens = lens.with_aperture_stop_clear()?;
 
         let pixel_pitch_mm = match opts.film {
             FilmSize::PixelPitchUm(p) => {
