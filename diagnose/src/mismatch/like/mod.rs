@@ -158,6 +158,24 @@ pub(crate) struct Ctx<'a> {
     /// Per shot and row: the sum of the pixels' temporal variances and whether no pixel is
     /// censored (`frames.rs`; data only, computed on first use).
     frame_pre: std::sync::OnceLock<Vec<(Vec<f64>, Vec<bool>)>>,
+    /// The hot or RTN class's per-pixel log-likelihood of the last pass with one of the two
+    /// mixtures ([`MixCache`]).
+    mix: Mutex<Option<MixCache>>,
+}
+
+/// Per pixel of the fit rows (pixel-pass order), the log-likelihood of the hot class (hot
+/// pixels alone) or of the RTN class (RTN alone), for a [`HotBase`] and the class's own
+/// parameters: the class likelihood does not read the mixture's fraction, so a fit of the
+/// fraction (a third of the hot-pixel fit's and half of the RTN fit's evaluations) only
+/// mixes the kept values with the normal class's (the same arithmetic on the same values:
+/// the same bits).
+struct MixCache {
+    /// The normal-class parts these values go with (held: compared by pointer).
+    base: Arc<HotBase>,
+    /// 0 for hot pixels with (ln V_h, σ_h) as bits; 1 for RTN with (A, p) as bits.
+    key: [u64; 3],
+    /// Class log-likelihood per pixel.
+    l: Arc<Vec<f64>>,
 }
 
 /// The parts of a fit-row log-likelihood that do not depend on the hot-pixel and RTN
@@ -325,6 +343,7 @@ impl<'a> Ctx<'a> {
             pred_buf: Mutex::new(Vec::new()),
             hot_base: Mutex::new(None),
             frame_pre: std::sync::OnceLock::new(),
+            mix: Mutex::new(None),
         }
     }
 
@@ -473,6 +492,23 @@ impl<'a> Ctx<'a> {
                 &col_owned
             }
         };
+        // The hot or RTN class's per-pixel log-likelihood, kept or reused ([`MixCache`]).
+        let mix_key: Option<[u64; 3]> = match (&hot_key, &hot, rtn) {
+            (Some(_), Some(h), None) => Some([0, h.ln_rate.to_bits(), h.log_sigma.to_bits()]),
+            (Some(_), None, Some((_, a_v, p))) => Some([1, a_v.to_bits(), p.to_bits()]),
+            _ => None,
+        };
+        let mix_hit: Option<Arc<Vec<f64>>> = match (&mix_key, &hot_base) {
+            (Some(k), Some(hb)) => self
+                .mix
+                .lock()
+                .expect("mixture cache")
+                .as_ref()
+                .filter(|m| m.key == *k && Arc::ptr_eq(&m.base, hb))
+                .map(|m| m.l.clone()),
+            _ => None,
+        };
+        let keep_mix = mix_key.is_some() && mix_hit.is_none();
         let stored: Option<&[Pred]> = use_store.then_some(&store[..]);
         // Column term: per column, the S-vector of column-mean residuals.
         let logl_columns = match &hot_base {
@@ -482,7 +518,8 @@ impl<'a> Ctx<'a> {
         };
         // Pixel term (blocks of PIXEL_BLOCK_ROWS rows: enough pieces to balance the threads
         // on a few fit rows).
-        let blocks: Vec<(f64, Vec<ScStat>, usize, Vec<f64>)> = rows
+        #[allow(clippy::type_complexity)]
+        let blocks: Vec<(f64, Vec<ScStat>, usize, Vec<f64>, Vec<f64>)> = rows
             .par_chunks(PIXEL_BLOCK_ROWS)
             .enumerate()
             .map(|(bi, blk)| {
@@ -500,12 +537,30 @@ impl<'a> Ctx<'a> {
                 // uniform shot share.
                 let mut hot_memo: HashMap<Vec<(u64, u16, u16)>, (f64, Vec<Pred>)> = HashMap::new();
                 let mut l0s: Vec<f64> = Vec::new();
+                let mut mix_vals: Vec<f64> = Vec::new();
                 let mut rtn_buf: Vec<Pred> = Vec::with_capacity(ns);
                 for (ri, &r) in blk.iter().enumerate() {
                     for j in 0..cols {
                         let i = r * cols + j;
                         let ch = d.channel[i] as usize;
                         let at = ((bi * PIXEL_BLOCK_ROWS + ri) * cols + j) * ns;
+                        if let (Some(lc), Some(hb)) = (&mix_hit, &hot_base) {
+                            // the kept class likelihood, mixed as below
+                            let l0 = hb.l0[at / ns];
+                            let (fr, is_hot) = match (&hot, rtn) {
+                                (Some(h), _) => (h.fraction, true),
+                                (None, Some((fr, _, _))) => (fr, false),
+                                (None, None) => unreachable!("a mixture key needs a mixture"),
+                            };
+                            let a = (1.0 - fr).ln() + l0;
+                            let b = fr.ln() + lc[at / ns];
+                            let tot = log_add_exp(a, b);
+                            if is_hot && b - tot > -std::f64::consts::LN_2 {
+                                n_hot += 1;
+                            }
+                            ll += tot;
+                            continue;
+                        }
                         let px: &[PixShot] = if sel == RowSel::Fit || self.calc_rows.is_empty() {
                             &self.fit_pix[at..at + ns]
                         } else {
@@ -579,6 +634,9 @@ impl<'a> Ctx<'a> {
                                     }
                                     lh
                                 };
+                                if keep_mix {
+                                    mix_vals.push(lh);
+                                }
                                 let a = (1.0 - h.fraction).ln() + l0;
                                 let b = h.fraction.ln() + lh;
                                 let tot = log_add_exp(a, b);
@@ -616,6 +674,9 @@ impl<'a> Ctx<'a> {
                                     sig_p,
                                     if use_cols { 0.0 } else { sig_c },
                                 );
+                                if keep_mix {
+                                    mix_vals.push(lr);
+                                }
                                 let a = (1.0 - fr).ln() + li;
                                 let b = fr.ln() + lr;
                                 let tot = log_add_exp(a, b);
@@ -684,7 +745,7 @@ impl<'a> Ctx<'a> {
                         }
                     }
                 }
-                (ll, sc, n_hot, l0s)
+                (ll, sc, n_hot, l0s, mix_vals)
             })
             .collect();
         // Frame-sequence terms (row noise, black-level drift; `frames.rs`): rows × shots of
@@ -692,7 +753,7 @@ impl<'a> Ctx<'a> {
         let mut logl = logl_columns + self.frame_terms_ll(state);
         let mut per_sc = vec![ScStat::default(); ns * nch];
         let mut hot_pixels = 0;
-        for (ll, sc, nh, _) in &blocks {
+        for (ll, sc, nh, ..) in &blocks {
             logl += ll;
             for (t, x) in per_sc.iter_mut().zip(sc) {
                 t.add(x);
@@ -702,17 +763,30 @@ impl<'a> Ctx<'a> {
         if use_store {
             *self.pred_buf.lock().expect("pred buffer") = store;
         }
+        let mut new_base: Option<Arc<HotBase>> = None;
         if keep_l0 {
             if let Some(st) = hot_key {
                 let l0: Vec<f64> = blocks.iter().flat_map(|b| b.3.iter().copied()).collect();
-                *self.hot_base.lock().expect("hot base") = Some(Arc::new(HotBase {
+                let nb = Arc::new(HotBase {
                     state: st,
                     rates: rates.clone(),
                     sel,
                     col: col.to_vec(),
                     logl_columns,
                     l0,
-                }));
+                });
+                *self.hot_base.lock().expect("hot base") = Some(nb.clone());
+                new_base = Some(nb);
+            }
+        }
+        if keep_mix {
+            if let (Some(key), Some(base)) = (mix_key, hot_base.clone().or(new_base)) {
+                let l: Vec<f64> = blocks.iter().flat_map(|b| b.4.iter().copied()).collect();
+                *self.mix.lock().expect("mixture cache") = Some(MixCache {
+                    base,
+                    key,
+                    l: Arc::new(l),
+                });
             }
         }
         let chi2 = per_sc.iter().map(|x| x.chi2).sum();
@@ -744,7 +818,167 @@ fn gather_pixel(d: &DataSet, i: usize, out: &mut [PixShot]) {
 
 #[cfg(test)]
 mod tests {
-    use super::{fit_bands, FIT_BANDS};
+    use super::{fit_bands, Ctx, RowSel, FIT_BANDS};
+    use crate::mismatch::data::{DataSet, ShotAccumulator, TargetClass};
+    use crate::mismatch::model::{Forward, ModelState, RateSpec};
+    use std::sync::Arc;
+
+    /// Fixed rate images per shot.
+    struct FixedRates(Vec<Arc<Vec<f32>>>);
+    impl Forward for FixedRates {
+        fn rates(&self, _: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
+            Ok(self.0.clone())
+        }
+    }
+
+    /// A 16 × 12 mono set: two darks (3 frames), three flats (2 frames; the last near a
+    /// 7 000–9 000 e⁻ well), a structured single-frame shot clipped at both rails; frames
+    /// from a fixed pseudo-random sequence around a slope in the rates.
+    fn demo() -> (DataSet, FixedRates) {
+        let (rows, cols) = (16usize, 12usize);
+        let n = rows * cols;
+        // (exposure s, rate scale e-/s, frames, target)
+        let shots = [
+            (0.1, 0.0, 3, TargetClass::Dark),
+            (1.0, 0.0, 3, TargetClass::Dark),
+            (0.01, 1.0e5, 2, TargetClass::Uniform),
+            (0.01, 3.0e5, 2, TargetClass::Uniform),
+            (0.01, 7.6e5, 2, TargetClass::Uniform),
+            (0.01, 9.0e5, 1, TargetClass::Structured),
+        ];
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut noise = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut rates = Vec::new();
+        let mut data = Vec::new();
+        for (k, (t, scale, frames, target)) in shots.into_iter().enumerate() {
+            let r: Vec<f32> = (0..n)
+                .map(|i| {
+                    let (row, c) = (i / cols, i % cols);
+                    let structured = matches!(target, TargetClass::Structured);
+                    let f = if structured && (row + c) % 3 == 0 {
+                        1.6
+                    } else if structured && (row * c) % 5 == 1 {
+                        0.0
+                    } else {
+                        1.0 - 0.01 * row as f64
+                    };
+                    (scale * f) as f32
+                })
+                .collect();
+            let mut acc = ShotAccumulator::new(rows, cols, 4095);
+            for _ in 0..frames {
+                let frame: Vec<u16> = r
+                    .iter()
+                    .map(|&x| {
+                        let e = x as f64 * t + 10.0 * t;
+                        let dn = 64.0 + 0.4095 * (e + 3.0 * e.sqrt() * noise()) + 8.0 * noise();
+                        let dn = if structured_zero(k, x) { -5.0 } else { dn };
+                        dn.round().clamp(0.0, 4095.0) as u16
+                    })
+                    .collect();
+                acc.add(&frame).unwrap();
+            }
+            data.push(acc.finish(format!("s{k}"), target, format!("k{k}"), t, 1.0));
+            rates.push(Arc::new(r));
+        }
+        fn structured_zero(k: usize, x: f32) -> bool {
+            k == 5 && x == 0.0
+        }
+        (
+            DataSet {
+                rows,
+                cols,
+                channel: vec![0; n],
+                channel_names: vec!["m".into()],
+                max_dn: 4095.0,
+                shots: data,
+            },
+            FixedRates(rates),
+        )
+    }
+
+    /// Reusing the hot or RTN class's per-pixel likelihoods ([`super::MixCache`]) gives the
+    /// bits of a pass from scratch, along a sequence that changes each mixture's fraction (the
+    /// kept values are reused), its own parameters, a fixed-pattern spread and the well (they
+    /// are not), and switches between the two mixtures and to both at once (no reuse).
+    #[test]
+    fn mixture_reuse_gives_the_bits_of_a_fresh_pass() {
+        let (data, fw) = demo();
+        let mut sensor = camsim_sensor::SensorModel::mono_test(data.rows, data.cols);
+        sensor.well_capacity_e = 9000.0;
+        let base = ModelState {
+            sensor,
+            exposure_factor: 1.0,
+            rates: RateSpec::default(),
+            frames_in_set: 13,
+        };
+        let at = |hot: Option<(f64, f64)>, rtn: Option<(f64, f64)>, dsnu_v: f64, well_e: f64| {
+            let mut s = base.clone();
+            s.sensor.dsnu_sigma_v = dsnu_v;
+            s.sensor.well_capacity_e = well_e;
+            s.sensor.effects.hot_pixels = hot.map(|(fr, v)| camsim_sensor::HotPixels {
+                fraction: fr,
+                dark_voltage_v_per_s: v,
+                log_sigma: 0.5,
+            });
+            s.sensor.effects.rtn = rtn.map(|(fr, a)| camsim_sensor::Rtn {
+                fraction: fr,
+                amplitude_v: a,
+                log_sigma: 0.0,
+                p_up: 0.5,
+                p_down: 0.5,
+            });
+            s
+        };
+        let d0 = base.sensor.dsnu_sigma_v;
+        // (state, whether the previous step's class likelihoods are kept: reused)
+        let seq = [
+            (at(Some((0.01, 0.05)), None, d0, 9000.0), false),
+            (at(Some((0.02, 0.05)), None, d0, 9000.0), true),
+            (at(Some((0.03, 0.05)), None, d0, 9000.0), true),
+            (at(Some((0.03, 0.08)), None, d0, 9000.0), false),
+            (at(Some((0.01, 0.08)), None, d0, 9000.0), true),
+            (at(Some((0.01, 0.08)), None, 2e-3, 9000.0), false),
+            (at(None, Some((0.01, 0.01)), d0, 9000.0), false),
+            (at(None, Some((0.03, 0.01)), d0, 9000.0), true),
+            (at(None, Some((0.03, 0.02)), d0, 9000.0), false),
+            (at(None, Some((0.05, 0.02)), d0, 9000.0), true),
+            (at(None, Some((0.05, 0.02)), d0, 3000.0), false),
+            (at(None, Some((0.02, 0.02)), d0, 3000.0), true),
+            (at(Some((0.02, 0.08)), None, d0, 3000.0), false),
+            // both mixtures: nothing kept is read, nothing is replaced
+            (at(Some((0.02, 0.08)), Some((0.02, 0.02)), d0, 3000.0), true),
+            (at(Some((0.03, 0.08)), Some((0.02, 0.02)), d0, 3000.0), true),
+        ];
+        let ctx = Ctx::new(&data, &fw, usize::MAX);
+        let kept = |c: &Ctx| {
+            c.mix
+                .lock()
+                .unwrap()
+                .as_ref()
+                .map(|m| Arc::as_ptr(&m.l) as usize)
+        };
+        for (k, (st, reused)) in seq.iter().enumerate() {
+            let before = kept(&ctx);
+            let r = ctx.rates_for(st, RowSel::Fit).unwrap();
+            let a = ctx.logl_with(st, &r, RowSel::Fit);
+            let fresh = Ctx::new(&data, &fw, usize::MAX);
+            let b = fresh.logl_with(st, &fresh.rates_for(st, RowSel::Fit).unwrap(), RowSel::Fit);
+            assert!(a.is_finite(), "step {k}: {a}");
+            assert_eq!(a.to_bits(), b.to_bits(), "step {k}: {a} vs fresh {b}");
+            let after = kept(&ctx);
+            assert_eq!(
+                *reused,
+                before.is_some() && before == after,
+                "step {k}: kept {before:?} -> {after:?}"
+            );
+        }
+    }
 
     /// The fit bands: FIT_BANDS runs of one even length starting at even rows, at most `n`
     /// rows in all (at least 2 per band), the first at the top, the last ending within one row
