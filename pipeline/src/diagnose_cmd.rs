@@ -75,6 +75,84 @@ struct SimForward {
     /// The veiling glare's whole-field sums per optics configuration (without the glare) and
     /// target, for the fit rows' bands ([`Forward::rates_rows`]).
     glare: Mutex<HashMap<String, Arc<camsim_optics::GlareSums>>>,
+    /// What the forward runs cost, by kind of work ([`ForwardWork`]).
+    work: ForwardWork,
+}
+
+/// Counters of the forward model's work by kind (calls and wall seconds; with
+/// `CAMSIM_PROFILE`, in the progress log and timing.json): where a large sensor's time goes.
+#[derive(Default)]
+struct ForwardWork {
+    /// Whole scenes rendered ([`crate::chain::shot_scene`]) and their bytes.
+    scene_renders: WorkCounter,
+    scene_bytes: std::sync::atomic::AtomicU64,
+    /// Whole-sensor optics runs for the veiling glare's sums ([`crate::chain::shot_glare_sums`]).
+    glare_sums: WorkCounter,
+    /// Bands of rows through the optics ([`crate::chain::band_irradiance`]).
+    band_optics: WorkCounter,
+    /// Whole-sensor optics runs ([`Forward::rates`]: channel planes or basis-term planes).
+    whole_optics: WorkCounter,
+}
+
+/// Calls and wall time of one kind of work.
+#[derive(Default)]
+struct WorkCounter {
+    calls: std::sync::atomic::AtomicU64,
+    nanos: std::sync::atomic::AtomicU64,
+}
+
+impl WorkCounter {
+    /// Count one call that started at `t0`.
+    fn add(&self, t0: std::time::Instant) {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.calls.fetch_add(1, Relaxed);
+        self.nanos
+            .fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+    }
+
+    /// (calls, seconds).
+    fn get(&self) -> (u64, f64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (
+            self.calls.load(Relaxed),
+            self.nanos.load(Relaxed) as f64 * 1e-9,
+        )
+    }
+}
+
+impl ForwardWork {
+    /// The counters as (stage name, calls, seconds).
+    fn stages(&self) -> Vec<(String, u64, f64)> {
+        let gb = self.scene_bytes.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9;
+        let one = |name: String, c: &WorkCounter| {
+            let (n, s) = c.get();
+            (name, n, s)
+        };
+        vec![
+            one(
+                format!("forward: whole scenes rendered ({gb:.1} GB in all)"),
+                &self.scene_renders,
+            ),
+            one(
+                "forward: whole-sensor optics for the glare sums".into(),
+                &self.glare_sums,
+            ),
+            one(
+                "forward: bands through the optics".into(),
+                &self.band_optics,
+            ),
+            one("forward: whole-sensor optics".into(), &self.whole_optics),
+        ]
+    }
+
+    /// One line for the progress log.
+    fn summary(&self) -> String {
+        self.stages()
+            .iter()
+            .map(|(n, c, s)| format!("{}: {c} / {s:.1} s", n.trim_start_matches("forward: ")))
+            .collect::<Vec<_>>()
+            .join("; ")
+    }
 }
 
 impl SimForward {
@@ -89,6 +167,7 @@ impl SimForward {
             planes: Mutex::new(PlaneCache::default()),
             scenes: Mutex::new(SceneCache::default()),
             glare: Mutex::new(HashMap::new()),
+            work: ForwardWork::default(),
         }
     }
 }
@@ -114,6 +193,8 @@ struct LruBytes<V, const BUDGET: usize> {
     entries: HashMap<String, (u64, V, usize)>,
     bytes: usize,
     stamp: u64,
+    /// The byte budget in force: `BUDGET` (tests lower it).
+    budget: usize,
 }
 
 impl<V, const BUDGET: usize> Default for LruBytes<V, BUDGET> {
@@ -122,6 +203,7 @@ impl<V, const BUDGET: usize> Default for LruBytes<V, BUDGET> {
             entries: HashMap::new(),
             bytes: 0,
             stamp: 0,
+            budget: BUDGET,
         }
     }
 }
@@ -140,13 +222,13 @@ impl<V: Clone, const BUDGET: usize> LruBytes<V, BUDGET> {
     /// Keep `value` of `bytes` under `key` when it fits in the budget, evicting the least
     /// recently used values first.
     fn insert(&mut self, key: String, value: V, bytes: usize) {
-        if bytes > BUDGET {
+        if bytes > self.budget {
             return;
         }
         if let Some((_, _, b)) = self.entries.remove(&key) {
             self.bytes -= b;
         }
-        while self.bytes + bytes > BUDGET && !self.entries.is_empty() {
+        while self.bytes + bytes > self.budget && !self.entries.is_empty() {
             let oldest = self
                 .entries
                 .iter()
@@ -184,26 +266,34 @@ impl SceneCache {
 
     /// The scene of shot `si` of `set` (whose camera is the one of this call), from the cache
     /// or rendered (and kept when it fits); `grid_key` is [`SceneCache::grid_key`] of the
-    /// call's camera.
+    /// call's camera. Renders are counted in `work`.
     fn scene(
         &mut self,
         set: &CaptureSet,
         si: usize,
         grid: &camsim_core::WavelengthGrid,
         grid_key: &str,
+        work: &ForwardWork,
     ) -> Result<Arc<camsim_core::image::SceneRadiance>, String> {
         let key = format!("{} {grid_key}", set.shots[si].target_key);
         if let Some(scene) = self.lru.get(&key) {
             return Ok(scene);
         }
+        let t0 = std::time::Instant::now();
         let scene = Arc::new(crate::chain::shot_scene(set, si, grid).map_err(|e| e.one_line())?);
-        self.lru.insert(key, scene.clone(), scene_bytes(&scene));
+        work.scene_renders.add(t0);
+        let bytes = scene_bytes(&scene);
+        work.scene_bytes
+            .fetch_add(bytes as u64, std::sync::atomic::Ordering::Relaxed);
+        self.lru.insert(key, scene.clone(), bytes);
         Ok(scene)
     }
 
     /// Rows `r0..r1` of [`SceneCache::scene`] for each of `ranges`
     /// ([`crate::chain::scene_rows`]), kept by themselves: the bands of a scene too large for
-    /// the cache are cut from one render.
+    /// the cache are cut from one render — `whole` when the caller holds that scene already
+    /// (of this `grid_key`: the glare sums' render), else rendered here once.
+    #[allow(clippy::too_many_arguments)]
     fn scene_bands(
         &mut self,
         set: &CaptureSet,
@@ -211,11 +301,13 @@ impl SceneCache {
         grid: &camsim_core::WavelengthGrid,
         grid_key: &str,
         ranges: &[(usize, usize)],
+        whole: Option<Arc<camsim_core::image::SceneRadiance>>,
+        work: &ForwardWork,
     ) -> Result<Vec<Arc<camsim_core::image::SceneRadiance>>, String> {
         let key = |(r0, r1): (usize, usize)| {
             format!("{} {grid_key} rows {r0}..{r1}", set.shots[si].target_key)
         };
-        let mut whole = None;
+        let mut whole = whole;
         let mut out = Vec::with_capacity(ranges.len());
         for &r in ranges {
             if let Some(scene) = self.lru.get(&key(r)) {
@@ -223,7 +315,7 @@ impl SceneCache {
                 continue;
             }
             if whole.is_none() {
-                whole = Some(self.scene(set, si, grid, grid_key)?);
+                whole = Some(self.scene(set, si, grid, grid_key, work)?);
             }
             let w = whole.as_ref().expect("rendered");
             let band = Arc::new(crate::chain::scene_rows(w, r.0, r.1));
@@ -393,6 +485,8 @@ impl Forward for SimForward {
                 continue;
             }
             let gk: &String = grid_key.get_or_init(|| SceneCache::grid_key(&set, &grid));
+            // The whole scene when the glare sums rendered it: the bands are cut from it.
+            let mut whole_scene = None;
             let glare = if glare_on {
                 let gkey = format!("{glare_key} target {key}");
                 let got = self.glare.lock().map_err(lock_err)?.get(&gkey).cloned();
@@ -403,10 +497,13 @@ impl Forward for SimForward {
                             .scenes
                             .lock()
                             .map_err(lock_err)?
-                            .scene(&set, si, &grid, gk)?;
+                            .scene(&set, si, &grid, gk, &self.work)?;
+                        let t0 = std::time::Instant::now();
                         let g = crate::chain::shot_glare_sums(&set, &whole, &grid)
                             .map_err(|e| e.one_line())?
                             .ok_or("veiling glare without its sums")?;
+                        self.work.glare_sums.add(t0);
+                        whole_scene = Some(whole);
                         let g = Arc::new(g);
                         self.glare.lock().map_err(lock_err)?.insert(gkey, g.clone());
                         g
@@ -424,13 +521,18 @@ impl Forward for SimForward {
                     .iter()
                     .map(|&bi| crate::chain::band_scene_rows(&set, &grid, bands[bi], widen))
                     .collect();
-                let scenes = self
-                    .scenes
-                    .lock()
-                    .map_err(lock_err)?
-                    .scene_bands(&set, si, &grid, gk, &ranges)?;
+                let scenes = self.scenes.lock().map_err(lock_err)?.scene_bands(
+                    &set,
+                    si,
+                    &grid,
+                    gk,
+                    &ranges,
+                    whole_scene,
+                    &self.work,
+                )?;
                 for (&bi, scene) in missing.iter().zip(&scenes) {
                     let band = bands[bi];
+                    let t0 = std::time::Instant::now();
                     let irr = crate::chain::band_irradiance(
                         &set,
                         scene,
@@ -440,6 +542,7 @@ impl Forward for SimForward {
                         glare.as_deref(),
                     )
                     .map_err(|e| e.one_line())?;
+                    self.work.band_optics.add(t0);
                     let sensor = crate::chain::band_sensor(&set, band);
                     let p = Arc::new(camsim_sensor::pixel_term_planes(&sensor, &irr));
                     by_band.insert(bkey(bi), p);
@@ -509,6 +612,7 @@ impl Forward for SimForward {
                         si,
                         &grid,
                         grid_key.get_or_init(|| SceneCache::grid_key(&set, &grid)),
+                        &self.work,
                     )
             };
             // The path is a function of the camera and the target alone (not of what is
@@ -516,7 +620,11 @@ impl Forward for SimForward {
             let mut scene = None;
             let channel = if believed_qe && optics_alike_at_every_wavelength(&set.camera) {
                 let sc = scene_of()?;
+                let t0 = std::time::Instant::now();
                 let r = channel_rate(&set, si, &sc, &grid)?;
+                if r.is_some() {
+                    self.work.whole_optics.add(t0);
+                }
                 scene = Some(sc);
                 r
             } else {
@@ -532,8 +640,10 @@ impl Forward for SimForward {
                         Some(sc) => sc,
                         None => scene_of()?,
                     };
+                    let t0 = std::time::Instant::now();
                     let irr =
                         shot_irradiance_of_scene(&set, si, &sc, &grid).map_err(|e| e.one_line())?;
+                    self.work.whole_optics.add(t0);
                     let pp = camsim_sensor::pixel_term_planes(&set.camera.sensor, &irr);
                     let r = camsim_sensor::electron_rate_from_term_planes(&set.camera.sensor, &pp);
                     by_target.insert(key.clone(), Arc::new(pp));
@@ -985,9 +1095,10 @@ pub fn run_diagnose(
     let progress = |m: &str| {
         if profile {
             eprintln!(
-                "camsim: {:8.3} s  {m}  [{} likelihood evaluations so far]",
+                "camsim: {:8.3} s  {m}  [{} likelihood evaluations so far; {}]",
                 t0.elapsed().as_secs_f64(),
-                camsim_diagnose::mismatch::prof::calls()
+                camsim_diagnose::mismatch::prof::calls(),
+                forward.work.summary()
             );
         }
         spinner.set_message(m.to_string())
@@ -1029,7 +1140,13 @@ pub fn run_diagnose(
             let p = st.join("timing.json");
             std::fs::write(
                 &p,
-                serde_json::to_string_pretty(&timing_json(&diag, &data, load_s)).expect("json"),
+                serde_json::to_string_pretty(&timing_json(
+                    &diag,
+                    &data,
+                    load_s,
+                    &forward.work.stages(),
+                ))
+                .expect("json"),
             )
             .map_err(|e| CliError::output(&p, e))?;
             files.push("timing.json".into());
@@ -1076,7 +1193,12 @@ pub struct DiagnoseSummary {
 /// timing.json: wall time per stage (frames read and reduced, then the diagnosis's stages
 /// and the likelihood/forward-model counters), and what was subsampled. Kept out of
 /// report.json, which is byte-identical for the same inputs.
-fn timing_json(d: &Diagnosis, data: &DataSet, load_s: f64) -> Value {
+fn timing_json(
+    d: &Diagnosis,
+    data: &DataSet,
+    load_s: f64,
+    forward_work: &[(String, u64, f64)],
+) -> Value {
     let mut stages = vec![json!({"stage": "read and reduce the frames", "seconds": load_s})];
     for t in &d.timing {
         let mut v = json!({"stage": t.stage, "seconds": t.seconds});
@@ -1085,9 +1207,12 @@ fn timing_json(d: &Diagnosis, data: &DataSet, load_s: f64) -> Value {
         }
         stages.push(v);
     }
+    for (stage, calls, seconds) in forward_work {
+        stages.push(json!({"stage": stage, "seconds": seconds, "calls": calls}));
+    }
     json!({
         "stages": stages,
-        "note": "the first stages are sequential wall times; the counters (likelihood, forward model, identifiability) are parts of them",
+        "note": "the first stages are sequential wall times; the counters (likelihood, forward model, identifiability, and the forward model's work by kind) are parts of them",
         "subsampled": {"fit_pixels": d.fit_pixels, "sensor_pixels": data.pixels(),
                        "rule": "fits use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels (5 contiguous bands from top to bottom when the fit rows are at most 1/8 of the rows and the forward model runs bands of rows by themselves); the reported fit (fit_before/fit_after, locate) uses every pixel"},
     })
@@ -1617,6 +1742,50 @@ mod band_tests {
                     "{spec:?} + crosstalk, shot {si}: max |Δ| {err} of {scale}"
                 );
             }
+        }
+    }
+
+    /// A veiling-glare spec on the fit rows' bands renders each target's whole scene once:
+    /// the glare's whole-field sums need it, and the bands are cut from that same render
+    /// (before, a scene too large for the scene cache — a 12 MP chart is 4.8 GB — was rendered
+    /// a second time for the bands). Same rates, bit for bit, as with the scenes cached.
+    #[test]
+    fn glare_bands_are_cut_from_the_glare_sums_render() {
+        let (_dir, set) = demo_set(vec![], Concealment::Charts, 96, 24);
+        let rows: Vec<usize> = (0..6).collect();
+        let spec = RateSpec {
+            glare_fraction: Some(0.05),
+            ..Default::default()
+        };
+        let cached = SimForward::new(&set, (0..set.shots.len()).collect());
+        let want = cached.rates_rows(&spec, &rows).unwrap();
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
+        // no scene fits the cache (as a whole 12 MP chart does not)
+        fw.scenes.lock().unwrap().lru.budget = 0;
+        {
+            let mut s2 = set.clone();
+            s2.camera = fw.camera_for(&spec).unwrap();
+            let grid = wavelength_grid(&s2);
+            assert!(row_bands(&s2, &grid, &rows).is_some(), "not run as bands");
+        }
+        let got = fw.rates_rows(&spec, &rows).unwrap();
+        let targets: std::collections::HashSet<&str> =
+            set.shots.iter().map(|s| s.target_key.as_str()).collect();
+        let (renders, _) = fw.work.scene_renders.get();
+        assert_eq!(
+            renders,
+            targets.len() as u64,
+            "one whole render per target ({} targets)",
+            targets.len()
+        );
+        assert_eq!(fw.work.glare_sums.get().0, targets.len() as u64);
+        for (si, (a, b)) in want.iter().zip(&got).enumerate() {
+            assert!(
+                a.iter()
+                    .zip(b.iter())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+                "shot {si}: rates differ from the cached scenes' run"
+            );
         }
     }
 }
