@@ -1498,12 +1498,7 @@ mod tests {
         let camera_json: Value =
             serde_json::from_str(&std::fs::read_to_string(&set.camera_path).unwrap()).unwrap();
         let fw = SimForward::new(&set, (0..set.shots.len()).collect());
-        let nch = set.camera.sensor.channel_qe.len();
-        let mut qe = vec![0.0; nch];
-        qe[0] = 4.0;
-        qe[nch - 1] = -7.0;
-        let mut ir = vec![0.0; nch];
-        ir[0] = 0.02;
+        let (qe, ir) = test_colour_shifts(&set);
         let specs = [
             RateSpec::default(),
             RateSpec {
@@ -1593,6 +1588,19 @@ fn demo_set(
     (dir, set)
 }
 
+/// The forward-model tests' QE shifts (+4 nm on the first channel, −7 nm on the last) and IR
+/// leakage (0.02 on the first channel) of `set`'s channels.
+#[cfg(test)]
+fn test_colour_shifts(set: &CaptureSet) -> (Vec<f64>, Vec<f64>) {
+    let nch = set.camera.sensor.channel_qe.len();
+    let mut qe = vec![0.0; nch];
+    qe[0] = 4.0;
+    qe[nch - 1] = -7.0;
+    let mut ir = vec![0.0; nch];
+    ir[0] = 0.02;
+    (qe, ir)
+}
+
 #[cfg(test)]
 mod band_tests {
     use super::*;
@@ -1618,12 +1626,7 @@ mod band_tests {
             .collect();
         rows.sort_unstable();
         rows.dedup();
-        let nch = set.camera.sensor.channel_qe.len();
-        let mut qe = vec![0.0; nch];
-        qe[0] = 4.0;
-        qe[nch - 1] = -7.0;
-        let mut ir = vec![0.0; nch];
-        ir[0] = 0.02;
+        let (qe, ir) = test_colour_shifts(&set);
         let specs = [
             RateSpec::default(),
             RateSpec {
