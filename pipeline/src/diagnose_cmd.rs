@@ -1470,11 +1470,7 @@ mod tests {
                 assert_eq!(via_channels, chart && alike, "{spec:?} shot {si}");
                 assert_eq!(alike, *channel_path || spec.qe_shift_nm.is_some());
                 let want = shot_electron_rate(&s2, si, &grid).unwrap().electrons_per_s;
-                let scale = want.iter().fold(0f32, |m, &x| m.max(x.abs())).max(1e-30);
-                let err = want
-                    .iter()
-                    .zip(g.iter())
-                    .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                let (err, scale) = max_abs_diff(&want, g);
                 assert!(
                     err <= 2e-6 * scale,
                     "{spec:?} shot {si}: max |Δ| {err} of {scale}"
@@ -1539,11 +1535,7 @@ mod tests {
                 let grid = wavelength_grid(&s2);
                 for (si, g) in got.iter().enumerate() {
                     let want = shot_electron_rate(&s2, si, &grid).unwrap().electrons_per_s;
-                    let scale = want.iter().fold(0f32, |m, &x| m.max(x.abs())).max(1e-30);
-                    let err = want
-                        .iter()
-                        .zip(g.iter())
-                        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                    let (err, scale) = max_abs_diff(&want, g);
                     assert!(
                         err <= 1e-5 * scale,
                         "{spec:?} pass {pass} shot {si}: max |Δ| {err} of {scale}"
@@ -1586,6 +1578,18 @@ fn demo_set(
     let truth = crate::demo::generate_capture_set(&spec, dir.path()).unwrap();
     let set = crate::config::load_captures(&truth.captures_json, None).unwrap();
     (dir, set)
+}
+
+/// The largest |want − got| of two rate images and the largest |want| (at least 1e-30), for the
+/// forward-model tests' relative tolerances.
+#[cfg(test)]
+fn max_abs_diff(want: &[f32], got: &[f32]) -> (f32, f32) {
+    let scale = want.iter().fold(0f32, |m, &x| m.max(x.abs())).max(1e-30);
+    let err = want
+        .iter()
+        .zip(got)
+        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+    (err, scale)
 }
 
 /// The forward-model tests' QE shifts (+4 nm on the first channel, −7 nm on the last) and IR
