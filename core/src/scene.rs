@@ -15,6 +15,7 @@ use crate::image::{SceneRadiance, SpectralBasis, SpectralImage};
 use crate::sample_aperture::{half_plane_weight, interval_weight, periodic_weight, SampleAperture};
 use crate::spectrum::Spectrum;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Where a target is sampled: `rows × cols` square cells of side `pitch_m`, centred on the
 /// optical axis, for a sensor of `sensor_width_m × sensor_height_m` (the target's extent).
@@ -224,15 +225,22 @@ fn half_plane_area(x0: f64, x1: f64, y0: f64, y1: f64, nx: f64, ny: f64) -> f64 
     0.5 * a.abs()
 }
 
-/// `wx(x_c) · wy(y_r)` at every sample (x_c, y_r: the sample centres).
-fn separable_plane(g: &SamplingGrid, wx: impl Fn(f64) -> f64, wy: impl Fn(f64) -> f64) -> Vec<f32> {
+/// `wx(x_c) · wy(y_r)` at every sample of the grid rows `rows` (x_c, y_r: the sample
+/// centres).
+fn separable_plane(
+    g: &SamplingGrid,
+    rows: Range<usize>,
+    wx: impl Fn(f64) -> f64,
+    wy: impl Fn(f64) -> f64,
+) -> Vec<f32> {
     let cx: Vec<f64> = (0..g.cols)
         .map(|c| wx(0.5 * (g.x0(c) + g.x0(c + 1))))
         .collect();
-    let ry: Vec<f64> = (0..g.rows)
+    let ry: Vec<f64> = rows
+        .clone()
         .map(|r| wy(0.5 * (g.y0(r) + g.y0(r + 1))))
         .collect();
-    let mut p = vec![0f32; g.rows * g.cols];
+    let mut p = vec![0f32; rows.len() * g.cols];
     p.par_chunks_mut(g.cols)
         .zip(ry.par_iter())
         .for_each(|(row, &y)| {
@@ -243,9 +251,15 @@ fn separable_plane(g: &SamplingGrid, wx: impl Fn(f64) -> f64, wy: impl Fn(f64) -
     p
 }
 
-fn plane_from_fn(g: &SamplingGrid, f: impl Fn(f64, f64, f64, f64) -> f32 + Sync) -> Vec<f32> {
-    let mut p = vec![0f32; g.rows * g.cols];
-    p.par_chunks_mut(g.cols).enumerate().for_each(|(r, row)| {
+/// `f(x0, x1, y0, y1)` of every cell of the grid rows `rows` (the cell's edges).
+fn plane_from_fn(
+    g: &SamplingGrid,
+    rows: Range<usize>,
+    f: impl Fn(f64, f64, f64, f64) -> f32 + Sync,
+) -> Vec<f32> {
+    let mut p = vec![0f32; rows.len() * g.cols];
+    p.par_chunks_mut(g.cols).enumerate().for_each(|(i, row)| {
+        let r = rows.start + i;
         let (y0, y1) = (g.y0(r), g.y0(r + 1));
         for (c, v) in row.iter_mut().enumerate() {
             *v = f(g.x0(c), g.x0(c + 1), y0, y1);
@@ -272,12 +286,31 @@ pub fn rendered_aperture(target: &Target, g: &SamplingGrid) -> SampleAperture {
 /// Render a target on a sampling grid as a spectral image (photons/(s·sr·m²·nm)); samples
 /// stand for [`rendered_aperture`].
 pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage, CoreError> {
+    render_target_rows(target, g, 0..g.rows)
+}
+
+/// The grid rows `row_range` of [`render_target`] by themselves (a row window of the grid:
+/// the same samples, bit for bit, as those rows of the whole render, each sample being a
+/// function of its own cell alone), without rendering the rest. Refused when `row_range`
+/// leaves the grid.
+pub fn render_target_rows(
+    target: &Target,
+    g: &SamplingGrid,
+    row_range: Range<usize>,
+) -> Result<SpectralImage, CoreError> {
+    if row_range.start > row_range.end || row_range.end > g.rows {
+        return Err(CoreError::Target(format!(
+            "row window {}..{} of a {}-row sampling grid",
+            row_range.start, row_range.end, g.rows
+        )));
+    }
     let (w, h) = (g.sensor_width_m, g.sensor_height_m);
     let ap = rendered_aperture(target, g);
     let d = g.pitch_m;
-    let n = g.rows * g.cols;
+    let nr = row_range.len();
+    let n = nr * g.cols;
     let single = |s: &Spectrum, plane: Vec<f32>| {
-        SpectralImage::from_single_spectrum(g.rows, g.cols, s.clone(), plane)
+        SpectralImage::from_single_spectrum(nr, g.cols, s.clone(), plane)
     };
     Ok(match target {
         Target::Rendered { description } => {
@@ -314,12 +347,15 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
                         (cx - pw / 2.0, cx + pw / 2.0, cy - ph / 2.0, cy + ph / 2.0);
                     let a = g.pitch_m * g.pitch_m;
                     let plane = match ap {
-                        SampleAperture::Cell => plane_from_fn(g, |x0, x1, y0, y1| {
-                            (overlap(x0, x1, px0, px1) * overlap(y0, y1, py0, py1) / a) as f32
-                        }),
+                        SampleAperture::Cell => {
+                            plane_from_fn(g, row_range.clone(), |x0, x1, y0, y1| {
+                                (overlap(x0, x1, px0, px1) * overlap(y0, y1, py0, py1) / a) as f32
+                            })
+                        }
                         // Separable: one weight per column and one per row.
                         _ => separable_plane(
                             g,
+                            row_range.clone(),
                             |xc| interval_weight(ap, (px0 - xc) / d, (px1 - xc) / d),
                             |yc| interval_weight(ap, (py0 - yc) / d, (py1 - yc) / d),
                         ),
@@ -332,7 +368,7 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             let mut basis = patches.clone();
             basis.push(background.clone());
             planes.push(bg);
-            SpectralImage::new(g.rows, g.cols, SpectralBasis::Spectra(basis), planes)?
+            SpectralImage::new(nr, g.cols, SpectralBasis::Spectra(basis), planes)?
         }
         Target::SlantedEdge {
             dark,
@@ -342,7 +378,7 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             let a = angle_deg.to_radians();
             let (nx, ny) = (a.cos(), a.sin());
             let area = g.pitch_m * g.pitch_m;
-            let lightp = plane_from_fn(g, |x0, x1, y0, y1| match ap {
+            let lightp = plane_from_fn(g, row_range.clone(), |x0, x1, y0, y1| match ap {
                 SampleAperture::Cell => {
                     (half_plane_area(x0, x1, y0, y1, nx, ny) / area).clamp(0.0, 1.0) as f32
                 }
@@ -353,15 +389,15 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             });
             let darkp = lightp.iter().map(|v| 1.0 - v).collect();
             SpectralImage::new(
-                g.rows,
+                nr,
                 g.cols,
                 SpectralBasis::Spectra(vec![dark.clone(), light.clone()]),
                 vec![darkp, lightp],
             )?
         }
-        Target::Image { radiance } => resample_image(radiance, g),
+        Target::Image { radiance } => resample_image(radiance, g, row_range.clone()),
         Target::Ramp { radiance, min, max } => {
-            let plane = plane_from_fn(g, |x0, x1, _, _| {
+            let plane = plane_from_fn(g, row_range.clone(), |x0, x1, _, _| {
                 // exact cell average of the clamped linear ramp (piecewise linear in x)
                 let f = |x: f64| {
                     let t = ((x + w / 2.0) / w).clamp(0.0, 1.0);
@@ -384,7 +420,7 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             // φ(x) = π f_max u² / p · W with u ∈ [0,1] across the sensor: local frequency
             // f(u) = f_max·u cycles/pixel.
             let fmax = max_cycles_per_pixel / pixel_pitch_m; // cycles per m at the right edge
-            let plane = plane_from_fn(g, |x0, x1, _, _| {
+            let plane = plane_from_fn(g, row_range.clone(), |x0, x1, _, _| {
                 let m = 4;
                 (0..m)
                     .map(|k| {
@@ -405,13 +441,13 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             point_size_m,
         } => {
             let (s, half) = (*spacing_m, point_size_m / 2.0);
-            let pts = plane_from_fn(g, |x0, x1, y0, y1| {
+            let pts = plane_from_fn(g, row_range.clone(), |x0, x1, y0, y1| {
                 (periodic_cover(ap, d, x0, x1, s, half) * periodic_cover(ap, d, y0, y1, s, half))
                     as f32
             });
             let bg = pts.iter().map(|v| 1.0 - v).collect();
             SpectralImage::new(
-                g.rows,
+                nr,
                 g.cols,
                 SpectralBasis::Spectra(vec![radiance.clone(), background.clone()]),
                 vec![pts, bg],
@@ -424,14 +460,14 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
             line_width_m,
         } => {
             let (s, half) = (*spacing_m, line_width_m / 2.0);
-            let lines = plane_from_fn(g, |x0, x1, y0, y1| {
+            let lines = plane_from_fn(g, row_range.clone(), |x0, x1, y0, y1| {
                 let cx = periodic_cover(ap, d, x0, x1, s, half);
                 let cy = periodic_cover(ap, d, y0, y1, s, half);
                 (1.0 - (1.0 - cx) * (1.0 - cy)) as f32
             });
             let bg = lines.iter().map(|v| 1.0 - v).collect();
             SpectralImage::new(
-                g.rows,
+                nr,
                 g.cols,
                 SpectralBasis::Spectra(vec![radiance.clone(), background.clone()]),
                 vec![lines, bg],
@@ -441,15 +477,16 @@ pub fn render_target(target: &Target, g: &SamplingGrid) -> Result<SpectralImage,
 }
 
 /// Bilinear resampling of an image so that it fills the sensor; outside, the border repeats.
-fn resample_image(src: &SpectralImage, g: &SamplingGrid) -> SpectralImage {
+/// (Grid rows `rows` only.)
+fn resample_image(src: &SpectralImage, g: &SamplingGrid, rows: Range<usize>) -> SpectralImage {
     let (w, h) = (g.sensor_width_m, g.sensor_height_m);
     let (sr, sc) = (src.rows as f64, src.cols as f64);
     let planes = src
         .planes
         .par_iter()
         .map(|p| {
-            let mut out = vec![0f32; g.rows * g.cols];
-            for r in 0..g.rows {
+            let mut out = vec![0f32; rows.len() * g.cols];
+            for (i, r) in rows.clone().enumerate() {
                 let y = (g.y0(r) + 0.5 * g.pitch_m + h / 2.0) / h * sr - 0.5;
                 let y = y.clamp(0.0, sr - 1.0);
                 let (yi, fy) = (y.floor() as usize, (y - y.floor()) as f32);
@@ -461,14 +498,14 @@ fn resample_image(src: &SpectralImage, g: &SamplingGrid) -> SpectralImage {
                     let xj = (xi + 1).min(src.cols - 1);
                     let a = p[yi * src.cols + xi] * (1.0 - fx) + p[yi * src.cols + xj] * fx;
                     let b = p[yj * src.cols + xi] * (1.0 - fx) + p[yj * src.cols + xj] * fx;
-                    out[r * g.cols + c] = a * (1.0 - fy) + b * fy;
+                    out[i * g.cols + c] = a * (1.0 - fy) + b * fy;
                 }
             }
             out
         })
         .collect();
     SpectralImage {
-        rows: g.rows,
+        rows: rows.len(),
         cols: g.cols,
         basis: src.basis.clone(),
         planes,
@@ -483,26 +520,64 @@ pub fn mean_luminance(
     c: &PhysicalConstants,
 ) -> f64 {
     let img = &scene.radiance;
-    let lum = img.integrate_against(&luminance_weight_for_photons(c));
-    let p = scene.sample_pitch_m;
-    let (mut s, mut n) = (0.0f64, 0usize);
-    for r in 0..img.rows {
-        let y = (r as f64 + 0.5 - img.rows as f64 / 2.0) * p;
-        for col in 0..img.cols {
-            let x = (col as f64 + 0.5 - img.cols as f64 / 2.0) * p;
-            if let Some((ww, hh)) = window_m {
-                if x.abs() > ww / 2.0 || y.abs() > hh / 2.0 {
-                    continue;
+    let mut sum = LuminanceSum::default();
+    sum.add_rows(img, 0, img.rows, scene.sample_pitch_m, window_m, c);
+    sum.mean()
+}
+
+/// [`mean_luminance`] accumulated over row strips of a scene, in the order of the whole
+/// scene's sum (rows top to bottom, then columns), so that the strips of a scene rendered by
+/// row windows ([`render_target_rows`]) give the whole scene's mean bit for bit without the
+/// whole scene in memory.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LuminanceSum {
+    /// Sum of the luminance (cd/m²) of the cells counted.
+    pub sum_cd_m2: f64,
+    /// Cells counted.
+    pub cells: usize,
+}
+
+impl LuminanceSum {
+    /// Add the cells of `strip`, the rows `row0..row0 + strip.rows` of a scene of `full_rows`
+    /// rows and sample pitch `pitch_m`, whose centres lie inside `window_m` (see
+    /// [`mean_luminance`]).
+    pub fn add_rows(
+        &mut self,
+        strip: &SpectralImage,
+        row0: usize,
+        full_rows: usize,
+        pitch_m: f64,
+        window_m: Option<(f64, f64)>,
+        c: &PhysicalConstants,
+    ) {
+        let lum = strip.integrate_against(&luminance_weight_for_photons(c));
+        let p = pitch_m;
+        let (mut s, mut n) = (self.sum_cd_m2, self.cells);
+        for i in 0..strip.rows {
+            let r = row0 + i;
+            let y = (r as f64 + 0.5 - full_rows as f64 / 2.0) * p;
+            for col in 0..strip.cols {
+                let x = (col as f64 + 0.5 - strip.cols as f64 / 2.0) * p;
+                if let Some((ww, hh)) = window_m {
+                    if x.abs() > ww / 2.0 || y.abs() > hh / 2.0 {
+                        continue;
+                    }
                 }
+                s += lum[i * strip.cols + col] as f64;
+                n += 1;
             }
-            s += lum[r * img.cols + col] as f64;
-            n += 1;
         }
+        self.sum_cd_m2 = s;
+        self.cells = n;
     }
-    if n == 0 {
-        0.0
-    } else {
-        s / n as f64
+
+    /// The mean (0 when no cell was counted).
+    pub fn mean(&self) -> f64 {
+        if self.cells == 0 {
+            0.0
+        } else {
+            self.sum_cd_m2 / self.cells as f64
+        }
     }
 }
 
@@ -638,6 +713,110 @@ mod tests {
                 .unwrap()
         };
         assert!(first_light(0) > first_light(19), "top of edge leans right");
+    }
+
+    /// Every kind of target, rendered by row windows of a grid with a margin, gives the rows
+    /// of the whole render bit for bit, and the strips' [`LuminanceSum`] the whole scene's
+    /// [`mean_luminance`] bit for bit (the diagnosis renders 12 MP scenes by bands this way).
+    #[test]
+    fn row_windows_are_the_whole_render_rows() {
+        let s = |v: f64| Spectrum::Affine {
+            offset: v,
+            slope_per_nm: 1e-3,
+        };
+        let picture = SpectralImage::from_single_spectrum(
+            5,
+            7,
+            s(1.0),
+            (0..35).map(|i| (i % 11) as f32 * 0.3).collect(),
+        );
+        let targets = vec![
+            Target::Dark,
+            Target::Uniform { radiance: s(2.0) },
+            Target::Patches {
+                rows: 3,
+                cols: 4,
+                patch_fraction: 0.7,
+                background: s(0.2),
+                patches: (0..12).map(|i| s(i as f64)).collect(),
+            },
+            Target::SlantedEdge {
+                dark: s(0.1),
+                light: s(1.0),
+                angle_deg: 5.0,
+            },
+            Target::Image { radiance: picture },
+            Target::Ramp {
+                radiance: s(1.0),
+                min: 0.1,
+                max: 0.9,
+            },
+            Target::FrequencySweep {
+                radiance: s(1.0),
+                max_cycles_per_pixel: 0.4,
+                pixel_pitch_m: 1e-6,
+                contrast: 0.8,
+            },
+            Target::PointArray {
+                radiance: s(1.0),
+                background: s(0.1),
+                spacing_m: 5e-6,
+                point_size_m: 1.5e-6,
+            },
+            Target::GridLines {
+                radiance: s(1.0),
+                background: s(0.1),
+                spacing_m: 6e-6,
+                line_width_m: 1e-6,
+            },
+        ];
+        let window = Some((14e-6, 9e-6));
+        for ap in [SampleAperture::Cell, SampleAperture::CubicBSpline] {
+            // 9 × 14 pixels, 2 px margin, 2× oversampling: 26 × 36 cells
+            let g = SamplingGrid::for_sensor(9, 14, 1e-6, 2, 2).with_aperture(ap);
+            for t in &targets {
+                let whole = render_target(t, &g).unwrap();
+                let mut lum = LuminanceSum::default();
+                let scene_of = |radiance: SpectralImage| SceneRadiance {
+                    radiance,
+                    sample_pitch_m: g.pitch_m,
+                    object_distance_m: None,
+                    illuminant: None,
+                    depth_m: None,
+                    sample_aperture: ap,
+                };
+                for (r0, r1) in [(0, 3), (3, 11), (11, 12), (12, 26)] {
+                    let w = render_target_rows(t, &g, r0..r1).unwrap();
+                    assert_eq!((w.rows, w.cols), (r1 - r0, g.cols));
+                    assert_eq!(w.planes.len(), whole.planes.len());
+                    for (a, b) in w.planes.iter().zip(&whole.planes) {
+                        let crop = &b[r0 * g.cols..r1 * g.cols];
+                        assert!(
+                            a.iter().zip(crop).all(|(x, y)| x.to_bits() == y.to_bits()),
+                            "{t:?} {ap:?} rows {r0}..{r1}"
+                        );
+                    }
+                    lum.add_rows(&w, r0, g.rows, g.pitch_m, window, &crate::constants::SI);
+                }
+                let m = mean_luminance(&scene_of(whole), window, &crate::constants::SI);
+                assert_eq!(lum.mean().to_bits(), m.to_bits(), "{t:?} {ap:?}");
+            }
+            // where the window lies, absolutely: a horizontal edge (light below the axis)
+            // turns light at the grid's middle row, 13 of 26 (cell averages)
+            let g = g.with_aperture(SampleAperture::Cell);
+            let edge = Target::SlantedEdge {
+                dark: s(0.0),
+                light: s(1.0),
+                angle_deg: 90.0,
+            };
+            let w = render_target_rows(&edge, &g, 12..14).unwrap();
+            let light = &w.planes[1];
+            assert!(light[..g.cols].iter().all(|v| *v < 1e-6));
+            assert!(light[g.cols..].iter().all(|v| *v > 1.0 - 1e-6));
+            let uniform = &targets[1];
+            assert!(render_target_rows(uniform, &g, 20..27).is_err());
+            assert_eq!(render_target_rows(uniform, &g, 3..3).unwrap().rows, 0);
+        }
     }
 
     #[test]

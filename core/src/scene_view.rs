@@ -25,7 +25,7 @@
 //! exact at any size ratio.
 use crate::error::CoreError;
 use crate::image::SpectralImage;
-use crate::scene::{render_target, SamplingGrid, Target};
+use crate::scene::{render_target_rows, SamplingGrid, Target};
 use rayon::prelude::*;
 
 /// Image-plane extent (m) of a target of horizontal field of view `fov_deg` and aspect
@@ -43,7 +43,7 @@ pub fn fov_deg_of_width(width_m: f64, image_distance_m: f64) -> f64 {
 }
 
 /// Render `target` on `g` as an object covering `extent_m = (W, H)` of the image plane,
-/// centred on the axis (`None`: the target fills the sensor, [`render_target`]). Images are
+/// centred on the axis (`None`: the target fills the sensor, [`crate::scene::render_target`]). Images are
 /// area-averaged and black outside the extent; other targets are laid out over the extent
 /// (charts tile it, ramps span it) and continue beyond it as the spec says.
 pub fn render_target_in_view(
@@ -51,8 +51,19 @@ pub fn render_target_in_view(
     g: &SamplingGrid,
     extent_m: Option<(f64, f64)>,
 ) -> Result<SpectralImage, CoreError> {
+    render_target_in_view_rows(target, g, extent_m, 0..g.rows)
+}
+
+/// The grid rows `rows` of [`render_target_in_view`] by themselves, the same samples bit for
+/// bit ([`crate::scene::render_target_rows`]).
+pub fn render_target_in_view_rows(
+    target: &Target,
+    g: &SamplingGrid,
+    extent_m: Option<(f64, f64)>,
+    rows: std::ops::Range<usize>,
+) -> Result<SpectralImage, CoreError> {
     let Some((w, h)) = extent_m else {
-        return render_target(target, g);
+        return render_target_rows(target, g, rows);
     };
     if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
         return Err(CoreError::Target(format!(
@@ -60,14 +71,22 @@ pub fn render_target_in_view(
         )));
     }
     match target {
-        Target::Image { radiance } => Ok(area_resample(radiance, g, w, h)),
+        Target::Image { radiance } => {
+            if rows.start > rows.end || rows.end > g.rows {
+                return Err(CoreError::Target(format!(
+                    "row window {}..{} of a {}-row sampling grid",
+                    rows.start, rows.end, g.rows
+                )));
+            }
+            Ok(area_resample(radiance, g, w, h, rows))
+        }
         other => {
             let gv = SamplingGrid {
                 sensor_width_m: w,
                 sensor_height_m: h,
                 ..*g
             };
-            render_target(other, &gv)
+            render_target_rows(other, &gv, rows)
         }
     }
 }
@@ -100,10 +119,17 @@ fn axis_weights(n: usize, pitch: f64, m: usize, extent: f64) -> Vec<Vec<(usize, 
 }
 
 /// Exact area average of a piecewise-constant picture spanning `w × h` (centred) onto `g`;
-/// zero outside.
-fn area_resample(src: &SpectralImage, g: &SamplingGrid, w: f64, h: f64) -> SpectralImage {
+/// zero outside; grid rows `rows` only.
+fn area_resample(
+    src: &SpectralImage,
+    g: &SamplingGrid,
+    w: f64,
+    h: f64,
+    rows: std::ops::Range<usize>,
+) -> SpectralImage {
     let wx = axis_weights(g.cols, g.pitch_m, src.cols, w);
     let wy = axis_weights(g.rows, g.pitch_m, src.rows, h);
+    let wy = &wy[rows.clone()];
     let planes = src
         .planes
         .par_iter()
@@ -117,7 +143,7 @@ fn area_resample(src: &SpectralImage, g: &SamplingGrid, w: f64, h: f64) -> Spect
                 }
             }
             // vertical pass
-            let mut out = vec![0f32; g.rows * g.cols];
+            let mut out = vec![0f32; rows.len() * g.cols];
             for (r, ws) in wy.iter().enumerate() {
                 for &(i, k) in ws {
                     let t = &tmp[i * g.cols..(i + 1) * g.cols];
@@ -130,7 +156,7 @@ fn area_resample(src: &SpectralImage, g: &SamplingGrid, w: f64, h: f64) -> Spect
         })
         .collect();
     SpectralImage {
-        rows: g.rows,
+        rows: rows.len(),
         cols: g.cols,
         basis: src.basis.clone(),
         planes,

@@ -5,6 +5,7 @@
 //! | step | function | stage call |
 //! |---|---|---|
 //! | scene radiance of a shot (field of view, distance, illuminant swap) | [`shot_scene`] | [`camsim_core::scene_view::render_target_in_view`], [`camsim_core::illuminant::swap_illuminant`] |
+//! | grid rows of a shot's scene by themselves (bit for bit the whole scene's rows; the luminance factor from the whole scene or computed by row strips) | [`shot_scene_rows`], [`shot_scene_by_rows`], [`shot_scene_and_factor`], [`shot_scene_luminance_factor`], [`shot_scene_factor_key`] | [`camsim_core::scene_view::render_target_in_view_rows`], [`camsim_core::scene::LuminanceSum`] |
 //! | scene radiance of a `gltf` target (path-traced with depth on the shot's grid, cached per scene file and settings; `camsim run`'s `render` section) | [`shot_scene`], [`shot_scene_cached`], [`render_gltf_on_grid`] (camera policy: pinhole when the camera defocuses by depth, else the glTF camera's own) | [`crate::gltf_target::render_gltf_target`] → [`crate::animated::grid_render_job`], [`crate::animated::render_job_radiance`] |
 //! | optics | [`shot_irradiance`], [`shot_irradiance_of_scene`] (on a scene kept per [`shot_sampling_grid`]), [`irradiance_of`], [`irradiance_and_blur_of`] (depth-aware for scenes with depth), [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`]; [`camsim_render::depth_optics::defocus_by_depth`] |
 //! | pixel integration | [`shot_electron_rate`] | [`camsim_sensor::electron_rate`] |
@@ -33,7 +34,8 @@ use std::path::Path;
 pub use crate::simulate::{
     sampling_for, shot_electron_rate, shot_electron_rate_cached, shot_irradiance,
     shot_irradiance_cached, shot_irradiance_of_scene, shot_sampling_grid, shot_scene,
-    shot_scene_cached, wavelength_grid,
+    shot_scene_and_factor, shot_scene_by_rows, shot_scene_cached, shot_scene_factor_key,
+    shot_scene_luminance_factor, shot_scene_rows, wavelength_grid,
 };
 
 /// The optics stage of the set's camera applied to a scene that does not come from a shot's

@@ -86,6 +86,11 @@ struct ForwardWork {
     /// Whole scenes rendered ([`crate::chain::shot_scene`]) and their bytes.
     scene_renders: WorkCounter,
     scene_bytes: std::sync::atomic::AtomicU64,
+    /// Bands of a scene rendered by themselves ([`crate::chain::shot_scene_rows`]).
+    scene_band_renders: WorkCounter,
+    /// Luminance factors computed by row strips
+    /// ([`crate::chain::shot_scene_luminance_factor`]: one whole scene's render, by strips).
+    factor_passes: WorkCounter,
     /// Whole-sensor optics runs for the veiling glare's sums ([`crate::chain::shot_glare_sums`]).
     glare_sums: WorkCounter,
     /// Bands of rows through the optics ([`crate::chain::band_irradiance`]).
@@ -134,6 +139,14 @@ impl ForwardWork {
                 &self.scene_renders,
             ),
             one(
+                "forward: scene bands rendered".into(),
+                &self.scene_band_renders,
+            ),
+            one(
+                "forward: luminance factors by row strips".into(),
+                &self.factor_passes,
+            ),
+            one(
                 "forward: whole-sensor optics for the glare sums".into(),
                 &self.glare_sums,
             ),
@@ -178,9 +191,17 @@ impl SimForward {
 /// candidates change except the grid's blur margin: a forward run of a candidate optics block
 /// re-runs only the optics stage (the render and its luminance scaling were about half of a
 /// run's time). Least recently used evicted first beyond [`SCENE_CACHE_BYTES`].
+///
+/// A band of rows of a scene ([`SceneCache::scene_bands`]) is cut from the whole scene when
+/// that is at hand, else rendered by itself ([`crate::chain::shot_scene_rows`], the same
+/// bits) with the scene's luminance factor, which is kept per target and
+/// [`crate::chain::shot_scene_factor_key`] (every blur margin of one oversampling shares it):
+/// a new sampling grid then costs the bands' rows, not a whole 12 MP scene.
 #[derive(Default)]
 struct SceneCache {
     lru: LruBytes<Arc<camsim_core::image::SceneRadiance>, SCENE_CACHE_BYTES>,
+    /// Luminance factor by target key and [`crate::chain::shot_scene_factor_key`].
+    factors: HashMap<String, f64>,
 }
 
 /// Memory for cached scenes.
@@ -280,8 +301,13 @@ impl SceneCache {
             return Ok(scene);
         }
         let t0 = std::time::Instant::now();
-        let scene = Arc::new(crate::chain::shot_scene(set, si, grid).map_err(|e| e.one_line())?);
+        let (scene, factor) =
+            crate::chain::shot_scene_and_factor(set, si, grid).map_err(|e| e.one_line())?;
+        let scene = Arc::new(scene);
         work.scene_renders.add(t0);
+        if crate::chain::shot_scene_by_rows(set, si) {
+            self.factors.insert(Self::factor_key(set, si, grid), factor);
+        }
         let bytes = scene_bytes(&scene);
         work.scene_bytes
             .fetch_add(bytes as u64, std::sync::atomic::Ordering::Relaxed);
@@ -289,10 +315,22 @@ impl SceneCache {
         Ok(scene)
     }
 
-    /// Rows `r0..r1` of [`SceneCache::scene`] for each of `ranges`
-    /// ([`crate::chain::scene_rows`]), kept by themselves: the bands of a scene too large for
-    /// the cache are cut from one render — `whole` when the caller holds that scene already
-    /// (of this `grid_key`: the glare sums' render), else rendered here once.
+    /// Key of [`SceneCache::factors`].
+    fn factor_key(set: &CaptureSet, si: usize, grid: &camsim_core::WavelengthGrid) -> String {
+        let g = crate::chain::shot_sampling_grid(set, grid);
+        format!(
+            "{} {}",
+            set.shots[si].target_key,
+            crate::chain::shot_scene_factor_key(set, si, &g)
+        )
+    }
+
+    /// Rows `r0..r1` of [`SceneCache::scene`] for each of `ranges`, kept by themselves: cut
+    /// ([`crate::chain::scene_rows`]) from `whole` when the caller holds that scene already (of
+    /// this `grid_key`: the glare sums' render) or from the cached whole scene; else rendered
+    /// by themselves ([`crate::chain::shot_scene_rows`], with the scene's luminance factor:
+    /// kept, or computed once by row strips); a target that cannot be rendered by rows is
+    /// rendered whole once and cut.
     #[allow(clippy::too_many_arguments)]
     fn scene_bands(
         &mut self,
@@ -312,6 +350,32 @@ impl SceneCache {
         for &r in ranges {
             if let Some(scene) = self.lru.get(&key(r)) {
                 out.push(scene);
+                continue;
+            }
+            if whole.is_none() {
+                let wkey = format!("{} {grid_key}", set.shots[si].target_key);
+                whole = self.lru.get(&wkey);
+            }
+            if whole.is_none() && crate::chain::shot_scene_by_rows(set, si) {
+                let fkey = Self::factor_key(set, si, grid);
+                let factor = match self.factors.get(&fkey) {
+                    Some(f) => *f,
+                    None => {
+                        let t0 = std::time::Instant::now();
+                        let f = crate::chain::shot_scene_luminance_factor(set, si, grid)
+                            .map_err(|e| e.one_line())?;
+                        work.factor_passes.add(t0);
+                        self.factors.insert(fkey, f);
+                        f
+                    }
+                };
+                let t0 = std::time::Instant::now();
+                let band = crate::chain::shot_scene_rows(set, si, grid, r.0..r.1, factor)
+                    .map_err(|e| e.one_line())?;
+                work.scene_band_renders.add(t0);
+                let band = Arc::new(band);
+                self.lru.insert(key(r), band.clone(), scene_bytes(&band));
+                out.push(band);
                 continue;
             }
             if whole.is_none() {
@@ -1750,6 +1814,93 @@ mod band_tests {
                 );
             }
         }
+    }
+
+    /// Without the whole scene at hand (a 12 MP chart does not fit the scene cache), the
+    /// bands' scene rows are rendered by themselves ([`crate::chain::shot_scene_rows`]) with
+    /// the target's luminance factor, computed once by row strips and shared by every blur
+    /// margin of one oversampling: the rates are bit for bit those of the bands cut from the
+    /// cached whole scenes, for the believed camera and candidates that change the sampling
+    /// grid's margin (defocus, distortion both ways, lateral colour) or not (fall-off), and no
+    /// whole scene is rendered.
+    #[test]
+    fn band_scenes_rendered_by_rows_equal_the_whole_scenes_rows() {
+        let (_dir, set) = demo_set(vec![], Concealment::Charts, 640, 24);
+        let rows: Vec<usize> = (0..6).chain(317..323).chain(634..640).collect();
+        let specs = [
+            RateSpec::default(),
+            RateSpec {
+                falloff: Some(vec![-0.3, 0.1, 0.0]),
+                ..Default::default()
+            },
+            RateSpec {
+                distortion: Some([-0.08, 0.02]),
+                ..Default::default()
+            },
+            RateSpec {
+                distortion: Some([0.06, 0.0]),
+                ..Default::default()
+            },
+            RateSpec {
+                lateral_color_um: Some(1.5),
+                ..Default::default()
+            },
+            RateSpec {
+                defocus_sigma_um: Some(4.0),
+                ..Default::default()
+            },
+        ];
+        let cached = SimForward::new(&set, (0..set.shots.len()).collect());
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
+        // no scene fits the cache (as a whole 12 MP chart does not)
+        fw.scenes.lock().unwrap().lru.budget = 0;
+        let mut margins = std::collections::HashSet::new();
+        for spec in &specs {
+            let mut s2 = set.clone();
+            s2.camera = fw.camera_for(spec).unwrap();
+            let grid = wavelength_grid(&s2);
+            assert!(
+                row_bands(&s2, &grid, &rows).is_some(),
+                "{spec:?}: not run as bands"
+            );
+            let (os, margin) = sampling_for(
+                &s2.camera.optics,
+                &s2.camera.sensor,
+                &grid,
+                s2.simulation.oversample,
+            );
+            margins.insert((os, margin));
+            let want = cached.rates_rows(spec, &rows).unwrap();
+            let got = fw.rates_rows(spec, &rows).unwrap();
+            for (si, (a, b)) in want.iter().zip(&got).enumerate() {
+                assert!(
+                    a.iter()
+                        .zip(b.iter())
+                        .all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "{spec:?} shot {si} ({}): rates differ from the whole scenes' rows",
+                    set.shots[si].id
+                );
+            }
+        }
+        assert!(
+            margins.len() >= 4,
+            "the specs change the margin: {margins:?}"
+        );
+        assert_eq!(
+            fw.work.scene_renders.get().0,
+            0,
+            "a whole scene was rendered"
+        );
+        assert!(fw.work.scene_band_renders.get().0 > 0);
+        // one strip pass per target and oversampling, not per margin
+        let targets: std::collections::HashSet<&str> =
+            set.shots.iter().map(|s| s.target_key.as_str()).collect();
+        let oversamplings: std::collections::HashSet<usize> = margins.iter().map(|m| m.0).collect();
+        assert_eq!(
+            fw.work.factor_passes.get().0,
+            (targets.len() * oversamplings.len()) as u64,
+            "{margins:?}"
+        );
     }
 
     /// A veiling-glare spec on the fit rows' bands renders each target's whole scene once:

@@ -228,6 +228,38 @@ fn scene_on_grid(
     set: &CaptureSet,
     shot: &crate::config::Shot,
     g: &SamplingGrid,
+) -> Result<(SceneRadiance, f64), CliError> {
+    let mut scene = scene_rows_unscaled(set, shot, g, 0..g.rows)?;
+    let world = &shot.target.world;
+    if let (Some(_), Some(new)) = (&world.swapped_from, &shot.target.illuminant) {
+        camsim_core::illuminant::swap_illuminant(&mut scene, new, true, &SI).map_err(|e| {
+            CliError::input(&set.path, format!("shot {}: swap_illuminant: {e}", shot.id))
+        })?;
+    }
+    let mut k = 1.0;
+    if let Some(l) = shot.target.mean_luminance_cd_m2 {
+        k = scale_to_mean_luminance(&mut scene, l, Some(luminance_window_m(set, shot, g)), &SI);
+    }
+    Ok((scene, k))
+}
+
+/// The window over which a shot's scene is scaled to its mean luminance: the target's
+/// image-plane extent, or the sensor.
+fn luminance_window_m(
+    set: &CaptureSet,
+    shot: &crate::config::Shot,
+    g: &SamplingGrid,
+) -> (f64, f64) {
+    target_extent_m(set, shot).unwrap_or((g.sensor_width_m, g.sensor_height_m))
+}
+
+/// The grid rows `rows` of a shot's target rendered on `g` with its illuminant, before any
+/// illuminant swap or luminance scaling ([`scene_on_grid`]'s first step).
+fn scene_rows_unscaled(
+    set: &CaptureSet,
+    shot: &crate::config::Shot,
+    g: &SamplingGrid,
+    rows: std::ops::Range<usize>,
 ) -> Result<SceneRadiance, CliError> {
     let world = &shot.target.world;
     let f_m = set.camera.optics.focal_length_m;
@@ -244,9 +276,10 @@ fn scene_on_grid(
         }
     }
     let extent = target_extent_m(set, shot);
-    let radiance = camsim_core::scene_view::render_target_in_view(&shot.target.target, g, extent)
-        .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
-    let mut scene = SceneRadiance {
+    let radiance =
+        camsim_core::scene_view::render_target_in_view_rows(&shot.target.target, g, extent, rows)
+            .map_err(|e| CliError::input(&set.path, format!("shot {}: {e}", shot.id)))?;
+    Ok(SceneRadiance {
         radiance,
         sample_pitch_m: g.pitch_m,
         object_distance_m: world.distance_m,
@@ -256,21 +289,123 @@ fn scene_on_grid(
             .or_else(|| shot.target.illuminant.clone()),
         depth_m: None,
         sample_aperture: camsim_core::scene::rendered_aperture(&shot.target.target, g),
+    })
+}
+
+/// Whether shot `shot_index`'s scene can be rendered by row windows ([`shot_scene_rows`]): a
+/// target sampled on the grid (not a glTF render) without an illuminant swap (which keeps the
+/// whole scene's mean luminance).
+pub fn shot_scene_by_rows(set: &CaptureSet, shot_index: usize) -> bool {
+    let shot = &set.shots[shot_index];
+    shot.target.gltf.is_none() && shot.target.world.swapped_from.is_none()
+}
+
+/// What the luminance factor of shot `shot_index`'s scene ([`shot_scene_luminance_factor`])
+/// depends on besides the target: the sampling grid `g` without its size when the mean is
+/// taken over the sensor (every margin of one oversampling and aperture samples the sensor
+/// with the same cells, bit for bit: [`camsim_core::scene::SamplingGrid::for_sensor`] centres
+/// the grid), the whole grid when a field of view sets the window, and the focal length.
+pub fn shot_scene_factor_key(set: &CaptureSet, shot_index: usize, g: &SamplingGrid) -> String {
+    let shot = &set.shots[shot_index];
+    let grid = match target_extent_m(set, shot) {
+        None => SamplingGrid {
+            rows: 0,
+            cols: 0,
+            ..*g
+        },
+        Some(_) => *g,
     };
-    if let (Some(_), Some(new)) = (&world.swapped_from, &shot.target.illuminant) {
-        camsim_core::illuminant::swap_illuminant(&mut scene, new, true, &SI).map_err(|e| {
-            CliError::input(&set.path, format!("shot {}: swap_illuminant: {e}", shot.id))
-        })?;
+    format!("{grid:?} f {}", set.camera.optics.focal_length_m)
+}
+
+/// The factor [`shot_scene`] scales shot `shot_index`'s scene by (to its mean luminance; 1
+/// without one or for a black scene), computed from the scene rendered by row strips of about
+/// [`FACTOR_STRIP_SAMPLES`] samples each in the whole scene's summation order
+/// ([`camsim_core::scene::LuminanceSum`]): the same bits as the whole render's without the
+/// whole scene in memory. Only for [`shot_scene_by_rows`] shots.
+pub fn shot_scene_luminance_factor(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+) -> Result<f64, CliError> {
+    let shot = &set.shots[shot_index];
+    let Some(l) = shot.target.mean_luminance_cd_m2 else {
+        return Ok(1.0);
+    };
+    if !shot_scene_by_rows(set, shot_index) {
+        return Err(CliError::input(
+            &set.path,
+            format!(
+                "shot {}: its scene cannot be rendered by row windows",
+                shot.id
+            ),
+        ));
     }
-    if let Some(l) = shot.target.mean_luminance_cd_m2 {
-        scale_to_mean_luminance(
-            &mut scene,
-            l,
-            Some(extent.unwrap_or((g.sensor_width_m, g.sensor_height_m))),
-            &SI,
-        );
+    let g = shot_sampling_grid(set, grid);
+    let window = luminance_window_m(set, shot, &g);
+    let strip = (FACTOR_STRIP_SAMPLES / g.cols.max(1)).max(1);
+    // rows whose centres lie in the window (the others add nothing to the sum)
+    let inside =
+        |r: usize| ((r as f64 + 0.5 - g.rows as f64 / 2.0) * g.pitch_m).abs() <= window.1 / 2.0;
+    let mut sum = camsim_core::scene::LuminanceSum::default();
+    let mut r0 = 0;
+    while r0 < g.rows {
+        let r1 = (r0 + strip).min(g.rows);
+        if (r0..r1).any(inside) {
+            let part = scene_rows_unscaled(set, shot, &g, r0..r1)?;
+            sum.add_rows(&part.radiance, r0, g.rows, g.pitch_m, Some(window), &SI);
+        }
+        r0 = r1;
+    }
+    let now = sum.mean();
+    Ok(if now <= 0.0 { 1.0 } else { l / now })
+}
+
+/// Samples per row strip of [`shot_scene_luminance_factor`] (times the scene's basis terms ×
+/// 4 bytes: 100 MB for a 25-term chart).
+pub const FACTOR_STRIP_SAMPLES: usize = 1 << 20;
+
+/// The grid rows `rows` of [`shot_scene`] by themselves, bit for bit
+/// ([`camsim_core::scene::render_target_rows`]), given the scene's luminance factor
+/// `factor` ([`shot_scene_luminance_factor`], or the one [`shot_scene_and_factor`] applied on
+/// a grid of the same [`shot_scene_factor_key`]). Only for [`shot_scene_by_rows`] shots.
+pub fn shot_scene_rows(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+    rows: std::ops::Range<usize>,
+    factor: f64,
+) -> Result<SceneRadiance, CliError> {
+    let shot = &set.shots[shot_index];
+    if !shot_scene_by_rows(set, shot_index) {
+        return Err(CliError::input(
+            &set.path,
+            format!(
+                "shot {}: its scene cannot be rendered by row windows",
+                shot.id
+            ),
+        ));
+    }
+    let g = shot_sampling_grid(set, grid);
+    let mut scene = scene_rows_unscaled(set, shot, &g, rows)?;
+    if factor != 1.0 {
+        scene.scale(factor);
     }
     Ok(scene)
+}
+
+/// [`shot_scene`] and the luminance factor it applied (1 when none; see
+/// [`shot_scene_luminance_factor`]).
+pub fn shot_scene_and_factor(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+) -> Result<(SceneRadiance, f64), CliError> {
+    let shot = &set.shots[shot_index];
+    if shot.target.gltf.is_some() {
+        return Ok((shot_scene(set, shot_index, grid)?, 1.0));
+    }
+    scene_on_grid(set, shot, &shot_sampling_grid(set, grid))
 }
 
 /// The scene radiance of one shot's target, sampled for the camera's optics (with margin).
@@ -306,7 +441,7 @@ pub fn shot_scene_cached(
         }
         return Ok(scene);
     }
-    scene_on_grid(set, shot, &g)
+    scene_on_grid(set, shot, &g).map(|(scene, _)| scene)
 }
 
 /// The grid on which [`shot_scene`] samples every shot's scene for the capture set's camera
@@ -456,7 +591,7 @@ fn uniform_electron_rate(
         cols: 1,
         ..full
     };
-    let scene = scene_on_grid(set, shot, &g)?;
+    let (scene, _) = scene_on_grid(set, shot, &g)?;
     // The axis sample without the glare block (added below from the mean over the sensor).
     let mut axis_optics = cam.optics.clone();
     axis_optics.effects.veiling_glare = None;
