@@ -126,18 +126,147 @@ pub struct LensDepthOptions {
     pub wavelengths_nm: Vec<f64>,
     /// Pupil rays per side of the geometric PSFs.
     pub pupil_n: usize,
-    /// Field tiles per side (1 = the on-axis PSF everywhere).
-    pub tiles: usize,
+    /// Where in the field PSFs are tabulated (each pixel's PSF is interpolated between them).
+    pub field_nodes: FieldNodes,
+}
+
+/// Where [`LensDepthKernels`] tabulates PSFs in the field: a grid of nodes (columns ×
+/// rows, a tensor product of positions along x and along y); each pixel's PSF is interpolated
+/// bilinearly between the four nodes around it ([`defocus_by_depth`]).
+///
+/// | variant | parameters | meaning |
+/// |---|---|---|
+/// | `Uniform(n)` | n ≥ 1 | the centres of `n × n` equal tiles (1: the axis's PSF everywhere) |
+/// | `Adaptive` | `tolerance` (fraction, default 0.02), `min_step_px` (samples, default 0.1), `max_per_side` (default 15) | positions along each axis at the field heights where the PSF's shape changes ([`adaptive_node_heights_mm`]), plus the image's edges |
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FieldNodes {
+    /// The centres of `n × n` equal tiles.
+    Uniform(usize),
+    /// Node heights placed by how fast the PSF changes with field height.
+    Adaptive {
+        /// Largest error of the linear interpolation of the PSF's centroid and RMS widths
+        /// between neighbouring node heights, as a fraction of the RMS width.
+        tolerance: f64,
+        /// Error always allowed (samples), so that sharp PSFs do not need many nodes.
+        min_step_px: f64,
+        /// At most this many nodes per image axis (the tolerance is relaxed until it holds).
+        max_per_side: usize,
+    },
+}
+
+/// The default field nodes (the camera chain's): adaptive, 2 % of the RMS width + 0.1 sample,
+/// at most 15 per side.
+pub const ADAPTIVE_FIELD_NODES: FieldNodes = FieldNodes::Adaptive {
+    tolerance: 0.02,
+    min_step_px: 0.1,
+    max_per_side: 15,
+};
+
+impl Default for FieldNodes {
+    fn default() -> Self {
+        ADAPTIVE_FIELD_NODES
+    }
+}
+
+/// Pupil rays per side of the probe's PSFs (their RMS widths to about 1 %).
+const PROBE_PUPIL_N: usize = 96;
+
+/// Dense field heights of the probe of [`adaptive_node_heights_mm`] (evenly spaced from the
+/// axis to the corner).
+const PROBE_HEIGHTS: usize = 33;
+
+/// Centroid and RMS widths (samples) of a PSF `n × n` on +y (field direction): (centroid y,
+/// RMS width along x (tangential), RMS width along y (radial)).
+fn psf_shape(psf: &[f64], n: usize) -> [f64; 3] {
+    let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    for (i, v) in psf.iter().enumerate() {
+        let (x, y) = ((i % n) as f64, (i / n) as f64);
+        s += v;
+        sx += v * x;
+        sy += v * y;
+    }
+    if !(s > 0.0) {
+        return [0.0; 3];
+    }
+    let (mx, my) = (sx / s, sy / s);
+    let (mut vx, mut vy) = (0.0, 0.0);
+    for (i, v) in psf.iter().enumerate() {
+        let (x, y) = ((i % n) as f64 - mx, (i / n) as f64 - my);
+        vx += v * x * x;
+        vy += v * y * y;
+    }
+    [my - (n / 2) as f64, (vx / s).sqrt(), (vy / s).sqrt()]
+}
+
+/// The node heights (mm, from 0) of [`FieldNodes::Adaptive`]: from the PSF shapes
+/// ([`psf_shape`]: centroid and the two RMS widths) at evenly spaced heights `heights_mm`,
+/// the fewest knots, chosen greedily from the axis outwards, such that the linear
+/// interpolation of every shape component between neighbouring knots is within
+/// `tolerance` × (the larger RMS width there) + `min_step_px` of its value at every height
+/// between them (a piecewise-linear fit with adaptive knots; the largest height is always a
+/// knot).
+pub fn adaptive_node_heights_mm(
+    heights_mm: &[f64],
+    shapes: &[[f64; 3]],
+    tolerance: f64,
+    min_step_px: f64,
+) -> Vec<f64> {
+    let m = heights_mm.len().min(shapes.len());
+    if m == 0 {
+        return vec![0.0];
+    }
+    let fits = |a: usize, b: usize| {
+        (a + 1..b).all(|j| {
+            let t = (heights_mm[j] - heights_mm[a]) / (heights_mm[b] - heights_mm[a]);
+            let allowed = tolerance * shapes[j][1].max(shapes[j][2]) + min_step_px;
+            (0..3).all(|c| {
+                let lerp = shapes[a][c] + t * (shapes[b][c] - shapes[a][c]);
+                (lerp - shapes[j][c]).abs() <= allowed
+            })
+        })
+    };
+    let mut knots = vec![0usize];
+    let mut a = 0;
+    while a + 1 < m {
+        let mut b = a + 1;
+        while b + 1 < m && fits(a, b + 1) {
+            b += 1;
+        }
+        knots.push(b);
+        a = b;
+    }
+    knots.iter().map(|k| heights_mm[*k]).collect()
+}
+
+/// Node positions (samples) along an axis of `len` samples of pitch `pitch_mm`, centred, at the
+/// node heights `heights_mm` on both sides and at the two edge samples.
+fn axis_nodes(len: usize, pitch_mm: f64, heights_mm: &[f64]) -> Vec<f64> {
+    let c = (len as f64 - 1.0) / 2.0;
+    let mut v: Vec<f64> = vec![0.0, len as f64 - 1.0];
+    for h in heights_mm {
+        let d = h / pitch_mm;
+        if d < c {
+            v.push(c - d);
+            v.push(c + d);
+        }
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    // nodes closer than half a sample are one
+    v.dedup_by(|b, a| (*b - *a).abs() < 0.5);
+    v
 }
 
 /// Real-lens PSFs by field tile × wavelength × object distance (see the module docs).
 #[derive(Debug, Clone)]
 pub struct LensDepthKernels {
-    /// Field tiles per side.
-    pub tiles: usize,
+    /// Node columns (sample positions along x, increasing).
+    pub node_x_px: Vec<f64>,
+    /// Node rows (sample positions along y, increasing).
+    pub node_y_px: Vec<f64>,
     /// Tabulated wavelengths (nm, increasing).
     pub wavelengths_nm: Vec<f64>,
-    /// `[tile (row-major)][wavelength]` → (1/z in 1/m, kernel) by increasing 1/z.
+    /// `[node (row-major: row · columns + column)][wavelength]` → (1/z in 1/m, kernel) by
+    /// increasing 1/z.
     table: Vec<Vec<Vec<(f64, Kernel)>>>,
     /// Entrance-pupil radius (m) of the lens.
     pub entrance_pupil_radius_m: f64,
@@ -158,7 +287,7 @@ impl LensDepthKernels {
             || opts.wavelengths_nm.is_empty()
             || opts.width == 0
             || opts.height == 0
-            || opts.tiles == 0
+            || opts.field_nodes == FieldNodes::Uniform(0)
         {
             return Err(bad(
                 "sample pitch > 0, an image, one tile and at least one wavelength are needed"
@@ -192,23 +321,99 @@ impl LensDepthKernels {
         let mut wls = opts.wavelengths_nm.clone();
         wls.sort_by(|a, b| a.total_cmp(b));
         wls.dedup();
-        // tile centres (samples) → paraxial image positions (mm); the field model is tabulated
-        // exactly at their distinct radii, so that no tile's PSF is interpolated between heights
-        let n = opts.tiles;
-        let (yc, xc) = (
-            (opts.height as f64 - 1.0) / 2.0,
+        // node positions (samples) → paraxial image positions (mm); the field model is
+        // tabulated exactly at their distinct radii, so that no node's PSF is interpolated
+        // between heights
+        let (node_x_px, node_y_px) = match opts.field_nodes {
+            FieldNodes::Uniform(n) => {
+                let centres = |len: usize| -> Vec<f64> {
+                    (0..n)
+                        .map(|k| {
+                            let (lo, hi) = tile_span(len, n, k);
+                            0.5 * (lo + hi) as f64 - 0.5
+                        })
+                        .collect()
+                };
+                (centres(opts.width), centres(opts.height))
+            }
+            FieldNodes::Adaptive {
+                tolerance,
+                min_step_px,
+                max_per_side,
+            } => {
+                // the probe: PSF shapes at evenly spaced heights out to the corner, at the
+                // slab farthest from focus (the largest blur), primary wavelength
+                let corner_mm = 0.5 * p * (opts.width as f64 - 1.0).hypot(opts.height as f64 - 1.0);
+                let far = invs
+                    .iter()
+                    .copied()
+                    .max_by(|a, b| (a - v_focus).abs().total_cmp(&(b - v_focus).abs()))
+                    .unwrap_or(v_focus);
+                let heights: Vec<f64> = (0..PROBE_HEIGHTS)
+                    .map(|k| corner_mm * k as f64 / (PROBE_HEIGHTS - 1) as f64)
+                    .collect();
+                let probe_bytes = (PROBE_HEIGHTS as u64)
+                    .saturating_mul((psf_n as u64).saturating_pow(2))
+                    .saturating_mul(16);
+                if probe_bytes > LENS_DEPTH_MEMORY_BUDGET_BYTES {
+                    return Err(bad(format!(
+                        "the field probe would need {:.1} GiB ({PROBE_HEIGHTS} field heights × {psf_n}² samples), over the {:.0} GiB budget: use a coarser sample pitch or a smaller aperture",
+                        probe_bytes as f64 / (1u64 << 30) as f64,
+                        LENS_DEPTH_MEMORY_BUDGET_BYTES as f64 / (1u64 << 30) as f64
+                    )));
+                }
+                let probe = if corner_mm > 0.0 {
+                    let m = FieldModel::compute(
+                        lens,
+                        &FieldModelOptions {
+                            n_fields: PROBE_HEIGHTS,
+                            paraxial_heights_mm: Some(heights.clone()),
+                            max_field_deg: None,
+                            wavelengths_nm: Some(vec![lens.primary_nm]),
+                            kind: PsfKind::Geometric,
+                            psf_n,
+                            psf_pitch_um: p * 1e3,
+                            pupil_n: opts.pupil_n.max(PROBE_PUPIL_N),
+                            pad: 1,
+                            ri_grid_n: 2,
+                            focus: Focus::Focused(Box::new(focus.clone())),
+                            object_distances_mm: vec![to_vertex(far)?],
+                        },
+                    )?;
+                    let t = m.at_distance(to_vertex(far)?);
+                    heights
+                        .iter()
+                        .map(|h| psf_shape(&t.psf_on_y(*h, lens.primary_nm), t.psf_n))
+                        .collect()
+                } else {
+                    vec![[0.0; 3]]
+                };
+                let mut tol = tolerance.max(0.0);
+                let mut min_step = min_step_px.max(0.0);
+                loop {
+                    let knots = adaptive_node_heights_mm(&heights, &probe, tol, min_step);
+                    let nodes = (
+                        axis_nodes(opts.width, p, &knots),
+                        axis_nodes(opts.height, p, &knots),
+                    );
+                    if nodes.0.len().max(nodes.1.len()) <= max_per_side.max(2) {
+                        break nodes;
+                    }
+                    tol = (2.0 * tol).max(0.01);
+                    min_step = (2.0 * min_step).max(0.05);
+                }
+            }
+        };
+        let (xc, yc) = (
             (opts.width as f64 - 1.0) / 2.0,
+            (opts.height as f64 - 1.0) / 2.0,
         );
-        let centres_mm: Vec<(f64, f64)> = (0..n * n)
-            .map(|t| {
-                let (r0, r1) = tile_span(opts.height, n, t / n);
-                let (c0, c1) = tile_span(opts.width, n, t % n);
-                let yi = 0.5 * (r0 + r1) as f64 - 0.5;
-                let xj = 0.5 * (c0 + c1) as f64 - 0.5;
-                ((xj - xc) * p, (yi - yc) * p)
-            })
+        let centres_mm: Vec<(f64, f64)> = node_y_px
+            .iter()
+            .flat_map(|yi| node_x_px.iter().map(move |xj| ((xj - xc) * p, (yi - yc) * p)))
             .collect();
-        let mut heights_mm: Vec<f64> = if n == 1 {
+        let single = centres_mm.len() == 1;
+        let mut heights_mm: Vec<f64> = if single {
             vec![0.0]
         } else {
             centres_mm.iter().map(|(x, y)| x.hypot(*y)).collect()
@@ -227,7 +432,7 @@ impl LensDepthKernels {
             .saturating_mul(entry_bytes)
             .saturating_mul(16)
             .saturating_add(
-                ((n * n) as u64)
+                (centres_mm.len() as u64)
                     .saturating_mul(nw)
                     .saturating_mul(nd)
                     .saturating_mul(entry_bytes)
@@ -259,7 +464,7 @@ impl LensDepthKernels {
             },
         )?;
         let tables: Vec<_> = distances.iter().map(|d| model.at_distance(*d)).collect();
-        let mut table = Vec::with_capacity(n * n);
+        let mut table = Vec::with_capacity(centres_mm.len());
         for (x_mm, y_mm) in centres_mm {
             let per_wl = wls
                 .iter()
@@ -267,7 +472,7 @@ impl LensDepthKernels {
                     invs.iter()
                         .zip(&tables)
                         .map(|(v, t)| {
-                            let psf = if n == 1 {
+                            let psf = if single {
                                 t.psf_on_y(0.0, *wl)
                             } else {
                                 t.psf_at(x_mm, y_mm, *wl)
@@ -280,16 +485,23 @@ impl LensDepthKernels {
             table.push(per_wl);
         }
         Ok(LensDepthKernels {
-            tiles: n,
+            node_x_px,
+            node_y_px,
             wavelengths_nm: wls,
             table,
             entrance_pupil_radius_m: r_ep_mm * 1e-3,
         })
     }
 
-    /// The tabulated PSF of tile `tile`, wavelength index `wl`, nearest in 1/z to `inv_z`.
-    pub fn kernel(&self, tile: usize, wl: usize, inv_z: f64) -> Kernel {
-        self.table[tile][wl]
+    /// Number of field nodes (columns × rows).
+    pub fn nodes(&self) -> usize {
+        self.table.len()
+    }
+
+    /// The tabulated PSF of node `node` (row-major), wavelength index `wl`, nearest in 1/z to
+    /// `inv_z`.
+    pub fn kernel(&self, node: usize, wl: usize, inv_z: f64) -> Kernel {
+        self.table[node][wl]
             .iter()
             .min_by(|a, b| (a.0 - inv_z).abs().total_cmp(&(b.0 - inv_z).abs()))
             .map(|t| t.1.clone())
@@ -313,60 +525,37 @@ fn tile_span(len: usize, n: usize, k: usize) -> (usize, usize) {
     (k * len / n, (k + 1) * len / n)
 }
 
-/// The field tiles along one image axis, for PSFs interpolated between the tile centres: tile
-/// `k`'s weight at sample x is the tent that is 1 at its centre (`(lo + hi − 1)/2` of its span,
-/// where [`LensDepthKernels`] tabulates its PSF) and 0 at the neighbouring centres, 1 beyond
-/// the outer centres, so that the weights of every sample sum to 1 (bilinear interpolation of
-/// the PSF between the four nearest tile centres, applied to the composited images: Nagy &
-/// O'Leary, "Restoring images degraded by spatially variant blur", SIAM J. Sci. Comput. 19,
-/// 1998). With fewer samples than tiles, hard tiles (weight 1 on the tile's own span).
-struct TileAxis {
+/// The field nodes along one image axis, for PSFs interpolated between them: node `k`'s
+/// weight at sample x is the tent that is 1 at its position and 0 at the neighbouring nodes, 1
+/// beyond the outer nodes, so that the weights of every sample sum to 1 (bilinear
+/// interpolation of the PSF between the four nodes around a pixel, applied to the composited
+/// images: Nagy & O'Leary, "Restoring images degraded by spatially variant blur", SIAM J. Sci.
+/// Comput. 19, 1998).
+struct NodeAxis {
     len: usize,
     centres: Vec<f64>,
-    hard: bool,
 }
 
-impl TileAxis {
-    fn new(len: usize, n: usize) -> Self {
-        let centres = (0..n)
-            .map(|k| {
-                let (lo, hi) = tile_span(len, n, k);
-                0.5 * (lo + hi) as f64 - 0.5
-            })
-            .collect();
-        TileAxis {
-            len,
-            centres,
-            hard: len < n,
-        }
-    }
-
-    /// The samples `[lo, hi)` where tile `k`'s weight is positive.
+impl NodeAxis {
+    /// The samples `[lo, hi)` where node `k`'s weight is positive.
     fn span(&self, k: usize) -> (usize, usize) {
-        let n = self.centres.len();
-        if self.hard {
-            return tile_span(self.len, n, k);
-        }
+        let c = &self.centres;
         let lo = if k == 0 {
             0
         } else {
-            (self.centres[k - 1].floor() + 1.0) as usize
+            ((c[k - 1].floor() + 1.0).max(0.0) as usize).min(self.len)
         };
-        let hi = if k + 1 == n {
+        let hi = if k + 1 == c.len() {
             self.len
         } else {
-            (self.centres[k + 1].ceil() as usize).min(self.len)
+            (c[k + 1].ceil().max(0.0) as usize).min(self.len)
         };
         (lo.min(hi), hi)
     }
 
-    /// Tile `k`'s weight at sample `x`.
+    /// Node `k`'s weight at sample `x`.
     fn weight(&self, k: usize, x: usize) -> f64 {
         let (c, n, x) = (&self.centres, self.centres.len(), x as f64);
-        if self.hard {
-            let (lo, hi) = tile_span(self.len, n, k);
-            return f64::from(u8::from((lo..hi).contains(&(x as usize))));
-        }
         if x <= c[k] {
             if k == 0 {
                 1.0
@@ -431,7 +620,6 @@ pub fn defocus_by_depth(
             }
         }
         DepthKernels::Lens(lk) => {
-            let n = lk.tiles;
             let mut out = vec![vec![0f32; w * h]; planes.len()];
             let mut rms_map = vec![0f32; w * h];
             let groups: Vec<usize> = band_wavelengths_nm
@@ -439,13 +627,23 @@ pub fn defocus_by_depth(
                 .map(|wl| lk.nearest_wavelength(*wl))
                 .collect();
             let wl_ref = lk.nearest_wavelength(550.0);
-            // Each pixel's PSF is interpolated between the tile centres' (bilinear tent weights
-            // that sum to 1): every tile composites the pixels its tent covers and adds them
-            // with its weight. On an image smaller than the tiling, hard tiles.
-            let (ys, xs) = (TileAxis::new(h, n), TileAxis::new(w, n));
-            for ty in 0..n {
-                for tx in 0..n {
-                    let tile = ty * n + tx;
+            // Each pixel's PSF is interpolated between the nodes' (bilinear tent weights that
+            // sum to 1): every node composites the pixels its tent covers and adds them with
+            // its weight.
+            let (ys, xs) = (
+                NodeAxis {
+                    len: h,
+                    centres: lk.node_y_px.clone(),
+                },
+                NodeAxis {
+                    len: w,
+                    centres: lk.node_x_px.clone(),
+                },
+            );
+            let nx = xs.centres.len();
+            for ty in 0..ys.centres.len() {
+                for tx in 0..nx {
+                    let tile = ty * nx + tx;
                     let (r0, r1) = ys.span(ty);
                     let (c0, c1) = xs.span(tx);
                     if r0 == r1 || c0 == c1 {

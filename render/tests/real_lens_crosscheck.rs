@@ -20,7 +20,8 @@ use camsim_lens::LensPrescription;
 use camsim_render::camera::real_lens::{FilmSize, RealLensCamera, RealLensOptions};
 use camsim_render::camera::{Camera, Pinhole};
 use camsim_render::depth_optics::{
-    defocus_by_depth, DepthKernels, LensDepthKernels, LensDepthOptions,
+    defocus_by_depth, DepthKernels, FieldNodes, LensDepthKernels, LensDepthOptions,
+    ADAPTIVE_FIELD_NODES,
 };
 use camsim_render::depth_path::slab_inverse_depths;
 use camsim_render::gltf_load::{load_gltf, pick_camera};
@@ -98,7 +99,7 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
                         height: h,
                         wavelengths_nm: vec![focus.lens.primary_nm],
                         pupil_n: 96,
-                        tiles: 3,
+                        field_nodes: FieldNodes::Uniform(3),
                     },
                     &[1.0 / z],
                 )
@@ -365,7 +366,7 @@ fn check_scene_real_lens(
     w: usize,
     h: usize,
     spp_lens: u32,
-    tiles: usize,
+    nodes: FieldNodes,
     assert_profile_tol: bool,
     dir: &Path,
 ) -> LensOutcome {
@@ -412,12 +413,18 @@ fn check_scene_real_lens(
                 height: h,
                 wavelengths_nm: band_nm.clone(),
                 pupil_n: 32,
-                tiles,
+                field_nodes: nodes,
             },
             &inv_depths,
         )
         .unwrap();
-        let kmax = (0..tiles * tiles)
+        eprintln!(
+            "{} f/{n_f}: field nodes x {:?}, y {:?} (px)",
+            spec.name,
+            lk.node_x_px.iter().map(|v| v.round()).collect::<Vec<_>>(),
+            lk.node_y_px.iter().map(|v| v.round()).collect::<Vec<_>>()
+        );
+        let kmax = (0..lk.nodes())
             .flat_map(|t| (0..band_nm.len()).map(move |b| (t, b)))
             .flat_map(|(t, b)| inv_depths.iter().map(move |v| (t, b, *v)))
             .map(|(t, b, v)| lk.kernel(t, b, v).radius)
@@ -427,7 +434,7 @@ fn check_scene_real_lens(
         let radius_at: Vec<(f64, usize)> = DEPTHS_M
             .iter()
             .map(|z| {
-                let r = (0..tiles * tiles)
+                let r = (0..lk.nodes())
                     .flat_map(|t| (0..band_nm.len()).map(move |b| (t, b)))
                     .map(|(t, b)| lk.kernel(t, b, 1.0 / z).radius)
                     .max()
@@ -612,10 +619,16 @@ fn check_scene_real_lens(
     out
 }
 
-/// The cross-check at `w` × `h` px, `spp_lens` samples per pixel through the lens, `tiles`²
-/// field tiles; `assert_profile_tol`: also assert the edge profiles within `EDGE_TOL` of the
+/// The cross-check at `w` × `h` px, `spp_lens` samples per pixel through the lens, PSFs at the
+/// field nodes `nodes`; `assert_profile_tol`: also assert the edge profiles within `EDGE_TOL` of the
 /// contrast, and that the Monte Carlo σ resolves it (σ < `EDGE_TOL`/3).
-fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_profile_tol: bool) {
+fn real_lens_crosscheck(
+    w: usize,
+    h: usize,
+    spp_lens: u32,
+    nodes: FieldNodes,
+    assert_profile_tol: bool,
+) {
     let lens = double_gauss();
     let dir = tempfile::tempdir().unwrap();
     let band_nm: Vec<f64> = (0..3).map(|b| 450.0 + 100.0 * b as f64).collect();
@@ -623,12 +636,12 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
     let mut failures = Vec::new();
     let mut controls = 0usize;
     let only = std::env::var("CAMSIM_XC_SCENE").ok();
-    // field tiles per side (an experiment's override; the tests state their own)
-    let tiles = std::env::var("CAMSIM_XC_TILES")
+    // n × n uniform field nodes (an experiment's override; the tests use the chain's)
+    let nodes = std::env::var("CAMSIM_XC_TILES")
         .ok()
         .and_then(|t| t.parse::<usize>().ok())
         .filter(|&t| t > 0)
-        .unwrap_or(tiles);
+        .map_or(nodes, FieldNodes::Uniform);
     for spec in scenes(w, h) {
         if only.as_deref().is_some_and(|o| o != spec.name) {
             continue;
@@ -639,7 +652,7 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
             w,
             h,
             spp_lens,
-            tiles,
+            nodes,
             assert_profile_tol,
             dir.path(),
         );
@@ -681,17 +694,19 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// CI size: 96 × 64 px, 128 samples per pixel through the lens, the chain's 3 × 3 field tiles.
+/// CI size: 96 × 64 px, 128 samples per pixel through the lens, the chain's adaptive field
+/// nodes.
 #[test]
 fn real_lens_crosscheck_three_scenes_three_apertures() {
-    real_lens_crosscheck(96, 64, 128, 3, false);
+    real_lens_crosscheck(96, 64, 128, ADAPTIVE_FIELD_NODES, false);
 }
 
-/// Full size (docs/render.md): 384 × 256 px, 1024 samples per pixel.
+/// Full size (docs/render.md): 384 × 256 px, 1024 samples per pixel, the chain's adaptive field
+/// nodes.
 #[test]
 #[ignore]
 fn real_lens_crosscheck_full_size() {
-    real_lens_crosscheck(384, 256, 1024, 3, true);
+    real_lens_crosscheck(384, 256, 1024, ADAPTIVE_FIELD_NODES, true);
 }
 
 /// A defocus whose PSF tables would exceed `LENS_DEPTH_MEMORY_BUDGET_BYTES` is refused before
@@ -710,7 +725,7 @@ fn lens_depth_kernels_refuse_a_huge_defocus() {
             height: 64,
             wavelengths_nm: vec![550.0],
             pupil_n: 32,
-            tiles: 3,
+            field_nodes: FieldNodes::Uniform(3),
         },
         &[1.0 / FOCUS_M, 10.0],
     )
