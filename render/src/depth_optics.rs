@@ -15,16 +15,24 @@
 //!   prescription ([`camsim_lens::FocusedLens`], focused by the camera's focus settings) at
 //!   every slab's object distance, from the lens field model tabulated over object distance
 //!   ([`camsim_lens::field_model::FieldModel`]), per tabulated wavelength (each band uses the
-//!   nearest) and per **field tile**: the image is cut into `tiles × tiles` equal rectangles
-//!   and each uses the PSF of its centre's paraxial image position
-//!   ([`camsim_lens::field_model::FieldTable::psf_at`]: the +y PSF at that height rotated to
-//!   the tile's azimuth), the field model being tabulated exactly at the distinct tile-centre
-//!   radii (no interpolation between heights). The rotated PSF points the way the real lens's
-//!   does: the radial skewness of the kernel matches the real-lens camera's PSF at 10 mm off
-//!   axis to the right and downwards, where a mirrored kernel would fail
-//!   (`render/tests/real_lens_crosscheck.rs`, docs/render_validation.md). Limits: the PSF is
-//!   piecewise constant over a tile (seams where neighbouring tiles differ); the geometric PSF
-//!   omits diffraction; the tables are refused above [`LENS_DEPTH_MEMORY_BUDGET_BYTES`]. Planar depth is taken from the lens's paraxial entrance pupil (the pinhole
+//!   nearest) and per **field node** ([`FieldNodes`]): PSFs are tabulated on a grid of nodes
+//!   (positions along x × positions along y), each node's the PSF of its paraxial image
+//!   position ([`camsim_lens::field_model::FieldTable::psf_at`]: the +y PSF at that height
+//!   rotated to the node's azimuth), the field model being tabulated exactly at the nodes'
+//!   distinct radii (no interpolation between heights), and each pixel's PSF is interpolated
+//!   bilinearly between the four nodes around it (tent weights on the composited images,
+//!   Nagy & O'Leary 1998). The chain's nodes are adaptive ([`ADAPTIVE_FIELD_NODES`]): a probe
+//!   of the PSF's centroid and RMS widths at 33 heights out to the corner, at the slab
+//!   farthest from focus, places node heights where the shape stops being linear in height
+//!   ([`adaptive_node_heights_mm`]), e.g. where the double Gauss starts to vignette at f/2;
+//!   uniform tile centres ([`FieldNodes::Uniform`]) are the alternative. The rotated PSF points
+//!   the way the real lens's does: the radial skewness of the kernel matches the real-lens
+//!   camera's PSF at 10 mm off axis to the right and downwards, where a mirrored kernel would
+//!   fail (`render/tests/real_lens_crosscheck.rs`, docs/render_validation.md). Limits: between
+//!   nodes the PSF is a mixture of the neighbours' (their moments interpolate; a shape change
+//!   that is not captured by the centroid and RMS widths is not seen by the probe); the
+//!   geometric PSF omits diffraction; the tables are refused above
+//!   [`LENS_DEPTH_MEMORY_BUDGET_BYTES`]. Planar depth is taken from the lens's paraxial entrance pupil (the pinhole
 //!   of the render), as by the real-lens camera ([`crate::camera::real_lens`]).
 //!
 //! Both give, besides the defocused planes, the blur size per pixel: the RMS radius of the PSF
@@ -109,7 +117,7 @@ pub fn kernel_rms_radius_px(k: &Kernel) -> f64 {
 
 /// Largest memory (bytes) [`LensDepthKernels::new`] may use for its PSF tables: 2 GiB. Its
 /// estimate is the field model's tables (distances × field heights × wavelengths × psf_n² f64),
-/// twice (the per-distance copies), plus the per-tile kernels (tiles² × wavelengths × distances ×
+/// twice (the per-distance copies), plus the per-node kernels (nodes × wavelengths × distances ×
 /// psf_n² f32); above it the call is refused with one line naming the sizes.
 pub const LENS_DEPTH_MEMORY_BUDGET_BYTES: u64 = 2 << 30;
 
@@ -177,7 +185,7 @@ const PROBE_HEIGHTS: usize = 33;
 
 /// Centroid and RMS widths (samples) of a PSF `n × n` on +y (field direction): (centroid y,
 /// RMS width along x (tangential), RMS width along y (radial)).
-fn psf_shape(psf: &[f64], n: usize) -> [f64; 3] {
+pub fn psf_shape(psf: &[f64], n: usize) -> [f64; 3] {
     let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
     for (i, v) in psf.iter().enumerate() {
         let (x, y) = ((i % n) as f64, (i / n) as f64);
@@ -238,25 +246,32 @@ pub fn adaptive_node_heights_mm(
     knots.iter().map(|k| heights_mm[*k]).collect()
 }
 
-/// Node positions (samples) along an axis of `len` samples of pitch `pitch_mm`, centred, at the
-/// node heights `heights_mm` on both sides and at the two edge samples.
+/// Node positions (samples) along an axis of `len` samples of pitch `pitch_mm`: the centre, the
+/// node heights `heights_mm` on both sides, and the two edge samples; a node closer than
+/// [`MIN_NODE_SPACING_PX`] to the one inside it or to the edge is dropped.
 fn axis_nodes(len: usize, pitch_mm: f64, heights_mm: &[f64]) -> Vec<f64> {
     let c = (len as f64 - 1.0) / 2.0;
-    let mut v: Vec<f64> = vec![0.0, len as f64 - 1.0];
-    for h in heights_mm {
-        let d = h / pitch_mm;
-        if d < c {
-            v.push(c - d);
-            v.push(c + d);
+    let mut side: Vec<f64> = vec![0.0];
+    let mut ds: Vec<f64> = heights_mm.iter().map(|h| h / pitch_mm).collect();
+    ds.sort_by(|a, b| a.total_cmp(b));
+    for d in ds {
+        if d - side[side.len() - 1] >= MIN_NODE_SPACING_PX && c - d >= MIN_NODE_SPACING_PX {
+            side.push(d);
         }
     }
-    v.sort_by(|a, b| a.total_cmp(b));
-    // nodes closer than half a sample are one
-    v.dedup_by(|b, a| (*b - *a).abs() < 0.5);
+    if c > 0.0 {
+        side.push(c);
+    }
+    let mut v: Vec<f64> = side.iter().rev().map(|d| c - d).collect();
+    v.extend(side.iter().skip(1).map(|d| c + d));
     v
 }
 
-/// Real-lens PSFs by field tile × wavelength × object distance (see the module docs).
+/// Smallest spacing of adaptive field nodes (samples): closer nodes would cost a compositing
+/// window each for a PSF change below a sample.
+pub const MIN_NODE_SPACING_PX: f64 = 4.0;
+
+/// Real-lens PSFs by field node × wavelength × object distance (see the module docs).
 #[derive(Debug, Clone)]
 pub struct LensDepthKernels {
     /// Node columns (sample positions along x, increasing).
@@ -290,7 +305,7 @@ impl LensDepthKernels {
             || opts.field_nodes == FieldNodes::Uniform(0)
         {
             return Err(bad(
-                "sample pitch > 0, an image, one tile and at least one wavelength are needed"
+                "sample pitch > 0, an image, one field node and at least one wavelength are needed"
                     .into(),
             ));
         }
@@ -410,7 +425,11 @@ impl LensDepthKernels {
         );
         let centres_mm: Vec<(f64, f64)> = node_y_px
             .iter()
-            .flat_map(|yi| node_x_px.iter().map(move |xj| ((xj - xc) * p, (yi - yc) * p)))
+            .flat_map(|yi| {
+                node_x_px
+                    .iter()
+                    .map(move |xj| ((xj - xc) * p, (yi - yc) * p))
+            })
             .collect();
         let single = centres_mm.len() == 1;
         let mut heights_mm: Vec<f64> = if single {
@@ -575,7 +594,7 @@ impl NodeAxis {
 pub enum DepthKernels {
     /// A thin lens: pillbox of the circle of confusion ([`thin_lens_for_camera`]).
     Thin(ThinLensDefocus),
-    /// A real lens's PSFs by field tile × wavelength × distance.
+    /// A real lens's PSFs by field node × wavelength × distance.
     Lens(LensDepthKernels),
 }
 
@@ -592,9 +611,9 @@ pub struct DepthDefocused {
 /// Defocus `planes` (`w × h`, wavelength `band_wavelengths_nm[b]` each) with planar depth
 /// `depth_m` (∞ or ≤ 0 = escaped) by depth-layered compositing over `layers` slabs
 /// ([`crate::depth_path::defocus_layered`]) with the PSFs of `kernels`: for a lens, per field
-/// tile (the pixels of the tile's interpolation weight plus a margin of the largest kernel
-/// radius are composited, and added with that weight: the PSF interpolated between tile
-/// centres, [`TileAxis`]) and per group of bands sharing a tabulated wavelength. The background is continued under blurred foreground edges
+/// node (the pixels of the node's interpolation weight plus a margin of the largest kernel
+/// radius are composited, and added with that weight: the PSF interpolated between the nodes,
+/// tent weights) and per group of bands sharing a tabulated wavelength. The background is continued under blurred foreground edges
 /// ([`defocus_layered_with`], `continue_background`).
 pub fn defocus_by_depth(
     planes: &[Vec<f32>],
@@ -643,7 +662,7 @@ pub fn defocus_by_depth(
             let nx = xs.centres.len();
             for ty in 0..ys.centres.len() {
                 for tx in 0..nx {
-                    let tile = ty * nx + tx;
+                    let node = ty * nx + tx;
                     let (r0, r1) = ys.span(ty);
                     let (c0, c1) = xs.span(tx);
                     if r0 == r1 || c0 == c1 {
@@ -651,7 +670,7 @@ pub fn defocus_by_depth(
                     }
                     let wy: Vec<f32> = (r0..r1).map(|r| ys.weight(ty, r) as f32).collect();
                     let wx: Vec<f32> = (c0..c1).map(|c| xs.weight(tx, c) as f32).collect();
-                    let margin = lk.table[tile]
+                    let margin = lk.table[node]
                         .iter()
                         .flatten()
                         .map(|(_, k)| k.radius)
@@ -675,7 +694,7 @@ pub fn defocus_by_depth(
                             (0..planes.len()).filter(|b| groups[*b] == g).collect();
                         let sub: Vec<Vec<f32>> = idx.iter().map(|b| crop(&planes[*b])).collect();
                         let res = defocus_layered_with(&sub, &dcrop, cw, ch, layers, true, |iz| {
-                            lk.kernel(tile, g, iz)
+                            lk.kernel(node, g, iz)
                         });
                         for (b, pl) in idx.iter().zip(&res) {
                             for (r, wr) in (r0..r1).zip(&wy) {
@@ -692,7 +711,7 @@ pub fn defocus_by_depth(
                         .iter()
                         .map(|m| {
                             m.map_or(0.0, |v| {
-                                kernel_rms_radius_px(&lk.kernel(tile, wl_ref, v)) as f32
+                                kernel_rms_radius_px(&lk.kernel(node, wl_ref, v)) as f32
                             })
                         })
                         .collect();
