@@ -145,7 +145,7 @@ pub struct LensDepthOptions {
 /// | variant | parameters | meaning |
 /// |---|---|---|
 /// | `Uniform(n)` | n ≥ 1 | the centres of `n × n` equal tiles (1: the axis's PSF everywhere) |
-/// | `Adaptive` | `tolerance` (fraction, default 0.02), `min_step_px` (samples, default 0.1), `max_per_side` (default 15) | positions along each axis at the field heights where the PSF's shape changes ([`adaptive_node_heights_mm`]), plus the image's edges |
+/// | `Adaptive` | `tolerance` (fraction, default 0.01), `min_step_px` (samples, default 0.02), `max_per_side` (default 15) | positions along each axis at the field heights where the PSF's shape changes ([`adaptive_node_heights_mm`]), plus the image's edges |
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum FieldNodes {
     /// The centres of `n × n` equal tiles.
@@ -162,11 +162,11 @@ pub enum FieldNodes {
     },
 }
 
-/// The default field nodes (the camera chain's): adaptive, 2 % of the RMS width + 0.1 sample,
+/// The default field nodes (the camera chain's): adaptive, 1 % of the RMS width + 0.02 sample,
 /// at most 15 per side.
 pub const ADAPTIVE_FIELD_NODES: FieldNodes = FieldNodes::Adaptive {
-    tolerance: 0.02,
-    min_step_px: 0.1,
+    tolerance: 0.01,
+    min_step_px: 0.02,
     max_per_side: 15,
 };
 
