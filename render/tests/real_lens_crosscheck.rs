@@ -412,7 +412,11 @@ fn check_scene_real_lens(
                 width: w,
                 height: h,
                 wavelengths_nm: band_nm.clone(),
-                pupil_n: 32,
+                // the chain's 32 (an experiment's override: CAMSIM_XC_PUPIL)
+                pupil_n: std::env::var("CAMSIM_XC_PUPIL")
+                    .ok()
+                    .and_then(|t| t.parse::<usize>().ok())
+                    .unwrap_or(32),
                 field_nodes: nodes,
             },
             &inv_depths,
@@ -549,6 +553,7 @@ fn check_scene_real_lens(
                         .collect()
                 };
                 let (mut worst_z, mut worst_diff, mut worst_sd) = (0f64, 0f64, 0f64);
+                let chi2_before = out.edge_chi2;
                 for (i, (z, sd)) in zs(&pb).into_iter().enumerate() {
                     worst_z = worst_z.max(z.abs());
                     worst_sd = worst_sd.max(sd / contrast);
@@ -568,7 +573,9 @@ fn check_scene_real_lens(
                 );
                 let (wa, wb) = (width_10_90(&pa), width_10_90(&pb));
                 eprintln!(
-                    "{tag}: worst profile |z| {worst_z:.2}, worst difference {worst_diff:.4} of the contrast (Monte Carlo σ ≤ {worst_sd:.4}); 10-90 % width real lens {wa:.2} px, depth path {wb:.2} px (from the noisy end levels)"
+                    "{tag}: worst profile |z| {worst_z:.2}, chi2 {:.1} over {} points, worst difference {worst_diff:.4} of the contrast (Monte Carlo σ ≤ {worst_sd:.4}); 10-90 % width real lens {wa:.2} px, depth path {wb:.2} px (from the noisy end levels)",
+                    out.edge_chi2 - chi2_before,
+                    pa.len()
                 );
                 if std::env::var("CAMSIM_XC_DEBUG").is_ok() {
                     for (i, (a, b)) in pa.iter().zip(&pb).enumerate() {
