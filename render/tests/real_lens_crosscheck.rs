@@ -216,9 +216,15 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
 const XC_YFOV_DEG: f64 = 24.0;
 /// Edge-profile tolerance (fraction of the edge contrast): the depth path's edge profiles agree
 /// with the real lens's within it, point by point, as with the thin lens (`depth_crosscheck`).
-/// Asserted only by the full-size test: at CI size (128 spp, 48–56 px along an edge) the Monte
-/// Carlo σ of a profile point is 3–14 % of the contrast and does not resolve it (the CI test
-/// asserts the z-test with that σ instead).
+/// The two criteria of the edges, by size:
+/// * CI size (128 spp, 48–56 px along an edge): the Monte Carlo σ of a profile point is 3–14 %
+///   of the contrast and does not resolve the tolerance, so the z-test with that σ (every
+///   point |z| < 5, χ² over all points p > 10⁻⁴) is asserted instead;
+/// * full size (1024 spp): σ is about 0.9 % of the contrast, below the depth path's stated
+///   approximations (16 depth slabs, geometric PSFs from 32² pupil rays, PSFs interpolated
+///   between field nodes: 1–3 % of the contrast at the edges, where the z-test would demand
+///   statistical identity), so the tolerance is asserted, with σ < `EDGE_TOL`/3 so that it is
+///   resolved; the z and χ² are printed.
 const EDGE_TOL: f64 = 0.06;
 
 /// Compositing slabs (the chain's `DEPTH_LAYERS`).
@@ -586,7 +592,7 @@ fn check_scene_real_lens(
                         );
                     }
                 }
-                if worst_z >= 5.0 {
+                if !assert_profile_tol && worst_z >= 5.0 {
                     out.failures.push(format!(
                         "{tag}: profile |z| {worst_z:.2} (Monte Carlo σ only)"
                     ));
@@ -627,8 +633,9 @@ fn check_scene_real_lens(
 }
 
 /// The cross-check at `w` × `h` px, `spp_lens` samples per pixel through the lens, PSFs at the
-/// field nodes `nodes`; `assert_profile_tol`: also assert the edge profiles within `EDGE_TOL` of the
-/// contrast, and that the Monte Carlo σ resolves it (σ < `EDGE_TOL`/3).
+/// field nodes `nodes`; `assert_profile_tol`: assert the edge profiles within `EDGE_TOL` of the
+/// contrast, and that the Monte Carlo σ resolves it (σ < `EDGE_TOL`/3), in place of the edges'
+/// z-tests (see `EDGE_TOL`).
 fn real_lens_crosscheck(
     w: usize,
     h: usize,
@@ -669,7 +676,7 @@ fn real_lens_crosscheck(
             spec.name, o.worst_block_z, o.min_chi2_p, o.corner_blocks, o.worst_focus_pixel_z, o.min_focus_chi2_p, o.worst_edge_z, o.edge_chi2, o.edge_n, edge_p, o.worst_profile_diff, o.worst_edge_sd, o.negative_controls
         );
         failures.extend(o.failures);
-        if edge_p <= 1e-4 {
+        if !assert_profile_tol && edge_p <= 1e-4 {
             failures.push(format!("{}: edge profiles chi2 p {edge_p}", spec.name));
         }
         if assert_profile_tol && o.worst_edge_sd >= EDGE_TOL / 3.0 {
