@@ -22,7 +22,7 @@
 //!   camera's (H/(2 tan(θ/2)) scale) to 10⁻⁹.
 use super::crosscheck_scenes::{
     block_z_tests, chi2_sf, depth_jump_mask, disc_esf_pixel, edge_profile, k_px, scenes,
-    visible_band_radiance, width_10_90, SceneSpec, DEPTHS_M,
+    visible_band_radiance, width_10_90, Edge, SceneSpec, DEPTHS_M,
 };
 use camsim_render::camera::{Pinhole, ThinLens};
 use camsim_render::depth_optics::{defocus_by_depth, thin_lens_for_camera, DepthKernels};
@@ -179,6 +179,7 @@ fn check_scene(
             // edges
             for e in &spec.edges {
                 let half = (cmax.ceil() as usize + 4) as isize;
+                let e = &clear_of_other_cards(spec, e, half, |z| t.coc_radius_px(z));
                 let n_along = (e.hi - e.lo) as f64;
                 let profile = |img: &[f32]| edge_profile(img, w, e, half);
                 let pa = profile(&thin.band_planes[bnd]);
@@ -348,6 +349,54 @@ fn family_wise_false_alarm(z_limit: f64, n: usize) -> f64 {
     use statrs::distribution::{ContinuousCDF, Normal};
     let p = 2.0 * Normal::new(0.0, 1.0).unwrap().cdf(-z_limit);
     -((n as f64) * (-p).ln_1p()).exp_m1()
+}
+
+/// `e` with its range along the edge shrunk, to whole checker periods, to the pixels whose
+/// circles of confusion reach no boundary of another card along the edge within the profile
+/// (`half` px either side): pixel row r (film y in [r, r + 1)) sees a card at depth z through
+/// a disc of radius c(z) about its film position, which stays clear of a boundary at b above
+/// when r ≥ b + ⌈c⌉ and below when r + 1 ≤ b − ⌈c⌉. (The `window` scene's vertical edge ends
+/// 8 px above the near bottom bar at every film size; at full size f/2 the bar's c = 15.9 px
+/// reached its last rows and the closed form, which assumes two surfaces, failed there.)
+fn clear_of_other_cards(
+    spec: &SceneSpec,
+    e: &Edge,
+    half: isize,
+    coc_px: impl Fn(f64) -> f64,
+) -> Edge {
+    let (mut lo, mut hi) = (e.lo as i64, e.hi as i64);
+    let (a0, a1) = (e.at as i64 - half as i64, e.at as i64 + half as i64);
+    for c in &spec.cards {
+        let r = coc_px(c.z_m).ceil() as i64;
+        let ((x0, x1), (b0, b1)) = if e.vertical {
+            ((c.x0, c.x1), (c.y0, c.y1))
+        } else {
+            ((c.y0, c.y1), (c.x0, c.x1))
+        };
+        if x1 as i64 <= a0 - r || x0 as i64 >= a1 + r {
+            continue;
+        }
+        for b in [b0 as i64, b1 as i64] {
+            if b + r > lo && b - r < hi {
+                if 2 * b <= lo + hi {
+                    lo = lo.max(b + r);
+                } else {
+                    hi = hi.min(b - r);
+                }
+            }
+        }
+    }
+    let n = (hi - lo).max(0) / 8 * 8;
+    assert!(
+        n >= 8,
+        "{}: edge {e:?} has no whole checker period clear of other cards",
+        spec.name
+    );
+    Edge {
+        lo: lo as usize,
+        hi: (lo + n) as usize,
+        ..*e
+    }
 }
 
 /// Offset added to every render seed, from `CAMSIM_XC_SEED` (default 0): a second,
