@@ -618,14 +618,22 @@ pub fn axial_irradiance_per_radiance_sr(
 /// Relative illumination of `lens` as focused (its image plane is the film; the aperture
 /// stop's clear radius set as by [`axial_irradiance_per_radiance_sr`]) at each film point
 /// `(film radius mm, wavelength nm)` of `points`: [`SensorSideLens::relative_illumination`].
-/// Errors for lenses that cannot be traced from the sensor (mirrors).
+/// Errors for lenses that cannot be traced from the sensor (mirrors), and when no ray from the
+/// film centre is found to get through at one of the wavelengths (the ratio is undefined;
+/// callers fall back to the entrance-pupil estimate).
 pub fn film_relative_illumination(
     lens: &LensPrescription,
     points: &[(f64, f64)],
     grid: usize,
 ) -> Result<Vec<f64>, LensError> {
     let side = SensorSideLens::new(&lens.with_aperture_stop_clear()?)?;
-    Ok(side.relative_illumination(points, grid))
+    side.relative_illumination(points, grid).ok_or_else(|| {
+        LensError::Prescription(format!(
+            "lens '{}': no ray from the film centre gets through at one of the wavelengths \
+             (film-side relative illumination undefined)",
+            lens.name
+        ))
+    })
 }
 
 impl SensorSideLens {
@@ -636,8 +644,8 @@ impl SensorSideLens {
     /// contains what the entrance-pupil estimate [`LensPrescription::relative_illumination`]
     /// (vignetting fraction × cos⁴ of the chief ray) leaves out: the pupil's aberrations and
     /// their change with wavelength, and the cos⁴ of every ray rather than the chief ray's.
-    /// 0 where no ray gets through on the axis.
-    pub fn relative_illumination(&self, points: &[(f64, f64)], grid: usize) -> Vec<f64> {
+    /// `None` when the axial integral is 0 at one of the wavelengths (no ray found).
+    pub fn relative_illumination(&self, points: &[(f64, f64)], grid: usize) -> Option<Vec<f64>> {
         let mut wls: Vec<f64> = points.iter().map(|p| p.1).collect();
         wls.sort_by(|a, b| a.total_cmp(b));
         wls.dedup();
@@ -645,16 +653,17 @@ impl SensorSideLens {
             .par_iter()
             .map(|w| self.irradiance_per_radiance_sr(0.0, *w, grid))
             .collect();
-        points
-            .par_iter()
-            .map(|&(r, w)| {
-                let e0 = axial[wls.partition_point(|x| *x < w)];
-                if e0 > 0.0 {
-                    self.irradiance_per_radiance_sr(r.abs(), w, grid) / e0
-                } else {
-                    0.0
-                }
-            })
-            .collect()
+        if axial.iter().any(|e| !(*e > 0.0)) {
+            return None;
+        }
+        Some(
+            points
+                .par_iter()
+                .map(|&(r, w)| {
+                    self.irradiance_per_radiance_sr(r.abs(), w, grid)
+                        / axial[wls.partition_point(|x| *x < w)]
+                })
+                .collect(),
+        )
     }
 }

@@ -296,7 +296,7 @@ fn off_axis_irradiance_of_a_bare_stop_is_the_projected_solid_angle_of_its_disc()
         let side = SensorSideLens::new(&l).unwrap();
         let film: Vec<f64> = [0.3, 0.8, 1.5].iter().map(|f| f * d_mm).collect();
         let pts: Vec<(f64, f64)> = film.iter().map(|r| (*r, 550.0)).collect();
-        let ri = side.relative_illumination(&pts, 384);
+        let ri = side.relative_illumination(&pts, 384).unwrap();
         for (p, ri) in film.iter().zip(ri) {
             let got = side.irradiance_per_radiance_sr(*p, 550.0, 384);
             let want = e(r_mm, d_mm, *p);
