@@ -342,7 +342,7 @@ fn geometry_model(
             psf_pitch_um: 10.0,
             pupil_n: 8,
             pad: 1,
-            ri_grid_n: 64,
+            ri_grid_n: 128,
             focus: Focus::Focused(Box::new(focus.clone())),
             object_distances_mm: vec![focus.focus_distance_mm],
         },
@@ -619,12 +619,19 @@ fn check_scene_real_lens(
                         .map(|(a, q)| (a - q).abs() / contrast)
                         .fold(0.0, f64::max);
                     eprintln!("{tag}: negative control (no defocus): worst |z| {zc:.1}, chi2 p {pc:.1e}, difference {dc:.3} of the contrast");
-                    if !((zc >= 5.0 || pc <= 1e-4) && dc > EDGE_TOL) {
+                    // asserted where the Monte Carlo σ resolves the control's difference (≥ 5σ):
+                    // at CI size one 650 nm edge of `window` has σ up to 0.13 of the contrast
+                    // against a 0.47 difference (3.5σ), so a control there shows the noise, not
+                    // the check's power (printed only)
+                    let resolvable = dc >= 5.0 * worst_sd;
+                    if resolvable && !((zc >= 5.0 || pc <= 1e-4) && dc > EDGE_TOL) {
                         out.failures.push(format!(
                             "{tag}: without the defocus the profile is within |z| {zc:.2} (chi2 p {pc:.1e}), {dc:.4} of the contrast of the real lens's (the check has no power)"
                         ));
                     }
-                    out.negative_controls += 1;
+                    if resolvable {
+                        out.negative_controls += 1;
+                    }
                 }
             }
         }
@@ -1124,4 +1131,119 @@ fn adaptive_field_nodes_interpolate_the_f2_psf_between_them() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// Relative illumination by wavelength at f/2 (issue 18, the full-size run's outer blocks):
+/// the double Gauss focused on 1.5 m at f/2, the film of the full-size cross-check (384 × 256
+/// px, 24° vertical), paraxial heights 0.6, 0.65 and 0.7 of the half-diagonal, at 450, 550
+/// and 650 nm (the cross-check's band centres). Printed: the entrance-pupil estimate
+/// `LensPrescription::relative_illumination` at the primary wavelength (what the field model
+/// tabulated before), the same at each wavelength, and the film-side relative illumination the
+/// field model now tabulates (`camsim_lens::pupil::film_relative_illumination`, the real-lens
+/// camera's integral), with the change in the depth path's outer blocks (film-side / the old
+/// primary estimate). Asserted: the film-side value exceeds the old one by more than 0.5 % at
+/// 550 nm and 1 % at 650 nm and is within 1 % of it at 450 nm everywhere here (the sign and
+/// size of the gap the full-size run saw: (a) 1.2 % and 1.8 % brighter at 550 and 650 nm, 450
+/// nm right), while the entrance-pupil estimate at 550 and 650 nm moves by less than 0.3 %
+/// from its primary value (per-wavelength vignetting alone is not the gap; it moves 0.2–0.9 %
+/// at 450 nm), and the film-side change from 450 to 650 nm exceeds 1.5× the estimate's.
+/// Also printed: the time of the film-side and of the old tables for `LensBlur`'s 41 × 7
+/// points, same run, interleaved.
+#[test]
+fn relative_illumination_by_wavelength_at_f2() {
+    let lens = double_gauss();
+    let (w, h) = (384usize, 256usize);
+    let cam = RealLensCamera::new(
+        &lens,
+        w as u32,
+        h as u32,
+        &RealLensOptions {
+            focus_distance_m: Some(FOCUS_M),
+            f_number: Some(2.0),
+            film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let focus = cam.info().focus.clone();
+    let half_diag = 0.5 * cam.info().pixel_pitch_mm * (w as f64).hypot(h as f64);
+    let l = focus.lens.with_object_distance(focus.focus_distance_mm);
+    let prim = l.primary_nm;
+    let per_tan = l.paraxial_image_mm_per_tan(prim).unwrap();
+    let wls = [450.0, 550.0, 650.0];
+    eprintln!("half-diagonal {half_diag:.3} mm; primary {prim} nm");
+    for frac in [0.6, 0.65, 0.7] {
+        let hp = frac * half_diag;
+        let th = (hp / per_tan).atan().to_degrees();
+        let old = l
+            .relative_illumination(th, prim, 128)
+            .unwrap()
+            .relative_illumination;
+        let (mut ep, mut film_v) = (Vec::new(), Vec::new());
+        for (j, &wl) in wls.iter().enumerate() {
+            let r = l.aimed_chief_ray(th, wl).unwrap().chief.image_mm[1].abs();
+            let est = l
+                .relative_illumination(th, wl, 128)
+                .unwrap()
+                .relative_illumination;
+            let film =
+                camsim_lens::pupil::film_relative_illumination(&l, &[(r, wl)], 256).unwrap()[0];
+            eprintln!(
+                "{frac} of the half-diagonal (paraxial {hp:.2} mm, {th:.2}°), {wl} nm: film radius {r:.3} mm; entrance-pupil estimate at the primary {old:.5}, at {wl} nm {est:.5}; film-side {film:.5}: change {:+.2} %",
+                100.0 * (film / old - 1.0)
+            );
+            let change = film / old - 1.0;
+            // the entrance-pupil estimate's own change with wavelength at 550 and 650 nm
+            let est_change = est / old - 1.0;
+            match j {
+                0 => assert!(change.abs() < 0.01, "450 nm: {change}"),
+                1 => assert!(
+                    change > 0.005 && est_change.abs() < 0.003,
+                    "550 nm: {change} {est_change}"
+                ),
+                _ => assert!(
+                    change > 0.01 && est_change.abs() < 0.003,
+                    "650 nm: {change} {est_change}"
+                ),
+            }
+            ep.push(est);
+            film_v.push(film);
+        }
+        let film = film_v;
+        let (spread_ep, spread_film) = (ep[2] / ep[0] - 1.0, film[2] / film[0] - 1.0);
+        eprintln!(
+            "  650 / 450 nm − 1: entrance-pupil estimate {:+.2} %, film-side {:+.2} %",
+            100.0 * spread_ep,
+            100.0 * spread_film
+        );
+        assert!(spread_film > 1.5 * spread_ep.abs(), "{ep:?} {film:?}");
+    }
+    // cost of LensBlur's dense table (41 fields × 7 wavelengths): film-side at 128² against
+    // the entrance-pupil estimate at the primary wavelength on 64² (the old table), interleaved
+    let wl7: Vec<f64> = (0..7).map(|i| 400.0 + 50.0 * i as f64).collect();
+    let ths: Vec<f64> = (0..41)
+        .map(|k| {
+            (1.1 * half_diag * k as f64 / 40.0 / per_tan)
+                .atan()
+                .to_degrees()
+        })
+        .collect();
+    let pts: Vec<(f64, f64)> = ths
+        .iter()
+        .flat_map(|th| {
+            let r = per_tan * th.to_radians().tan();
+            wl7.iter().map(move |w| (r, *w))
+        })
+        .collect();
+    for rep in 0..2 {
+        let t = std::time::Instant::now();
+        let _ = camsim_lens::pupil::film_relative_illumination(&l, &pts, 128).unwrap();
+        let t_new = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        for th in &ths {
+            let _ = l.relative_illumination(*th, prim, 64).unwrap();
+        }
+        let t_old = t.elapsed().as_secs_f64();
+        eprintln!("run {rep}: film-side 41 × 7 points {t_new:.3} s, entrance-pupil 41 fields {t_old:.3} s ({} threads)", rayon::current_num_threads());
+    }
 }
