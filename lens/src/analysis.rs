@@ -16,7 +16,8 @@
 //!   the paraxial scaling ν_cut = 1/(λ N_w) (a shift of one pupil diameter = ν_cut).
 //! * relative illumination: fraction of a fixed entrance-pupil grid transmitted when rays are
 //!   clipped at the semi-diameters (mechanical vignetting) × cos⁴ of the real image-space
-//!   chief-ray angle (natural fall-off, Smith §9.2); both factors are reported separately.
+//!   chief-ray angle (natural fall-off, Smith §9.2), at a given wavelength (refraction, hence
+//!   vignetting, changes with it); both factors are reported separately.
 use crate::error::LensError;
 use crate::paraxial::FirstOrder;
 use crate::prescription::LensPrescription;
@@ -312,23 +313,26 @@ impl LensPrescription {
         })
     }
 
-    /// Relative illumination at `field_deg` relative to the axis (see module docs), sampled with
-    /// the `grid_n`² pupil grid at the primary wavelength.
+    /// Relative illumination at `field_deg` relative to the axis at `wavelength_nm` (see module
+    /// docs), sampled with the `grid_n`² grid on the paraxial entrance pupil at that wavelength,
+    /// the chief ray aimed at the stop centre at that wavelength. (The film-side integral of
+    /// [`crate::pupil::film_relative_illumination`] adds the pupil's aberrations.)
     pub fn relative_illumination(
         &self,
         field_deg: f64,
+        wavelength_nm: f64,
         grid_n: usize,
     ) -> Result<RelativeIllumination, LensError> {
         let grid = pupil_grid(grid_n);
         let count = |f: f64| -> Result<(usize, f64), LensError> {
             let fan = self.ray_fan(
                 f,
-                self.primary_nm,
-                self.primary_nm,
+                wavelength_nm,
+                wavelength_nm,
                 &grid,
                 Clipping::SemiDiameters,
             )?;
-            let chief = self.aimed_chief_ray(f, self.primary_nm)?.chief;
+            let chief = self.aimed_chief_ray(f, wavelength_nm)?.chief;
             Ok((fan.rays.iter().flatten().count(), chief.direction[2]))
         };
         let (n0, _) = count(0.0)?;

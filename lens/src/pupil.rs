@@ -287,33 +287,67 @@ impl SensorSideLens {
     }
 
     /// Film irradiance per unit scene radiance (sr) at the centre of the film, at
-    /// `wavelength_nm`, for a scene of uniform radiance in every direction the lens sees:
+    /// `wavelength_nm`: [`SensorSideLens::irradiance_per_radiance_sr`] at film radius 0 (the
+    /// real lens's camera-equation factor). For an aplanatic lens whose film lies at the
+    /// paraxial image it is the paraxial camera equation π/(4N_w²) (paper Eq. 1); a real lens
+    /// departs from it by its pupil's spherical aberration, the pupil's change with wavelength,
+    /// and a film moved to the best focus.
+    pub fn axial_irradiance_per_radiance_sr(&self, wavelength_nm: f64, grid: usize) -> f64 {
+        self.irradiance_per_radiance_sr(0.0, wavelength_nm, grid)
+    }
+
+    /// Film irradiance per unit scene radiance (sr) at the film point at radius
+    /// `film_radius_mm` from the axis, at `wavelength_nm`, for a scene of uniform radiance in
+    /// every direction the lens sees:
     ///
     ///   E/L = ∫ cos⁴θ / d² dA
     ///
-    /// over the rear-plane points q through which a ray from the film centre gets through the
+    /// over the rear-plane points q through which a ray from the film point gets through the
     /// lens (θ the ray's angle to the axis, d the film-to-rear-plane distance; radiance is
     /// conserved along the ray, T = 1). This is the integral the real-lens camera's estimator
     /// samples (module docs; pbrt-v4 §5.3.3, `RealisticCamera`'s weight cos⁴θ·A/d²), here by
-    /// the midpoint rule: the bundle's bounds on a 48² grid over the rear surface's clear
-    /// aperture, widened by one cell, then `grid`² points over them. For an aplanatic lens whose
-    /// film lies at the paraxial image it is the paraxial camera equation π/(4N_w²) (paper
-    /// Eq. 1); a real lens departs from it by its pupil's spherical aberration, the pupil's
-    /// change with wavelength, and a film moved to the best focus. 0 when no ray gets through.
-    pub fn axial_irradiance_per_radiance_sr(&self, wavelength_nm: f64, grid: usize) -> f64 {
-        let h = self.surfaces[0]
+    /// the midpoint rule: the bundle's bounds on a coarse grid (`grid` clamped to 16–48 per
+    /// side) over the rear surface's clear aperture (the square doubled while the bundle
+    /// touches its edge), widened by one cell, then `grid`² points over them. Off the axis its
+    /// ratio to the axial value is the lens's relative illumination
+    /// ([`film_relative_illumination`]): vignetting, the cos⁴ fall-off and the pupil's
+    /// aberrations at once. 0 when no ray gets through.
+    pub fn irradiance_per_radiance_sr(
+        &self,
+        film_radius_mm: f64,
+        wavelength_nm: f64,
+        grid: usize,
+    ) -> f64 {
+        let r = film_radius_mm;
+        let mut h = self.surfaces[0]
             .surface
             .semi_diameter_mm
             .unwrap_or(self.rear_plane_mm)
             .max(1e-9);
-        let coarse = 48;
-        let start = PupilBounds {
-            x0_mm: -h,
-            x1_mm: h,
-            y0_mm: -h,
-            y1_mm: h,
-        };
-        let Some(b) = self.scan(0.0, start, coarse, &[wavelength_nm]) else {
+        let coarse = grid.clamp(16, 48);
+        let mut found = None;
+        for _ in 0..4 {
+            let start = PupilBounds {
+                x0_mm: -h,
+                x1_mm: h,
+                y0_mm: -h,
+                y1_mm: h,
+            };
+            found = self.scan(r, start, coarse, &[wavelength_nm]);
+            let cell = 2.0 * h / coarse as f64;
+            match found {
+                Some(b)
+                    if b.x0_mm < -h + cell
+                        || b.x1_mm > h - cell
+                        || b.y0_mm < -h + cell
+                        || b.y1_mm > h - cell =>
+                {
+                    h *= 2.0
+                }
+                _ => break,
+            }
+        }
+        let Some(b) = found else {
             return 0.0;
         };
         let cell = 2.0 * h / coarse as f64;
@@ -337,13 +371,9 @@ impl SensorSideLens {
                 (0..n)
                     .map(|ix| {
                         let q = [b.x0_mm + wx * (ix as f64 + 0.5), y];
-                        let dir = self.direction_to([0.0, 0.0], q);
-                        match self.trace(
-                            [0.0, 0.0, 0.0],
-                            dir,
-                            wavelength_nm,
-                            Clipping::SemiDiameters,
-                        ) {
+                        let dir = self.direction_to([r, 0.0], q);
+                        match self.trace([r, 0.0, 0.0], dir, wavelength_nm, Clipping::SemiDiameters)
+                        {
                             Some(_) => dir[2].powi(4) / d2,
                             None => 0.0,
                         }
@@ -583,4 +613,57 @@ pub fn axial_irradiance_per_radiance_sr(
         .iter()
         .map(|w| side.axial_irradiance_per_radiance_sr(*w, AXIAL_IRRADIANCE_GRID))
         .collect())
+}
+
+/// Relative illumination of `lens` as focused (its image plane is the film; the aperture
+/// stop's clear radius set as by [`axial_irradiance_per_radiance_sr`]) at each film point
+/// `(film radius mm, wavelength nm)` of `points`: [`SensorSideLens::relative_illumination`].
+/// Errors for lenses that cannot be traced from the sensor (mirrors), and when no ray from the
+/// film centre is found to get through at one of the wavelengths (the ratio is undefined;
+/// callers fall back to the entrance-pupil estimate).
+pub fn film_relative_illumination(
+    lens: &LensPrescription,
+    points: &[(f64, f64)],
+    grid: usize,
+) -> Result<Vec<f64>, LensError> {
+    let side = SensorSideLens::new(&lens.with_aperture_stop_clear()?)?;
+    side.relative_illumination(points, grid).ok_or_else(|| {
+        LensError::Prescription(format!(
+            "lens '{}': no ray from the film centre gets through at one of the wavelengths \
+             (film-side relative illumination undefined)",
+            lens.name
+        ))
+    })
+}
+
+impl SensorSideLens {
+    /// Relative illumination at each film point `(film radius mm, wavelength nm)` of `points`:
+    /// the film irradiance of a uniform-radiance scene there over that on the axis at the same
+    /// wavelength, E(r, λ)/E(0, λ), both by [`SensorSideLens::irradiance_per_radiance_sr`]
+    /// with the rear-plane grid `grid` per side (the same quadrature on and off the axis). It
+    /// contains what the entrance-pupil estimate [`LensPrescription::relative_illumination`]
+    /// (vignetting fraction × cos⁴ of the chief ray) leaves out: the pupil's aberrations and
+    /// their change with wavelength, and the cos⁴ of every ray rather than the chief ray's.
+    /// `None` when the axial integral is 0 at one of the wavelengths (no ray found).
+    pub fn relative_illumination(&self, points: &[(f64, f64)], grid: usize) -> Option<Vec<f64>> {
+        let mut wls: Vec<f64> = points.iter().map(|p| p.1).collect();
+        wls.sort_by(|a, b| a.total_cmp(b));
+        wls.dedup();
+        let axial: Vec<f64> = wls
+            .par_iter()
+            .map(|w| self.irradiance_per_radiance_sr(0.0, *w, grid))
+            .collect();
+        if axial.iter().any(|e| !(*e > 0.0)) {
+            return None;
+        }
+        Some(
+            points
+                .par_iter()
+                .map(|&(r, w)| {
+                    self.irradiance_per_radiance_sr(r.abs(), w, grid)
+                        / axial[wls.partition_point(|x| *x < w)]
+                })
+                .collect(),
+        )
+    }
 }

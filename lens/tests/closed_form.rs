@@ -216,7 +216,7 @@ fn vignetting_by_a_front_aperture_is_the_circle_overlap() {
     s3.semi_diameter_mm = Some(big);
     let l = lens(vec![s0, s1, s2, s3], 1, 2.0 * a, None);
     for th in [3.0f64, 6.0, 10.0] {
-        let ri = l.relative_illumination(th, 201).unwrap();
+        let ri = l.relative_illumination(th, l.primary_nm, 201).unwrap();
         let d = 20.0 * th.to_radians().tan();
         let area = 2.0 * a * a * (d / (2.0 * a)).acos() - d / 2.0 * (4.0 * a * a - d * d).sqrt();
         let want = area / (std::f64::consts::PI * a * a);

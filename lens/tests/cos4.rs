@@ -69,7 +69,7 @@ fn relative_illumination_is_cos4_of_the_field_angle() {
     for sd in [None, Some(10.0)] {
         let l = thin_lens(sd);
         for f in FIELDS {
-            let ri = l.relative_illumination(f, 21).unwrap();
+            let ri = l.relative_illumination(f, l.primary_nm, 21).unwrap();
             let c4 = f.to_radians().cos().powi(4);
             assert!(
                 (ri.vignetting_factor - 1.0).abs() < 1e-12,
@@ -108,7 +108,7 @@ fn radiometric_irradiance_from_the_real_image_mapping_is_cos4() {
             (e_rel / c4 - 1.0).abs() < 0.01,
             "field {f}: radiometric {e_rel} vs cos⁴ {c4}"
         );
-        let ri = l.relative_illumination(*f, 21).unwrap();
+        let ri = l.relative_illumination(*f, w, 21).unwrap();
         assert!(
             (ri.relative_illumination / e_rel - 1.0).abs() < 0.01,
             "field {f}: analysis {} vs radiometric {e_rel}",

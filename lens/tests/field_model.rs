@@ -37,8 +37,10 @@ fn on_axis_distortion_is_zero_and_relative_illumination_is_one() {
         assert!(m.real_height_mm[0][j].abs() < 1e-12);
         assert_eq!(m.distortion_pct(0, j), 0.0);
     }
-    assert!((m.relative_illumination[0] - 1.0).abs() < 1e-12);
-    assert!((m.relative_illumination_at(0.0) - 1.0).abs() < 1e-12);
+    for (j, w) in m.wavelengths_nm.iter().enumerate() {
+        assert!((m.relative_illumination[0][j] - 1.0).abs() < 1e-12);
+        assert!((m.relative_illumination_at(0.0, *w) - 1.0).abs() < 1e-12);
+    }
 }
 
 #[test]
@@ -176,7 +178,8 @@ fn save_load_round_trip_wave_model() {
     for (a, b) in bt
         .relative_illumination
         .iter()
-        .zip(&mt.relative_illumination)
+        .flatten()
+        .zip(mt.relative_illumination.iter().flatten())
     {
         assert!(close(*a, *b));
     }
@@ -268,13 +271,14 @@ fn interpolated_table_at_an_intermediate_distance_matches_a_direct_computation()
         assert!((interp.magnification - direct.magnification).abs() < 1e-6);
         for k in 0..3 {
             assert!((interp.field_angles_deg[k] - direct.field_angles_deg[k]).abs() < 1e-6);
-            assert!(
-                (interp.relative_illumination[k] - direct.relative_illumination[k]).abs() < 2e-3,
-                "{d} field {k}: RI {} vs {}",
-                interp.relative_illumination[k],
-                direct.relative_illumination[k]
-            );
             for j in 0..direct.wavelengths_nm.len() {
+                assert!(
+                    (interp.relative_illumination[k][j] - direct.relative_illumination[k][j]).abs()
+                        < 2e-3,
+                    "{d} field {k} wl {j}: RI {} vs {}",
+                    interp.relative_illumination[k][j],
+                    direct.relative_illumination[k][j]
+                );
                 assert!(
                     (interp.real_height_mm[k][j] - direct.real_height_mm[k][j]).abs() < 1e-5,
                     "{d} field {k} wl {j}: height {} vs {}",
@@ -315,6 +319,10 @@ fn version_1_files_are_read_and_bad_versions_named() {
         .unwrap()
         .first_order(l.primary_nm)
         .unwrap();
+    // version 1 stored one relative illumination per field
+    let ri_v1: Vec<f64> = (0..t.paraxial_height_mm.len())
+        .map(|k| t.relative_illumination_at_field(k, l.primary_nm))
+        .collect();
     let v1 = serde_json::json!({
         "format": "camsim-lens field model", "version": 1,
         "lens_name": l.name, "psf_kind": "geometric",
@@ -322,7 +330,7 @@ fn version_1_files_are_read_and_bad_versions_named() {
         "f_number": fo.f_number, "primary_nm": l.primary_nm,
         "wavelengths_nm": t.wavelengths_nm, "field_angles_deg": t.field_angles_deg,
         "paraxial_height_mm": t.paraxial_height_mm, "real_height_mm": t.real_height_mm,
-        "relative_illumination": t.relative_illumination, "psf_n": t.psf_n,
+        "relative_illumination": ri_v1, "psf_n": t.psf_n,
         "psf_pitch_um": t.psf_pitch_um, "psf": t.psf,
     });
     let dir = std::env::temp_dir();
@@ -350,6 +358,10 @@ fn version_1_files_are_read_and_bad_versions_named() {
         &t.real_height_mm.concat()
     ));
     assert!(close(&b.field_angles_deg, &t.field_angles_deg));
+    // ... used at every wavelength
+    for (k, row) in b.relative_illumination.iter().enumerate() {
+        assert!(row.len() == t.wavelengths_nm.len() && close(row, &vec![ri_v1[k]; row.len()]));
+    }
     assert!(
         m.at_distance(Some(1000.0)) == *b,
         "a single table is used at any distance"
@@ -382,4 +394,144 @@ fn version_1_files_are_read_and_bad_versions_named() {
         assert_eq!(e.lines().count(), 1, "{e}");
     }
     std::fs::remove_file(&path).ok();
+}
+
+/// An independent film-side integral: E/L = Σ cos⁴θ/d² ΔA over a fixed `n`² grid of the square
+/// ±`half_mm` on the rear-vertex plane (no bundle bounds), for a film point at radius `r_mm`.
+fn brute_force_irradiance_sr(
+    side: &camsim_lens::pupil::SensorSideLens,
+    r_mm: f64,
+    wavelength_nm: f64,
+    half_mm: f64,
+    n: usize,
+) -> f64 {
+    let d = side.rear_plane_mm();
+    let cell = 2.0 * half_mm / n as f64;
+    let mut s = 0.0;
+    for iy in 0..n {
+        for ix in 0..n {
+            let q = [
+                -half_mm + cell * (ix as f64 + 0.5),
+                -half_mm + cell * (iy as f64 + 0.5),
+            ];
+            if side
+                .trace_through([r_mm, 0.0], q, wavelength_nm, Clipping::SemiDiameters)
+                .is_some()
+            {
+                let v = [q[0] - r_mm, q[1], d];
+                let c = d / (v[0] * v[0] + v[1] * v[1] + d * d).sqrt();
+                s += c.powi(4);
+            }
+        }
+    }
+    s * cell * cell / (d * d)
+}
+
+/// Relative illumination by wavelength (issue 18): the double Gauss 50 mm at f/2 focused on
+/// 1.5 m vignettes differently by wavelength 12–14 mm off the axis (0.6–0.7 of a 19.6 mm
+/// half-diagonal). The field model's tabulated relative illumination at 450, 550 and 650 nm
+/// (128² rear-plane grid) equals, within 0.3 %, an independent film-side integral at the same
+/// wavelength (a fixed 800² grid over ±20 mm of the rear-vertex plane, no bundle bounds; the
+/// two agree to 0.2 % at 128², 0.04 % at 256², 0.3–0.4 % at 64²) where the field's real
+/// chief ray lands at that wavelength, over the same integral on the axis; 450 and 650 nm
+/// differ there by more than 4× that tolerance, so a table that ignored the wavelength fails.
+/// Saved and loaded, the per-wavelength table comes back; a file without its key (written
+/// before it) uses the per-field value at every wavelength.
+#[test]
+fn relative_illumination_is_tabulated_by_wavelength_as_traced_from_the_film() {
+    let l = lens();
+    let focused = l.focus_at(Some(1500.0)).unwrap();
+    let wls = vec![450.0, 550.0, 650.0];
+    let m = FieldModel::compute(
+        &l,
+        &FieldModelOptions {
+            paraxial_heights_mm: Some(vec![0.0, 11.8, 12.8, 13.8]),
+            wavelengths_nm: Some(wls.clone()),
+            kind: PsfKind::Geometric,
+            psf_n: 3,
+            psf_pitch_um: 10.0,
+            pupil_n: 8,
+            pad: 1,
+            ri_grid_n: 128,
+            focus: camsim_lens::field_model::Focus::At(Some(1500.0)),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let t = &m.tables[0];
+    let side =
+        camsim_lens::pupil::SensorSideLens::new(&focused.with_aperture_stop_clear().unwrap())
+            .unwrap();
+    let e0: Vec<f64> = wls
+        .iter()
+        .map(|w| brute_force_irradiance_sr(&side, 0.0, *w, 20.0, 800))
+        .collect();
+    let tol = 3e-3;
+    let mut worst: f64 = 0.0;
+    for k in 1..4 {
+        let mut direct = Vec::new();
+        for (j, w) in wls.iter().enumerate() {
+            let r = t.real_height_mm[k][j].abs();
+            let want = brute_force_irradiance_sr(&side, r, *w, 20.0, 800) / e0[j];
+            let got = t.relative_illumination[k][j];
+            eprintln!(
+                "paraxial {:.1} mm, {w} nm: film radius {r:.3} mm, table {got:.5}, brute force {want:.5} ({:+.3} %)",
+                t.paraxial_height_mm[k],
+                100.0 * (got / want - 1.0)
+            );
+            worst = worst.max((got / want - 1.0).abs());
+            assert!(
+                (got / want - 1.0).abs() < tol,
+                "{w} nm at {} mm: {got} vs {want}",
+                t.paraxial_height_mm[k]
+            );
+            assert_eq!(t.relative_illumination_at_field(k, *w), got);
+            direct.push(want);
+        }
+        assert!(
+            direct[2] / direct[0] - 1.0 > 4.0 * tol,
+            "450 and 650 nm do not differ at {} mm: {direct:?}",
+            t.paraxial_height_mm[k]
+        );
+    }
+    eprintln!("worst table / brute force − 1: {:.3} %", 100.0 * worst);
+    // between tabulated wavelengths: linear
+    let mid = t.relative_illumination_at(12.8, 500.0);
+    let want = 0.5 * (t.relative_illumination[2][0] + t.relative_illumination[2][1]);
+    assert!((mid - want).abs() < 1e-12, "{mid} vs {want}");
+    // save / load, and a file without the per-wavelength key
+    let path = std::env::temp_dir().join(format!("camsim_fm_riwl_{}.json", std::process::id()));
+    m.save(&path).unwrap();
+    let back = FieldModel::load(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-15 * a.abs().max(b.abs()).max(1e-300);
+    let bt = &back.tables[0];
+    assert!(bt
+        .relative_illumination
+        .iter()
+        .flatten()
+        .zip(t.relative_illumination.iter().flatten())
+        .all(|(a, b)| close(*a, *b)));
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let d0 = &mut v["distances"][0];
+    let per_field: Vec<f64> = serde_json::from_value(d0["relative_illumination"].clone()).unwrap();
+    assert_eq!(per_field.len(), 4);
+    for (k, p) in per_field.iter().enumerate() {
+        // the per-field key holds the primary wavelength's value
+        let want = t.relative_illumination_at_field(k, l.primary_nm);
+        assert!(close(*p, want), "{p} vs {want}");
+    }
+    d0.as_object_mut()
+        .unwrap()
+        .remove("relative_illumination_by_wavelength")
+        .unwrap();
+    std::fs::write(&path, v.to_string()).unwrap();
+    let old = FieldModel::load(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    for (row, p) in old.tables[0].relative_illumination.iter().zip(&per_field) {
+        assert!(
+            row.len() == 3 && row.iter().all(|x| close(*x, *p)),
+            "{row:?} vs {p}"
+        );
+    }
 }

@@ -441,7 +441,7 @@ fn rays_that_miss_a_surface_are_lost_not_panics() {
             if let Err(e) = l.spot_diagram(f, w, 9, 0.0, Clipping::None) {
                 check_msg("spot_diagram", &e);
             }
-            if let Err(e) = l.relative_illumination(f, 9) {
+            if let Err(e) = l.relative_illumination(f, w, 9) {
                 check_msg("relative_illumination", &e);
             }
             if let Err(e) = l.distortion(f) {

@@ -14,10 +14,16 @@
 //!    colour. As in ISET no Jacobian is applied (the irradiance is resampled, not redistributed).
 //!    The simulated image is not inverted (as in ISET): a scene point at azimuth φ lands at
 //!    azimuth φ.
-//! 2. **Relative illumination.** The lens's own relative illumination (vignetting × cos⁴ of the
-//!    real image-space chief-ray angle, traced) at r_p **replaces** `OpticsModel::
-//!    relative_illumination` (which is ignored for this blur kind: the traced value already
-//!    contains the cos⁴ fall-off). Interpolated linearly in r_p², held constant beyond the table.
+//! 2. **Relative illumination.** The lens's own relative illumination at r_p and the band's
+//!    wavelength **replaces** `OpticsModel::relative_illumination` (which is ignored for this
+//!    blur kind: the traced value already contains the cos⁴ fall-off): the film irradiance of a
+//!    uniform-radiance scene where the real chief ray of r_p lands over the axial one, traced
+//!    from the film through the lens with its physical stop at that wavelength
+//!    (`camsim_lens::pupil::film_relative_illumination`: vignetting, cos⁴ and the pupil's
+//!    aberrations, which change with wavelength; the entrance-pupil estimate
+//!    `LensPrescription::relative_illumination` for a lens with mirrors). Interpolated
+//!    linearly in r_p² and in wavelength between the tabulated ones (clamped at the ends), held
+//!    constant beyond the table.
 //! 3. **Camera equation.** The film irradiance per unit radiance on the axis traced from the
 //!    film through the lens with its physical stop, E/L = ∫ cos⁴θ/d² dA over the rear-plane
 //!    points whose rays get through, at the band's wavelength
@@ -76,6 +82,10 @@ use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
+
+/// Grid per side of the relative-illumination integrals of [`LensBlur::from_prescription`]
+/// (`FieldModelOptions::ri_grid_n`).
+const RI_GRID_N: usize = 128;
 
 /// How [`LensBlur::from_prescription`] builds the field model.
 #[derive(Debug, Clone, PartialEq)]
@@ -164,8 +174,8 @@ pub struct RadialTable {
     pub wavelengths_nm: Vec<f64>,
     /// Real chief-ray heights `[field][wavelength]` (mm, signed as traced).
     pub real_height_mm: Vec<Vec<f64>>,
-    /// Relative illumination per field.
-    pub relative_illumination: Vec<f64>,
+    /// Relative illumination `[field][wavelength]` (1 on axis; as the field model's).
+    pub relative_illumination: Vec<Vec<f64>>,
 }
 
 impl std::fmt::Debug for LensBlur {
@@ -354,7 +364,7 @@ impl LensBlur {
             psf_pitch_um: pitch_um,
             pupil_n,
             pad,
-            ri_grid_n: 64,
+            ri_grid_n: RI_GRID_N,
             focus: Focus::Focused(Box::new(focus.clone())),
             object_distances_mm: vec![object_mm],
         };
@@ -363,7 +373,7 @@ impl LensBlur {
         // Dense distortion / illumination table (chief rays and pupil grids only: cheap).
         let nd = opts.n_dense_fields.max(opts.n_fields);
         let wls = model.wavelengths_nm.clone();
-        let rows: Vec<(f64, Vec<f64>, f64)> = (0..nd)
+        let rows: Vec<(f64, Vec<f64>)> = (0..nd)
             .into_par_iter()
             .map(|k| {
                 let h = hmax * k as f64 / (nd - 1) as f64;
@@ -381,18 +391,36 @@ impl LensBlur {
                         })?;
                     real.push(chief.image_mm[1]);
                 }
-                let ri = focused
-                    .relative_illumination(th, 64)
-                    .map_err(ctx)?
-                    .relative_illumination;
-                Ok((h, real, ri))
+                Ok((h, real))
             })
             .collect::<Result<_, OpticsError>>()?;
+        // Relative illumination where each real chief ray lands, per wavelength (as the field
+        // model's: film-side, the entrance-pupil estimate for a lens with mirrors).
+        let nwl = wls.len();
+        let points: Vec<(f64, f64)> = rows
+            .iter()
+            .flat_map(|(_, real)| real.iter().zip(&wls).map(|(r, w)| (r.abs(), *w)))
+            .collect();
+        let ri: Vec<f64> =
+            match camsim_lens::pupil::film_relative_illumination(&focused, &points, RI_GRID_N) {
+                Ok(v) => v,
+                Err(_) => (0..points.len())
+                    .into_par_iter()
+                    .map(|i| {
+                        let (k, w) = (i / nwl, wls[i % nwl]);
+                        let th = (rows[k].0 / per_tan).atan().to_degrees();
+                        focused
+                            .relative_illumination(th, w, RI_GRID_N)
+                            .map(|r| r.relative_illumination)
+                            .map_err(ctx)
+                    })
+                    .collect::<Result<_, OpticsError>>()?,
+            };
         let radial = RadialTable {
             paraxial_height_mm: rows.iter().map(|r| r.0).collect(),
             wavelengths_nm: wls,
             real_height_mm: rows.iter().map(|r| r.1.clone()).collect(),
-            relative_illumination: rows.iter().map(|r| r.2).collect(),
+            relative_illumination: ri.chunks(nwl).map(|c| c.to_vec()).collect(),
         };
         Ok(LensBlur {
             model: Arc::new(model),
@@ -433,8 +461,9 @@ impl LensBlur {
     }
 }
 
-/// Radial tables of one wavelength: q = real/paraxial and relative illumination, both
-/// piecewise linear in the paraxial height squared.
+/// Radial tables of one wavelength: q = real/paraxial and relative illumination (both
+/// interpolated linearly in wavelength from the tables), both piecewise linear in the paraxial
+/// height squared.
 struct Radial {
     u: Vec<f64>,
     q: Vec<f64>,
@@ -474,11 +503,12 @@ impl Radial {
                     .iter()
                     .map(|row| interp(wl, row, wavelength_nm, false))
                     .collect();
-                (
-                    t.paraxial_height_mm.clone(),
-                    real,
-                    t.relative_illumination.clone(),
-                )
+                let ri = t
+                    .relative_illumination
+                    .iter()
+                    .map(|row| interp(wl, row, wavelength_nm, false))
+                    .collect();
+                (t.paraxial_height_mm.clone(), real, ri)
             }
             None => (
                 m.paraxial_height_mm.clone(),
@@ -486,7 +516,9 @@ impl Radial {
                     .iter()
                     .map(|&x| m.real_height_mm_at(x, wavelength_nm))
                     .collect::<Vec<_>>(),
-                m.relative_illumination.clone(),
+                (0..m.paraxial_height_mm.len())
+                    .map(|k| m.relative_illumination_at_field(k, wavelength_nm))
+                    .collect(),
             ),
         };
         let nf = h.len();

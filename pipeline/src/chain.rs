@@ -168,8 +168,11 @@ pub fn shot_channel_irradiance_of_scene(
 
 /// Depth-layered compositing slabs of the depth-aware optics (uniform in 1/z).
 pub const DEPTH_LAYERS: usize = 16;
-/// Field tiles per side of the real-lens depth-aware optics (PSF of each tile's centre).
-pub const DEPTH_FIELD_TILES: usize = 3;
+/// Field nodes of the real-lens depth-aware optics: placed where the PSF changes with field
+/// height ([`camsim_render::depth_optics::FieldNodes::Adaptive`], its defaults), each pixel's
+/// PSF interpolated between the four around it.
+pub const DEPTH_FIELD_NODES: camsim_render::depth_optics::FieldNodes =
+    camsim_render::depth_optics::ADAPTIVE_FIELD_NODES;
 
 /// What the optics stage did with a scene's depth.
 #[derive(Debug, Clone)]
@@ -181,8 +184,9 @@ pub struct DepthOptics {
     pub focus_distance_m: Option<f64>,
     /// Compositing slabs.
     pub layers: usize,
-    /// Field tiles per side (1: one PSF per depth for the whole frame).
-    pub field_tiles: usize,
+    /// PSF nodes in the field: [columns, rows] ([1, 1]: one PSF per depth for the whole
+    /// frame, as for the thin lens).
+    pub field_nodes: [usize; 2],
     /// PSF RMS radius (µm on the sensor) applied at every scene sample.
     pub blur_rms_radius_um: Plane,
 }
@@ -260,7 +264,7 @@ pub fn camera_irradiance_and_blur(
             let f = cam.thin_lens_focus_m;
             let t = thin_lens_for_camera(optics.focal_length_m, optics.f_number, f, dx)
                 .map_err(|e| optics_err(&e))?;
-            (DepthKernels::Thin(t), scene.radiance.clone(), f, 1)
+            (DepthKernels::Thin(t), scene.radiance.clone(), f, [1, 1])
         }
         Some(focus) => {
             let camsim_optics::Blur::Lens(lb) = &mut optics.blur else {
@@ -275,18 +279,19 @@ pub fn camera_irradiance_and_blur(
                     height: h,
                     wavelengths_nm: lb.model.wavelengths_nm.clone(),
                     pupil_n: 32,
-                    tiles: DEPTH_FIELD_TILES,
+                    field_nodes: DEPTH_FIELD_NODES,
                 },
                 &camsim_render::depth_path::slab_inverse_depths(&depth.data, DEPTH_LAYERS),
             )
             .map_err(|e| optics_err(&e))?;
             // the PSFs are applied here; the lens model keeps distortion and illumination
             lb.apply_psf = false;
+            let nodes = [lk.node_x_px.len(), lk.node_y_px.len()];
             (
                 DepthKernels::Lens(lk),
                 bands,
                 focus.focus_distance_mm.map(|d| d * 1e-3),
-                DEPTH_FIELD_TILES,
+                nodes,
             )
         }
     };
@@ -319,7 +324,7 @@ pub fn camera_irradiance_and_blur(
             },
             focus_distance_m,
             layers: DEPTH_LAYERS,
-            field_tiles: tiles,
+            field_nodes: tiles,
             blur_rms_radius_um: Plane {
                 rows: h,
                 cols: w,

@@ -741,7 +741,7 @@ fn run_into(r: &Run, st: &Path, progress: bool) -> Result<(Summary, Vec<PathBuf>
                 "focus_distance_m": d.focus_distance_m,
                 "focus_distance_from": if d.kernels == "lens" { "first vertex" } else { "lens (thin)" },
                 "layers": d.layers,
-                "field_tiles": d.field_tiles,
+                "field_nodes": d.field_nodes,
                 "depth_map": {"file": "depth.exr", "channel": "Z", "units": "m", "meaning": "planar depth from the render camera, sample at each pixel centre (inf = nothing hit)",
                               "min_m": if finite.is_empty() { Value::Null } else { json!(zmin) },
                               "max_m": if finite.is_empty() { Value::Null } else { json!(zmax) }},

@@ -484,9 +484,10 @@ impl LensFieldModel {
     fn real_height_mm_at(&self, height_mm: f64, wavelength_nm: f64) -> f64 {
         self.table.real_height_mm_at(height_mm, wavelength_nm)
     }
-    /// Relative illumination (1 on axis) at paraxial height `height_mm`.
-    fn relative_illumination_at(&self, height_mm: f64) -> f64 {
-        self.table.relative_illumination_at(height_mm)
+    /// Relative illumination (1 on axis) at paraxial height `height_mm` and `wavelength_nm`.
+    fn relative_illumination_at(&self, height_mm: f64, wavelength_nm: f64) -> f64 {
+        self.table
+            .relative_illumination_at(height_mm, wavelength_nm)
     }
 }
 

@@ -21,8 +21,8 @@ use std::mem::MaybeUninit;
 pub(crate) const LEAF: u32 = 1 << 31;
 /// Unused child slot.
 pub(crate) const EMPTY: u32 = u32::MAX;
-/// Barycentric tolerance (closes cracks along shared edges; as `TriGeom::intersect`).
-const BARY_EPS: f32 = 1e-6;
+/// Barycentric tolerance (closes cracks along shared edges; [`crate::scene::BARY_EPS`]).
+use crate::scene::BARY_EPS;
 /// Traversal stack entries kept on the call stack: enough for trees up to 85 levels deep
 /// (each level stacks ≤ 3 children); a deeper tree (a pathological obvhs build) traverses with
 /// a heap stack sized from its depth ([`Bvh4::stack_len`]).

@@ -16,8 +16,8 @@
 use glam::{Vec2, Vec3};
 use std::arch::x86_64::*;
 
-/// Barycentric tolerance (as the 4-wide packs and the scalar test).
-const BARY_EPS: f32 = 1e-6;
+/// Barycentric tolerance (closes cracks along shared edges; [`crate::scene::BARY_EPS`]).
+use crate::scene::BARY_EPS;
 
 /// 8 triangles: rows of the world → (b₁, b₂, w) maps, one lane per triangle.
 #[repr(C, align(32))]

@@ -11,6 +11,19 @@ use crate::spectral::{SigmoidPoly, TabulatedSpectrum, N_WL};
 use glam::{Mat4, Vec2, Vec3, Vec3A, Vec4};
 use obvhs::ray::Ray;
 
+/// Barycentric tolerance of every ray–triangle test (this one, [`crate::bvh4`]'s packs and the
+/// AVX2 flat case): a ray exactly on an edge shared by two triangles must hit one of them.
+/// In f32 the barycentric u = (s·p)/det, s = o − v₀, p = d × e₂, carries a rounding error of
+/// about 4ε·|s|·|p|/|det| ≈ 4ε·L/(a·sin α) (ε = 2⁻²⁴, L the distance from the ray origin to
+/// the triangle, a its edge length, α the angle between its edges, face-on): 4·10⁻⁵ for the
+/// 4-px checker cells of the depth cross-check (4.2 cm at 5 m), which the former 10⁻⁶ did not
+/// cover — 353 of the 98 304 pixel-centre rays of its `steps` scene (357 and 250 of the
+/// other two), which lie exactly on the cells' diagonals, missed both triangles
+/// (render/tests/depth_crosscheck.rs, `pinhole_depth_is_the_card_depth_at_every_pixel`). 10⁻⁴ closes cracks up to
+/// L/(a·sin α) ≈ 400 and grows each triangle by 10⁻⁴ of its size. Not watertight beyond that
+/// ratio (a watertight test: Woop, Benthin & Wald, JCGT 2(1), 2013).
+pub(crate) const BARY_EPS: f32 = 1e-4;
+
 /// Intersection data of one triangle (Möller & Trumbore 1997): vertex 0 and two edges.
 #[derive(Debug, Clone, Copy)]
 pub struct TriGeom {
@@ -33,9 +46,9 @@ impl TriGeom {
         }
         let inv = 1.0 / det;
         let s = ray.origin - self.v0;
-        // a small tolerance on the barycentrics closes cracks along shared edges (a ray
-        // exactly on an edge may otherwise miss both triangles in floating point)
-        const EPS: f32 = 1e-6;
+        // the barycentric tolerance closes cracks along shared edges (a ray exactly on an
+        // edge may otherwise miss both triangles in floating point)
+        const EPS: f32 = BARY_EPS;
         let u = s.dot(p) * inv;
         if !(-EPS..=1.0 + EPS).contains(&u) {
             return f32::INFINITY;

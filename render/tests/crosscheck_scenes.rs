@@ -6,7 +6,7 @@ use camsim_render::gltf_load::load_gltf;
 use camsim_render::gltf_write::{flat_spectrum, quad, GltfBuilder, MeshData};
 use camsim_render::scene::Scene;
 use camsim_render::{Bands, RenderSettings};
-use serde_json::{json, Value};
+use serde_json::json;
 
 /// The card depths (m).
 pub const DEPTHS_M: [f64; 3] = [0.5, 1.5, 5.0];
@@ -54,31 +54,60 @@ pub fn k_px(h: usize, yfov_deg: f64) -> f64 {
     camsim_render::depth_optics::pinhole_pixels_per_tan(yfov_deg.to_radians(), h)
 }
 
-/// Emitters: spectrally distinct so that every band differs.
+/// The emitters (material index = position): name and spectral radiance (W m⁻² sr⁻¹ nm⁻¹)
+/// at 360 and 830 nm, linear in between — spectrally distinct so that every band differs.
+pub const EMITTERS: [(&str, [f64; 2]); 6] = [
+    ("warm", [0.2, 2.0]),
+    ("cool", [2.0, 0.3]),
+    ("grey", [1.0, 1.0]),
+    ("dark", [0.15, 0.15]),
+    ("bright", [3.0, 3.0]),
+    ("bright_cool", [4.0, 1.5]),
+];
+
+/// Emitters: [`EMITTERS`] as glTF materials.
 pub fn materials(b: &mut GltfBuilder) {
-    let emit = |b: &mut GltfBuilder, name: &str, s: Value| {
+    for (name, v) in EMITTERS {
         b.material(json!({"name": name, "doubleSided": true,
             "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
-            "extras": {"spectral_reflectance": flat_spectrum(0.0), "spectral_emission": s}}))
-    };
-    emit(
-        b,
-        "warm",
-        json!({"wavelength_nm": [360.0, 830.0], "values": [0.2, 2.0]}),
-    ); // 0
-    emit(
-        b,
-        "cool",
-        json!({"wavelength_nm": [360.0, 830.0], "values": [2.0, 0.3]}),
-    ); // 1
-    emit(b, "grey", flat_spectrum(1.0)); // 2
-    emit(b, "dark", flat_spectrum(0.15)); // 3
-    emit(b, "bright", flat_spectrum(3.0)); // 4
-    emit(
-        b,
-        "bright_cool",
-        json!({"wavelength_nm": [360.0, 830.0], "values": [4.0, 1.5]}),
-    ); // 5
+            "extras": {"spectral_reflectance": flat_spectrum(0.0),
+                "spectral_emission": {"wavelength_nm": [360.0, 830.0], "values": v}}}));
+    }
+}
+
+/// Band radiance of emitter `material` ([`EMITTERS`]) over [`lo_nm`, `hi_nm`] (inside
+/// 360–830 nm): the mean of a linear spectrum over the band is its value at the band centre.
+/// This is what the renderer's band planes estimate (uniform wavelength density, per-band
+/// means; `Bands::sample_wavelengths`).
+pub fn band_radiance(material: usize, lo_nm: f64, hi_nm: f64) -> f64 {
+    let [a, b] = EMITTERS[material].1;
+    let t = (0.5 * (lo_nm + hi_nm) - 360.0) / (830.0 - 360.0);
+    a + (b - a) * t
+}
+
+/// The band radiance a pinhole sees at pixel (`x`, `y`) of `spec`: the nearest card covering
+/// it; for a checker the mean of its two emitters, which is what a profile averaged along an
+/// edge over whole checker periods sees (also through a lens: shifting the pixel by one px
+/// along the edge shifts every ray's hit on a fronto-parallel card by one px of its pinhole
+/// projection). None where no card covers the pixel.
+pub fn visible_band_radiance(
+    spec: &SceneSpec,
+    x: i32,
+    y: i32,
+    lo_nm: f64,
+    hi_nm: f64,
+) -> Option<f64> {
+    let card = spec
+        .cards
+        .iter()
+        .filter(|c| c.x0 <= x && x < c.x1 && c.y0 <= y && y < c.y1)
+        .min_by(|a, b| a.z_m.total_cmp(&b.z_m))?;
+    Some(match card.fill {
+        Fill::Uniform(m) => band_radiance(m, lo_nm, hi_nm),
+        Fill::Checker(m0, m1) => {
+            0.5 * (band_radiance(m0, lo_nm, hi_nm) + band_radiance(m1, lo_nm, hi_nm))
+        }
+    })
 }
 
 /// The glTF of `spec` for a pinhole camera of vertical field `yfov_deg` at the origin on a
@@ -287,6 +316,32 @@ pub fn disc_esf(u: f64, c: f64) -> f64 {
     }
     let t = (u / c).clamp(-1.0, 1.0);
     0.5 + (t * (1.0 - t * t).sqrt() + t.asin()) / std::f64::consts::PI
+}
+
+/// [`disc_esf`] averaged over u in [`u0`, `u0` + 1] (a pixel, film coordinates uniform over
+/// it), exactly: A(u0 + 1) − A(u0) with the antiderivative A(u) = ∫₀ᵘ disc_esf, which for
+/// |u| ≤ c is u/2 + (c/π)(t·asin t + √(1−t²) − (1−t²)^{3/2}/3 − 2/3), t = u/c (from
+/// ∫asin t dt = t·asin t + √(1−t²) and ∫t√(1−t²) dt = −(1−t²)^{3/2}/3), −2c/(3π) below −c
+/// and u − 2c/(3π) above c; for c = 0, A(u) = max(u, 0).
+pub fn disc_esf_pixel(u0: f64, c: f64) -> f64 {
+    let a = |u: f64| -> f64 {
+        if c <= 1e-12 {
+            return u.max(0.0);
+        }
+        let k = 2.0 * c / (3.0 * std::f64::consts::PI);
+        if u <= -c {
+            -k
+        } else if u >= c {
+            u - k
+        } else {
+            let t = u / c;
+            let r = (1.0 - t * t).max(0.0);
+            0.5 * u
+                + c / std::f64::consts::PI
+                    * (t * t.asin() + r.sqrt() - r * r.sqrt() / 3.0 - 2.0 / 3.0)
+        }
+    };
+    a(u0 + 1.0) - a(u0)
 }
 
 /// 10–90 % width (px) of a rising or falling profile sampled at unit spacing (linear

@@ -270,7 +270,7 @@ fn relative_illumination_matches_the_lens_report() {
         for (i, th) in [7.0, 14.0, 18.0].into_iter().enumerate() {
             let h = lens.distortion(th).unwrap().real_height_mm;
             let report = lens
-                .relative_illumination(th, 128)
+                .relative_illumination(th, 587.6, 128)
                 .unwrap()
                 .relative_illumination;
             // a point at azimuth 135° (the camera is rotationally symmetric)

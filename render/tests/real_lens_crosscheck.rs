@@ -20,7 +20,8 @@ use camsim_lens::LensPrescription;
 use camsim_render::camera::real_lens::{FilmSize, RealLensCamera, RealLensOptions};
 use camsim_render::camera::{Camera, Pinhole};
 use camsim_render::depth_optics::{
-    defocus_by_depth, DepthKernels, LensDepthKernels, LensDepthOptions,
+    defocus_by_depth, DepthKernels, FieldNodes, LensDepthKernels, LensDepthOptions,
+    ADAPTIVE_FIELD_NODES,
 };
 use camsim_render::depth_path::slab_inverse_depths;
 use camsim_render::gltf_load::{load_gltf, pick_camera};
@@ -98,7 +99,7 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
                         height: h,
                         wavelengths_nm: vec![focus.lens.primary_nm],
                         pupil_n: 96,
-                        tiles: 3,
+                        field_nodes: FieldNodes::Uniform(3),
                     },
                     &[1.0 / z],
                 )
@@ -215,9 +216,15 @@ fn lens_depth_kernels_point_like_the_real_lens_off_axis() {
 const XC_YFOV_DEG: f64 = 24.0;
 /// Edge-profile tolerance (fraction of the edge contrast): the depth path's edge profiles agree
 /// with the real lens's within it, point by point, as with the thin lens (`depth_crosscheck`).
-/// Asserted only by the full-size test: at CI size (128 spp, 48–56 px along an edge) the Monte
-/// Carlo σ of a profile point is 3–14 % of the contrast and does not resolve it (the CI test
-/// asserts the z-test with that σ instead).
+/// The two criteria of the edges, by size:
+/// * CI size (128 spp, 48–56 px along an edge): the Monte Carlo σ of a profile point is 3–14 %
+///   of the contrast and does not resolve the tolerance, so the z-test with that σ (every
+///   point |z| < 5, χ² over all points p > 10⁻⁴) is asserted instead;
+/// * full size (1024 spp): σ is about 0.9 % of the contrast, below the depth path's stated
+///   approximations (16 depth slabs, geometric PSFs from 32² pupil rays, PSFs interpolated
+///   between field nodes: 1–3 % of the contrast at the edges, where the z-test would demand
+///   statistical identity), so the tolerance is asserted, with σ < `EDGE_TOL`/3 so that it is
+///   resolved; the z and χ² are printed.
 const EDGE_TOL: f64 = 0.06;
 
 /// Compositing slabs (the chain's `DEPTH_LAYERS`).
@@ -335,7 +342,7 @@ fn geometry_model(
             psf_pitch_um: 10.0,
             pupil_n: 8,
             pad: 1,
-            ri_grid_n: 64,
+            ri_grid_n: 128,
             focus: Focus::Focused(Box::new(focus.clone())),
             object_distances_mm: vec![focus.focus_distance_mm],
         },
@@ -365,7 +372,7 @@ fn check_scene_real_lens(
     w: usize,
     h: usize,
     spp_lens: u32,
-    tiles: usize,
+    nodes: FieldNodes,
     assert_profile_tol: bool,
     dir: &Path,
 ) -> LensOutcome {
@@ -411,13 +418,23 @@ fn check_scene_real_lens(
                 width: w,
                 height: h,
                 wavelengths_nm: band_nm.clone(),
-                pupil_n: 32,
-                tiles,
+                // the chain's 32 (an experiment's override: CAMSIM_XC_PUPIL)
+                pupil_n: std::env::var("CAMSIM_XC_PUPIL")
+                    .ok()
+                    .and_then(|t| t.parse::<usize>().ok())
+                    .unwrap_or(32),
+                field_nodes: nodes,
             },
             &inv_depths,
         )
         .unwrap();
-        let kmax = (0..tiles * tiles)
+        eprintln!(
+            "{} f/{n_f}: field nodes x {:?}, y {:?} (px)",
+            spec.name,
+            lk.node_x_px.iter().map(|v| v.round()).collect::<Vec<_>>(),
+            lk.node_y_px.iter().map(|v| v.round()).collect::<Vec<_>>()
+        );
+        let kmax = (0..lk.nodes())
             .flat_map(|t| (0..band_nm.len()).map(move |b| (t, b)))
             .flat_map(|(t, b)| inv_depths.iter().map(move |v| (t, b, *v)))
             .map(|(t, b, v)| lk.kernel(t, b, v).radius)
@@ -427,7 +444,7 @@ fn check_scene_real_lens(
         let radius_at: Vec<(f64, usize)> = DEPTHS_M
             .iter()
             .map(|z| {
-                let r = (0..tiles * tiles)
+                let r = (0..lk.nodes())
                     .flat_map(|t| (0..band_nm.len()).map(move |b| (t, b)))
                     .map(|(t, b)| lk.kernel(t, b, 1.0 / z).radius)
                     .max()
@@ -542,6 +559,7 @@ fn check_scene_real_lens(
                         .collect()
                 };
                 let (mut worst_z, mut worst_diff, mut worst_sd) = (0f64, 0f64, 0f64);
+                let chi2_before = out.edge_chi2;
                 for (i, (z, sd)) in zs(&pb).into_iter().enumerate() {
                     worst_z = worst_z.max(z.abs());
                     worst_sd = worst_sd.max(sd / contrast);
@@ -561,7 +579,9 @@ fn check_scene_real_lens(
                 );
                 let (wa, wb) = (width_10_90(&pa), width_10_90(&pb));
                 eprintln!(
-                    "{tag}: worst profile |z| {worst_z:.2}, worst difference {worst_diff:.4} of the contrast (Monte Carlo σ ≤ {worst_sd:.4}); 10-90 % width real lens {wa:.2} px, depth path {wb:.2} px (from the noisy end levels)"
+                    "{tag}: worst profile |z| {worst_z:.2}, chi2 {:.1} over {} points, worst difference {worst_diff:.4} of the contrast (Monte Carlo σ ≤ {worst_sd:.4}); 10-90 % width real lens {wa:.2} px, depth path {wb:.2} px (from the noisy end levels)",
+                    out.edge_chi2 - chi2_before,
+                    pa.len()
                 );
                 if std::env::var("CAMSIM_XC_DEBUG").is_ok() {
                     for (i, (a, b)) in pa.iter().zip(&pb).enumerate() {
@@ -572,7 +592,7 @@ fn check_scene_real_lens(
                         );
                     }
                 }
-                if worst_z >= 5.0 {
+                if !assert_profile_tol && worst_z >= 5.0 {
                     out.failures.push(format!(
                         "{tag}: profile |z| {worst_z:.2} (Monte Carlo σ only)"
                     ));
@@ -599,12 +619,19 @@ fn check_scene_real_lens(
                         .map(|(a, q)| (a - q).abs() / contrast)
                         .fold(0.0, f64::max);
                     eprintln!("{tag}: negative control (no defocus): worst |z| {zc:.1}, chi2 p {pc:.1e}, difference {dc:.3} of the contrast");
-                    if !((zc >= 5.0 || pc <= 1e-4) && dc > EDGE_TOL) {
+                    // asserted where the Monte Carlo σ resolves the control's difference (≥ 5σ):
+                    // at CI size one 650 nm edge of `window` has σ up to 0.13 of the contrast
+                    // against a 0.47 difference (3.5σ), so a control there shows the noise, not
+                    // the check's power (printed only)
+                    let resolvable = dc >= 5.0 * worst_sd;
+                    if resolvable && !((zc >= 5.0 || pc <= 1e-4) && dc > EDGE_TOL) {
                         out.failures.push(format!(
                             "{tag}: without the defocus the profile is within |z| {zc:.2} (chi2 p {pc:.1e}), {dc:.4} of the contrast of the real lens's (the check has no power)"
                         ));
                     }
-                    out.negative_controls += 1;
+                    if resolvable {
+                        out.negative_controls += 1;
+                    }
                 }
             }
         }
@@ -612,10 +639,17 @@ fn check_scene_real_lens(
     out
 }
 
-/// The cross-check at `w` × `h` px, `spp_lens` samples per pixel through the lens, `tiles`²
-/// field tiles; `assert_profile_tol`: also assert the edge profiles within `EDGE_TOL` of the
-/// contrast, and that the Monte Carlo σ resolves it (σ < `EDGE_TOL`/3).
-fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_profile_tol: bool) {
+/// The cross-check at `w` × `h` px, `spp_lens` samples per pixel through the lens, PSFs at the
+/// field nodes `nodes`; `assert_profile_tol`: assert the edge profiles within `EDGE_TOL` of the
+/// contrast, and that the Monte Carlo σ resolves it (σ < `EDGE_TOL`/3), in place of the edges'
+/// z-tests (see `EDGE_TOL`).
+fn real_lens_crosscheck(
+    w: usize,
+    h: usize,
+    spp_lens: u32,
+    nodes: FieldNodes,
+    assert_profile_tol: bool,
+) {
     let lens = double_gauss();
     let dir = tempfile::tempdir().unwrap();
     let band_nm: Vec<f64> = (0..3).map(|b| 450.0 + 100.0 * b as f64).collect();
@@ -623,12 +657,12 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
     let mut failures = Vec::new();
     let mut controls = 0usize;
     let only = std::env::var("CAMSIM_XC_SCENE").ok();
-    // field tiles per side (an experiment's override; the tests state their own)
-    let tiles = std::env::var("CAMSIM_XC_TILES")
+    // n × n uniform field nodes (an experiment's override; the tests use the chain's)
+    let nodes = std::env::var("CAMSIM_XC_TILES")
         .ok()
         .and_then(|t| t.parse::<usize>().ok())
         .filter(|&t| t > 0)
-        .unwrap_or(tiles);
+        .map_or(nodes, FieldNodes::Uniform);
     for spec in scenes(w, h) {
         if only.as_deref().is_some_and(|o| o != spec.name) {
             continue;
@@ -639,7 +673,7 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
             w,
             h,
             spp_lens,
-            tiles,
+            nodes,
             assert_profile_tol,
             dir.path(),
         );
@@ -649,7 +683,7 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
             spec.name, o.worst_block_z, o.min_chi2_p, o.corner_blocks, o.worst_focus_pixel_z, o.min_focus_chi2_p, o.worst_edge_z, o.edge_chi2, o.edge_n, edge_p, o.worst_profile_diff, o.worst_edge_sd, o.negative_controls
         );
         failures.extend(o.failures);
-        if edge_p <= 1e-4 {
+        if !assert_profile_tol && edge_p <= 1e-4 {
             failures.push(format!("{}: edge profiles chi2 p {edge_p}", spec.name));
         }
         if assert_profile_tol && o.worst_edge_sd >= EDGE_TOL / 3.0 {
@@ -681,17 +715,19 @@ fn real_lens_crosscheck(w: usize, h: usize, spp_lens: u32, tiles: usize, assert_
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// CI size: 96 × 64 px, 128 samples per pixel through the lens, the chain's 3 × 3 field tiles.
+/// CI size: 96 × 64 px, 128 samples per pixel through the lens, the chain's adaptive field
+/// nodes.
 #[test]
 fn real_lens_crosscheck_three_scenes_three_apertures() {
-    real_lens_crosscheck(96, 64, 128, 3, false);
+    real_lens_crosscheck(96, 64, 128, ADAPTIVE_FIELD_NODES, false);
 }
 
-/// Full size (docs/render.md): 384 × 256 px, 1024 samples per pixel.
+/// Full size (docs/render.md): 384 × 256 px, 1024 samples per pixel, the chain's adaptive field
+/// nodes.
 #[test]
 #[ignore]
 fn real_lens_crosscheck_full_size() {
-    real_lens_crosscheck(384, 256, 1024, 3, true);
+    real_lens_crosscheck(384, 256, 1024, ADAPTIVE_FIELD_NODES, true);
 }
 
 /// A defocus whose PSF tables would exceed `LENS_DEPTH_MEMORY_BUDGET_BYTES` is refused before
@@ -710,7 +746,7 @@ fn lens_depth_kernels_refuse_a_huge_defocus() {
             height: 64,
             wavelengths_nm: vec![550.0],
             pupil_n: 32,
-            tiles: 3,
+            field_nodes: FieldNodes::Uniform(3),
         },
         &[1.0 / FOCUS_M, 10.0],
     )
@@ -929,4 +965,285 @@ fn real_lens_chief_rays_follow_the_pinhole_field() {
         worst_pin_px > 1.0,
         "the distortion is not resolved ({worst_pin_px} px)"
     );
+}
+
+/// The adaptive knots of a piecewise-linear shape profile are its kinks: a width constant to
+/// 6 mm and falling linearly after it needs exactly the knots 0, 6 and 12 mm at a tolerance
+/// below the error of moving the middle knot one probe height (0.29 px); a linear profile
+/// needs only its ends; a curved profile gets more knots for a smaller tolerance, and between
+/// neighbouring knots the linear interpolation is within the tolerance at every dense height.
+#[test]
+fn adaptive_field_node_heights_are_the_kinks_of_the_psf_shape() {
+    use camsim_render::depth_optics::adaptive_node_heights_mm;
+    let hs: Vec<f64> = (0..33).map(|k| 12.0 * k as f64 / 32.0).collect();
+    let kinked: Vec<[f64; 3]> = hs
+        .iter()
+        .map(|h| {
+            let wdt = if *h <= 6.0 {
+                20.0
+            } else {
+                20.0 - 5.0 * (h - 6.0) / 6.0
+            };
+            [0.0, 20.0, wdt]
+        })
+        .collect();
+    assert_eq!(
+        adaptive_node_heights_mm(&hs, &kinked, 0.002, 0.0),
+        vec![0.0, 6.0, 12.0]
+    );
+    let linear: Vec<[f64; 3]> = hs.iter().map(|h| [0.1 * h, 20.0, 20.0 - h]).collect();
+    assert_eq!(
+        adaptive_node_heights_mm(&hs, &linear, 0.02, 0.1),
+        vec![0.0, 12.0]
+    );
+    let curved: Vec<[f64; 3]> = hs.iter().map(|h| [0.0, 20.0, 20.0 - 0.1 * h * h]).collect();
+    let (coarse, fine) = (
+        adaptive_node_heights_mm(&hs, &curved, 0.05, 0.0),
+        adaptive_node_heights_mm(&hs, &curved, 0.005, 0.0),
+    );
+    assert!(fine.len() > coarse.len() + 2, "{coarse:?} {fine:?}");
+    for (tol, knots) in [(0.05, &coarse), (0.005, &fine)] {
+        assert_eq!((knots[0], *knots.last().unwrap()), (0.0, 12.0));
+        for (j, h) in hs.iter().enumerate() {
+            let b = knots.iter().position(|k| k >= h).unwrap();
+            let a = b.saturating_sub(1);
+            let (ka, kb) = (knots[a], knots[b]);
+            let at = |x: f64| 20.0 - 0.1 * x * x;
+            let lerp = if kb > ka {
+                at(ka) + (h - ka) / (kb - ka) * (at(kb) - at(ka))
+            } else {
+                at(ka)
+            };
+            assert!(
+                (lerp - curved[j][2]).abs() <= tol * 20.0 + 1e-12,
+                "tolerance {tol}: at {h} mm {lerp} vs {}",
+                curved[j][2]
+            );
+        }
+    }
+}
+
+/// RMS widths (samples) along x and y, and the centroid x, of a kernel.
+fn kernel_moments(k: &camsim_render::depth_path::Kernel) -> (f64, f64, f64) {
+    let n = 2 * k.radius + 1;
+    let (mut s, mut sx, mut sy, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (i, v) in k.values.iter().enumerate() {
+        let (x, y, v) = ((i % n) as f64, (i / n) as f64, *v as f64);
+        s += v;
+        sx += v * x;
+        sy += v * y;
+        sxx += v * x * x;
+        syy += v * y * y;
+    }
+    let (mx, my) = (sx / s, sy / s);
+    (
+        mx - k.radius as f64,
+        (sxx / s - mx * mx).sqrt(),
+        (syy / s - my * my).sqrt(),
+    )
+}
+
+/// The cause of the f/2 edge gap of the full-size cross-check, tested directly: along the
+/// middle row of the 384 × 256 film at f/2, the PSF of the 0.5 m card interpolated between the
+/// field nodes (tent weights: a mixture of the two nodes' kernels, its moments) has the RMS
+/// widths of the PSF tabulated at that very position within 3 %, from 5 to 16 mm off the
+/// axis; the same at f/4. The 3 × 3 tile centres, interpolated the same way, miss by more than 5 % at 5.4 mm
+/// (the check has power against the old tiling).
+#[test]
+fn adaptive_field_nodes_interpolate_the_f2_psf_between_them() {
+    let lens = double_gauss();
+    let (w, h) = (384usize, 256usize);
+    let aps = apertures(&lens, w, h, &[550.0]);
+    let mut failures = Vec::new();
+    for ap in aps.iter().filter(|a| a.f_number <= 4.0) {
+        let invs = [1.0 / 0.5, 1.0 / FOCUS_M];
+        let opts = |w: usize, h: usize, nodes: FieldNodes| LensDepthOptions {
+            sample_pitch_mm: ap.pitch_mm,
+            width: w,
+            height: h,
+            wavelengths_nm: vec![ap.focus.lens.primary_nm],
+            pupil_n: 96,
+            field_nodes: nodes,
+        };
+        let xc = (w as f64 - 1.0) / 2.0;
+        // the interpolated PSF's moments at column xc + off on the middle row (a node row)
+        let interpolated = |lk: &LensDepthKernels, off: f64| -> (f64, f64) {
+            // the node row nearest the middle (the middle itself for adaptive nodes, half a
+            // sample off for 3 × 3 tiles)
+            let row = (0..lk.node_y_px.len())
+                .min_by(|a, b| {
+                    let d = |i: &usize| (lk.node_y_px[*i] - (h as f64 - 1.0) / 2.0).abs();
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap();
+            let nx = lk.node_x_px.len();
+            let x = xc + off;
+            // the tent weights: t on node b, 1 − t on node a (the outer node alone beyond it)
+            let b = lk.node_x_px.iter().position(|c| *c >= x).unwrap_or(nx - 1);
+            let a = b.saturating_sub(1);
+            let t = if a == b {
+                1.0
+            } else {
+                ((x - lk.node_x_px[a]) / (lk.node_x_px[b] - lk.node_x_px[a])).clamp(0.0, 1.0)
+            };
+            let (ma, ra, ta) = kernel_moments(&lk.kernel(row * nx + a, 0, 1.0 / 0.5));
+            let (mb, rb, tb) = kernel_moments(&lk.kernel(row * nx + b, 0, 1.0 / 0.5));
+            let m = (1.0 - t) * ma + t * mb;
+            let var = |sa: f64, sb: f64, da: f64, db: f64| {
+                (1.0 - t) * (sa * sa + da * da) + t * (sb * sb + db * db)
+            };
+            (
+                var(ra, rb, ma - m, mb - m).sqrt(),
+                var(ta, tb, 0.0, 0.0).sqrt(),
+            )
+        };
+        let adaptive =
+            LensDepthKernels::new(&ap.focus, &opts(w, h, ADAPTIVE_FIELD_NODES), &invs).unwrap();
+        let uniform =
+            LensDepthKernels::new(&ap.focus, &opts(w, h, FieldNodes::Uniform(3)), &invs).unwrap();
+        eprintln!(
+            "f/{}: adaptive nodes x {:?}, y {:?}",
+            ap.f_number, adaptive.node_x_px, adaptive.node_y_px
+        );
+        for off in [64usize, 90, 120, 150, 185] {
+            // the PSF tabulated at the probe itself: the outer tile centre of a 3-tile strip
+            let strip =
+                LensDepthKernels::new(&ap.focus, &opts(3 * off, 3, FieldNodes::Uniform(3)), &invs)
+                    .unwrap();
+            let (_, r0, t0) = kernel_moments(&strip.kernel(3 + 2, 0, 1.0 / 0.5));
+            let (ra, ta) = interpolated(&adaptive, off as f64);
+            let (ru, tu) = interpolated(&uniform, off as f64);
+            let mm = off as f64 * ap.pitch_mm;
+            let n_f = ap.f_number;
+            eprintln!(
+            "f/{n_f}, {mm:.2} mm: tabulated radial/tangential RMS {r0:.2}/{t0:.2} px; adaptive nodes {ra:.2}/{ta:.2}; 3 × 3 tiles {ru:.2}/{tu:.2}"
+        );
+            if (ra / r0 - 1.0).abs() > 0.03 || (ta / t0 - 1.0).abs() > 0.03 {
+                failures.push(format!(
+                    "f/{n_f}, {mm:.2} mm: interpolated {ra:.2}/{ta:.2} px vs {r0:.2}/{t0:.2} px"
+                ));
+            }
+            if n_f == 2.0 && off == 64 && (ru / r0 - 1.0).abs().max((tu / t0 - 1.0).abs()) < 0.05 {
+                failures.push(format!(
+                "f/{n_f}, {mm:.2} mm: the 3 × 3 tiles give {ru:.2}/{tu:.2} px vs {r0:.2}/{t0:.2} px (no power)"
+            ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// Relative illumination by wavelength at f/2 (issue 18, the full-size run's outer blocks):
+/// the double Gauss focused on 1.5 m at f/2, the film of the full-size cross-check (384 × 256
+/// px, 24° vertical), paraxial heights 0.6, 0.65 and 0.7 of the half-diagonal, at 450, 550
+/// and 650 nm (the cross-check's band centres). Printed: the entrance-pupil estimate
+/// `LensPrescription::relative_illumination` at the primary wavelength (what the field model
+/// tabulated before), the same at each wavelength, and the film-side relative illumination the
+/// field model now tabulates (`camsim_lens::pupil::film_relative_illumination`, the real-lens
+/// camera's integral), with the change in the depth path's outer blocks (film-side / the old
+/// primary estimate). Asserted: the film-side value exceeds the old one by more than 0.5 % at
+/// 550 nm and 1 % at 650 nm and is within 1 % of it at 450 nm everywhere here (the sign and
+/// size of the gap the full-size run saw: (a) 1.2 % and 1.8 % brighter at 550 and 650 nm, 450
+/// nm right), while the entrance-pupil estimate at 550 and 650 nm moves by less than 0.3 %
+/// from its primary value (per-wavelength vignetting alone is not the gap; it moves 0.2–0.9 %
+/// at 450 nm), and the film-side change from 450 to 650 nm exceeds 1.5× the estimate's.
+/// Also printed: the time of the film-side and of the old tables for `LensBlur`'s 41 × 7
+/// points, same run, interleaved.
+#[test]
+fn relative_illumination_by_wavelength_at_f2() {
+    let lens = double_gauss();
+    let (w, h) = (384usize, 256usize);
+    let cam = RealLensCamera::new(
+        &lens,
+        w as u32,
+        h as u32,
+        &RealLensOptions {
+            focus_distance_m: Some(FOCUS_M),
+            f_number: Some(2.0),
+            film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let focus = cam.info().focus.clone();
+    let half_diag = 0.5 * cam.info().pixel_pitch_mm * (w as f64).hypot(h as f64);
+    let l = focus.lens.with_object_distance(focus.focus_distance_mm);
+    let prim = l.primary_nm;
+    let per_tan = l.paraxial_image_mm_per_tan(prim).unwrap();
+    let wls = [450.0, 550.0, 650.0];
+    eprintln!("half-diagonal {half_diag:.3} mm; primary {prim} nm");
+    for frac in [0.6, 0.65, 0.7] {
+        let hp = frac * half_diag;
+        let th = (hp / per_tan).atan().to_degrees();
+        let old = l
+            .relative_illumination(th, prim, 128)
+            .unwrap()
+            .relative_illumination;
+        let (mut ep, mut film_v) = (Vec::new(), Vec::new());
+        for (j, &wl) in wls.iter().enumerate() {
+            let r = l.aimed_chief_ray(th, wl).unwrap().chief.image_mm[1].abs();
+            let est = l
+                .relative_illumination(th, wl, 128)
+                .unwrap()
+                .relative_illumination;
+            let film =
+                camsim_lens::pupil::film_relative_illumination(&l, &[(r, wl)], 256).unwrap()[0];
+            eprintln!(
+                "{frac} of the half-diagonal (paraxial {hp:.2} mm, {th:.2}°), {wl} nm: film radius {r:.3} mm; entrance-pupil estimate at the primary {old:.5}, at {wl} nm {est:.5}; film-side {film:.5}: change {:+.2} %",
+                100.0 * (film / old - 1.0)
+            );
+            let change = film / old - 1.0;
+            // the entrance-pupil estimate's own change with wavelength at 550 and 650 nm
+            let est_change = est / old - 1.0;
+            match j {
+                0 => assert!(change.abs() < 0.01, "450 nm: {change}"),
+                1 => assert!(
+                    change > 0.005 && est_change.abs() < 0.003,
+                    "550 nm: {change} {est_change}"
+                ),
+                _ => assert!(
+                    change > 0.01 && est_change.abs() < 0.003,
+                    "650 nm: {change} {est_change}"
+                ),
+            }
+            ep.push(est);
+            film_v.push(film);
+        }
+        let film = film_v;
+        let (spread_ep, spread_film) = (ep[2] / ep[0] - 1.0, film[2] / film[0] - 1.0);
+        eprintln!(
+            "  650 / 450 nm − 1: entrance-pupil estimate {:+.2} %, film-side {:+.2} %",
+            100.0 * spread_ep,
+            100.0 * spread_film
+        );
+        assert!(spread_film > 1.5 * spread_ep.abs(), "{ep:?} {film:?}");
+    }
+    // cost of LensBlur's dense table (41 fields × 7 wavelengths): film-side at 128² against
+    // the entrance-pupil estimate at the primary wavelength on 64² (the old table), interleaved
+    let wl7: Vec<f64> = (0..7).map(|i| 400.0 + 50.0 * i as f64).collect();
+    let ths: Vec<f64> = (0..41)
+        .map(|k| {
+            (1.1 * half_diag * k as f64 / 40.0 / per_tan)
+                .atan()
+                .to_degrees()
+        })
+        .collect();
+    let pts: Vec<(f64, f64)> = ths
+        .iter()
+        .flat_map(|th| {
+            let r = per_tan * th.to_radians().tan();
+            wl7.iter().map(move |w| (r, *w))
+        })
+        .collect();
+    for rep in 0..2 {
+        let t = std::time::Instant::now();
+        let _ = camsim_lens::pupil::film_relative_illumination(&l, &pts, 128).unwrap();
+        let t_new = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        for th in &ths {
+            let _ = l.relative_illumination(*th, prim, 64).unwrap();
+        }
+        let t_old = t.elapsed().as_secs_f64();
+        eprintln!("run {rep}: film-side 41 × 7 points {t_new:.3} s, entrance-pupil 41 fields {t_old:.3} s ({} threads)", rayon::current_num_threads());
+    }
 }
