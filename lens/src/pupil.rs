@@ -296,6 +296,44 @@ impl SensorSideLens {
         self.irradiance_per_radiance_sr(0.0, wavelength_nm, grid)
     }
 
+    /// Coarse scan ([`Self::scan`], `coarse`² points, from the film point at `film_radius_mm`)
+    /// over a centred square of half-width `half_width_mm` on the rear plane, doubled (at most
+    /// `tries` − 1 times) while the bundle found touches the square's edge: the bounds and the
+    /// final half-width; `None` when no ray gets through.
+    fn scan_growing(
+        &self,
+        film_radius_mm: f64,
+        half_width_mm: f64,
+        coarse: usize,
+        wavelengths_nm: &[f64],
+        tries: usize,
+    ) -> Option<(PupilBounds, f64)> {
+        let mut e = half_width_mm;
+        let mut found = None;
+        for _ in 0..tries {
+            let sq = PupilBounds {
+                x0_mm: -e,
+                x1_mm: e,
+                y0_mm: -e,
+                y1_mm: e,
+            };
+            found = self.scan(film_radius_mm, sq, coarse, wavelengths_nm);
+            let cell = 2.0 * e / coarse as f64;
+            match found {
+                Some(b)
+                    if b.x0_mm < -e + cell
+                        || b.x1_mm > e - cell
+                        || b.y0_mm < -e + cell
+                        || b.y1_mm > e - cell =>
+                {
+                    e *= 2.0
+                }
+                _ => break,
+            }
+        }
+        found.map(|b| (b, e))
+    }
+
     /// Film irradiance per unit scene radiance (sr) at the film point at radius
     /// `film_radius_mm` from the axis, at `wavelength_nm`, for a scene of uniform radiance in
     /// every direction the lens sees:
@@ -325,31 +363,10 @@ impl SensorSideLens {
             .unwrap_or(self.rear_plane_mm)
             .max(1e-9);
         let coarse = grid.clamp(16, 48);
-        let mut found = None;
-        for _ in 0..4 {
-            let start = PupilBounds {
-                x0_mm: -h,
-                x1_mm: h,
-                y0_mm: -h,
-                y1_mm: h,
-            };
-            found = self.scan(r, start, coarse, &[wavelength_nm]);
-            let cell = 2.0 * h / coarse as f64;
-            match found {
-                Some(b)
-                    if b.x0_mm < -h + cell
-                        || b.x1_mm > h - cell
-                        || b.y0_mm < -h + cell
-                        || b.y1_mm > h - cell =>
-                {
-                    h *= 2.0
-                }
-                _ => break,
-            }
-        }
-        let Some(b) = found else {
+        let Some((b, grown)) = self.scan_growing(r, h, coarse, &[wavelength_nm], 4) else {
             return 0.0;
         };
+        h = grown;
         let cell = 2.0 * h / coarse as f64;
         let b = PupilBounds {
             x0_mm: b.x0_mm - cell,
@@ -478,32 +495,9 @@ impl ExitPupilTable {
             .map(|i| {
                 let r = i as f64 * 0.5 * dr;
                 // Coarse scan over a square that grows until the pupil is inside it.
-                let mut e = opts.search_half_width_mm;
-                let mut found = None;
-                for _ in 0..6 {
-                    let sq = PupilBounds {
-                        x0_mm: -e,
-                        x1_mm: e,
-                        y0_mm: -e,
-                        y1_mm: e,
-                    };
-                    found = lens.scan(r, sq, coarse, &wls);
-                    let cell = 2.0 * e / coarse as f64;
-                    match found {
-                        Some(b)
-                            if b.x0_mm < -e + cell
-                                || b.x1_mm > e - cell
-                                || b.y0_mm < -e + cell
-                                || b.y1_mm > e - cell =>
-                        {
-                            e *= 2.0
-                        }
-                        _ => break,
-                    }
-                }
+                let (b, e) = lens.scan_growing(r, opts.search_half_width_mm, coarse, &wls, 6)?;
                 // Fine scan of the coarse box widened by one coarse cell, widened in turn by
                 // one fine cell.
-                let b = found?;
                 let wide = b.widened(2.0 * e / coarse as f64);
                 let c = (wide.x1_mm - wide.x0_mm).max(wide.y1_mm - wide.y0_mm) / fine as f64;
                 lens.scan(r, wide, fine, &wls).map(|f| f.widened(c))

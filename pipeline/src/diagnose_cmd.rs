@@ -1674,6 +1674,33 @@ mod band_tests {
     use super::*;
     use crate::demo::Concealment;
 
+    /// The candidates that change the optics' sampling grid (fall-off keeps it; distortion
+    /// both ways, lateral colour and defocus widen its margin), one each.
+    fn sampling_grid_specs() -> [RateSpec; 5] {
+        [
+            RateSpec {
+                falloff: Some(vec![-0.3, 0.1, 0.0]),
+                ..Default::default()
+            },
+            RateSpec {
+                distortion: Some([-0.08, 0.02]),
+                ..Default::default()
+            },
+            RateSpec {
+                distortion: Some([0.06, 0.0]),
+                ..Default::default()
+            },
+            RateSpec {
+                lateral_color_um: Some(1.5),
+                ..Default::default()
+            },
+            RateSpec {
+                defocus_sigma_um: Some(4.0),
+                ..Default::default()
+            },
+        ]
+    }
+
     /// The forward model of fit-row bands ([`Forward::rates_rows`]: each band through the
     /// chain by itself, [`crate::chain::band_irradiance`]) equals the whole-sensor run
     /// ([`Forward::rates`]) on the requested rows within f32 rounding, for every block a
@@ -1695,32 +1722,15 @@ mod band_tests {
         rows.sort_unstable();
         rows.dedup();
         let (qe, ir) = test_colour_shifts(&set);
-        let specs = [
+        let mut specs = vec![
             RateSpec::default(),
             RateSpec {
                 glare_fraction: Some(0.05),
                 ..Default::default()
             },
-            RateSpec {
-                falloff: Some(vec![-0.3, 0.1, 0.0]),
-                ..Default::default()
-            },
-            RateSpec {
-                distortion: Some([-0.08, 0.02]),
-                ..Default::default()
-            },
-            RateSpec {
-                distortion: Some([0.06, 0.0]),
-                ..Default::default()
-            },
-            RateSpec {
-                lateral_color_um: Some(1.5),
-                ..Default::default()
-            },
-            RateSpec {
-                defocus_sigma_um: Some(4.0),
-                ..Default::default()
-            },
+        ];
+        specs.extend(sampling_grid_specs());
+        specs.extend([
             RateSpec {
                 qe_shift_nm: Some(qe.clone()),
                 ..Default::default()
@@ -1738,7 +1748,7 @@ mod band_tests {
                 qe_shift_nm: Some(qe),
                 ir_leakage: Some(ir),
             },
-        ];
+        ]);
         let ct = camsim_sensor::effects::Crosstalk {
             left: 0.01,
             right: 0.02,
@@ -1827,29 +1837,8 @@ mod band_tests {
     fn band_scenes_rendered_by_rows_equal_the_whole_scenes_rows() {
         let (_dir, set) = demo_set(vec![], Concealment::Charts, 640, 24);
         let rows: Vec<usize> = (0..6).chain(317..323).chain(634..640).collect();
-        let specs = [
-            RateSpec::default(),
-            RateSpec {
-                falloff: Some(vec![-0.3, 0.1, 0.0]),
-                ..Default::default()
-            },
-            RateSpec {
-                distortion: Some([-0.08, 0.02]),
-                ..Default::default()
-            },
-            RateSpec {
-                distortion: Some([0.06, 0.0]),
-                ..Default::default()
-            },
-            RateSpec {
-                lateral_color_um: Some(1.5),
-                ..Default::default()
-            },
-            RateSpec {
-                defocus_sigma_um: Some(4.0),
-                ..Default::default()
-            },
-        ];
+        let mut specs = vec![RateSpec::default()];
+        specs.extend(sampling_grid_specs());
         let cached = SimForward::new(&set, (0..set.shots.len()).collect());
         let fw = SimForward::new(&set, (0..set.shots.len()).collect());
         // no scene fits the cache (as a whole 12 MP chart does not)
