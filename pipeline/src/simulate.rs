@@ -292,6 +292,21 @@ fn scene_rows_unscaled(
     })
 }
 
+/// Refuses (one line naming the shot) a shot whose scene cannot be rendered by row windows
+/// ([`shot_scene_by_rows`]).
+fn refuse_unless_by_rows(set: &CaptureSet, shot_index: usize) -> Result<(), CliError> {
+    if shot_scene_by_rows(set, shot_index) {
+        return Ok(());
+    }
+    Err(CliError::input(
+        &set.path,
+        format!(
+            "shot {}: its scene cannot be rendered by row windows",
+            set.shots[shot_index].id
+        ),
+    ))
+}
+
 /// Whether shot `shot_index`'s scene can be rendered by row windows ([`shot_scene_rows`]): a
 /// target sampled on the grid (not a glTF render) without an illuminant swap (which keeps the
 /// whole scene's mean luminance).
@@ -332,15 +347,7 @@ pub fn shot_scene_luminance_factor(
     let Some(l) = shot.target.mean_luminance_cd_m2 else {
         return Ok(1.0);
     };
-    if !shot_scene_by_rows(set, shot_index) {
-        return Err(CliError::input(
-            &set.path,
-            format!(
-                "shot {}: its scene cannot be rendered by row windows",
-                shot.id
-            ),
-        ));
-    }
+    refuse_unless_by_rows(set, shot_index)?;
     let g = shot_sampling_grid(set, grid);
     let window = luminance_window_m(set, shot, &g);
     let strip = (FACTOR_STRIP_SAMPLES / g.cols.max(1)).max(1);
@@ -377,15 +384,7 @@ pub fn shot_scene_rows(
     factor: f64,
 ) -> Result<SceneRadiance, CliError> {
     let shot = &set.shots[shot_index];
-    if !shot_scene_by_rows(set, shot_index) {
-        return Err(CliError::input(
-            &set.path,
-            format!(
-                "shot {}: its scene cannot be rendered by row windows",
-                shot.id
-            ),
-        ));
-    }
+    refuse_unless_by_rows(set, shot_index)?;
     let g = shot_sampling_grid(set, grid);
     let mut scene = scene_rows_unscaled(set, shot, &g, rows)?;
     if factor != 1.0 {

@@ -278,22 +278,28 @@ struct Aperture {
     shift_px: f64,
 }
 
+/// The real-lens camera of the cross-check: `lens` focused on `FOCUS_M` at f/`f_number`, a
+/// `w` × `h` film filling the scenes' 24° vertical field.
+fn xc_camera(lens: &LensPrescription, w: usize, h: usize, f_number: f64) -> RealLensCamera {
+    RealLensCamera::new(
+        lens,
+        w as u32,
+        h as u32,
+        &RealLensOptions {
+            focus_distance_m: Some(FOCUS_M),
+            f_number: Some(f_number),
+            film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
 fn apertures(lens: &LensPrescription, w: usize, h: usize, band_nm: &[f64]) -> Vec<Aperture> {
     [2.0, 4.0, 8.0]
         .into_iter()
         .map(|n_f| {
-            let cam = RealLensCamera::new(
-                lens,
-                w as u32,
-                h as u32,
-                &RealLensOptions {
-                    focus_distance_m: Some(FOCUS_M),
-                    f_number: Some(n_f),
-                    film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let cam = xc_camera(lens, w, h, n_f);
             let focus = cam.info().focus.clone();
             let pitch_mm = cam.info().pixel_pitch_mm;
             let r_mm = 0.5 * pitch_mm * (w as f64).hypot(h as f64);
@@ -861,18 +867,7 @@ fn real_lens_chief_rays_follow_the_pinhole_field() {
             .unwrap()
             .perspective(w as u32, h as u32),
     };
-    let cam = RealLensCamera::new(
-        &lens,
-        w as u32,
-        h as u32,
-        &RealLensOptions {
-            focus_distance_m: Some(FOCUS_M),
-            f_number: Some(2.0),
-            film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let cam = xc_camera(&lens, w, h, 2.0);
     let focus = cam.info().focus.clone();
     let p_mm = cam.info().pixel_pitch_mm;
     let wl = focus.lens.primary_nm;
@@ -1153,18 +1148,7 @@ fn adaptive_field_nodes_interpolate_the_f2_psf_between_them() {
 fn relative_illumination_by_wavelength_at_f2() {
     let lens = double_gauss();
     let (w, h) = (384usize, 256usize);
-    let cam = RealLensCamera::new(
-        &lens,
-        w as u32,
-        h as u32,
-        &RealLensOptions {
-            focus_distance_m: Some(FOCUS_M),
-            f_number: Some(2.0),
-            film: FilmSize::VerticalFovRad(XC_YFOV_DEG.to_radians()),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let cam = xc_camera(&lens, w, h, 2.0);
     let focus = cam.info().focus.clone();
     let half_diag = 0.5 * cam.info().pixel_pitch_mm * (w as f64).hypot(h as f64);
     let l = focus.lens.with_object_distance(focus.focus_distance_mm);
