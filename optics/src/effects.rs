@@ -402,6 +402,97 @@ impl OpticsEffects {
         worst
     }
 
+    /// The range `[g_lo, g_hi]` of the warp's ratio `g = r_s / r` (scene radius over image
+    /// radius: a sample at field offset (x, y) from the centre takes the scene value at
+    /// (g·x, g·y), [`warp_planes`]) over the image radii `[r_lo_m, r_hi_m]`, at every
+    /// wavelength of `wavelengths_nm` (lateral colour; `None` without it). What a row window
+    /// of the field must hold: its rows' sources lie within `y·[g_lo, g_hi]` of the centre.
+    ///
+    /// Exact for the models of [`OpticsEffects::warp_forward_m`]: with `u = (r_s / H)²`,
+    /// `1/g = r / r_s = D(u) + d·w(λ)·10⁻⁶ / H`, where `D(u)` is monotone for the division model
+    /// and for the polynomial one with k2 = 0, and otherwise a parabola in u with its one
+    /// extremum at `u* = −k1 / (2·k2)`; so 1/g takes its extremes at the ends of the
+    /// scene-radius range (the exact inverse of `[r_lo, r_hi]`, by bisection of the monotone
+    /// forward map, widened by 10⁻⁹ relative) and at u* when it lies inside. `None` when the
+    /// forward map cannot be inverted there (it folds over, or is not increasing).
+    pub fn warp_ratio_range(
+        &self,
+        r_lo_m: f64,
+        r_hi_m: f64,
+        wavelengths_nm: Option<&[f64]>,
+    ) -> Option<(f64, f64)> {
+        let hd = self.half_diagonal_m();
+        if !(hd > 0.0 && r_lo_m >= 0.0 && r_hi_m >= r_lo_m && r_hi_m.is_finite()) {
+            return None;
+        }
+        let lams: Vec<Option<f64>> = match wavelengths_nm {
+            Some(w) if self.lateral_color.is_some() => w.iter().map(|&l| Some(l)).collect(),
+            _ => vec![None],
+        };
+        let r_lim = self.distortion.map_or(f64::INFINITY, |d| d.h_limit()) * hd;
+        let (mut g_lo, mut g_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for l in lams {
+            let fwd = |r: f64| self.warp_forward_m(r, l);
+            // the scene radius imaged at r: bisection on a bracket grown as RadialInverse's
+            let inverse = |r: f64| -> Option<f64> {
+                if r <= 0.0 {
+                    return Some(0.0);
+                }
+                let mut b = r.min(0.999 * r_lim);
+                let mut tries = 0;
+                while fwd(b) < r {
+                    let next = (b * 1.1).min(0.999 * r_lim + 0.001 * b);
+                    tries += 1;
+                    if tries > 200 || next <= b {
+                        return None;
+                    }
+                    b = next;
+                }
+                let mut a = 0.0f64;
+                for _ in 0..200 {
+                    let c = 0.5 * (a + b);
+                    if c <= a || c >= b {
+                        break;
+                    }
+                    if fwd(c) < r {
+                        a = c;
+                    } else {
+                        b = c;
+                    }
+                }
+                Some(0.5 * (a + b))
+            };
+            let s_lo = inverse(r_lo_m)? * (1.0 - 1e-9);
+            let s_hi = (inverse(r_hi_m)? * (1.0 + 1e-9)).min(0.999_999 * r_lim);
+            // 1/g = fwd(s)/s; at s → 0 its limit, evaluated at 10⁻⁶ of the half-diagonal
+            let inv_g = |s: f64| {
+                let s = s.max(1e-6 * hd);
+                fwd(s) / s
+            };
+            let mut at = vec![s_lo, s_hi];
+            if let Some(Distortion::Polynomial { k1, k2 }) = self.distortion {
+                if k2 != 0.0 {
+                    let u = -k1 / (2.0 * k2);
+                    if u > 0.0 {
+                        let s = hd * u.sqrt();
+                        if s > s_lo && s < s_hi {
+                            at.push(s);
+                        }
+                    }
+                }
+            }
+            for s in at {
+                let q = inv_g(s);
+                if !(q.is_finite() && q > 0.0) {
+                    return None;
+                }
+                g_lo = g_lo.min(1.0 / q);
+                g_hi = g_hi.max(1.0 / q);
+            }
+        }
+        Some((g_lo, g_hi))
+    }
+
     /// A bound on the rounding error of [`OpticsEffects::warp_forward_m`] (f64) anywhere on
     /// [0, r_hi] at λ: 64 ε times the sum of the magnitudes of its terms (each term has a few
     /// roundings; a division model's `1 − k·h²` loses relative accuracy as `1/(1 − k·h²)`).

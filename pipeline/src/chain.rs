@@ -414,25 +414,55 @@ pub fn band_refusal(set: &CaptureSet, band: RowBand) -> Option<String> {
 }
 
 /// The rows `r0..r1` of the scene sampling grid ([`shot_sampling_grid`]) whose optical image
-/// `band` integrates: its pixel rows plus the optics' margin ([`sampling_for`]: the blur's,
-/// the diffuser's and the defocus block's reach and a warp's outward displacement) on each
-/// side; the whole grid's rows are `(rows + 2·margin)·os`.
+/// `band` integrates, with the blur's reach: its pixel rows plus, on each side, the margin the
+/// camera's optics would have without their warp blocks ([`sampling_for`]: the blur's, the
+/// diffuser's and the defocus block's reach). The whole grid's rows are
+/// `(rows + 2·margin)·os`, with the margin a warp adds (its largest outward displacement, at
+/// the field's corner): a band does not need those rows, only its own rows' sources, which
+/// [`band_warp_widening`] adds. [`band_irradiance`] returns these rows; the pixel integration
+/// ([`band_sensor`]) centres the band's pixels in them as the whole sensor's in the grid.
 pub fn band_core_rows(set: &CaptureSet, grid: &WavelengthGrid, band: RowBand) -> (usize, usize) {
     let cam = &set.camera;
     let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
-    (band.start * os, (band.end + 2 * margin) * os)
+    let mut unwarped = cam.optics.clone();
+    unwarped.effects.distortion = None;
+    unwarped.effects.lateral_color = None;
+    let reach = sampling_for(&unwarped, &cam.sensor, grid, set.simulation.oversample)
+        .1
+        .min(margin);
+    (
+        (band.start + margin - reach) * os,
+        (band.end + margin + reach) * os,
+    )
 }
 
-/// How many scene-grid rows a row band must be widened by on each side to hold every source
-/// of a warp ([`camsim_optics::OpticsEffects::max_warp_displacement_m`] over the grid, + 2
-/// samples: a pincushion warp's sources lie inward, which the margin does not cover); 0
-/// without a warp. A function of the camera and the grid alone: compute it once per forward
-/// run and pass it to [`band_scene_rows`] and [`band_irradiance`].
-pub fn band_warp_widening(set: &CaptureSet, grid: &WavelengthGrid) -> usize {
+/// How many scene-grid rows the optics stage of a row band must read beyond its
+/// [`band_core_rows`] on each side to hold every source of a warp ([`band_warp_widening`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct BandWidening {
+    /// Rows above the core rows (towards row 0).
+    pub above: usize,
+    /// Rows below the core rows.
+    pub below: usize,
+}
+
+/// The rows a row band must be widened by to hold every source of a warp (0 without one): a
+/// warped sample at field offset (x, y) from the grid's centre takes the scene at
+/// (g·x, g·y), `g = r_s / r` ([`camsim_optics::OpticsEffects::warp_ratio_range`] over the
+/// image radii the band's core rows reach), so a core row at offset y reads rows
+/// `y·[g_lo, g_hi]`; over the core rows `y ∈ [y₀, y₁]` the sources lie within the extremes of
+/// the four products, and the bilinear taps read the row below each source too. A pincushion
+/// warp's sources lie towards the centre, a barrel warp's away from it, by `|y|·|1 − g|`:
+/// little near the axis, most at the sensor's top and bottom edges. One row more each side
+/// than the exact bound covers the inverse table's interpolation (its error is ≪ 10⁻³ of a
+/// sample). When the ratio's range cannot be found (a map that folds over, which the optics
+/// refuse anyway) the whole field's largest displacement
+/// ([`camsim_optics::OpticsEffects::max_warp_displacement_m`], + 2 samples) on both sides.
+pub fn band_warp_widening(set: &CaptureSet, grid: &WavelengthGrid, band: RowBand) -> BandWidening {
     let cam = &set.camera;
     let fx = &cam.optics.effects;
     if !fx.has_warp() {
-        return 0;
+        return BandWidening::default();
     }
     let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
     let full_rows = (cam.sensor.rows + 2 * margin) * os;
@@ -442,27 +472,56 @@ pub fn band_warp_widening(set: &CaptureSet, grid: &WavelengthGrid) -> usize {
         (full_rows as f64 - 1.0) / 2.0,
         (full_cols as f64 - 1.0) / 2.0,
     );
-    let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001;
-    let d = fx.max_warp_displacement_m(r_max, Some(&grid.wavelength_nm));
-    ((d / dx).ceil() as usize).saturating_add(2)
+    let (c0, c1) = band_core_rows(set, grid, band);
+    let c1 = c1.min(full_rows);
+    // the core rows' offsets from the centre (samples)
+    let (y0, y1) = (c0 as f64 - yc, c1 as f64 - 1.0 - yc);
+    let y_far = y0.abs().max(y1.abs());
+    let y_near = if y0 <= 0.0 && y1 >= 0.0 {
+        0.0
+    } else {
+        y0.abs().min(y1.abs())
+    };
+    let r_lo = dx * y_near;
+    let r_hi = dx * y_far.hypot(xc);
+    match fx.warp_ratio_range(r_lo, r_hi, Some(&grid.wavelength_nm)) {
+        Some((g_lo, g_hi)) => {
+            let p = [y0 * g_lo, y0 * g_hi, y1 * g_lo, y1 * g_hi];
+            let s_lo = p.iter().cloned().fold(f64::INFINITY, f64::min) + yc;
+            let s_hi = p.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + yc;
+            // first row read: floor(s_lo), less one; one past the last: floor(s_hi) + 1 (the
+            // tap's second row) + 1, plus one
+            let first = s_lo.floor() - 1.0;
+            let end = s_hi.floor() + 3.0;
+            BandWidening {
+                above: (c0 as f64 - first).max(0.0).ceil() as usize,
+                below: (end - c1 as f64).max(0.0).ceil() as usize,
+            }
+        }
+        None => {
+            let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001;
+            let d = fx.max_warp_displacement_m(r_max, Some(&grid.wavelength_nm));
+            let w = ((d / dx).ceil() as usize).saturating_add(2);
+            BandWidening { above: w, below: w }
+        }
+    }
 }
 
 /// The rows of the scene grid the optics stage of `band` reads ([`band_irradiance`]): its
-/// [`band_core_rows`] widened on each side by `widen` rows ([`band_warp_widening`]), within
-/// the grid.
+/// [`band_core_rows`] widened by `widen` ([`band_warp_widening`]), within the grid.
 pub fn band_scene_rows(
     set: &CaptureSet,
     grid: &WavelengthGrid,
     band: RowBand,
-    widen: usize,
+    widen: BandWidening,
 ) -> (usize, usize) {
     let cam = &set.camera;
     let (os, margin) = sampling_for(&cam.optics, &cam.sensor, grid, set.simulation.oversample);
     let (r0, r1) = band_core_rows(set, grid, band);
     let full_rows = (cam.sensor.rows + 2 * margin) * os;
     (
-        r0.saturating_sub(widen),
-        r1.saturating_add(widen).min(full_rows),
+        r0.saturating_sub(widen.above),
+        r1.saturating_add(widen.below).min(full_rows),
     )
 }
 
@@ -512,7 +571,7 @@ pub fn band_irradiance(
     scene_band: &SceneRadiance,
     grid: &WavelengthGrid,
     band: RowBand,
-    widen: usize,
+    widen: BandWidening,
     glare: Option<&camsim_optics::GlareSums>,
 ) -> Result<SensorIrradiance, CliError> {
     let err = |e: String| CliError::input(&set.camera_path, format!("optics: {e}"));
