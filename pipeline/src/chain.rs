@@ -142,6 +142,22 @@ pub fn shot_channel_irradiance_of_scene(
     if scene.depth_m.is_some() || !optics_alike_at_every_wavelength(&set.camera) {
         return Ok(None);
     }
+    let (channels, channel_scene) = channel_scene(set, scene)?;
+    let irradiance = shot_irradiance_of_scene(set, shot_index, &channel_scene, grid)?;
+    Ok(Some(ChannelIrradiance {
+        channels,
+        irradiance,
+    }))
+}
+
+/// The scene on the sensor channels' planes ([`camsim_sensor::channel_planes`]: plane j is
+/// `∫ QE'_c(λ) L(x, λ) dλ` of channel `channels[j]`), the input of the optics when they act
+/// alike at every wavelength ([`shot_channel_irradiance_of_scene`], and a row band's
+/// [`band_irradiance`] of these planes' rows). Returns the channels and the scene.
+pub fn channel_scene(
+    set: &CaptureSet,
+    scene: &SceneRadiance,
+) -> Result<(Vec<usize>, SceneRadiance), CliError> {
     let ch = camsim_sensor::channel_planes(&set.camera.sensor, &scene.radiance);
     let n = ch.planes.len();
     let radiance = camsim_core::SpectralImage::new(
@@ -159,11 +175,7 @@ pub fn shot_channel_irradiance_of_scene(
         depth_m: None,
         sample_aperture: scene.sample_aperture,
     };
-    let irradiance = shot_irradiance_of_scene(set, shot_index, &channel_scene, grid)?;
-    Ok(Some(ChannelIrradiance {
-        channels: ch.channels,
-        irradiance,
-    }))
+    Ok((ch.channels, channel_scene))
 }
 
 /// Depth-layered compositing slabs of the depth-aware optics (uniform in 1/z).

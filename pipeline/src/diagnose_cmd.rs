@@ -525,7 +525,13 @@ impl Forward for SimForward {
             drop(set);
             return self.rates(spec);
         };
-        let okey = format!("{} bands {bands:?}", Self::optics_key(&set, spec, &grid));
+        // (on the channel planes the planes hold the believed QE: a key of their own)
+        let (channel_capable, channels) = channel_path(&set, &self.believed);
+        let okey = format!(
+            "{} bands {bands:?}{}",
+            Self::optics_key(&set, spec, &grid),
+            if channel_capable { " channels" } else { "" }
+        );
         let cached = self.planes.lock().map_err(lock_err)?.get(&okey);
         let mut by_band: HashMap<String, Arc<PixelTermPlanes>> = cached.clone().unwrap_or_default();
         let (rows_n, cols) = (set.camera.sensor.rows, set.camera.sensor.cols);
@@ -546,6 +552,7 @@ impl Forward for SimForward {
         let grid_key = std::cell::OnceCell::new();
         let mut rate_by_target: HashMap<String, Arc<Vec<f32>>> = HashMap::new();
         let mut out = Vec::with_capacity(self.shots.len());
+        let used_channels = channels.len();
         for &si in &self.shots {
             let key = set.shots[si].target_key.clone();
             if let Some(r) = rate_by_target.get(&key) {
@@ -553,36 +560,74 @@ impl Forward for SimForward {
                 continue;
             }
             let gk: &String = grid_key.get_or_init(|| SceneCache::grid_key(&set, &grid));
+            // The path of `rates`: the optics on the channel planes when they act alike at
+            // every wavelength, the QE blocks are the believed ones and the target's scene has
+            // more basis terms than the CFA has channels (`channel_rate`); else on the terms.
+            let channel_mode_of = |terms: usize| channel_capable && terms > used_channels;
+            let tkey = format!("{glare_key} target {key}");
+            let ckey = format!("{tkey} channels");
             // The whole scene when the glare sums rendered it: the bands are cut from it.
             let mut whole_scene = None;
+            let mut mode: Option<bool> = None;
             let glare = if glare_on {
-                let gkey = format!("{glare_key} target {key}");
-                let got = self.glare.lock().map_err(lock_err)?.get(&gkey).cloned();
-                Some(match got {
-                    Some(g) => g,
-                    None => {
+                let (ch, te) = {
+                    let g = self.glare.lock().map_err(lock_err)?;
+                    (
+                        g.get(&ckey).cloned().filter(|_| channel_capable),
+                        g.get(&tkey).cloned(),
+                    )
+                };
+                Some(match (ch, te) {
+                    (Some(g), _) => {
+                        mode = Some(true);
+                        g
+                    }
+                    // (the terms' sums of these optics: the bands on the terms are exact too)
+                    (None, Some(g)) => {
+                        mode = Some(false);
+                        g
+                    }
+                    _ => {
                         let whole = self
                             .scenes
                             .lock()
                             .map_err(lock_err)?
                             .scene(&set, si, &grid, gk, &self.work)?;
+                        let channel = channel_mode_of(whole.radiance.terms());
+                        mode = Some(channel);
                         let t0 = std::time::Instant::now();
-                        let g = crate::chain::shot_glare_sums(&set, &whole, &grid)
-                            .map_err(|e| e.one_line())?
-                            .ok_or("veiling glare without its sums")?;
+                        let g = if channel {
+                            let (_, chs) = crate::chain::channel_scene(&set, &whole)
+                                .map_err(|e| e.one_line())?;
+                            crate::chain::shot_glare_sums(&set, &chs, &grid)
+                        } else {
+                            crate::chain::shot_glare_sums(&set, &whole, &grid)
+                        }
+                        .map_err(|e| e.one_line())?
+                        .ok_or("veiling glare without its sums")?;
                         self.work.glare_sums.add(t0);
                         whole_scene = Some(whole);
                         let g = Arc::new(g);
-                        self.glare.lock().map_err(lock_err)?.insert(gkey, g.clone());
+                        let k = if channel { &ckey } else { &tkey };
+                        self.glare
+                            .lock()
+                            .map_err(lock_err)?
+                            .insert(k.clone(), g.clone());
                         g
                     }
                 })
             } else {
                 None
             };
-            let bkey = |bi: usize| format!("{key} band {bi}");
+            // (a band's planes on the channel planes are kept under their own key)
+            let bkey = |bi: usize, channel: bool| {
+                format!("{key} band {bi}{}", if channel { " channels" } else { "" })
+            };
             let missing: Vec<usize> = (0..bands.len())
-                .filter(|&bi| !by_band.contains_key(&bkey(bi)))
+                .filter(|&bi| {
+                    !by_band.contains_key(&bkey(bi, false))
+                        && !by_band.contains_key(&bkey(bi, true))
+                })
                 .collect();
             if !missing.is_empty() {
                 let ranges: Vec<(usize, usize)> = missing
@@ -600,10 +645,20 @@ impl Forward for SimForward {
                 )?;
                 for (&bi, scene) in missing.iter().zip(&scenes) {
                     let band = bands[bi];
+                    let channel = *mode.get_or_insert(channel_mode_of(scene.radiance.terms()));
                     let t0 = std::time::Instant::now();
+                    let chs;
+                    let optics_input: &camsim_core::image::SceneRadiance = if channel {
+                        chs = crate::chain::channel_scene(&set, scene)
+                            .map_err(|e| e.one_line())?
+                            .1;
+                        &chs
+                    } else {
+                        scene
+                    };
                     let irr = crate::chain::band_irradiance(
                         &set,
-                        scene,
+                        optics_input,
                         &grid,
                         band,
                         widen[bi],
@@ -613,14 +668,21 @@ impl Forward for SimForward {
                     self.work.band_optics.add(t0);
                     let sensor = crate::chain::band_sensor(&set, band);
                     let p = Arc::new(camsim_sensor::pixel_term_planes(&sensor, &irr));
-                    by_band.insert(bkey(bi), p);
+                    by_band.insert(bkey(bi, channel), p);
                 }
             }
             let mut rate = vec![0f32; rows_n * cols];
             for (bi, band) in bands.iter().enumerate() {
                 let sensor = crate::chain::band_sensor(&set, *band);
-                let pp = &by_band[&bkey(bi)];
-                let r = camsim_sensor::electron_rate_from_term_planes(&sensor, pp);
+                let r = match by_band.get(&bkey(bi, true)) {
+                    Some(pp) => {
+                        camsim_sensor::electron_rate_from_channel_planes(&sensor, &channels, pp)
+                    }
+                    None => camsim_sensor::electron_rate_from_term_planes(
+                        &sensor,
+                        &by_band[&bkey(bi, false)],
+                    ),
+                };
                 rate[band.start * cols..band.end * cols].copy_from_slice(&r);
             }
             let r = Arc::new(rate);
@@ -662,9 +724,13 @@ impl Forward for SimForward {
         let grid_key = std::cell::OnceCell::new();
         // The QE blocks of the believed camera: the optics then act on the channel planes
         // (see `channel_rate`); a candidate QE reads the cached term planes instead.
-        let believed_qe = set.camera.sensor.effects.qe_shift
-            == self.believed.sensor.effects.qe_shift
-            && set.camera.sensor.effects.ir_leakage == self.believed.sensor.effects.ir_leakage;
+        let (channel_capable, _) = channel_path(&set, &self.believed);
+        let glare_off = !set
+            .camera
+            .optics
+            .effects
+            .veiling_glare
+            .is_some_and(|f| f > 0.0);
         for &si in &self.shots {
             let key = set.shots[si].target_key.clone();
             if let Some(r) = rate_by_target.get(&key) {
@@ -686,15 +752,23 @@ impl Forward for SimForward {
             // The path is a function of the camera and the target alone (not of what is
             // cached), so a call's rates do not depend on the calls before it.
             let mut scene = None;
-            let channel = if believed_qe && optics_alike_at_every_wavelength(&set.camera) {
+            let channel = if channel_capable {
                 let sc = scene_of()?;
                 let t0 = std::time::Instant::now();
                 let r = channel_rate(&set, si, &sc, &grid)?;
-                if r.is_some() {
-                    self.work.whole_optics.add(t0);
-                }
                 scene = Some(sc);
-                r
+                r.map(|(r, sums)| {
+                    self.work.whole_optics.add(t0);
+                    // Without glare the channel image is the one before the glare: its sums
+                    // are a glare spec's of these optics ([`Forward::rates_rows`]).
+                    if glare_off {
+                        let gkey = format!("{okey} target {key} channels");
+                        if let Ok(mut g) = self.glare.lock() {
+                            g.insert(gkey, Arc::new(sums));
+                        }
+                    }
+                    r
+                })
             } else {
                 None
             };
@@ -712,6 +786,13 @@ impl Forward for SimForward {
                     let irr =
                         shot_irradiance_of_scene(&set, si, &sc, &grid).map_err(|e| e.one_line())?;
                     self.work.whole_optics.add(t0);
+                    // without glare: a glare spec's sums of these optics, as on the channels
+                    if glare_off {
+                        let sums = camsim_optics::glare_sums_of_image(&set.camera.optics, &irr);
+                        if let Ok(mut g) = self.glare.lock() {
+                            g.insert(format!("{okey} target {key}"), Arc::new(sums));
+                        }
+                    }
                     let pp = camsim_sensor::pixel_term_planes(&set.camera.sensor, &irr);
                     let r = camsim_sensor::electron_rate_from_term_planes(&set.camera.sensor, &pp);
                     by_target.insert(key.clone(), Arc::new(pp));
@@ -741,13 +822,15 @@ impl Forward for SimForward {
 /// scene has more basis terms than the CFA has channels (a colour chart: 25 terms, 3–4
 /// channels). The caller takes it only with the believed camera's QE blocks: a QE candidate
 /// reuses the cached term planes of its optics instead (one weighted sum per pixel).
-/// `None`: take the basis terms' path.
+/// `None`: take the basis terms' path. With the rates, the veiling-glare sums of the channel
+/// image ([`camsim_optics::glare_sums_of_image`]: a glare spec's sums when the camera has no
+/// glare).
 fn channel_rate(
     set: &CaptureSet,
     si: usize,
     scene: &camsim_core::image::SceneRadiance,
     grid: &camsim_core::WavelengthGrid,
-) -> Result<Option<Vec<f32>>, String> {
+) -> Result<Option<(Vec<f32>, camsim_optics::GlareSums)>, String> {
     let sensor = &set.camera.sensor;
     let used = (0..sensor.channel_qe.len())
         .filter(|&c| sensor.cfa.tile.iter().flatten().any(|&t| t == c))
@@ -761,11 +844,29 @@ fn channel_rate(
         return Ok(None);
     };
     let pp = camsim_sensor::pixel_term_planes(sensor, &ch.irradiance);
-    Ok(Some(camsim_sensor::electron_rate_from_channel_planes(
-        sensor,
-        &ch.channels,
-        &pp,
+    let sums = camsim_optics::glare_sums_of_image(&set.camera.optics, &ch.irradiance);
+    Ok(Some((
+        camsim_sensor::electron_rate_from_channel_planes(sensor, &ch.channels, &pp),
+        sums,
     )))
+}
+
+/// Whether the forward model of `set`'s camera may run the optics on the sensor channels'
+/// planes ([`channel_rate`]; per target, when its scene has more basis terms than the CFA has
+/// channels): the optics act alike at every wavelength and the QE blocks are the believed
+/// camera's (a QE candidate reads the term planes of its optics instead). With the channels
+/// used by the CFA, in [`camsim_sensor::channel_planes`]' order.
+fn channel_path(set: &CaptureSet, believed: &crate::config::Camera) -> (bool, Vec<usize>) {
+    let sensor = &set.camera.sensor;
+    let believed_qe = sensor.effects.qe_shift == believed.sensor.effects.qe_shift
+        && sensor.effects.ir_leakage == believed.sensor.effects.ir_leakage;
+    let channels = (0..sensor.channel_qe.len())
+        .filter(|&c| sensor.cfa.tile.iter().flatten().any(|&t| t == c))
+        .collect();
+    (
+        believed_qe && optics_alike_at_every_wavelength(&set.camera),
+        channels,
+    )
 }
 
 /// Sets the blocks of `spec` on a validated camera, in their fitted forms (the typed twin of
@@ -1970,6 +2071,45 @@ mod band_tests {
             (targets.len() * oversamplings.len()) as u64,
             "{margins:?}"
         );
+    }
+
+    /// The glare sums of the believed optics come from the believed camera's whole-sensor run
+    /// on the channel planes (the fit check's: without glare its channel image is the image
+    /// before the glare): a glare spec's bands then render no whole scene and run no
+    /// whole-sensor optics for the sums, and their rates are bit for bit those of a forward
+    /// model that computed the sums itself (the whole scene's channel planes through the
+    /// optics without the glare).
+    #[test]
+    fn glare_sums_of_the_believed_channel_run_are_reused() {
+        let (_dir, set) = demo_set(vec![], Concealment::Charts, 96, 24);
+        let rows: Vec<usize> = (0..6).collect();
+        let spec = RateSpec {
+            glare_fraction: Some(0.05),
+            ..Default::default()
+        };
+        let fresh = SimForward::new(&set, (0..set.shots.len()).collect());
+        let want = fresh.rates_rows(&spec, &rows).unwrap();
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
+        // no scene fits the cache (as a whole 12 MP chart does not)
+        fw.scenes.lock().unwrap().lru.budget = 0;
+        fw.rates(&RateSpec::default()).unwrap();
+        let renders = fw.work.scene_renders.get().0;
+        let got = fw.rates_rows(&spec, &rows).unwrap();
+        assert_eq!(fw.work.glare_sums.get().0, 0, "glare sums computed again");
+        assert_eq!(
+            fw.work.scene_renders.get().0,
+            renders,
+            "a whole scene rendered for the glare"
+        );
+        assert!(fresh.work.glare_sums.get().0 > 0);
+        for (si, (a, b)) in want.iter().zip(&got).enumerate() {
+            assert!(
+                a.iter()
+                    .zip(b.iter())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+                "shot {si}: rates differ from the run that computed its sums"
+            );
+        }
     }
 
     /// A veiling-glare spec on the fit rows' bands renders each target's whole scene once:
