@@ -512,7 +512,8 @@ pub(crate) fn trim_kernel(psf: &[f64], n: usize) -> Kernel {
     let mut r = 0;
     for j in 0..n {
         for i in 0..n {
-            if psf[j * n + i] > 0.0 {
+            // every non-zero sample (spread PSFs have small negative ones)
+            if psf[j * n + i] != 0.0 {
                 r = r.max(i.abs_diff(c)).max(j.abs_diff(c));
             }
         }

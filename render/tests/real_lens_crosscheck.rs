@@ -502,7 +502,9 @@ fn check_scene_real_lens(
         // the negative control: the same chain without the defocus
         let b_sharp = lens_geometry(&ap.optics, pin.band_planes.clone(), w, h, pitch_mm, &grid);
         let shift_px = ap.shift_px;
-        let margin = kmax + 2 + shift_px.ceil() as usize;
+        // the kernel's radius includes the ring the spread rays reach (`splat_quadratic`):
+        // one sample of slack beyond it, as two beyond the rays' own bins before
+        let margin = kmax + 1 + shift_px.ceil() as usize;
         eprintln!(
             "{} f/{n_f}: pitch {pitch_mm:.4} mm, largest kernel radius {kmax} px, corner distortion shift {shift_px:.2} px, block margin {margin} px",
             spec.name
@@ -573,7 +575,13 @@ fn check_scene_real_lens(
             // point by point, z with the Monte Carlo σ only; the profile difference as a
             // fraction of the edge contrast (asserted < EDGE_TOL where σ resolves it)
             for e in &spec.edges {
-                let half = (kmax + 4) as isize;
+                // the largest kernel radius + 4 px each side, within the frame
+                let room = if e.vertical {
+                    e.at.min(w - e.at)
+                } else {
+                    e.at.min(h - e.at)
+                };
+                let half = (kmax + 4).min(room) as isize;
                 let n_along = (e.hi - e.lo) as f64;
                 let prof = |img: &[f32]| edge_profile(img, w, e, half);
                 let (pa, pb, pp, pg) = (
