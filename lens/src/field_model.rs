@@ -20,7 +20,7 @@
 //!   `[iy·n + ix]`, sample (n/2, n/2) at the real chief ray's image point, x = (ix − n/2)·pitch,
 //!   y = (iy − n/2)·pitch, values summing to 1.
 //! * A field point at azimuth φ (measured from +x towards +y, so +y is φ = 90°) has the +y
-//!   PSF rotated by φ − 90° about its centre (bilinear resampling, renormalised).
+//!   PSF rotated by φ − 90° about its centre (each sample moved and spread by `splat_quadratic`, renormalised).
 //! * Distortion: `real_height_mm[field][wavelength]` is the real chief-ray height (chief ray
 //!   aimed at the stop centre at that wavelength), `paraxial_height_mm[field]` the paraxial
 //!   one at the primary wavelength; distortion % = 100 (real − paraxial)/paraxial.
@@ -33,8 +33,10 @@
 //!   estimate [`LensPrescription::relative_illumination`] (vignetting × cos⁴ of the image-space
 //!   chief-ray angle) at each wavelength.
 //! * Wave PSFs come from [`LensPrescription::wave_optics`] (FFT of the pupil function) and are
-//!   point-sampled bilinearly onto the common grid, then renormalised; geometric PSFs bin the
-//!   rays of a square pupil grid (clipped at the semi-diameters) about the chief ray.
+//!   point-sampled bilinearly onto the common grid, then renormalised; geometric PSFs spread
+//!   the rays of a square pupil grid (clipped at the semi-diameters) about the chief ray with
+//!   quadratic weights that keep their centroid and second moments (`splat_quadratic`), and
+//!   rotations to other azimuths move the samples the same way.
 //! * Interpolation: bilinear in paraxial height × wavelength within a distance, and linear in
 //!   the object-space **vergence** 1/d (0 for an object at infinity) between the two tabulated
 //!   distances that bracket the one asked for; defocus, magnification and the image-space
@@ -323,6 +325,37 @@ fn bilinear(img: &[f64], n: usize, fx: f64, fy: f64) -> f64 {
         + get(x0 + 1.0, y0 + 1.0) * tx * ty
 }
 
+/// Add `v` at the fractional index (`fx`, `fy`) of an n×n row-major grid, spread over the 3 × 3
+/// samples around the nearest one with the quadratic Lagrange weights of the offset f ∈
+/// [−½, ½] along each axis, w₋₁ = f(f − 1)/2, w₀ = 1 − f², w₊₁ = f(f + 1)/2. They reproduce
+/// 1, f and f² exactly, so the grid keeps the mean and the second moments of the points it
+/// receives; a nearest-bin histogram adds the bin's box (1/12 sample² per axis) and bilinear
+/// resampling up to ¼ sample² more — blur that a PSF of about a sample cannot afford, since it is
+/// applied to images whose samples are already pixel averages (the pixel's box counted twice).
+/// The weights can be negative (down to −⅛), as for any interpolation of order > 1; weight that
+/// would land outside the grid is dropped.
+pub fn splat_quadratic(img: &mut [f64], n: usize, fx: f64, fy: f64, v: f64) {
+    if !(fx.is_finite() && fy.is_finite()) {
+        return;
+    }
+    let (kx, ky) = (fx.round(), fy.round());
+    let w = |f: f64| [0.5 * f * (f - 1.0), 1.0 - f * f, 0.5 * f * (f + 1.0)];
+    let (wx, wy) = (w(fx - kx), w(fy - ky));
+    for (dy, wy) in (-1..=1).zip(wy) {
+        let y = ky + dy as f64;
+        if y < 0.0 || y >= n as f64 {
+            continue;
+        }
+        for (dx, wx) in (-1..=1).zip(wx) {
+            let x = kx + dx as f64;
+            if x < 0.0 || x >= n as f64 {
+                continue;
+            }
+            img[y as usize * n + x as usize] += v * wx * wy;
+        }
+    }
+}
+
 fn normalise(v: &mut [f64]) {
     let s: f64 = v.iter().sum();
     if s > 0.0 {
@@ -352,17 +385,24 @@ pub fn vergence_per_mm(object_distance_mm: Option<f64>) -> f64 {
 }
 
 /// Rotate an n×n PSF (centre n/2) by `angle_deg` counter-clockwise (+x towards +y) about its
-/// centre, by bilinear resampling; renormalised to sum 1.
+/// centre: every sample is moved to its rotated position and spread there by
+/// [`splat_quadratic`], so the rotated PSF has the rotated centroid and covariance of the
+/// samples exactly (bilinear resampling would widen it by up to ¼ sample² per axis);
+/// renormalised to sum 1.
 pub fn rotate_psf(psf: &[f64], n: usize, angle_deg: f64) -> Vec<f64> {
     let (s, c) = angle_deg.to_radians().sin_cos();
     let c0 = (n / 2) as f64;
     let mut out = vec![0.0; n * n];
     for iy in 0..n {
         for ix in 0..n {
-            let (u, v) = (ix as f64 - c0, iy as f64 - c0);
-            // source point = R(−angle)·(u, v)
-            let (x, y) = (c * u + s * v, -s * u + c * v);
-            out[iy * n + ix] = bilinear(psf, n, x + c0, y + c0);
+            let v = psf[iy * n + ix];
+            if v == 0.0 {
+                continue;
+            }
+            let (u, w) = (ix as f64 - c0, iy as f64 - c0);
+            // target point = R(angle)·(u, w)
+            let (x, y) = (c * u - s * w, s * u + c * w);
+            splat_quadratic(&mut out, n, x + c0, y + c0, v);
         }
     }
     normalise(&mut out);
@@ -439,8 +479,9 @@ fn entry(
 
 /// The geometric PSF (ray counts, not normalised) of the rays of the `pupil_n`² entrance-pupil
 /// grid ([`pupil_grid`], normalised pupil coordinates) that `keep` accepts, traced through
-/// `lens` at wavelength `w` for the field of `aim` and binned on a `psf_n`² grid of pitch
-/// `pitch_mm` centred (bin centre) on the chief ray's image point `chief_mm`: the one binning of
+/// `lens` at wavelength `w` for the field of `aim` and spread ([`splat_quadratic`]: the rays'
+/// centroid and second moments exactly) on a `psf_n`² grid of pitch `pitch_mm` centred (sample
+/// centre) on the chief ray's image point `chief_mm`: the one binning of
 /// [`FieldModel`]'s geometric PSFs and of [`geometric_pupil_half_psfs`].
 #[allow(clippy::too_many_arguments)]
 fn bin_geometric_psf(
@@ -463,11 +504,9 @@ fn bin_geometric_psf(
         let Some(r) = b.get(i).filter(|_| keep(p)) else {
             continue;
         };
-        let fx = ((r.image_mm[0] - chief_mm[0]) / pitch_mm + c0 + 0.5).floor();
-        let fy = ((r.image_mm[1] - chief_mm[1]) / pitch_mm + c0 + 0.5).floor();
-        if fx >= 0.0 && fy >= 0.0 && (fx as usize) < psf_n && (fy as usize) < psf_n {
-            img[fy as usize * psf_n + fx as usize] += 1.0;
-        }
+        let fx = (r.image_mm[0] - chief_mm[0]) / pitch_mm + c0;
+        let fy = (r.image_mm[1] - chief_mm[1]) / pitch_mm + c0;
+        splat_quadratic(&mut img, psf_n, fx, fy, 1.0);
     }
     img
 }

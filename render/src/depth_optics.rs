@@ -37,7 +37,9 @@
 //!
 //! Both give, besides the defocused planes, the blur size per pixel: the RMS radius of the PSF
 //! applied to the pixel's slab (about the PSF centroid), [`kernel_rms_radius_px`].
-use crate::depth_path::{defocus_layered_with, slabs, trim_kernel, Kernel, ThinLensDefocus};
+use crate::depth_path::{
+    defocus_layered_slabs, defocus_layered_with, slabs, trim_kernel, Kernel, ThinLensDefocus,
+};
 
 /// The thin-lens defocus of a camera (see the module docs): focal length `focal_length_m`,
 /// F-number `f_number`, focused on `focus_distance_m` (`None` = infinity), samples of
@@ -628,14 +630,15 @@ pub fn defocus_by_depth(
     match kernels {
         DepthKernels::Thin(t) => {
             let out = defocus_layered_with(planes, depth_m, w, h, layers, true, |iz| t.kernel(iz));
-            let (index, mean) = slabs(depth_m, layers);
-            let rms: Vec<f32> = mean
+            let sl = slabs(depth_m, layers);
+            let rms: Vec<f32> = sl
+                .mean_inv_z
                 .iter()
                 .map(|m| m.map_or(0.0, |v| kernel_rms_radius_px(&t.kernel(v)) as f32))
                 .collect();
             DepthDefocused {
                 planes: out,
-                blur_rms_radius_px: index.iter().map(|k| rms[*k]).collect(),
+                blur_rms_radius_px: sl.index.iter().map(|k| rms[*k]).collect(),
             }
         }
         DepthKernels::Lens(lk) => {
@@ -646,6 +649,10 @@ pub fn defocus_by_depth(
                 .map(|wl| lk.nearest_wavelength(*wl))
                 .collect();
             let wl_ref = lk.nearest_wavelength(550.0);
+            // the whole image's slabs: every node composites its window with them (slabs of
+            // a window's own depth range would split one plane by its f32 depth jitter where no
+            // other depth is in the window)
+            let whole = slabs(depth_m, layers);
             // Each pixel's PSF is interpolated between the nodes' (bilinear tent weights that
             // sum to 1): every node composites the pixels its tent covers and adds them with
             // its weight.
@@ -685,7 +692,7 @@ pub fn defocus_by_depth(
                             .flat_map(|r| p[r * w + ec0..r * w + ec1].iter().copied())
                             .collect()
                     };
-                    let dcrop = crop(depth_m);
+                    let wslabs = whole.window(w, (er0, er1), (ec0, ec1));
                     let mut gl: Vec<usize> = groups.clone();
                     gl.sort_unstable();
                     gl.dedup();
@@ -693,7 +700,7 @@ pub fn defocus_by_depth(
                         let idx: Vec<usize> =
                             (0..planes.len()).filter(|b| groups[*b] == g).collect();
                         let sub: Vec<Vec<f32>> = idx.iter().map(|b| crop(&planes[*b])).collect();
-                        let res = defocus_layered_with(&sub, &dcrop, cw, ch, layers, true, |iz| {
+                        let res = defocus_layered_slabs(&sub, &wslabs, cw, ch, true, |iz| {
                             lk.kernel(node, g, iz)
                         });
                         for (b, pl) in idx.iter().zip(&res) {
@@ -706,7 +713,7 @@ pub fn defocus_by_depth(
                             }
                         }
                     }
-                    let (index, mean) = slabs(&dcrop, layers);
+                    let (index, mean) = (&wslabs.index, &wslabs.mean_inv_z);
                     let rms: Vec<f32> = mean
                         .iter()
                         .map(|m| {

@@ -129,10 +129,40 @@ pub fn convolve(img: &[f32], w: usize, h: usize, k: &Kernel) -> Vec<f32> {
     PlaneConvolver::new(w, h, k).apply(img)
 }
 
+/// Smallest slab span relative to the nearest inverse depth: depths from f32 hit distances
+/// differ by a few ulps (relative ~1e-7) on one plane, and slabs thinner than that would split
+/// a plane into layers that occlude each other cell by cell (a flat checker whose cells are
+/// separate quads). Below this span the depths are one slab.
+pub const SLAB_MIN_RELATIVE_SPAN: f64 = 1e-5;
+
+/// The depth slabs of a depth map (result of [`slabs`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthSlabs {
+    /// The slab (0..layers) of every pixel.
+    pub index: Vec<usize>,
+    /// The mean inverse depth (1/m) of each slab's pixels (`None` for an empty slab).
+    pub mean_inv_z: Vec<Option<f64>>,
+}
+
+impl DepthSlabs {
+    /// The window rows `r0..r1`, columns `c0..c1` of a `w`-wide map, with the whole map's
+    /// slabs: a window is composited with the layers of the whole image, never re-sliced by
+    /// its own (narrower) depth range.
+    pub fn window(&self, w: usize, (r0, r1): (usize, usize), (c0, c1): (usize, usize)) -> Self {
+        DepthSlabs {
+            index: (r0..r1)
+                .flat_map(|r| self.index[r * w + c0..r * w + c1].iter().copied())
+                .collect(),
+            mean_inv_z: self.mean_inv_z.clone(),
+        }
+    }
+}
+
 /// The slab (0..`layers`) of every pixel and the mean inverse depth (1/m) of each slab's
-/// pixels (`None` for an empty slab): slabs are uniform in 1/z between the nearest and the
-/// farthest depth of `depth_m` (∞ or non-positive = escaped, 1/z = 0).
-pub fn slabs(depth_m: &[f32], layers: usize) -> (Vec<usize>, Vec<Option<f64>>) {
+/// pixels: slabs are uniform in 1/z between the nearest and the farthest depth of `depth_m`
+/// (∞ or non-positive = escaped, 1/z = 0), at least [`SLAB_MIN_RELATIVE_SPAN`] of the nearest
+/// 1/z wide together.
+pub fn slabs(depth_m: &[f32], layers: usize) -> DepthSlabs {
     let inv: Vec<f64> = depth_m
         .iter()
         .map(|z| {
@@ -147,7 +177,7 @@ pub fn slabs(depth_m: &[f32], layers: usize) -> (Vec<usize>, Vec<Option<f64>>) {
         .iter()
         .fold((f64::INFINITY, 0f64), |(a, b), v| (a.min(*v), b.max(*v)));
     let layers = layers.max(1);
-    let span = (hi - lo).max(1e-12);
+    let span = (hi - lo).max(SLAB_MIN_RELATIVE_SPAN * hi).max(1e-12);
     let index: Vec<usize> = inv
         .iter()
         .map(|v| (((v - lo) / span * layers as f64) as usize).min(layers - 1))
@@ -161,13 +191,20 @@ pub fn slabs(depth_m: &[f32], layers: usize) -> (Vec<usize>, Vec<Option<f64>>) {
         .iter()
         .map(|(s, n)| if *n > 0 { Some(s / *n as f64) } else { None })
         .collect();
-    (index, mean)
+    DepthSlabs {
+        index,
+        mean_inv_z: mean,
+    }
 }
 
 /// The inverse depths (1/m) at which [`defocus_layered`] asks for kernels: the mean 1/z of
 /// every non-empty slab (a tabulated PSF model can be built at exactly these).
 pub fn slab_inverse_depths(depth_m: &[f32], layers: usize) -> Vec<f64> {
-    slabs(depth_m, layers).1.into_iter().flatten().collect()
+    slabs(depth_m, layers)
+        .mean_inv_z
+        .into_iter()
+        .flatten()
+        .collect()
 }
 
 /// Layered depth-of-field: `bands` radiance planes (`w × h`) with planar depth `depth_m`
@@ -204,9 +241,22 @@ pub fn defocus_layered_with(
     continue_background: bool,
     kernel: impl Fn(f64) -> Kernel + Sync,
 ) -> Vec<Vec<f32>> {
+    let s = slabs(depth_m, layers);
+    defocus_layered_slabs(bands, &s, w, h, continue_background, kernel)
+}
+
+/// [`defocus_layered_with`] on given slabs (`slabs` of a `w × h` image, e.g. a window of the
+/// whole image's [`DepthSlabs`]).
+pub fn defocus_layered_slabs(
+    bands: &[Vec<f32>],
+    slabs: &DepthSlabs,
+    w: usize,
+    h: usize,
+    continue_background: bool,
+    kernel: impl Fn(f64) -> Kernel + Sync,
+) -> Vec<Vec<f32>> {
     use rayon::prelude::*;
-    let layers = layers.max(1);
-    let (index, mean) = slabs(depth_m, layers);
+    let (index, mean) = (&slabs.index, &slabs.mean_inv_z);
     // acc: the composite so far as a normalised colour; cover: whether any layer reached the
     // pixel yet
     let mut acc = vec![vec![0f32; w * h]; bands.len()];
@@ -462,7 +512,8 @@ pub(crate) fn trim_kernel(psf: &[f64], n: usize) -> Kernel {
     let mut r = 0;
     for j in 0..n {
         for i in 0..n {
-            if psf[j * n + i] > 0.0 {
+            // every non-zero sample (spread PSFs have small negative ones)
+            if psf[j * n + i] != 0.0 {
                 r = r.max(i.abs_diff(c)).max(j.abs_diff(c));
             }
         }

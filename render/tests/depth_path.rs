@@ -614,3 +614,47 @@ fn lens_defocus_psf_is_the_entrance_pupil_disc() {
         );
     }
 }
+
+/// One plane whose depths carry f32 jitter (the renderer's hit distances on a checker of
+/// separate quads: 4.999999–5.000001 m) is one slab, and a checker on it is defocused as on a
+/// plane of one depth (`SLAB_MIN_RELATIVE_SPAN`); two planes 2 % apart in 1/z are still
+/// two slabs.
+#[test]
+fn f32_depth_jitter_of_one_plane_is_one_slab() {
+    use camsim_render::depth_path::slabs;
+    let (w, h) = (64usize, 48usize);
+    let jitter = [5.0f32, 4.999_999_5, 5.000_000_5, 4.999_999, 5.000_001];
+    let depth: Vec<f32> = (0..w * h)
+        .map(|q| jitter[((q % w) / 4 * 7 + (q / w) / 4 * 3) % jitter.len()])
+        .collect();
+    let s = slabs(&depth, 16);
+    assert!(
+        s.index.iter().all(|k| *k == s.index[0]),
+        "one plane split into slabs"
+    );
+    let checker: Vec<f32> = (0..w * h)
+        .map(|q| {
+            if ((q % w) / 4 + (q / w) / 4) % 2 == 0 {
+                1.0
+            } else {
+                0.15
+            }
+        })
+        .collect();
+    let k = |_iz: f64| Kernel::pillbox(3.3);
+    let a = defocus_layered(std::slice::from_ref(&checker), &depth, w, h, 16, k);
+    let b = defocus_layered(
+        std::slice::from_ref(&checker),
+        &vec![5.0; w * h],
+        w,
+        h,
+        16,
+        k,
+    );
+    assert_eq!(a, b);
+    let two: Vec<f32> = (0..w * h)
+        .map(|q| if q % w < w / 2 { 5.0 } else { 4.9 })
+        .collect();
+    let s2 = slabs(&two, 16);
+    assert_ne!(s2.index[0], s2.index[w - 1], "two planes merged");
+}

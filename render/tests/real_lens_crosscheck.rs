@@ -224,7 +224,9 @@ const XC_YFOV_DEG: f64 = 24.0;
 ///   approximations (16 depth slabs, geometric PSFs from 32² pupil rays, PSFs interpolated
 ///   between field nodes: 1–3 % of the contrast at the edges, where the z-test would demand
 ///   statistical identity), so the tolerance is asserted, with σ < `EDGE_TOL`/3 so that it is
-///   resolved; the z and χ² are printed.
+///   resolved; the z and χ² are printed. An edge whose σ does not resolve it (`window`'s
+///   in-focus checker-over-checker edge: low contrast, σ 2.1–2.4 % of it) keeps the z-test, with
+///   its own χ² (p > 10⁻⁴); every scene must hold at least one edge to the tolerance.
 const EDGE_TOL: f64 = 0.06;
 
 /// Compositing slabs (the chain's `DEPTH_LAYERS`).
@@ -296,8 +298,12 @@ fn xc_camera(lens: &LensPrescription, w: usize, h: usize, f_number: f64) -> Real
 }
 
 fn apertures(lens: &LensPrescription, w: usize, h: usize, band_nm: &[f64]) -> Vec<Aperture> {
+    let only: Option<f64> = std::env::var("CAMSIM_XC_FNUM")
+        .ok()
+        .and_then(|t| t.parse().ok());
     [2.0, 4.0, 8.0]
         .into_iter()
+        .filter(|n| only.is_none_or(|o| o == *n))
         .map(|n_f| {
             let cam = xc_camera(lens, w, h, n_f);
             let focus = cam.info().focus.clone();
@@ -364,6 +370,9 @@ struct LensOutcome {
     min_focus_chi2_p: f64,
     worst_edge_z: f64,
     worst_edge_sd: f64,
+    /// Edge tests (edge × band × aperture) held to `EDGE_TOL` (σ resolves it), and by z-test.
+    tolerance_edges: usize,
+    z_edges: usize,
     edge_chi2: f64,
     edge_n: usize,
     worst_profile_diff: f64,
@@ -467,11 +476,35 @@ fn check_scene_real_lens(
             LAYERS,
             &DepthKernels::Lens(lk),
         );
-        let b_img = lens_geometry(&ap.optics, dp.planes, w, h, pitch_mm, &grid);
+        let dp_planes = dp.planes;
+        let b_img = lens_geometry(&ap.optics, dp_planes.clone(), w, h, pitch_mm, &grid);
+        if let Ok(d) = std::env::var("CAMSIM_XC_DUMP") {
+            // an experiment's dump: raw little-endian f32 planes (a), (b), pinhole and variances
+            let put = |tag: &str, planes: &[Vec<f32>]| {
+                for (bi, p) in planes.iter().enumerate() {
+                    let bytes: Vec<u8> = p.iter().flat_map(|v| v.to_le_bytes()).collect();
+                    let f = format!("{d}/{}_f{n_f}_{tag}_{bi}_{w}x{h}.f32", spec.name);
+                    std::fs::write(&f, bytes).unwrap();
+                }
+            };
+            put("depth", std::slice::from_ref(&pin.depth_z_m));
+            put("dp", &dp_planes);
+            put("a", &real.band_planes);
+            put("va", rvar);
+            put("b", &b_img);
+            put("pin", &pin.band_planes);
+            put("vpin", pvar);
+            put(
+                "bsharp",
+                &lens_geometry(&ap.optics, pin.band_planes.clone(), w, h, pitch_mm, &grid),
+            );
+        }
         // the negative control: the same chain without the defocus
         let b_sharp = lens_geometry(&ap.optics, pin.band_planes.clone(), w, h, pitch_mm, &grid);
         let shift_px = ap.shift_px;
-        let margin = kmax + 2 + shift_px.ceil() as usize;
+        // the kernel's radius includes the ring the spread rays reach (`splat_quadratic`):
+        // one sample of slack beyond it, as two beyond the rays' own bins before
+        let margin = kmax + 1 + shift_px.ceil() as usize;
         eprintln!(
             "{} f/{n_f}: pitch {pitch_mm:.4} mm, largest kernel radius {kmax} px, corner distortion shift {shift_px:.2} px, block margin {margin} px",
             spec.name
@@ -542,7 +575,13 @@ fn check_scene_real_lens(
             // point by point, z with the Monte Carlo σ only; the profile difference as a
             // fraction of the edge contrast (asserted < EDGE_TOL where σ resolves it)
             for e in &spec.edges {
-                let half = (kmax + 4) as isize;
+                // the largest kernel radius + 4 px each side, within the frame
+                let room = if e.vertical {
+                    e.at.min(w - e.at)
+                } else {
+                    e.at.min(h - e.at)
+                };
+                let half = (kmax + 4).min(room) as isize;
                 let n_along = (e.hi - e.lo) as f64;
                 let prof = |img: &[f32]| edge_profile(img, w, e, half);
                 let (pa, pb, pp, pg) = (
@@ -598,15 +637,30 @@ fn check_scene_real_lens(
                         );
                     }
                 }
-                if !assert_profile_tol && worst_z >= 5.0 {
-                    out.failures.push(format!(
-                        "{tag}: profile |z| {worst_z:.2} (Monte Carlo σ only)"
-                    ));
-                }
-                if assert_profile_tol && worst_diff >= EDGE_TOL {
-                    out.failures.push(format!(
-                        "{tag}: profiles differ by {worst_diff:.4} of the contrast (tolerance {EDGE_TOL})"
-                    ));
+                // the tolerance where σ resolves it (full size), else the z-test (see `EDGE_TOL`)
+                let edge_chi2 = out.edge_chi2 - chi2_before;
+                let edge_p = super::crosscheck_scenes::chi2_sf(edge_chi2, pa.len());
+                if assert_profile_tol && worst_sd < EDGE_TOL / 3.0 {
+                    out.tolerance_edges += 1;
+                    if worst_diff >= EDGE_TOL {
+                        out.failures.push(format!(
+                            "{tag}: profiles differ by {worst_diff:.4} of the contrast (tolerance {EDGE_TOL})"
+                        ));
+                    }
+                } else {
+                    out.z_edges += 1;
+                    if worst_z >= 5.0 {
+                        out.failures.push(format!(
+                            "{tag}: profile |z| {worst_z:.2} (Monte Carlo σ only)"
+                        ));
+                    }
+                    // at full size each such edge's χ² by itself (at CI size the scene's χ²)
+                    if assert_profile_tol && edge_p <= 1e-4 {
+                        out.failures.push(format!(
+                            "{tag}: profile chi2 {edge_chi2:.1} over {} points, p {edge_p:.1e}",
+                            pa.len()
+                        ));
+                    }
                 }
                 // negative control: the chain without the depth-aware defocus (pinhole radiance,
                 // the same lens geometry) fails the same edge z-test at f/2 wherever the near
@@ -692,9 +746,13 @@ fn real_lens_crosscheck(
         if !assert_profile_tol && edge_p <= 1e-4 {
             failures.push(format!("{}: edge profiles chi2 p {edge_p}", spec.name));
         }
-        if assert_profile_tol && o.worst_edge_sd >= EDGE_TOL / 3.0 {
+        eprintln!(
+            "{}: {} edge tests held to the tolerance, {} by z-test",
+            spec.name, o.tolerance_edges, o.z_edges
+        );
+        if assert_profile_tol && o.tolerance_edges == 0 {
             failures.push(format!(
-                "{}: edge profile Monte Carlo σ {} of the contrast does not resolve {EDGE_TOL}",
+                "{}: no edge's Monte Carlo σ resolves the tolerance {EDGE_TOL} (σ ≤ {} of the contrast)",
                 spec.name, o.worst_edge_sd
             ));
         }
@@ -733,7 +791,12 @@ fn real_lens_crosscheck_three_scenes_three_apertures() {
 #[test]
 #[ignore]
 fn real_lens_crosscheck_full_size() {
-    real_lens_crosscheck(384, 256, 1024, ADAPTIVE_FIELD_NODES, true);
+    // an experiment's override of the samples per pixel: CAMSIM_XC_SPP
+    let spp = std::env::var("CAMSIM_XC_SPP")
+        .ok()
+        .and_then(|t| t.parse().ok())
+        .unwrap_or(1024);
+    real_lens_crosscheck(384, 256, spp, ADAPTIVE_FIELD_NODES, true);
 }
 
 /// A defocus whose PSF tables would exceed `LENS_DEPTH_MEMORY_BUDGET_BYTES` is refused before
@@ -1230,4 +1293,85 @@ fn relative_illumination_by_wavelength_at_f2() {
         let t_old = t.elapsed().as_secs_f64();
         eprintln!("run {rep}: film-side 41 × 7 points {t_new:.3} s, entrance-pupil 41 fields {t_old:.3} s ({} threads)", rayon::current_num_threads());
     }
+}
+
+/// The cause of the full-size f/2 and f/4 block failures of `near_card` (session 19): the
+/// depth path composited every field node's window with slabs of the window's own depth range.
+/// Where a window held only the far checker, that range was the f32 jitter of its depths
+/// (4.9999995–5.000001 m between the cells' quads), so the 16 slabs split the plane cell by
+/// cell into layers that occluded each other (block means off by up to 16 %). Tested: on the
+/// full-size f/2 film with the chain's adaptive nodes, a far checker whose cells carry that
+/// jitter is defocused exactly as the same checker at one depth, next to a near card (so
+/// the whole image has two depths, some node windows one).
+#[test]
+fn depth_jitter_of_one_plane_does_not_split_it_into_layers() {
+    let lens = double_gauss();
+    let (w, h) = (384usize, 256usize);
+    let aps = apertures(&lens, w, h, &[550.0]);
+    let ap = aps.iter().find(|a| a.f_number == 2.0).unwrap();
+    let (near, far) = (DEPTHS_M[0] as f32, DEPTHS_M[2] as f32);
+    // the f32 depths the renderer gave the far checker's cells
+    let jitter = [far, 4.999_999_5, 5.000_000_5, 4.999_999, 5.000_001];
+    let checker: Vec<f32> = (0..w * h)
+        .map(|q| {
+            if ((q % w) / 4 + (q / w) / 4) % 2 == 0 {
+                1.0
+            } else {
+                0.15
+            }
+        })
+        .collect();
+    let depth = |jittered: bool| -> Vec<f32> {
+        (0..w * h)
+            .map(|q| {
+                let (x, y) = (q % w, q / w);
+                if x < w / 3 {
+                    near
+                } else if jittered {
+                    jitter[(x / 4 * 7 + y / 4 * 3) % jitter.len()]
+                } else {
+                    far
+                }
+            })
+            .collect()
+    };
+    let inv_depths = slab_inverse_depths(&depth(false), LAYERS);
+    let lk = LensDepthKernels::new(
+        &ap.focus,
+        &LensDepthOptions {
+            sample_pitch_mm: ap.pitch_mm,
+            width: w,
+            height: h,
+            wavelengths_nm: vec![550.0],
+            pupil_n: 32,
+            field_nodes: ADAPTIVE_FIELD_NODES,
+        },
+        &inv_depths,
+    )
+    .unwrap();
+    let kernels = DepthKernels::Lens(lk);
+    let run = |jittered: bool| {
+        defocus_by_depth(
+            std::slice::from_ref(&checker),
+            &[550.0],
+            &depth(jittered),
+            w,
+            h,
+            LAYERS,
+            &kernels,
+        )
+        .planes
+        .remove(0)
+    };
+    let (plain, jittered) = (run(false), run(true));
+    let worst = plain
+        .iter()
+        .zip(&jittered)
+        .map(|(a, b)| (a - b).abs() / a.abs().max(1e-3))
+        .fold(0f32, f32::max);
+    eprintln!("f32 depth jitter on one plane: worst relative change {worst:.2e}");
+    assert!(
+        worst < 1e-5,
+        "the far plane's f32 depth jitter changes the defocused image by {worst} (relative)"
+    );
 }
