@@ -169,6 +169,28 @@ pub fn build(spec: &SceneSpec, w: usize, h: usize, yfov_deg: f64) -> GltfBuilder
     b
 }
 
+/// The f32 depths (m) the renderer gives the cells of a checker at 5 m (each cell its own pair
+/// of triangles): a plane's depth jitter.
+pub const JITTERED_5M: [f32; 5] = [5.0, 4.999_999_5, 5.000_000_5, 4.999_999, 5.000_001];
+
+/// A `w × h` plane of 4-px checker cells valued `hi` and `lo` (phase at the pixel origin).
+pub fn checker_plane(w: usize, h: usize, hi: f32, lo: f32) -> Vec<f32> {
+    (0..w * h)
+        .map(|q| {
+            if ((q % w) / 4 + (q / w) / 4) % 2 == 0 {
+                hi
+            } else {
+                lo
+            }
+        })
+        .collect()
+}
+
+/// [`JITTERED_5M`] spread over 4-px cells of a `w`-wide image: the depth of pixel `q`.
+pub fn jittered_5m_depth(w: usize, q: usize) -> f32 {
+    JITTERED_5M[((q % w) / 4 * 7 + (q / w) / 4 * 3) % JITTERED_5M.len()]
+}
+
 /// The three scenes on a `w × h` film (multiples of 8; the cards extend 16 px past the frame,
 /// which a lens sees).
 pub fn scenes(w: usize, h: usize) -> Vec<SceneSpec> {

@@ -623,24 +623,15 @@ fn lens_defocus_psf_is_the_entrance_pupil_disc() {
 fn f32_depth_jitter_of_one_plane_is_one_slab() {
     use camsim_render::depth_path::slabs;
     let (w, h) = (64usize, 48usize);
-    let jitter = [5.0f32, 4.999_999_5, 5.000_000_5, 4.999_999, 5.000_001];
     let depth: Vec<f32> = (0..w * h)
-        .map(|q| jitter[((q % w) / 4 * 7 + (q / w) / 4 * 3) % jitter.len()])
+        .map(|q| super::crosscheck_scenes::jittered_5m_depth(w, q))
         .collect();
     let s = slabs(&depth, 16);
     assert!(
         s.index.iter().all(|k| *k == s.index[0]),
         "one plane split into slabs"
     );
-    let checker: Vec<f32> = (0..w * h)
-        .map(|q| {
-            if ((q % w) / 4 + (q / w) / 4) % 2 == 0 {
-                1.0
-            } else {
-                0.15
-            }
-        })
-        .collect();
+    let checker = super::crosscheck_scenes::checker_plane(w, h, 1.0, 0.15);
     let k = |_iz: f64| Kernel::pillbox(3.3);
     let a = defocus_layered(std::slice::from_ref(&checker), &depth, w, h, 16, k);
     let b = defocus_layered(

@@ -1310,25 +1310,16 @@ fn depth_jitter_of_one_plane_does_not_split_it_into_layers() {
     let aps = apertures(&lens, w, h, &[550.0]);
     let ap = aps.iter().find(|a| a.f_number == 2.0).unwrap();
     let (near, far) = (DEPTHS_M[0] as f32, DEPTHS_M[2] as f32);
-    // the f32 depths the renderer gave the far checker's cells
-    let jitter = [far, 4.999_999_5, 5.000_000_5, 4.999_999, 5.000_001];
-    let checker: Vec<f32> = (0..w * h)
-        .map(|q| {
-            if ((q % w) / 4 + (q / w) / 4) % 2 == 0 {
-                1.0
-            } else {
-                0.15
-            }
-        })
-        .collect();
+    let checker = super::crosscheck_scenes::checker_plane(w, h, 1.0, 0.15);
     let depth = |jittered: bool| -> Vec<f32> {
         (0..w * h)
             .map(|q| {
-                let (x, y) = (q % w, q / w);
+                let x = q % w;
                 if x < w / 3 {
                     near
                 } else if jittered {
-                    jitter[(x / 4 * 7 + y / 4 * 3) % jitter.len()]
+                    // the f32 depths the renderer gave the far checker's cells
+                    super::crosscheck_scenes::jittered_5m_depth(w, q)
                 } else {
                     far
                 }
