@@ -51,9 +51,9 @@ fn full(l: &Kernel, r: &Kernel) -> Kernel {
 /// traced full PSF (R = √2 × its RMS radius, a uniform disc's), positive for the nearer object
 /// and negative for the farther one (the halves swap through focus). Tolerance 4 % + 0.15
 /// samples: the residual spherical aberration and pupil distortion of the stopped lens make
-/// the blur not quite a uniform disc (a few %), and binning ~3000 rays on 8 µm samples
-/// shifts a centroid by ≲ 0.1 sample. In focus the disparity vanishes (< 0.15 samples), the
-/// centroids lie on the axis in y, and the halves are mirror images.
+/// the blur not quite a uniform disc (a few %). In focus the disparity is bounded by the spot
+/// (|d| ≤ R; a nearest-bin histogram used to round it to 0), the centroids lie on the axis in
+/// y, and the halves are mirror images.
 #[test]
 fn lens_half_pupil_disparity_matches_thin_lens_geometry() {
     let mut lens = super::test_lenses::double_gauss();
@@ -90,14 +90,22 @@ fn lens_half_pupil_disparity_matches_thin_lens_geometry() {
         // here independently of camsim_optics::dual_pixel_disparity_m
         let expected = sign * 8.0 * radius / (3.0 * std::f64::consts::PI);
         eprintln!("1/z {inv}: R {radius:.3} px, disparity {d:.3} px, thin lens {expected:.3} px, y {ly:.3} {ry:.3}");
-        assert!(
-            (d - expected).abs() < 0.04 * expected.abs() + 0.15,
-            "1/z {inv}: disparity {d} vs {expected}"
-        );
         assert!(ly.abs() < 0.1 && ry.abs() < 0.1);
         if sign == 0.0 {
+            // At the paraxial focus the residual spherical aberration leaves the halves a
+            // disparity of the order of the spot (−0.16 px for R 0.22 px): the split of a
+            // distribution into two halves moves their means apart by at most twice its x
+            // standard deviation (between-group ≤ total variance), R for a round spot.
             assert!(radius < 1.0, "in focus R {radius}");
+            assert!(
+                d.abs() <= radius,
+                "1/z {inv}: in-focus disparity {d} beyond R {radius}"
+            );
         } else {
+            assert!(
+                (d - expected).abs() < 0.04 * expected.abs() + 0.15,
+                "1/z {inv}: disparity {d} vs {expected}"
+            );
             assert!(radius > 4.0, "defocused R {radius}");
             assert_eq!(d.signum(), sign);
         }
