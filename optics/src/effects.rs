@@ -404,7 +404,7 @@ impl OpticsEffects {
 
     /// The range `[g_lo, g_hi]` of the warp's ratio `g = r_s / r` (scene radius over image
     /// radius: a sample at field offset (x, y) from the centre takes the scene value at
-    /// (g·x, g·y), [`warp_planes`]) over the image radii `[r_lo_m, r_hi_m]`, at every
+    /// (g·x, g·y), `warp_planes`) over the image radii `[r_lo_m, r_hi_m]`, at every
     /// wavelength of `wavelengths_nm` (lateral colour; `None` without it). What a row window
     /// of the field must hold: its rows' sources lie within `y·[g_lo, g_hi]` of the centre.
     ///

@@ -347,7 +347,7 @@ pub fn glare_sums(
 
 /// [`glare_sums`] of an optical image already formed without the glare (`irradiance`: the
 /// whole field through `optics` without the block, e.g. a camera that has none): the same
-/// sums ([`effects::veiling_glare_sums`] over the samples on the sensor of `optics`' effects)
+/// sums (`effects::veiling_glare_sums` over the samples on the sensor of `optics`' effects)
 /// without running the optics again.
 pub fn glare_sums_of_image(optics: &OpticsModel, irradiance: &SensorIrradiance) -> GlareSums {
     effects::veiling_glare_sums(
