@@ -438,16 +438,7 @@ impl OpticsEffects {
                 if r <= 0.0 {
                     return Some(0.0);
                 }
-                let mut b = r.min(0.999 * r_lim);
-                let mut tries = 0;
-                while fwd(b) < r {
-                    let next = (b * 1.1).min(0.999 * r_lim + 0.001 * b);
-                    tries += 1;
-                    if tries > 200 || next <= b {
-                        return None;
-                    }
-                    b = next;
-                }
+                let mut b = grow_bracket(fwd, r, r_lim)?;
                 let mut a = 0.0f64;
                 for _ in 0..200 {
                     let c = 0.5 * (a + b);
@@ -593,6 +584,22 @@ static INVERSE_MEMO: std::sync::Mutex<
 /// Most inverse tables kept (≈ 33 kB each).
 const INVERSE_MEMO_ENTRIES: usize = 2048;
 
+/// The upper end of a bracket of the inverse of the increasing radial map `fwd` at `r`: the
+/// first of r, 1.1·r, 1.1²·r, … (approaching the model's pole `r_lim` no closer than 0.999 of
+/// it) that `fwd` maps to at least `r`; `None` when 200 steps do not get there.
+fn grow_bracket(fwd: impl Fn(f64) -> f64, r: f64, r_lim: f64) -> Option<f64> {
+    let mut b = r.min(0.999 * r_lim);
+    let mut tries = 0;
+    while fwd(b) < r {
+        let next = (b * 1.1).min(0.999 * r_lim + 0.001 * b);
+        tries += 1;
+        if tries > 200 || next <= b {
+            return None;
+        }
+        b = next;
+    }
+    Some(b)
+}
 impl RadialInverse {
     const N: usize = 4097;
 
@@ -644,17 +651,6 @@ impl RadialInverse {
         let hd = fx.half_diagonal_m();
         let fwd = |r: f64| fx.warp_forward_m(r, wavelength_nm);
         let r_lim = fx.distortion.map_or(f64::INFINITY, |d| d.h_limit()) * hd;
-        // Bracket: grow r_hi until it maps beyond r_max, staying below the model's pole.
-        let mut r_hi = r_max_m.min(0.999 * r_lim);
-        let mut tries = 0;
-        while fwd(r_hi) < r_max_m {
-            let next = (r_hi * 1.1).min(0.999 * r_lim + 0.001 * r_hi);
-            tries += 1;
-            if tries > 200 || next <= r_hi {
-                break;
-            }
-            r_hi = next;
-        }
         let fold = || {
             OpticsError::Effect(format!(
                 "optics distortion / lateral colour: the radial map folds over inside the image \
@@ -662,9 +658,8 @@ impl RadialInverse {
                 r_max_m * 1e3
             ))
         };
-        if fwd(r_hi) < r_max_m {
-            return Err(fold());
-        }
+        // Bracket: grow r_hi until it maps beyond r_max, staying below the model's pole.
+        let r_hi = grow_bracket(fwd, r_max_m, r_lim).ok_or_else(fold)?;
         // Monotonicity on the bracket.
         let m = 4096;
         let mut prev = fwd(0.0);
