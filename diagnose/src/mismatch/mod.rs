@@ -152,6 +152,10 @@ pub fn diagnose(
     let ctx = Ctx::new(data, forward, opts.max_fit_pixels);
     lap("set-up (fit rows, outlier mask)", &mut timing);
     progress("fit check (believed camera)");
+    // The believed camera's rates on every pixel, held for the residual maps: the rate cache
+    // is least-recently-used, and at 12 MP the fits' entries evict these long before the maps
+    // are drawn (a second whole-sensor forward run: renders and optics of every target).
+    let rb = ctx.rates(believed)?;
     let (before, ev_before) = ctx.locate(believed)?;
     lap("fit check and locate, believed camera", &mut timing);
     let selection = select::select(&ctx, believed, &opts.select, progress)?;
@@ -185,7 +189,6 @@ pub fn diagnose(
         })
         .collect();
     worst.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let rb = ctx.rates(believed)?;
     let ra = ctx.rates(&selection.state)?;
     let maps = worst
         .iter()

@@ -1019,4 +1019,74 @@ mod tests {
         }
         assert!(fit_bands(9, 4).is_empty());
     }
+
+    /// A forward model that runs row windows and counts its whole-sensor runs per spec.
+    struct CountingWindowed {
+        rates: Vec<Arc<Vec<f32>>>,
+        whole_runs: std::sync::Mutex<std::collections::HashMap<String, usize>>,
+    }
+    impl Forward for CountingWindowed {
+        fn rates(&self, spec: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
+            *self
+                .whole_runs
+                .lock()
+                .unwrap()
+                .entry(spec.key())
+                .or_default() += 1;
+            Ok(self.rates.clone())
+        }
+        fn rates_rows(&self, _: &RateSpec, _: &[usize]) -> Result<Vec<Arc<Vec<f32>>>, String> {
+            Ok(self.rates.clone())
+        }
+        fn row_window(&self, _: &[usize]) -> bool {
+            true
+        }
+    }
+
+    #[test]
+    fn fit_row_entries_do_not_evict_the_whole_sensor_rates() {
+        // 64 × 8 flats, fits on 16 of the 64 rows: the fit rows run as windows.
+        let (rows, cols) = (64usize, 8usize);
+        let rate = Arc::new(vec![1.0e5f32; rows * cols]);
+        let mut shots = Vec::new();
+        for k in 0..2 {
+            let mut acc = ShotAccumulator::new(rows, cols, 4095);
+            for f in 0..2u16 {
+                acc.add(&vec![1000 + 10 * k + f; rows * cols]).unwrap();
+            }
+            shots.push(acc.finish(
+                format!("s{k}"),
+                TargetClass::Uniform,
+                format!("k{k}"),
+                0.01,
+                1.0,
+            ));
+        }
+        let data = DataSet {
+            rows,
+            cols,
+            channel: vec![0; rows * cols],
+            channel_names: vec!["m".into()],
+            max_dn: 4095.0,
+            shots,
+        };
+        let fwd = CountingWindowed {
+            rates: vec![rate.clone(), rate],
+            whole_runs: Default::default(),
+        };
+        let ctx = Ctx::new(&data, &fwd, 16 * cols);
+        assert!(ctx.fit_window && ctx.fit_rows.len() < rows);
+        let believed = RateSpec::default();
+        ctx.all_base_rates(&believed).unwrap();
+        // more fit-row entries than the cache keeps of one kind (at most 4 096)
+        for i in 1..=4_200 {
+            let spec = RateSpec {
+                glare_fraction: Some(1e-3 * i as f64),
+                ..RateSpec::default()
+            };
+            ctx.base_rates(&spec).unwrap();
+        }
+        ctx.all_base_rates(&believed).unwrap();
+        assert_eq!(fwd.whole_runs.lock().unwrap()[&believed.key()], 1);
+    }
 }

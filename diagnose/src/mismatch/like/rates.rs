@@ -5,15 +5,19 @@ use crate::mismatch::model::{crosstalk_image, ModelState, RateSpec};
 use rayon::prelude::*;
 use std::sync::Arc;
 
+/// Key prefix of the rate cache's fit-row entries ([`Ctx::base_rates`]).
+const FIT_ROWS_KEY: &str = "rows|";
+
 impl Ctx<'_> {
     /// Rates of the forward model for `spec` on the rows a fit-row evaluation reads
     /// ([`Ctx::calc_rows`]; every row when the forward model computes them all anyway, see
-    /// [`Ctx::fit_window`]); elsewhere possibly 0. Cached (the cache holds up to ~512 MB).
+    /// [`Ctx::fit_window`]); elsewhere possibly 0. Cached (fit-row and whole-sensor entries
+    /// each up to ~512 MB, at least 8 entries of each kind).
     pub fn base_rates(&self, spec: &RateSpec) -> Result<Arc<Rates>, String> {
         if !self.fit_window {
             return self.all_base_rates(spec);
         }
-        self.cached_rates(format!("rows|{}", spec.key()), || {
+        self.cached_rates(format!("{FIT_ROWS_KEY}{}", spec.key()), || {
             self.forward.rates_rows(spec, &self.calc_rows)
         })
     }
@@ -59,10 +63,17 @@ impl Ctx<'_> {
         let entry_bytes = unique * self.data.pixels() * 4;
         let max_entries = ((512usize << 20) / entry_bytes.max(1)).clamp(8, 4096);
         let r = Arc::new(r);
+        // Fit-row entries and whole-sensor entries are evicted each within their own kind:
+        // the fits make hundreds of fit-row entries, and the few whole-sensor ones (the
+        // believed camera, each acceptance's full-resolution check, which the final fit check
+        // repeats) would otherwise be evicted by them and cost a whole forward run again.
+        let fit_kind = |k: &str| k.starts_with(FIT_ROWS_KEY);
+        let kind = fit_kind(&key);
         let mut c = self.cache.lock().expect("cache");
-        while c.len() >= max_entries {
+        while c.keys().filter(|k| fit_kind(k) == kind).count() >= max_entries {
             let oldest = c
                 .iter()
+                .filter(|(k, _)| fit_kind(k) == kind)
                 .min_by_key(|(_, v)| v.0)
                 .map(|(k, _)| k.clone())
                 .expect("non-empty");
