@@ -309,29 +309,122 @@ pub fn censored_pixel(
             return false;
         }
     }
-    let med = |x: &mut [f64]| -> f64 {
-        x.sort_by(|a, b| a.total_cmp(b));
-        let n = x.len();
-        if n == 0 {
-            f64::NAN
-        } else if n % 2 == 1 {
-            x[n / 2]
-        } else {
-            0.5 * (x[n / 2 - 1] + x[n / 2])
-        }
-    };
     let level = if neighbour_means.is_empty() {
         own_mean
     } else {
-        med(neighbour_means)
+        median(neighbour_means)
     };
-    let mut dev: Vec<f64> = neighbour_means.iter().map(|x| (x - level).abs()).collect();
-    let mad = 1.4826 * med(&mut dev);
-    let var_t = med(neighbour_vars);
+    let mut dev_buf = [0f64; 8];
+    let mad = 1.4826
+        * if neighbour_means.len() <= dev_buf.len() {
+            let dev = &mut dev_buf[..neighbour_means.len()];
+            for (d, x) in dev.iter_mut().zip(neighbour_means.iter()) {
+                *d = (x - level).abs();
+            }
+            median(dev)
+        } else {
+            let mut dev: Vec<f64> = neighbour_means.iter().map(|x| (x - level).abs()).collect();
+            median(&mut dev)
+        };
+    let var_t = median(neighbour_vars);
     let s = (var_t.max(0.0) + if mad.is_finite() { mad * mad } else { 0.0 })
         .max(9.0)
         .sqrt();
     level - 6.0 * s <= 0.0 || level + 6.0 * s >= max_dn
+}
+
+/// The median of `x` in the order of [`f64::total_cmp`]: the middle value, or the mean of the
+/// two middle values for an even count; NaN for none. Up to 8 values (a pixel's same-channel
+/// neighbours, see [`censored_pixel`]) are ordered by a fixed 19-comparator sorting network
+/// (Knuth, *The Art of Computer Programming* vol. 3, §5.3.4) on the values' total-order
+/// keys, without touching `x`; the sorted sequence is the one `sort_by(f64::total_cmp)`
+/// gives, so the median has the same bits. Longer inputs are sorted in place.
+#[inline]
+fn median(x: &mut [f64]) -> f64 {
+    let n = x.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    if n > 8 {
+        x.sort_by(|a, b| a.total_cmp(b));
+        return if n % 2 == 1 {
+            x[n / 2]
+        } else {
+            0.5 * (x[n / 2 - 1] + x[n / 2])
+        };
+    }
+    // Padding keys sort after every value's key (ties only with identical bits).
+    let mut k = [i64::MAX; 8];
+    for (k, &v) in k.iter_mut().zip(x.iter()) {
+        *k = total_order_key(v);
+    }
+    sort8_keys(&mut k);
+    if n % 2 == 1 {
+        total_order_value(k[n / 2])
+    } else {
+        0.5 * (total_order_value(k[n / 2 - 1]) + total_order_value(k[n / 2]))
+    }
+}
+
+/// The integer whose signed order is [`f64::total_cmp`]'s order of `v` (the transform
+/// `total_cmp` itself uses: negative values' magnitude bits flipped).
+#[inline]
+fn total_order_key(v: f64) -> i64 {
+    let b = v.to_bits() as i64;
+    b ^ ((((b >> 63) as u64) >> 1) as i64)
+}
+
+/// The inverse of [`total_order_key`] (the transform is its own inverse).
+#[inline]
+fn total_order_value(k: i64) -> f64 {
+    f64::from_bits((k ^ ((((k >> 63) as u64) >> 1) as i64)) as u64)
+}
+
+/// The 19 comparators of the optimal sorting network for 8 inputs, in 6 layers (unrolled in
+/// [`sort8_keys`]; the test checks both against each other).
+#[cfg_attr(not(test), allow(dead_code))]
+const SORT8_NETWORK: [(usize, usize); 19] = [
+    (0, 2),
+    (1, 3),
+    (4, 6),
+    (5, 7),
+    (0, 4),
+    (1, 5),
+    (2, 6),
+    (3, 7),
+    (0, 1),
+    (2, 3),
+    (4, 5),
+    (6, 7),
+    (2, 4),
+    (3, 5),
+    (1, 4),
+    (3, 6),
+    (1, 2),
+    (3, 4),
+    (5, 6),
+];
+
+/// Sorts 8 keys ascending with [`SORT8_NETWORK`] (branch-free min/max), unrolled so the keys
+/// stay in registers.
+#[inline(always)]
+fn sort8_keys(k: &mut [i64; 8]) {
+    let [mut k0, mut k1, mut k2, mut k3, mut k4, mut k5, mut k6, mut k7] = *k;
+    macro_rules! cmp_swap {
+        ($($a:ident $b:ident),*) => {$(
+            let (x, y) = ($a, $b);
+            $a = x.min(y);
+            $b = x.max(y);
+        )*};
+    }
+    // The comparators of SORT8_NETWORK, in its order.
+    cmp_swap!(k0 k2, k1 k3, k4 k6, k5 k7);
+    cmp_swap!(k0 k4, k1 k5, k2 k6, k3 k7);
+    cmp_swap!(k0 k1, k2 k3, k4 k5, k6 k7);
+    cmp_swap!(k2 k4, k3 k5);
+    cmp_swap!(k1 k4, k3 k6);
+    cmp_swap!(k1 k2, k3 k4, k5 k6);
+    *k = [k0, k1, k2, k3, k4, k5, k6, k7];
 }
 
 #[cfg(test)]
@@ -357,5 +450,70 @@ mod tests {
         // A 10-DN range lies within 6 × 3 DN of a rail everywhere: the neighbourhood rule
         // alone censors every pixel.
         assert_eq!(s.rail_only, vec![false, false, false]);
+    }
+
+    /// The network sorts every 0/1 input of 8 (the 0-1 principle: then it sorts every input).
+    #[test]
+    fn sort8_network_sorts_all_zero_one_inputs() {
+        for m in 0u32..256 {
+            let mut k = [0i64; 8];
+            for (i, k) in k.iter_mut().enumerate() {
+                *k = ((m >> i) & 1) as i64;
+            }
+            let mut by_table = k;
+            for &(a, b) in SORT8_NETWORK.iter() {
+                let (x, y) = (by_table[a], by_table[b]);
+                by_table[a] = x.min(y);
+                by_table[b] = x.max(y);
+            }
+            sort8_keys(&mut k);
+            assert!(k.windows(2).all(|w| w[0] <= w[1]), "input {m:08b} -> {k:?}");
+            assert_eq!(k, by_table, "input {m:08b}");
+        }
+    }
+
+    /// The median has the bits of the sort-based median it replaces, for every length up
+    /// to 9, with ties, signed zeros, negative values and subnormals.
+    #[test]
+    fn median_matches_sorting_bit_for_bit() {
+        fn by_sorting(x: &[f64]) -> f64 {
+            let mut x = x.to_vec();
+            x.sort_by(|a, b| a.total_cmp(b));
+            let n = x.len();
+            if n == 0 {
+                f64::NAN
+            } else if n % 2 == 1 {
+                x[n / 2]
+            } else {
+                0.5 * (x[n / 2 - 1] + x[n / 2])
+            }
+        }
+        let pool = [
+            0.0, -0.0, 1.0, -1.0, 2.5, 2.5, 1e-310, -1e-310, 4095.0, 17.25, 3.0, -7.5, 1e300,
+        ];
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        for n in 0..=9usize {
+            for _ in 0..2000 {
+                let x: Vec<f64> = (0..n)
+                    .map(|_| {
+                        state = state
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        let r = (state >> 33) as usize;
+                        if r % 3 == 0 {
+                            pool[r % pool.len()]
+                        } else {
+                            (r % 100_000) as f64 / 7.0 - 5000.0
+                        }
+                    })
+                    .collect();
+                let mut y = x.clone();
+                let (a, b) = (median(&mut y), by_sorting(&x));
+                assert!(
+                    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                    "{x:?}: {a} vs {b}"
+                );
+            }
+        }
     }
 }
