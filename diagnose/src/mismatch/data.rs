@@ -226,37 +226,63 @@ impl ShotAccumulator {
         };
         let max = self.max_dn as f64;
         let (rows, cols) = (self.rows, self.cols);
-        let (censored, rail_only): (Vec<bool>, Vec<bool>) = (0..mean_dn.len())
-            .into_par_iter()
-            .map(|i| {
-                let (r, c) = (i / cols.max(1), i % cols.max(1));
-                let mut m = [0f64; 8];
-                let mut v = [0f64; 8];
-                let mut k = 0;
-                for dr in [-2i64, 0, 2] {
-                    for dc in [-2i64, 0, 2] {
-                        let (rr, cc) = (r as i64 + dr, c as i64 + dc);
-                        if (dr, dc) == (0, 0)
-                            || rr < 0
-                            || cc < 0
-                            || rr >= rows as i64
-                            || cc >= cols as i64
-                        {
-                            continue;
-                        }
-                        let j = rr as usize * cols + cc as usize;
-                        m[k] = mean_dn[j] as f64;
-                        v[k] = var_dn.get(j).map_or(0.0, |&x| x as f64);
-                        k += 1;
+        let has_var = !var_dn.is_empty();
+        let cols1 = cols.max(1);
+        // The same-channel neighbours two pixels away (the 3 × 3 grid of offsets −2, 0, +2
+        // without the centre, row by row) that lie on the sensor, into `m` (means) and `v`
+        // (temporal variances, 0 without them); returns their number.
+        let neighbours = |r: usize, c: usize, m: &mut [f64; 8], v: &mut [f64; 8]| -> usize {
+            let mut k = 0;
+            for dr in [-2i64, 0, 2] {
+                for dc in [-2i64, 0, 2] {
+                    let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                    if (dr, dc) == (0, 0)
+                        || rr < 0
+                        || cc < 0
+                        || rr >= rows as i64
+                        || cc >= cols as i64
+                    {
+                        continue;
                     }
+                    let j = rr as usize * cols + cc as usize;
+                    m[k] = mean_dn[j] as f64;
+                    v[k] = if has_var { var_dn[j] as f64 } else { 0.0 };
+                    k += 1;
                 }
-                let n_rail = self.n_low[i] + self.n_high[i];
-                let c = censored_pixel(n_rail, &mut m[..k], &mut v[..k], mean_dn[i] as f64, max);
-                let by_rails_only = n_rail > 0
-                    && !censored_pixel(0, &mut m[..k], &mut v[..k], mean_dn[i] as f64, max);
-                (c, by_rails_only)
-            })
-            .unzip();
+            }
+            k
+        };
+        let mut censored = vec![false; mean_dn.len()];
+        let mut rail_only = vec![false; mean_dn.len()];
+        censored
+            .par_chunks_mut(cols1)
+            .zip(rail_only.par_chunks_mut(cols1))
+            .enumerate()
+            .for_each(|(r, (cen, rail))| {
+                let interior_row = r >= 2 && r + 2 < rows;
+                for c in 0..cen.len() {
+                    let i = r * cols + c;
+                    let mut m = [0f64; 8];
+                    let mut v = [0f64; 8];
+                    let k = if interior_row && c >= 2 && c + 2 < cols {
+                        // All 8 on the sensor: the same values in the same order, by fixed
+                        // offsets.
+                        let (up, down) = (i - 2 * cols, i + 2 * cols);
+                        let js = [up - 2, up, up + 2, i - 2, i + 2, down - 2, down, down + 2];
+                        for (q, &j) in js.iter().enumerate() {
+                            m[q] = mean_dn[j] as f64;
+                            v[q] = if has_var { var_dn[j] as f64 } else { 0.0 };
+                        }
+                        8
+                    } else {
+                        neighbours(r, c, &mut m, &mut v)
+                    };
+                    let n_rail = self.n_low[i] + self.n_high[i];
+                    let own = mean_dn[i] as f64;
+                    cen[c] = censored_pixel(n_rail, &mut m[..k], &mut v[..k], own, max);
+                    rail[c] = n_rail > 0 && !censored_pixel(0, &mut m[..k], &mut v[..k], own, max);
+                }
+            });
         ShotData {
             id,
             target,
@@ -513,6 +539,80 @@ mod tests {
                     a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
                     "{x:?}: {a} vs {b}"
                 );
+            }
+        }
+    }
+
+    /// The censoring pass (interior pixels by fixed offsets, edge pixels by the bounds-checked
+    /// walk) gives, pixel by pixel, what the rule gives on each pixel's neighbours gathered
+    /// directly; on frames with levels near both rails and in between, so every branch of the
+    /// rule occurs.
+    #[test]
+    fn censoring_pass_matches_the_rule_per_pixel() {
+        let (rows, cols, max) = (9usize, 11usize, 4095u16);
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as u32
+        };
+        for frames in [1usize, 3] {
+            let mut a = ShotAccumulator::new(rows, cols, max);
+            // dark columns (censored by the neighbourhood), mid-level columns with two dead
+            // pixels (censored by their own rail frames only), columns at the top rail
+            let level: Vec<u32> = (0..rows * cols)
+                .map(|i| match (i / cols, i % cols) {
+                    (4, 5) | (6, 5) => 0,
+                    (_, c) if c < 2 => 5,
+                    (_, c) if c < 9 => 2000,
+                    _ => 4093,
+                })
+                .collect();
+            for _ in 0..frames {
+                let f: Vec<u16> = level
+                    .iter()
+                    .map(|&l| (l + next() % 5).saturating_sub(2).min(max as u32) as u16)
+                    .collect();
+                a.add(&f).unwrap();
+            }
+            let (n_low, n_high) = (a.n_low.clone(), a.n_high.clone());
+            let s = a.finish("s".into(), TargetClass::Uniform, "k".into(), 0.1, 1.0);
+            let (mut n_cen, mut n_rail_only) = (0, 0);
+            for r in 0..rows {
+                for c in 0..cols {
+                    let (mut m, mut v) = (Vec::new(), Vec::new());
+                    for dr in [-2i64, 0, 2] {
+                        for dc in [-2i64, 0, 2] {
+                            let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                            if (dr, dc) != (0, 0)
+                                && (0..rows as i64).contains(&rr)
+                                && (0..cols as i64).contains(&cc)
+                            {
+                                let j = rr as usize * cols + cc as usize;
+                                m.push(s.mean_dn[j] as f64);
+                                v.push(s.var_dn.get(j).map_or(0.0, |&x| x as f64));
+                            }
+                        }
+                    }
+                    let i = r * cols + c;
+                    let n_rail = n_low[i] + n_high[i];
+                    let own = s.mean_dn[i] as f64;
+                    let cen = censored_pixel(n_rail, &mut m, &mut v, own, max as f64);
+                    let by_rails =
+                        n_rail > 0 && !censored_pixel(0, &mut m, &mut v, own, max as f64);
+                    assert_eq!(
+                        s.censored[i], cen,
+                        "censored at ({r}, {c}), {frames} frames"
+                    );
+                    assert_eq!(s.rail_only[i], by_rails, "rail_only at ({r}, {c})");
+                    n_cen += cen as usize;
+                    n_rail_only += by_rails as usize;
+                }
+            }
+            assert!(n_cen > 0 && n_cen < rows * cols, "{n_cen} censored");
+            if frames > 1 {
+                assert!(n_rail_only > 0, "no rail-only pixel");
             }
         }
     }
