@@ -226,37 +226,63 @@ impl ShotAccumulator {
         };
         let max = self.max_dn as f64;
         let (rows, cols) = (self.rows, self.cols);
-        let (censored, rail_only): (Vec<bool>, Vec<bool>) = (0..mean_dn.len())
-            .into_par_iter()
-            .map(|i| {
-                let (r, c) = (i / cols.max(1), i % cols.max(1));
-                let mut m = [0f64; 8];
-                let mut v = [0f64; 8];
-                let mut k = 0;
-                for dr in [-2i64, 0, 2] {
-                    for dc in [-2i64, 0, 2] {
-                        let (rr, cc) = (r as i64 + dr, c as i64 + dc);
-                        if (dr, dc) == (0, 0)
-                            || rr < 0
-                            || cc < 0
-                            || rr >= rows as i64
-                            || cc >= cols as i64
-                        {
-                            continue;
-                        }
-                        let j = rr as usize * cols + cc as usize;
-                        m[k] = mean_dn[j] as f64;
-                        v[k] = var_dn.get(j).map_or(0.0, |&x| x as f64);
-                        k += 1;
+        let has_var = !var_dn.is_empty();
+        let cols1 = cols.max(1);
+        // The same-channel neighbours two pixels away (the 3 × 3 grid of offsets −2, 0, +2
+        // without the centre, row by row) that lie on the sensor, into `m` (means) and `v`
+        // (temporal variances, 0 without them); returns their number.
+        let neighbours = |r: usize, c: usize, m: &mut [f64; 8], v: &mut [f64; 8]| -> usize {
+            let mut k = 0;
+            for dr in [-2i64, 0, 2] {
+                for dc in [-2i64, 0, 2] {
+                    let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                    if (dr, dc) == (0, 0)
+                        || rr < 0
+                        || cc < 0
+                        || rr >= rows as i64
+                        || cc >= cols as i64
+                    {
+                        continue;
                     }
+                    let j = rr as usize * cols + cc as usize;
+                    m[k] = mean_dn[j] as f64;
+                    v[k] = if has_var { var_dn[j] as f64 } else { 0.0 };
+                    k += 1;
                 }
-                let n_rail = self.n_low[i] + self.n_high[i];
-                let c = censored_pixel(n_rail, &mut m[..k], &mut v[..k], mean_dn[i] as f64, max);
-                let by_rails_only = n_rail > 0
-                    && !censored_pixel(0, &mut m[..k], &mut v[..k], mean_dn[i] as f64, max);
-                (c, by_rails_only)
-            })
-            .unzip();
+            }
+            k
+        };
+        let mut censored = vec![false; mean_dn.len()];
+        let mut rail_only = vec![false; mean_dn.len()];
+        censored
+            .par_chunks_mut(cols1)
+            .zip(rail_only.par_chunks_mut(cols1))
+            .enumerate()
+            .for_each(|(r, (cen, rail))| {
+                let interior_row = r >= 2 && r + 2 < rows;
+                for c in 0..cen.len() {
+                    let i = r * cols + c;
+                    let mut m = [0f64; 8];
+                    let mut v = [0f64; 8];
+                    let k = if interior_row && c >= 2 && c + 2 < cols {
+                        // All 8 on the sensor: the same values in the same order, by fixed
+                        // offsets.
+                        let (up, down) = (i - 2 * cols, i + 2 * cols);
+                        let js = [up - 2, up, up + 2, i - 2, i + 2, down - 2, down, down + 2];
+                        for (q, &j) in js.iter().enumerate() {
+                            m[q] = mean_dn[j] as f64;
+                            v[q] = if has_var { var_dn[j] as f64 } else { 0.0 };
+                        }
+                        8
+                    } else {
+                        neighbours(r, c, &mut m, &mut v)
+                    };
+                    let n_rail = self.n_low[i] + self.n_high[i];
+                    let own = mean_dn[i] as f64;
+                    cen[c] = censored_pixel(n_rail, &mut m[..k], &mut v[..k], own, max);
+                    rail[c] = n_rail > 0 && !censored_pixel(0, &mut m[..k], &mut v[..k], own, max);
+                }
+            });
         ShotData {
             id,
             target,
@@ -309,29 +335,122 @@ pub fn censored_pixel(
             return false;
         }
     }
-    let med = |x: &mut [f64]| -> f64 {
-        x.sort_by(|a, b| a.total_cmp(b));
-        let n = x.len();
-        if n == 0 {
-            f64::NAN
-        } else if n % 2 == 1 {
-            x[n / 2]
-        } else {
-            0.5 * (x[n / 2 - 1] + x[n / 2])
-        }
-    };
     let level = if neighbour_means.is_empty() {
         own_mean
     } else {
-        med(neighbour_means)
+        median(neighbour_means)
     };
-    let mut dev: Vec<f64> = neighbour_means.iter().map(|x| (x - level).abs()).collect();
-    let mad = 1.4826 * med(&mut dev);
-    let var_t = med(neighbour_vars);
+    let mut dev_buf = [0f64; 8];
+    let mad = 1.4826
+        * if neighbour_means.len() <= dev_buf.len() {
+            let dev = &mut dev_buf[..neighbour_means.len()];
+            for (d, x) in dev.iter_mut().zip(neighbour_means.iter()) {
+                *d = (x - level).abs();
+            }
+            median(dev)
+        } else {
+            let mut dev: Vec<f64> = neighbour_means.iter().map(|x| (x - level).abs()).collect();
+            median(&mut dev)
+        };
+    let var_t = median(neighbour_vars);
     let s = (var_t.max(0.0) + if mad.is_finite() { mad * mad } else { 0.0 })
         .max(9.0)
         .sqrt();
     level - 6.0 * s <= 0.0 || level + 6.0 * s >= max_dn
+}
+
+/// The median of `x` in the order of [`f64::total_cmp`]: the middle value, or the mean of the
+/// two middle values for an even count; NaN for none. Up to 8 values (a pixel's same-channel
+/// neighbours, see [`censored_pixel`]) are ordered by a fixed 19-comparator sorting network
+/// (Knuth, *The Art of Computer Programming* vol. 3, §5.3.4) on the values' total-order
+/// keys, without touching `x`; the sorted sequence is the one `sort_by(f64::total_cmp)`
+/// gives, so the median has the same bits. Longer inputs are sorted in place.
+#[inline]
+fn median(x: &mut [f64]) -> f64 {
+    let n = x.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    if n > 8 {
+        x.sort_by(|a, b| a.total_cmp(b));
+        return if n % 2 == 1 {
+            x[n / 2]
+        } else {
+            0.5 * (x[n / 2 - 1] + x[n / 2])
+        };
+    }
+    // Padding keys sort after every value's key (ties only with identical bits).
+    let mut k = [i64::MAX; 8];
+    for (k, &v) in k.iter_mut().zip(x.iter()) {
+        *k = total_order_key(v);
+    }
+    sort8_keys(&mut k);
+    if n % 2 == 1 {
+        total_order_value(k[n / 2])
+    } else {
+        0.5 * (total_order_value(k[n / 2 - 1]) + total_order_value(k[n / 2]))
+    }
+}
+
+/// The integer whose signed order is [`f64::total_cmp`]'s order of `v` (the transform
+/// `total_cmp` itself uses: negative values' magnitude bits flipped).
+#[inline]
+fn total_order_key(v: f64) -> i64 {
+    let b = v.to_bits() as i64;
+    b ^ ((((b >> 63) as u64) >> 1) as i64)
+}
+
+/// The inverse of [`total_order_key`] (the transform is its own inverse).
+#[inline]
+fn total_order_value(k: i64) -> f64 {
+    f64::from_bits((k ^ ((((k >> 63) as u64) >> 1) as i64)) as u64)
+}
+
+/// The 19 comparators of the optimal sorting network for 8 inputs, in 6 layers (unrolled in
+/// [`sort8_keys`]; the test checks both against each other).
+#[cfg_attr(not(test), allow(dead_code))]
+const SORT8_NETWORK: [(usize, usize); 19] = [
+    (0, 2),
+    (1, 3),
+    (4, 6),
+    (5, 7),
+    (0, 4),
+    (1, 5),
+    (2, 6),
+    (3, 7),
+    (0, 1),
+    (2, 3),
+    (4, 5),
+    (6, 7),
+    (2, 4),
+    (3, 5),
+    (1, 4),
+    (3, 6),
+    (1, 2),
+    (3, 4),
+    (5, 6),
+];
+
+/// Sorts 8 keys ascending with [`SORT8_NETWORK`] (branch-free min/max), unrolled so the keys
+/// stay in registers.
+#[inline(always)]
+fn sort8_keys(k: &mut [i64; 8]) {
+    let [mut k0, mut k1, mut k2, mut k3, mut k4, mut k5, mut k6, mut k7] = *k;
+    macro_rules! cmp_swap {
+        ($($a:ident $b:ident),*) => {$(
+            let (x, y) = ($a, $b);
+            $a = x.min(y);
+            $b = x.max(y);
+        )*};
+    }
+    // The comparators of SORT8_NETWORK, in its order.
+    cmp_swap!(k0 k2, k1 k3, k4 k6, k5 k7);
+    cmp_swap!(k0 k4, k1 k5, k2 k6, k3 k7);
+    cmp_swap!(k0 k1, k2 k3, k4 k5, k6 k7);
+    cmp_swap!(k2 k4, k3 k5);
+    cmp_swap!(k1 k4, k3 k6);
+    cmp_swap!(k1 k2, k3 k4, k5 k6);
+    *k = [k0, k1, k2, k3, k4, k5, k6, k7];
 }
 
 #[cfg(test)]
@@ -357,5 +476,144 @@ mod tests {
         // A 10-DN range lies within 6 × 3 DN of a rail everywhere: the neighbourhood rule
         // alone censors every pixel.
         assert_eq!(s.rail_only, vec![false, false, false]);
+    }
+
+    /// The network sorts every 0/1 input of 8 (the 0-1 principle: then it sorts every input).
+    #[test]
+    fn sort8_network_sorts_all_zero_one_inputs() {
+        for m in 0u32..256 {
+            let mut k = [0i64; 8];
+            for (i, k) in k.iter_mut().enumerate() {
+                *k = ((m >> i) & 1) as i64;
+            }
+            let mut by_table = k;
+            for &(a, b) in SORT8_NETWORK.iter() {
+                let (x, y) = (by_table[a], by_table[b]);
+                by_table[a] = x.min(y);
+                by_table[b] = x.max(y);
+            }
+            sort8_keys(&mut k);
+            assert!(k.windows(2).all(|w| w[0] <= w[1]), "input {m:08b} -> {k:?}");
+            assert_eq!(k, by_table, "input {m:08b}");
+        }
+    }
+
+    /// The median has the bits of the sort-based median it replaces, for every length up
+    /// to 9, with ties, signed zeros, negative values and subnormals.
+    #[test]
+    fn median_matches_sorting_bit_for_bit() {
+        fn by_sorting(x: &[f64]) -> f64 {
+            let mut x = x.to_vec();
+            x.sort_by(|a, b| a.total_cmp(b));
+            let n = x.len();
+            if n == 0 {
+                f64::NAN
+            } else if n % 2 == 1 {
+                x[n / 2]
+            } else {
+                0.5 * (x[n / 2 - 1] + x[n / 2])
+            }
+        }
+        let pool = [
+            0.0, -0.0, 1.0, -1.0, 2.5, 2.5, 1e-310, -1e-310, 4095.0, 17.25, 3.0, -7.5, 1e300,
+        ];
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        for n in 0..=9usize {
+            for _ in 0..2000 {
+                let x: Vec<f64> = (0..n)
+                    .map(|_| {
+                        state = state
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        let r = (state >> 33) as usize;
+                        if r % 3 == 0 {
+                            pool[r % pool.len()]
+                        } else {
+                            (r % 100_000) as f64 / 7.0 - 5000.0
+                        }
+                    })
+                    .collect();
+                let mut y = x.clone();
+                let (a, b) = (median(&mut y), by_sorting(&x));
+                assert!(
+                    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                    "{x:?}: {a} vs {b}"
+                );
+            }
+        }
+    }
+
+    /// The censoring pass (interior pixels by fixed offsets, edge pixels by the bounds-checked
+    /// walk) gives, pixel by pixel, what the rule gives on each pixel's neighbours gathered
+    /// directly; on frames with levels near both rails and in between, so every branch of the
+    /// rule occurs.
+    #[test]
+    fn censoring_pass_matches_the_rule_per_pixel() {
+        let (rows, cols, max) = (9usize, 11usize, 4095u16);
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as u32
+        };
+        for frames in [1usize, 3] {
+            let mut a = ShotAccumulator::new(rows, cols, max);
+            // dark columns (censored by the neighbourhood), mid-level columns with two dead
+            // pixels (censored by their own rail frames only), columns at the top rail
+            let level: Vec<u32> = (0..rows * cols)
+                .map(|i| match (i / cols, i % cols) {
+                    (4, 5) | (6, 5) => 0,
+                    (_, c) if c < 2 => 5,
+                    (_, c) if c < 9 => 2000,
+                    _ => 4093,
+                })
+                .collect();
+            for _ in 0..frames {
+                let f: Vec<u16> = level
+                    .iter()
+                    .map(|&l| (l + next() % 5).saturating_sub(2).min(max as u32) as u16)
+                    .collect();
+                a.add(&f).unwrap();
+            }
+            let (n_low, n_high) = (a.n_low.clone(), a.n_high.clone());
+            let s = a.finish("s".into(), TargetClass::Uniform, "k".into(), 0.1, 1.0);
+            let (mut n_cen, mut n_rail_only) = (0, 0);
+            for r in 0..rows {
+                for c in 0..cols {
+                    let (mut m, mut v) = (Vec::new(), Vec::new());
+                    for dr in [-2i64, 0, 2] {
+                        for dc in [-2i64, 0, 2] {
+                            let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                            if (dr, dc) != (0, 0)
+                                && (0..rows as i64).contains(&rr)
+                                && (0..cols as i64).contains(&cc)
+                            {
+                                let j = rr as usize * cols + cc as usize;
+                                m.push(s.mean_dn[j] as f64);
+                                v.push(s.var_dn.get(j).map_or(0.0, |&x| x as f64));
+                            }
+                        }
+                    }
+                    let i = r * cols + c;
+                    let n_rail = n_low[i] + n_high[i];
+                    let own = s.mean_dn[i] as f64;
+                    let cen = censored_pixel(n_rail, &mut m, &mut v, own, max as f64);
+                    let by_rails =
+                        n_rail > 0 && !censored_pixel(0, &mut m, &mut v, own, max as f64);
+                    assert_eq!(
+                        s.censored[i], cen,
+                        "censored at ({r}, {c}), {frames} frames"
+                    );
+                    assert_eq!(s.rail_only[i], by_rails, "rail_only at ({r}, {c})");
+                    n_cen += cen as usize;
+                    n_rail_only += by_rails as usize;
+                }
+            }
+            assert!(n_cen > 0 && n_cen < rows * cols, "{n_cen} censored");
+            if frames > 1 {
+                assert!(n_rail_only > 0, "no rail-only pixel");
+            }
+        }
     }
 }
