@@ -44,6 +44,37 @@ pub enum SpectralBasis {
     Spectra(Vec<Spectrum>),
 }
 
+impl SpectralBasis {
+    /// Number of basis terms.
+    pub fn len(&self) -> usize {
+        match self {
+            SpectralBasis::Bands(g) => g.len(),
+            SpectralBasis::Spectra(s) => s.len(),
+        }
+    }
+
+    /// Whether there is no basis term.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Basis spectrum of term `k`.
+    pub fn spectrum(&self, k: usize) -> Spectrum {
+        match self {
+            SpectralBasis::Bands(g) => g.hat(k),
+            SpectralBasis::Spectra(s) => s[k].clone(),
+        }
+    }
+
+    /// `∫ w(λ) B_k(λ) dλ` for every term: the weights that turn an image's planes into the
+    /// spatial map of `∫ w(λ) L(x, λ) dλ` (exact for piecewise-linear data).
+    pub fn term_integrals(&self, w: &Spectrum) -> Vec<f64> {
+        (0..self.len())
+            .map(|k| Spectrum::integrate_product(w, &self.spectrum(k)).unwrap_or(0.0))
+            .collect()
+    }
+}
+
 /// A spectral image as basis spectra × coefficient planes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SpectralImage {
@@ -112,18 +143,12 @@ impl SpectralImage {
 
     /// Basis spectrum of term `k`.
     pub fn basis_spectrum(&self, k: usize) -> Spectrum {
-        match &self.basis {
-            SpectralBasis::Bands(g) => g.hat(k),
-            SpectralBasis::Spectra(s) => s[k].clone(),
-        }
+        self.basis.spectrum(k)
     }
 
-    /// `∫ w(λ) B_k(λ) dλ` for every term: the weights that turn the planes into the
-    /// spatial map of `∫ w(λ) L(x, λ) dλ` (exact for piecewise-linear data).
+    /// [`SpectralBasis::term_integrals`] of the image's basis.
     pub fn term_integrals(&self, w: &Spectrum) -> Vec<f64> {
-        (0..self.terms())
-            .map(|k| Spectrum::integrate_product(w, &self.basis_spectrum(k)).unwrap_or(0.0))
-            .collect()
+        self.basis.term_integrals(w)
     }
 
     /// The map `Σ_k weights[k] · plane_k` (f64 accumulation per pixel).

@@ -476,6 +476,246 @@ pub fn render_target_rows(
     })
 }
 
+/// The basis of `target`'s render ([`render_target_rows`]): its plane k multiplies basis
+/// term k. Refused for a [`Target::Rendered`] scene, which is not sampled as a target.
+pub fn target_basis(target: &Target) -> Result<SpectralBasis, CoreError> {
+    let spectra =
+        |v: &[&Spectrum]| SpectralBasis::Spectra(v.iter().map(|s| (*s).clone()).collect());
+    Ok(match target {
+        Target::Rendered { description } => {
+            return Err(CoreError::Target(format!(
+                "{description} is a rendered scene: it has no basis before it is path-traced"
+            )))
+        }
+        Target::Dark => SpectralBasis::Spectra(vec![Spectrum::constant(0.0)]),
+        Target::Uniform { radiance }
+        | Target::Ramp { radiance, .. }
+        | Target::FrequencySweep { radiance, .. } => spectra(&[radiance]),
+        Target::Patches {
+            background,
+            patches,
+            ..
+        } => {
+            let mut basis = patches.clone();
+            basis.push(background.clone());
+            SpectralBasis::Spectra(basis)
+        }
+        Target::SlantedEdge { dark, light, .. } => spectra(&[dark, light]),
+        Target::Image { radiance } => radiance.basis.clone(),
+        Target::PointArray {
+            radiance,
+            background,
+            ..
+        }
+        | Target::GridLines {
+            radiance,
+            background,
+            ..
+        } => spectra(&[radiance, background]),
+    })
+}
+
+/// What [`render_target_projected_rows`] renders: output plane `j` is
+/// `Σ_k weights[j][k] · (term_scale · plane_k)`, `plane_k` the render's plane of basis term k
+/// ([`target_basis`]), e.g. one row of weights per sensor channel (`∫ QE_c(λ) B_k(λ) dλ`) or
+/// the luminance weights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaneProjection {
+    /// One row per output plane, one weight per basis term of the target.
+    pub weights: Vec<Vec<f64>>,
+    /// Factor applied to every term sample first, in f32 as [`SpectralImage::scale`] does
+    /// (a luminance scaling of the scene; 1 for none).
+    pub term_scale: f64,
+}
+
+/// Samples per row strip of the projected render of targets without a sparse form
+/// ([`render_target_projected_rows`]; times the target's basis terms × 4 bytes).
+pub const PROJECTION_STRIP_SAMPLES: usize = 1 << 16;
+
+/// The grid rows `row_range` of [`render_target_rows`] projected onto `proj`'s output planes
+/// ([`PlaneProjection`]) without the basis-term planes: bit for bit
+/// [`SpectralImage::combine`] of each row of weights on the render's rows after
+/// [`SpectralImage::scale`]`(term_scale)`. A chart's patch planes are separable boxes, so
+/// per cell only the patches that overlap it are evaluated (the others are 0 there and add
+/// nothing: the sum runs over the terms in the same order); other targets are rendered by
+/// strips of about [`PROJECTION_STRIP_SAMPLES`] samples and combined. Refused when a row of
+/// weights does not have one weight per basis term, or as [`render_target_rows`] refuses.
+pub fn render_target_projected_rows(
+    target: &Target,
+    g: &SamplingGrid,
+    row_range: Range<usize>,
+    proj: &PlaneProjection,
+) -> Result<Vec<Vec<f32>>, CoreError> {
+    check_projection(&target_basis(target)?, proj)?;
+    if row_range.start > row_range.end || row_range.end > g.rows {
+        return Err(CoreError::Target(format!(
+            "row window {}..{} of a {}-row sampling grid",
+            row_range.start, row_range.end, g.rows
+        )));
+    }
+    match target {
+        Target::Patches {
+            rows,
+            cols,
+            patch_fraction,
+            patches,
+            ..
+        } if patches.len() == rows * cols => Ok(patches_projected(
+            g,
+            row_range,
+            (*rows, *cols),
+            *patch_fraction,
+            proj,
+        )),
+        _ => project_by_strips(row_range, g.cols, proj, |r| {
+            render_target_rows(target, g, r)
+        }),
+    }
+}
+
+/// Refuses a projection without one weight per term of `basis` in every row.
+pub fn check_projection(basis: &SpectralBasis, proj: &PlaneProjection) -> Result<(), CoreError> {
+    let k = basis.len();
+    match proj.weights.iter().position(|w| w.len() != k) {
+        Some(j) => Err(CoreError::Target(format!(
+            "projection row {j} has {} weights for {k} basis terms",
+            proj.weights[j].len()
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// [`PlaneProjection`] of the rows `row_range` of a render given by `render` (a row window of
+/// it, the same samples as the whole render's rows), rendered by strips of about
+/// [`PROJECTION_STRIP_SAMPLES`] samples: per strip the render scaled
+/// ([`SpectralImage::scale`]) and combined ([`SpectralImage::combine`]).
+pub fn project_by_strips(
+    row_range: Range<usize>,
+    cols: usize,
+    proj: &PlaneProjection,
+    mut render: impl FnMut(Range<usize>) -> Result<SpectralImage, CoreError>,
+) -> Result<Vec<Vec<f32>>, CoreError> {
+    let nr = row_range.len();
+    let mut out: Vec<Vec<f32>> = proj.weights.iter().map(|_| vec![0f32; nr * cols]).collect();
+    let strip = (PROJECTION_STRIP_SAMPLES / cols.max(1)).max(1);
+    let mut r0 = row_range.start;
+    while r0 < row_range.end {
+        let r1 = (r0 + strip).min(row_range.end);
+        let mut img = render(r0..r1)?;
+        check_projection(&img.basis, proj)?;
+        img.scale(proj.term_scale);
+        let at = (r0 - row_range.start) * cols;
+        for (o, w) in out.iter_mut().zip(&proj.weights) {
+            o[at..at + (r1 - r0) * cols].copy_from_slice(&img.combine(w));
+        }
+        r0 = r1;
+    }
+    Ok(out)
+}
+
+/// The sparse projected render of a `rows × cols` chart ([`render_target_projected_rows`]):
+/// the same per-axis patch factors as [`render_target_rows`]' patch planes (cell overlaps,
+/// or the aperture's interval weights at the sample centres), kept where nonzero.
+fn patches_projected(
+    g: &SamplingGrid,
+    row_range: Range<usize>,
+    (prows, pcols): (usize, usize),
+    patch_fraction: f64,
+    proj: &PlaneProjection,
+) -> Vec<Vec<f32>> {
+    let (w, h) = (g.sensor_width_m, g.sensor_height_m);
+    let ap = g.aperture;
+    let d = g.pitch_m;
+    let a = g.pitch_m * g.pitch_m;
+    let (cw, ch) = (w / pcols as f64, h / prows as f64);
+    let (pw, ph) = (cw * patch_fraction, ch * patch_fraction);
+    // the factor of one axis for the cell [c0, c1] and the patch [p0, p1]
+    let factor = |c0: f64, c1: f64, p0: f64, p1: f64| match ap {
+        SampleAperture::Cell => overlap(c0, c1, p0, p1),
+        _ => {
+            let cc = 0.5 * (c0 + c1);
+            interval_weight(ap, (p0 - cc) / d, (p1 - cc) / d)
+        }
+    };
+    let xs: Vec<(f64, f64)> = (0..pcols)
+        .map(|pc| {
+            let cx = -w / 2.0 + (pc as f64 + 0.5) * cw;
+            (cx - pw / 2.0, cx + pw / 2.0)
+        })
+        .collect();
+    let ys: Vec<(f64, f64)> = (0..prows)
+        .map(|pr| {
+            let cy = -h / 2.0 + (pr as f64 + 0.5) * ch;
+            (cy - ph / 2.0, cy + ph / 2.0)
+        })
+        .collect();
+    let nonzero = |c0: f64, c1: f64, spans: &[(f64, f64)]| -> Vec<(usize, f64)> {
+        spans
+            .iter()
+            .enumerate()
+            .map(|(i, &(p0, p1))| (i, factor(c0, c1, p0, p1)))
+            .filter(|(_, f)| *f != 0.0)
+            .collect()
+    };
+    let by_col: Vec<Vec<(usize, f64)>> = (0..g.cols)
+        .map(|c| nonzero(g.x0(c), g.x0(c + 1), &xs))
+        .collect();
+    // a patch's sample: its planes' `(ox·oy/a) as f32` or `(wx·wy) as f32`
+    let value = |fx: f64, fy: f64| match ap {
+        SampleAperture::Cell => (fx * fy / a) as f32,
+        _ => (fx * fy) as f32,
+    };
+    let nr = row_range.len();
+    let cols = g.cols;
+    let nj = proj.weights.len();
+    let mut out: Vec<Vec<f32>> = (0..nj).map(|_| vec![0f32; nr * cols]).collect();
+    if nr == 0 || cols == 0 {
+        return out;
+    }
+    let mut dst_rows: Vec<Vec<&mut [f32]>> = (0..nr).map(|_| Vec::with_capacity(nj)).collect();
+    for o in out.iter_mut() {
+        for (i, chunk) in o.chunks_mut(cols).enumerate() {
+            dst_rows[i].push(chunk);
+        }
+    }
+    let s = proj.term_scale as f32;
+    let bg_k = prows * pcols;
+    dst_rows
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(i, mut dst)| {
+            let r = row_range.start + i;
+            let by_row = nonzero(g.y0(r), g.y0(r + 1), &ys);
+            let mut acc = vec![0f64; nj];
+            for (c, xl) in by_col.iter().enumerate() {
+                acc.iter_mut().for_each(|v| *v = 0.0);
+                // the background plane: 1 minus the patches (in term order), at least 0
+                let mut bg = 1f32;
+                for &(pr, fy) in &by_row {
+                    for &(pc, fx) in xl {
+                        let v = value(fx, fy);
+                        bg -= v;
+                        let vs = (v * s) as f64;
+                        let k = pr * pcols + pc;
+                        for (a, wj) in acc.iter_mut().zip(&proj.weights) {
+                            if wj[k] != 0.0 {
+                                *a += wj[k] * vs;
+                            }
+                        }
+                    }
+                }
+                let bgs = (bg.max(0.0) * s) as f64;
+                for ((a, wj), o) in acc.iter_mut().zip(&proj.weights).zip(dst.iter_mut()) {
+                    if wj[bg_k] != 0.0 {
+                        *a += wj[bg_k] * bgs;
+                    }
+                    o[c] = *a as f32;
+                }
+            }
+        });
+    out
+}
+
 /// Bilinear resampling of an image so that it fills the sensor; outside, the border repeats.
 /// (Grid rows `rows` only.)
 fn resample_image(src: &SpectralImage, g: &SamplingGrid, rows: Range<usize>) -> SpectralImage {
@@ -551,19 +791,36 @@ impl LuminanceSum {
         c: &PhysicalConstants,
     ) {
         let lum = strip.integrate_against(&luminance_weight_for_photons(c));
+        self.add_luminance_rows(&lum, strip.cols, row0, full_rows, pitch_m, window_m);
+    }
+
+    /// [`LuminanceSum::add_rows`] of a strip's luminance plane (cd/m², `cols` wide): the
+    /// strip's [`SpectralImage::integrate_against`] the luminance weights
+    /// ([`luminance_weight_for_photons`]), or the same plane from
+    /// [`render_target_projected_rows`] with those weights.
+    pub fn add_luminance_rows(
+        &mut self,
+        lum: &[f32],
+        cols: usize,
+        row0: usize,
+        full_rows: usize,
+        pitch_m: f64,
+        window_m: Option<(f64, f64)>,
+    ) {
         let p = pitch_m;
+        let rows = if cols == 0 { 0 } else { lum.len() / cols };
         let (mut s, mut n) = (self.sum_cd_m2, self.cells);
-        for i in 0..strip.rows {
+        for i in 0..rows {
             let r = row0 + i;
             let y = (r as f64 + 0.5 - full_rows as f64 / 2.0) * p;
-            for col in 0..strip.cols {
-                let x = (col as f64 + 0.5 - strip.cols as f64 / 2.0) * p;
+            for col in 0..cols {
+                let x = (col as f64 + 0.5 - cols as f64 / 2.0) * p;
                 if let Some((ww, hh)) = window_m {
                     if x.abs() > ww / 2.0 || y.abs() > hh / 2.0 {
                         continue;
                     }
                 }
-                s += lum[i * strip.cols + col] as f64;
+                s += lum[i * cols + col] as f64;
                 n += 1;
             }
         }
@@ -628,7 +885,7 @@ pub const PLANCK_C1: f64 = 3.741_771_852e-16;
 pub const PLANCK_C2: f64 = 1.438_776_877e-2;
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use approx::assert_relative_eq;
 
@@ -817,6 +1074,145 @@ mod tests {
             assert!(render_target_rows(uniform, &g, 20..27).is_err());
             assert_eq!(render_target_rows(uniform, &g, 3..3).unwrap().rows, 0);
         }
+    }
+
+    /// One target of every kind (the picture has 1 term, the others their own bases).
+    pub(crate) fn every_kind_of_target() -> Vec<Target> {
+        let s = |v: f64| Spectrum::Affine {
+            offset: v,
+            slope_per_nm: 1e-3,
+        };
+        let picture = SpectralImage::from_single_spectrum(
+            5,
+            7,
+            s(1.0),
+            (0..35).map(|i| (i % 11) as f32 * 0.3).collect(),
+        );
+        vec![
+            Target::Dark,
+            Target::Uniform { radiance: s(2.0) },
+            Target::Patches {
+                rows: 3,
+                cols: 4,
+                patch_fraction: 0.7,
+                background: s(0.2),
+                patches: (0..12).map(|i| s(i as f64)).collect(),
+            },
+            // patches smaller than a cell apart: cells overlap several patches
+            Target::Patches {
+                rows: 6,
+                cols: 9,
+                patch_fraction: 0.9,
+                background: s(0.3),
+                patches: (0..54).map(|i| s(0.1 * i as f64)).collect(),
+            },
+            Target::SlantedEdge {
+                dark: s(0.1),
+                light: s(1.0),
+                angle_deg: 5.0,
+            },
+            Target::Image { radiance: picture },
+            Target::Ramp {
+                radiance: s(1.0),
+                min: 0.1,
+                max: 0.9,
+            },
+            Target::FrequencySweep {
+                radiance: s(1.0),
+                max_cycles_per_pixel: 0.4,
+                pixel_pitch_m: 1e-6,
+                contrast: 0.8,
+            },
+            Target::PointArray {
+                radiance: s(1.0),
+                background: s(0.1),
+                spacing_m: 5e-6,
+                point_size_m: 1.5e-6,
+            },
+            Target::GridLines {
+                radiance: s(1.0),
+                background: s(0.1),
+                spacing_m: 6e-6,
+                line_width_m: 1e-6,
+            },
+        ]
+    }
+
+    /// Weights of `outputs` projections of `terms` basis terms: some 0, some negative.
+    pub(crate) fn test_projection(
+        outputs: usize,
+        terms: usize,
+        term_scale: f64,
+    ) -> PlaneProjection {
+        PlaneProjection {
+            weights: (0..outputs)
+                .map(|j| {
+                    (0..terms)
+                        .map(|k| match (k + 2 * j) % 5 {
+                            0 => 0.0,
+                            m => (m as f64 * 0.37 - 0.6) * (1.0 + 0.01 * k as f64),
+                        })
+                        .collect()
+                })
+                .collect(),
+            term_scale,
+        }
+    }
+
+    /// The projected render of every kind of target (the charts by their sparse form, the
+    /// rest by strips) is bit for bit the combination of the scaled term render, on row
+    /// windows too, for both sample apertures and for cells smaller and larger than the gaps
+    /// between a chart's patches; and the basis it takes is the render's.
+    #[test]
+    fn projected_render_is_the_combined_term_render() {
+        for ap in [SampleAperture::Cell, SampleAperture::CubicBSpline] {
+            for os in [1, 2] {
+                let g = SamplingGrid::for_sensor(9, 14, 1e-6, os, 2).with_aperture(ap);
+                for t in &every_kind_of_target() {
+                    let basis = target_basis(t).unwrap();
+                    let whole = render_target(t, &g).unwrap();
+                    assert_eq!(whole.basis, basis, "{t:?}");
+                    let proj = test_projection(3, basis.len(), 1.37);
+                    let mut scaled = whole.clone();
+                    scaled.scale(proj.term_scale);
+                    let want: Vec<Vec<f32>> =
+                        proj.weights.iter().map(|w| scaled.combine(w)).collect();
+                    let mid = g.rows / 2;
+                    for (r0, r1) in [
+                        (0, g.rows),
+                        (0, 3),
+                        (3, mid),
+                        (mid, mid + 1),
+                        (mid, g.rows),
+                        (4, 4),
+                    ] {
+                        let got = render_target_projected_rows(t, &g, r0..r1, &proj).unwrap();
+                        assert_eq!(got.len(), 3);
+                        for (a, b) in got.iter().zip(&want) {
+                            let crop = &b[r0 * g.cols..r1 * g.cols];
+                            assert_eq!(a.len(), crop.len());
+                            assert!(
+                                a.iter().zip(crop).all(|(x, y)| x.to_bits() == y.to_bits()),
+                                "{t:?} {ap:?} os {os} rows {r0}..{r1}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        let g = SamplingGrid::for_sensor(9, 14, 1e-6, 1, 0);
+        let chart = &every_kind_of_target()[2];
+        // one weight short, a window off the grid, a rendered scene: refused
+        assert!(
+            render_target_projected_rows(chart, &g, 0..9, &test_projection(2, 12, 1.0)).is_err()
+        );
+        assert!(
+            render_target_projected_rows(chart, &g, 0..10, &test_projection(2, 13, 1.0)).is_err()
+        );
+        let rendered = Target::Rendered {
+            description: "x".into(),
+        };
+        assert!(target_basis(&rendered).is_err());
     }
 
     #[test]

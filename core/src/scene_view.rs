@@ -25,7 +25,10 @@
 //! exact at any size ratio.
 use crate::error::CoreError;
 use crate::image::SpectralImage;
-use crate::scene::{render_target_rows, SamplingGrid, Target};
+use crate::scene::{
+    check_projection, render_target_projected_rows, render_target_rows, PlaneProjection,
+    SamplingGrid, Target,
+};
 use rayon::prelude::*;
 
 /// Image-plane extent (m) of a target of horizontal field of view `fov_deg` and aspect
@@ -87,6 +90,41 @@ pub fn render_target_in_view_rows(
                 ..*g
             };
             render_target_rows(other, &gv, rows)
+        }
+    }
+}
+
+/// The grid rows `rows` of [`render_target_in_view`] projected onto `proj`'s output planes,
+/// bit for bit as [`crate::scene::render_target_projected_rows`] (of which it is the
+/// field-of-view form): an image with an extent is resampled on the rows and combined.
+pub fn render_target_in_view_projected_rows(
+    target: &Target,
+    g: &SamplingGrid,
+    extent_m: Option<(f64, f64)>,
+    rows: std::ops::Range<usize>,
+    proj: &PlaneProjection,
+) -> Result<Vec<Vec<f32>>, CoreError> {
+    match (extent_m, target) {
+        (None, _) => render_target_projected_rows(target, g, rows, proj),
+        // one strip: the resampling's horizontal pass is over the whole picture
+        (Some(_), Target::Image { .. }) => {
+            let mut img = render_target_in_view_rows(target, g, extent_m, rows)?;
+            check_projection(&img.basis, proj)?;
+            img.scale(proj.term_scale);
+            Ok(proj.weights.iter().map(|w| img.combine(w)).collect())
+        }
+        (Some((w, h)), other) => {
+            if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
+                return Err(CoreError::Target(format!(
+                    "field of view gives an image-plane extent of {w} × {h} m (expected positive)"
+                )));
+            }
+            let gv = SamplingGrid {
+                sensor_width_m: w,
+                sensor_height_m: h,
+                ..*g
+            };
+            render_target_projected_rows(other, &gv, rows, proj)
         }
     }
 }
@@ -183,6 +221,34 @@ mod tests {
         // the centre is inside, the corner outside
         assert_eq!(out.planes[0][10 * 20 + 10], 1.0);
         assert_eq!(out.planes[0][0], 0.0);
+    }
+
+    /// With a field of view too, the projected render is the combined scaled term render bit
+    /// for bit (a chart laid over the extent, a picture resampled onto it).
+    #[test]
+    fn projected_render_in_view_is_the_combined_term_render() {
+        use crate::scene::target_basis;
+        use crate::scene::tests::{every_kind_of_target, test_projection};
+        let g = SamplingGrid::for_sensor(9, 14, 1e-6, 2, 1);
+        for t in &every_kind_of_target() {
+            let extent = Some((11.3e-6, 7.1e-6));
+            let terms = target_basis(t).unwrap().len();
+            let proj = test_projection(2, terms, 0.83);
+            let mut whole = render_target_in_view(t, &g, extent).unwrap();
+            whole.scale(proj.term_scale);
+            for (r0, r1) in [(0, g.rows), (5, 13)] {
+                let got =
+                    render_target_in_view_projected_rows(t, &g, extent, r0..r1, &proj).unwrap();
+                for (a, w) in got.iter().zip(&proj.weights) {
+                    let want = whole.combine(w);
+                    let crop = &want[r0 * g.cols..r1 * g.cols];
+                    assert!(
+                        a.iter().zip(crop).all(|(x, y)| x.to_bits() == y.to_bits()),
+                        "{t:?} rows {r0}..{r1}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

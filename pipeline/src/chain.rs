@@ -5,6 +5,7 @@
 //! | step | function | stage call |
 //! |---|---|---|
 //! | scene radiance of a shot (field of view, distance, illuminant swap) | [`shot_scene`] | [`camsim_core::scene_view::render_target_in_view`], [`camsim_core::illuminant::swap_illuminant`] |
+//! | a shot's scene rendered straight onto the sensor channels' planes (whole or grid rows; bit for bit the channel planes of the scene) | [`shot_channel_scene_rows`], [`channel_scene`] | [`camsim_core::scene::render_target_projected_rows`], [`camsim_sensor::channel_weights`] |
 //! | grid rows of a shot's scene by themselves (bit for bit the whole scene's rows; the luminance factor from the whole scene or computed by row strips) | [`shot_scene_rows`], [`shot_scene_by_rows`], [`shot_scene_and_factor`], [`shot_scene_luminance_factor`], [`shot_scene_factor_key`] | [`camsim_core::scene_view::render_target_in_view_rows`], [`camsim_core::scene::LuminanceSum`] |
 //! | scene radiance of a `gltf` target (path-traced with depth on the shot's grid, cached per scene file and settings; `camsim run`'s `render` section) | [`shot_scene`], [`shot_scene_cached`], [`render_gltf_on_grid`] (camera policy: pinhole when the camera defocuses by depth, else the glTF camera's own) | [`crate::gltf_target::render_gltf_target`] → [`crate::animated::grid_render_job`], [`crate::animated::render_job_radiance`] |
 //! | optics | [`shot_irradiance`], [`shot_irradiance_of_scene`] (on a scene kept per [`shot_sampling_grid`]), [`irradiance_of`], [`irradiance_and_blur_of`] (depth-aware for scenes with depth), [`optical_image`] | [`camsim_optics::form_image`]; with `optics.uncropped_optical_image`, [`camsim_optics::form_image_uncropped_window`]; [`camsim_render::depth_optics::defocus_by_depth`] |
@@ -159,23 +160,61 @@ pub fn channel_scene(
     scene: &SceneRadiance,
 ) -> Result<(Vec<usize>, SceneRadiance), CliError> {
     let ch = camsim_sensor::channel_planes(&set.camera.sensor, &scene.radiance);
-    let n = ch.planes.len();
-    let radiance = camsim_core::SpectralImage::new(
-        scene.radiance.rows,
-        scene.radiance.cols,
-        camsim_core::image::SpectralBasis::Spectra(vec![camsim_core::Spectrum::constant(1.0); n]),
-        ch.planes,
-    )
-    .map_err(|e| CliError::input(&set.camera_path, format!("channel planes: {e}")))?;
-    let channel_scene = SceneRadiance {
-        radiance,
+    let planes = crate::simulate::ProjectedScene {
+        planes: ch.planes,
+        rows: scene.radiance.rows,
+        cols: scene.radiance.cols,
         sample_pitch_m: scene.sample_pitch_m,
         object_distance_m: scene.object_distance_m,
-        illuminant: None,
-        depth_m: None,
         sample_aperture: scene.sample_aperture,
     };
-    Ok((ch.channels, channel_scene))
+    Ok((ch.channels, channel_scene_of_planes(set, planes)?))
+}
+
+/// The grid rows `rows` of [`channel_scene`] of shot `shot_index`'s scene with the luminance
+/// factor `factor` ([`crate::simulate::shot_scene_rows`]'s), rendered straight onto the
+/// channel planes ([`crate::simulate::shot_scene_projected_rows`] with
+/// [`camsim_sensor::channel_weights`]): the same planes bit for bit, without the scene's
+/// basis-term planes. Only for [`crate::simulate::shot_scene_by_rows`] shots.
+pub fn shot_channel_scene_rows(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+    rows: std::ops::Range<usize>,
+    factor: f64,
+) -> Result<(Vec<usize>, SceneRadiance), CliError> {
+    let mut channels = Vec::new();
+    let planes =
+        crate::simulate::shot_scene_projected_rows(set, shot_index, grid, rows, factor, |b| {
+            let w = camsim_sensor::channel_weights(&set.camera.sensor, b);
+            channels = w.channels;
+            w.weights
+        })?;
+    Ok((channels, channel_scene_of_planes(set, planes)?))
+}
+
+/// The scene whose basis terms are the channel planes `p` (spectra 1: the planes are already
+/// the channels' spectral integrals).
+fn channel_scene_of_planes(
+    set: &CaptureSet,
+    p: crate::simulate::ProjectedScene,
+) -> Result<SceneRadiance, CliError> {
+    let n = p.planes.len();
+    let radiance = camsim_core::SpectralImage::new(
+        p.rows,
+        p.cols,
+        camsim_core::image::SpectralBasis::Spectra(vec![camsim_core::Spectrum::constant(1.0); n]),
+        p.planes,
+    )
+    .map_err(|e| CliError::input(&set.camera_path, format!("channel planes: {e}")))?;
+    Ok(SceneRadiance {
+        radiance,
+        sample_pitch_m: p.sample_pitch_m,
+        object_distance_m: p.object_distance_m,
+        illuminant: None,
+        depth_m: None,
+        sample_aperture: p.sample_aperture,
+    })
 }
 
 /// Depth-layered compositing slabs of the depth-aware optics (uniform in 1/z).

@@ -86,6 +86,10 @@ struct ForwardWork {
     /// Whole scenes rendered ([`crate::chain::shot_scene`]) and their bytes.
     scene_renders: WorkCounter,
     scene_bytes: std::sync::atomic::AtomicU64,
+    /// Whole scenes rendered straight onto the channel planes
+    /// ([`crate::chain::shot_channel_scene_rows`]) and their bytes.
+    channel_scene_renders: WorkCounter,
+    channel_scene_bytes: std::sync::atomic::AtomicU64,
     /// Bands of a scene rendered by themselves ([`crate::chain::shot_scene_rows`]).
     scene_band_renders: WorkCounter,
     /// Luminance factors computed by row strips
@@ -129,6 +133,10 @@ impl ForwardWork {
     /// The counters as (stage name, calls, seconds).
     fn stages(&self) -> Vec<(String, u64, f64)> {
         let gb = self.scene_bytes.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9;
+        let cgb = self
+            .channel_scene_bytes
+            .load(std::sync::atomic::Ordering::Relaxed) as f64
+            * 1e-9;
         let one = |name: String, c: &WorkCounter| {
             let (n, s) = c.get();
             (name, n, s)
@@ -137,6 +145,10 @@ impl ForwardWork {
             one(
                 format!("forward: whole scenes rendered ({gb:.1} GB in all)"),
                 &self.scene_renders,
+            ),
+            one(
+                format!("forward: whole channel scenes rendered ({cgb:.1} GB in all)"),
+                &self.channel_scene_renders,
             ),
             one(
                 "forward: scene bands rendered".into(),
@@ -178,7 +190,7 @@ impl SimForward {
             camera_path: set.camera_path.clone(),
             shots,
             planes: Mutex::new(PlaneCache::default()),
-            scenes: Mutex::new(SceneCache::default()),
+            scenes: Mutex::new(SceneCache::with_budget(scene_cache_budget())),
             glare: Mutex::new(HashMap::new()),
             work: ForwardWork::default(),
         }
@@ -190,7 +202,12 @@ impl SimForward {
 /// through that grid, the focal length and the wavelength grid, none of which the optics
 /// candidates change except the grid's blur margin: a forward run of a candidate optics block
 /// re-runs only the optics stage (the render and its luminance scaling were about half of a
-/// run's time). Least recently used evicted first beyond [`SCENE_CACHE_BYTES`].
+/// run's time). Least recently used evicted first beyond [`scene_cache_budget`].
+///
+/// With the believed camera's QE blocks a chart's scene is kept on the sensor channels'
+/// planes ([`SceneCache::channel_scene`], rendered straight onto them): 3–4 planes instead of
+/// 25 basis terms, so a 12 MP chart (0.8 GB, not 4.8 GB) is kept between the fit check and
+/// the confirmation.
 ///
 /// A band of rows of a scene ([`SceneCache::scene_bands`]) is cut from the whole scene when
 /// that is at hand, else rendered by itself ([`crate::chain::shot_scene_rows`], the same
@@ -204,8 +221,21 @@ struct SceneCache {
     factors: HashMap<String, f64>,
 }
 
-/// Memory for cached scenes.
+/// The least memory for cached scenes ([`scene_cache_budget`]).
 const SCENE_CACHE_BYTES: usize = 256 << 20;
+
+/// Share of the memory limit the scene cache may hold ([`scene_cache_budget`]).
+const SCENE_CACHE_SHARE: f64 = 0.2;
+
+/// Memory for cached scenes: [`SCENE_CACHE_SHARE`] of the memory limit
+/// ([`crate::budget::memory_limit`]: `--max-memory`, else ¾ of the available memory), at
+/// least [`SCENE_CACHE_BYTES`] (docs/limits.md). At 12 MP a chart's channel scene is 0.8 GB
+/// (4 planes × 48 M samples × 4 B) and a flat's or dark's 0.2 GB: a diagnosis with a 20 GB
+/// limit keeps the 4 targets of the 12 MP benchmark set (2 GB of 4 GB).
+fn scene_cache_budget() -> usize {
+    let lim = crate::budget::memory_limit().bytes as f64 * SCENE_CACHE_SHARE;
+    (lim.min(usize::MAX as f64) as usize).max(SCENE_CACHE_BYTES)
+}
 
 /// A map from keys to values that keeps its values' bytes within `BUDGET`, evicting the least
 /// recently used first (the forward model's caches of scenes and pixel planes).
@@ -272,6 +302,13 @@ fn scene_bytes(s: &camsim_core::image::SceneRadiance) -> usize {
 }
 
 impl SceneCache {
+    /// An empty cache holding at most `budget` bytes.
+    fn with_budget(budget: usize) -> Self {
+        let mut c = SceneCache::default();
+        c.lru.budget = budget;
+        c
+    }
+
     /// What of the camera shapes a target's scene that a candidate can change: the sampling
     /// grid, the focal length and the wavelength grid. The rest (focus, sensor size, render
     /// settings) is the believed camera's, fixed for one [`SimForward`], which the cache
@@ -315,6 +352,68 @@ impl SceneCache {
         Ok(scene)
     }
 
+    /// The luminance factor of shot `si`'s scene (a [`crate::chain::shot_scene_by_rows`]
+    /// shot): kept, or computed once by row strips.
+    fn factor(
+        &mut self,
+        set: &CaptureSet,
+        si: usize,
+        grid: &camsim_core::WavelengthGrid,
+        work: &ForwardWork,
+    ) -> Result<f64, String> {
+        let fkey = Self::factor_key(set, si, grid);
+        if let Some(f) = self.factors.get(&fkey) {
+            return Ok(*f);
+        }
+        let t0 = std::time::Instant::now();
+        let f =
+            crate::chain::shot_scene_luminance_factor(set, si, grid).map_err(|e| e.one_line())?;
+        work.factor_passes.add(t0);
+        self.factors.insert(fkey, f);
+        Ok(f)
+    }
+
+    /// The scene of shot `si` on the sensor channels' planes ([`crate::chain::channel_scene`]
+    /// of [`SceneCache::scene`], bit for bit), from the cache or rendered straight onto the
+    /// planes ([`crate::chain::shot_channel_scene_rows`] with the scene's luminance factor;
+    /// a shot that cannot be rendered by rows: from its whole scene). For the camera's QE
+    /// blocks, which are the believed camera's whenever the channel path is taken
+    /// ([`channel_path`]).
+    fn channel_scene(
+        &mut self,
+        set: &CaptureSet,
+        si: usize,
+        grid: &camsim_core::WavelengthGrid,
+        grid_key: &str,
+        work: &ForwardWork,
+    ) -> Result<Arc<camsim_core::image::SceneRadiance>, String> {
+        let key = format!("{} {grid_key} channels", set.shots[si].target_key);
+        if let Some(scene) = self.lru.get(&key) {
+            return Ok(scene);
+        }
+        let scene = if crate::chain::shot_scene_by_rows(set, si) {
+            let factor = self.factor(set, si, grid, work)?;
+            let t0 = std::time::Instant::now();
+            let rows = crate::chain::shot_sampling_grid(set, grid).rows;
+            let (_, chs) = crate::chain::shot_channel_scene_rows(set, si, grid, 0..rows, factor)
+                .map_err(|e| e.one_line())?;
+            work.channel_scene_renders.add(t0);
+            work.channel_scene_bytes.fetch_add(
+                scene_bytes(&chs) as u64,
+                std::sync::atomic::Ordering::Relaxed,
+            );
+            chs
+        } else {
+            let whole = self.scene(set, si, grid, grid_key, work)?;
+            crate::chain::channel_scene(set, &whole)
+                .map_err(|e| e.one_line())?
+                .1
+        };
+        let scene = Arc::new(scene);
+        self.lru.insert(key, scene.clone(), scene_bytes(&scene));
+        Ok(scene)
+    }
+
     /// Key of [`SceneCache::factors`].
     fn factor_key(set: &CaptureSet, si: usize, grid: &camsim_core::WavelengthGrid) -> String {
         let g = crate::chain::shot_sampling_grid(set, grid);
@@ -325,12 +424,14 @@ impl SceneCache {
         )
     }
 
-    /// Rows `r0..r1` of [`SceneCache::scene`] for each of `ranges`, kept by themselves: cut
+    /// Rows `r0..r1` of [`SceneCache::scene`] (with `channels`: of
+    /// [`SceneCache::channel_scene`]) for each of `ranges`, kept by themselves: cut
     /// ([`crate::chain::scene_rows`]) from `whole` when the caller holds that scene already (of
-    /// this `grid_key`: the glare sums' render) or from the cached whole scene; else rendered
-    /// by themselves ([`crate::chain::shot_scene_rows`], with the scene's luminance factor:
-    /// kept, or computed once by row strips); a target that cannot be rendered by rows is
-    /// rendered whole once and cut.
+    /// this `grid_key` and kind: the glare sums' render) or from the cached whole scene; else
+    /// rendered by themselves ([`crate::chain::shot_scene_rows`], or straight onto the
+    /// channel planes, [`crate::chain::shot_channel_scene_rows`], with the scene's luminance
+    /// factor: kept, or computed once by row strips); a target that cannot be rendered by
+    /// rows is rendered whole once and cut.
     #[allow(clippy::too_many_arguments)]
     fn scene_bands(
         &mut self,
@@ -340,10 +441,15 @@ impl SceneCache {
         grid_key: &str,
         ranges: &[(usize, usize)],
         whole: Option<Arc<camsim_core::image::SceneRadiance>>,
+        channels: bool,
         work: &ForwardWork,
     ) -> Result<Vec<Arc<camsim_core::image::SceneRadiance>>, String> {
+        let kind = if channels { " channels" } else { "" };
         let key = |(r0, r1): (usize, usize)| {
-            format!("{} {grid_key} rows {r0}..{r1}", set.shots[si].target_key)
+            format!(
+                "{} {grid_key}{kind} rows {r0}..{r1}",
+                set.shots[si].target_key
+            )
         };
         let mut whole = whole;
         let mut out = Vec::with_capacity(ranges.len());
@@ -353,25 +459,19 @@ impl SceneCache {
                 continue;
             }
             if whole.is_none() {
-                let wkey = format!("{} {grid_key}", set.shots[si].target_key);
+                let wkey = format!("{} {grid_key}{kind}", set.shots[si].target_key);
                 whole = self.lru.get(&wkey);
             }
             if whole.is_none() && crate::chain::shot_scene_by_rows(set, si) {
-                let fkey = Self::factor_key(set, si, grid);
-                let factor = match self.factors.get(&fkey) {
-                    Some(f) => *f,
-                    None => {
-                        let t0 = std::time::Instant::now();
-                        let f = crate::chain::shot_scene_luminance_factor(set, si, grid)
-                            .map_err(|e| e.one_line())?;
-                        work.factor_passes.add(t0);
-                        self.factors.insert(fkey, f);
-                        f
-                    }
-                };
+                let factor = self.factor(set, si, grid, work)?;
                 let t0 = std::time::Instant::now();
-                let band = crate::chain::shot_scene_rows(set, si, grid, r.0..r.1, factor)
-                    .map_err(|e| e.one_line())?;
+                let band = if channels {
+                    crate::chain::shot_channel_scene_rows(set, si, grid, r.0..r.1, factor)
+                        .map(|(_, chs)| chs)
+                } else {
+                    crate::chain::shot_scene_rows(set, si, grid, r.0..r.1, factor)
+                }
+                .map_err(|e| e.one_line())?;
                 work.scene_band_renders.add(t0);
                 let band = Arc::new(band);
                 self.lru.insert(key(r), band.clone(), scene_bytes(&band));
@@ -379,7 +479,11 @@ impl SceneCache {
                 continue;
             }
             if whole.is_none() {
-                whole = Some(self.scene(set, si, grid, grid_key, work)?);
+                whole = Some(if channels {
+                    self.channel_scene(set, si, grid, grid_key, work)?
+                } else {
+                    self.scene(set, si, grid, grid_key, work)?
+                });
             }
             let w = whole.as_ref().expect("rendered");
             let band = Arc::new(crate::chain::scene_rows(w, r.0, r.1));
@@ -416,6 +520,35 @@ impl SimForward {
         })?;
         cam.sensor.effects.crosstalk = None;
         Ok(cam)
+    }
+
+    /// Whether shot `si`'s optics run on the sensor channels' planes: the camera may
+    /// (`channel_capable`, [`channel_path`]) and its scene has more basis terms than the CFA
+    /// has channels (`used`) and no depth. The terms are the target's
+    /// ([`camsim_core::scene::target_basis`]) for a shot rendered by rows (nothing is
+    /// rendered to tell), else its rendered scene's.
+    fn channel_mode(
+        &self,
+        set: &CaptureSet,
+        si: usize,
+        grid: &camsim_core::WavelengthGrid,
+        grid_key: &str,
+        (channel_capable, used): (bool, usize),
+    ) -> Result<bool, String> {
+        if !channel_capable {
+            return Ok(false);
+        }
+        if crate::chain::shot_scene_by_rows(set, si) {
+            let basis = camsim_core::scene::target_basis(&set.shots[si].target.target)
+                .map_err(|e| format!("{}: shot {}: {e}", set.path.display(), set.shots[si].id))?;
+            return Ok(basis.len() > used);
+        }
+        let scene = self
+            .scenes
+            .lock()
+            .map_err(|_| "forward model lock poisoned".to_string())?
+            .scene(set, si, grid, grid_key, &self.work)?;
+        Ok(scene.depth_m.is_none() && scene.radiance.terms() > used)
     }
 
     /// Key of everything but the QE blocks that shapes the pixel planes: the optics blocks,
@@ -563,7 +696,8 @@ impl Forward for SimForward {
             // The path of `rates`: the optics on the channel planes when they act alike at
             // every wavelength, the QE blocks are the believed ones and the target's scene has
             // more basis terms than the CFA has channels (`channel_rate`); else on the terms.
-            let channel_mode_of = |terms: usize| channel_capable && terms > used_channels;
+            let channel_mode_of =
+                || self.channel_mode(&set, si, &grid, gk, (channel_capable, used_channels));
             let tkey = format!("{glare_key} target {key}");
             let ckey = format!("{tkey} channels");
             // The whole scene when the glare sums rendered it: the bands are cut from it.
@@ -588,23 +722,21 @@ impl Forward for SimForward {
                         g
                     }
                     _ => {
-                        let whole = self
-                            .scenes
-                            .lock()
-                            .map_err(lock_err)?
-                            .scene(&set, si, &grid, gk, &self.work)?;
-                        let channel = channel_mode_of(whole.radiance.terms());
+                        let channel = channel_mode_of()?;
                         mode = Some(channel);
+                        // (on the channel planes: the whole scene rendered straight onto them)
+                        let whole = {
+                            let mut sc = self.scenes.lock().map_err(lock_err)?;
+                            if channel {
+                                sc.channel_scene(&set, si, &grid, gk, &self.work)?
+                            } else {
+                                sc.scene(&set, si, &grid, gk, &self.work)?
+                            }
+                        };
                         let t0 = std::time::Instant::now();
-                        let g = if channel {
-                            let (_, chs) = crate::chain::channel_scene(&set, &whole)
-                                .map_err(|e| e.one_line())?;
-                            crate::chain::shot_glare_sums(&set, &chs, &grid)
-                        } else {
-                            crate::chain::shot_glare_sums(&set, &whole, &grid)
-                        }
-                        .map_err(|e| e.one_line())?
-                        .ok_or("veiling glare without its sums")?;
+                        let g = crate::chain::shot_glare_sums(&set, &whole, &grid)
+                            .map_err(|e| e.one_line())?
+                            .ok_or("veiling glare without its sums")?;
                         self.work.glare_sums.add(t0);
                         whole_scene = Some(whole);
                         let g = Arc::new(g);
@@ -634,6 +766,11 @@ impl Forward for SimForward {
                     .iter()
                     .map(|&bi| crate::chain::band_scene_rows(&set, &grid, bands[bi], widen[bi]))
                     .collect();
+                let channel = match mode {
+                    Some(m) => m,
+                    None => channel_mode_of()?,
+                };
+                // (on the channel planes: the bands rendered straight onto them)
                 let scenes = self.scenes.lock().map_err(lock_err)?.scene_bands(
                     &set,
                     si,
@@ -641,24 +778,15 @@ impl Forward for SimForward {
                     gk,
                     &ranges,
                     whole_scene,
+                    channel,
                     &self.work,
                 )?;
                 for (&bi, scene) in missing.iter().zip(&scenes) {
                     let band = bands[bi];
-                    let channel = *mode.get_or_insert(channel_mode_of(scene.radiance.terms()));
                     let t0 = std::time::Instant::now();
-                    let chs;
-                    let optics_input: &camsim_core::image::SceneRadiance = if channel {
-                        chs = crate::chain::channel_scene(&set, scene)
-                            .map_err(|e| e.one_line())?
-                            .1;
-                        &chs
-                    } else {
-                        scene
-                    };
                     let irr = crate::chain::band_irradiance(
                         &set,
-                        optics_input,
+                        scene,
                         &grid,
                         band,
                         widen[bi],
@@ -724,7 +852,7 @@ impl Forward for SimForward {
         let grid_key = std::cell::OnceCell::new();
         // The QE blocks of the believed camera: the optics then act on the channel planes
         // (see `channel_rate`); a candidate QE reads the cached term planes instead.
-        let (channel_capable, _) = channel_path(&set, &self.believed);
+        let (channel_capable, channels) = channel_path(&set, &self.believed);
         let glare_off = !set
             .camera
             .optics
@@ -751,37 +879,37 @@ impl Forward for SimForward {
             };
             // The path is a function of the camera and the target alone (not of what is
             // cached), so a call's rates do not depend on the calls before it.
-            let mut scene = None;
-            let channel = if channel_capable {
-                let sc = scene_of()?;
-                let t0 = std::time::Instant::now();
-                let r = channel_rate(&set, si, &sc, &grid)?;
-                scene = Some(sc);
-                r.map(|(r, sums)| {
+            let gk = grid_key.get_or_init(|| SceneCache::grid_key(&set, &grid));
+            let channel =
+                if self.channel_mode(&set, si, &grid, gk, (channel_capable, channels.len()))? {
+                    // the scene rendered straight onto the channel planes (or kept)
+                    let chs = self
+                        .scenes
+                        .lock()
+                        .map_err(|_| "forward model lock poisoned".to_string())?
+                        .channel_scene(&set, si, &grid, gk, &self.work)?;
+                    let t0 = std::time::Instant::now();
+                    let (r, sums) = channel_rate(&set, si, &chs, &channels, &grid)?;
                     self.work.whole_optics.add(t0);
-                    // Without glare the channel image is the one before the glare: its sums
-                    // are a glare spec's of these optics ([`Forward::rates_rows`]).
+                    // Without glare the channel image is the one before the glare: its sums are a
+                    // glare spec's of these optics ([`Forward::rates_rows`]).
                     if glare_off {
                         let gkey = format!("{okey} target {key} channels");
                         if let Ok(mut g) = self.glare.lock() {
                             g.insert(gkey, Arc::new(sums));
                         }
                     }
-                    r
-                })
-            } else {
-                None
-            };
+                    Some(r)
+                } else {
+                    None
+                };
             let r = match (channel, by_target.get(&key)) {
                 (Some(r), _) => r,
                 (None, Some(pp)) => {
                     camsim_sensor::electron_rate_from_term_planes(&set.camera.sensor, pp)
                 }
                 (None, None) => {
-                    let sc = match scene {
-                        Some(sc) => sc,
-                        None => scene_of()?,
-                    };
+                    let sc = scene_of()?;
                     let t0 = std::time::Instant::now();
                     let irr =
                         shot_irradiance_of_scene(&set, si, &sc, &grid).map_err(|e| e.one_line())?;
@@ -817,38 +945,31 @@ impl Forward for SimForward {
 }
 
 /// The electron rates of shot `si` through the optics on the sensor channels' planes
-/// ([`crate::chain::shot_channel_irradiance_of_scene`]) when that is cheaper than the basis
-/// terms' path and exact to f32 rounding: the optics act alike at every wavelength and the
-/// scene has more basis terms than the CFA has channels (a colour chart: 25 terms, 3–4
-/// channels). The caller takes it only with the believed camera's QE blocks: a QE candidate
-/// reuses the cached term planes of its optics instead (one weighted sum per pixel).
-/// `None`: take the basis terms' path. With the rates, the veiling-glare sums of the channel
-/// image ([`camsim_optics::glare_sums_of_image`]: a glare spec's sums when the camera has no
+/// (`channel_scene`: [`SceneCache::channel_scene`], plane j of channel `channels[j]`), the
+/// optics stage of [`crate::chain::shot_channel_irradiance_of_scene`]: cheaper than the basis
+/// terms' path and exact to f32 rounding when the optics act alike at every wavelength and
+/// the scene has more basis terms than the CFA has channels (a colour chart: 25 terms, 3–4
+/// channels; [`SimForward::channel_mode`]). The caller takes it only with the believed
+/// camera's QE blocks: a QE candidate reuses the cached term planes of its optics instead
+/// (one weighted sum per pixel). With the rates, the veiling-glare sums of the channel image
+/// ([`camsim_optics::glare_sums_of_image`]: a glare spec's sums when the camera has no
 /// glare).
 fn channel_rate(
     set: &CaptureSet,
     si: usize,
-    scene: &camsim_core::image::SceneRadiance,
+    channel_scene: &camsim_core::image::SceneRadiance,
+    channels: &[usize],
     grid: &camsim_core::WavelengthGrid,
-) -> Result<Option<(Vec<f32>, camsim_optics::GlareSums)>, String> {
+) -> Result<(Vec<f32>, camsim_optics::GlareSums), String> {
     let sensor = &set.camera.sensor;
-    let used = (0..sensor.channel_qe.len())
-        .filter(|&c| sensor.cfa.tile.iter().flatten().any(|&t| t == c))
-        .count();
-    if scene.radiance.terms() <= used {
-        return Ok(None);
-    }
-    let Some(ch) = crate::chain::shot_channel_irradiance_of_scene(set, si, scene, grid)
-        .map_err(|e| e.one_line())?
-    else {
-        return Ok(None);
-    };
-    let pp = camsim_sensor::pixel_term_planes(sensor, &ch.irradiance);
-    let sums = camsim_optics::glare_sums_of_image(&set.camera.optics, &ch.irradiance);
-    Ok(Some((
-        camsim_sensor::electron_rate_from_channel_planes(sensor, &ch.channels, &pp),
+    let irradiance =
+        shot_irradiance_of_scene(set, si, channel_scene, grid).map_err(|e| e.one_line())?;
+    let pp = camsim_sensor::pixel_term_planes(sensor, &irradiance);
+    let sums = camsim_optics::glare_sums_of_image(&set.camera.optics, &irradiance);
+    Ok((
+        camsim_sensor::electron_rate_from_channel_planes(sensor, channels, &pp),
         sums,
-    )))
+    ))
 }
 
 /// Whether the forward model of `set`'s camera may run the optics on the sensor channels'
@@ -1630,9 +1751,15 @@ mod tests {
             let mut s2 = set.clone();
             s2.camera = fw.camera_for(spec).unwrap();
             let grid = wavelength_grid(&s2);
+            // (whether the optics allow it: the QE candidate's rates take the terms' path)
+            let capable = optics_alike_at_every_wavelength(&s2.camera);
+            let channels = super::channel_path(&s2, &fw.believed).1;
+            let gk = SceneCache::grid_key(&s2, &grid);
             for (si, g) in got.iter().enumerate() {
                 let scene = crate::chain::shot_scene(&s2, si, &grid).unwrap();
-                let via_channels = channel_rate(&s2, si, &scene, &grid).unwrap().is_some();
+                let via_channels = fw
+                    .channel_mode(&s2, si, &grid, &gk, (capable, channels.len()))
+                    .unwrap();
                 let chart = scene.radiance.terms() > nch;
                 charts += usize::from(chart);
                 let alike = optics_alike_at_every_wavelength(&s2.camera);
@@ -2057,7 +2184,7 @@ mod band_tests {
             "the specs change the margin: {margins:?}"
         );
         assert_eq!(
-            fw.work.scene_renders.get().0,
+            fw.work.scene_renders.get().0 + fw.work.channel_scene_renders.get().0,
             0,
             "a whole scene was rendered"
         );
@@ -2071,6 +2198,56 @@ mod band_tests {
             (targets.len() * oversamplings.len()) as u64,
             "{margins:?}"
         );
+    }
+
+    /// A shot's scene rendered straight onto the channel planes (whole, and grid-row windows
+    /// with the luminance factor computed by row strips on the luminance plane) is bit for
+    /// bit [`crate::chain::channel_scene`] of its term render, for every target of a chart
+    /// set (two charts under two illuminants, a flat, a dark); and the forward model's kept
+    /// channel scene is that.
+    #[test]
+    fn channel_scenes_rendered_straight_equal_the_term_scenes_channel_planes() {
+        let (_dir, set) = demo_set(vec![], Concealment::Charts, 40, 56);
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
+        let grid = wavelength_grid(&set);
+        let g = crate::chain::shot_sampling_grid(&set, &grid);
+        let gk = SceneCache::grid_key(&set, &grid);
+        let same = |a: &[f32], b: &[f32]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        let mut charts = 0;
+        for si in 0..set.shots.len() {
+            let id = &set.shots[si].id;
+            let (scene, factor) = crate::chain::shot_scene_and_factor(&set, si, &grid).unwrap();
+            charts += usize::from(scene.radiance.terms() > 4);
+            let strips = crate::chain::shot_scene_luminance_factor(&set, si, &grid).unwrap();
+            assert_eq!(strips.to_bits(), factor.to_bits(), "{id}: luminance factor");
+            let (ch, want) = crate::chain::channel_scene(&set, &scene).unwrap();
+            for (r0, r1) in [(0, g.rows), (3, 17), (g.rows - 5, g.rows)] {
+                let (ch2, got) =
+                    crate::chain::shot_channel_scene_rows(&set, si, &grid, r0..r1, factor).unwrap();
+                assert_eq!(ch, ch2);
+                assert_eq!(got.sample_aperture, want.sample_aperture);
+                assert_eq!(got.sample_pitch_m, want.sample_pitch_m);
+                for (a, b) in got.radiance.planes.iter().zip(&want.radiance.planes) {
+                    assert!(
+                        same(a, &b[r0 * g.cols..r1 * g.cols]),
+                        "{id} rows {r0}..{r1}"
+                    );
+                }
+            }
+            let kept = fw
+                .scenes
+                .lock()
+                .unwrap()
+                .channel_scene(&set, si, &grid, &gk, &fw.work)
+                .unwrap();
+            assert_eq!(kept.radiance.planes.len(), want.radiance.planes.len());
+            for (a, b) in kept.radiance.planes.iter().zip(&want.radiance.planes) {
+                assert!(same(a, b), "{id}: kept channel scene");
+            }
+        }
+        assert!(charts >= 2, "the set has {charts} charts");
     }
 
     /// The glare sums of the believed optics come from the believed camera's whole-sensor run
@@ -2093,11 +2270,13 @@ mod band_tests {
         // no scene fits the cache (as a whole 12 MP chart does not)
         fw.scenes.lock().unwrap().lru.budget = 0;
         fw.rates(&RateSpec::default()).unwrap();
-        let renders = fw.work.scene_renders.get().0;
+        let whole_renders =
+            |w: &ForwardWork| w.scene_renders.get().0 + w.channel_scene_renders.get().0;
+        let renders = whole_renders(&fw.work);
         let got = fw.rates_rows(&spec, &rows).unwrap();
         assert_eq!(fw.work.glare_sums.get().0, 0, "glare sums computed again");
         assert_eq!(
-            fw.work.scene_renders.get().0,
+            whole_renders(&fw.work),
             renders,
             "a whole scene rendered for the glare"
         );
@@ -2138,7 +2317,12 @@ mod band_tests {
         let got = fw.rates_rows(&spec, &rows).unwrap();
         let targets: std::collections::HashSet<&str> =
             set.shots.iter().map(|s| s.target_key.as_str()).collect();
-        let (renders, _) = fw.work.scene_renders.get();
+        // (a chart's whole scene rendered straight onto the channel planes)
+        let renders = fw.work.scene_renders.get().0 + fw.work.channel_scene_renders.get().0;
+        assert!(
+            fw.work.channel_scene_renders.get().0 > 0,
+            "no chart on the channels"
+        );
         assert_eq!(
             renders,
             targets.len() as u64,

@@ -262,19 +262,7 @@ fn scene_rows_unscaled(
     rows: std::ops::Range<usize>,
 ) -> Result<SceneRadiance, CliError> {
     let world = &shot.target.world;
-    let f_m = set.camera.optics.focal_length_m;
-    if let Some(d) = world.distance_m {
-        if !(d > f_m) {
-            return Err(CliError::input(
-                &set.path,
-                format!(
-                    "shot {}: target.distance_m = {d} must exceed the focal length ({f_m} m) to \
-                     form a real image",
-                    shot.id
-                ),
-            ));
-        }
-    }
+    check_target_distance(set, shot)?;
     let extent = target_extent_m(set, shot);
     let radiance =
         camsim_core::scene_view::render_target_in_view_rows(&shot.target.target, g, extent, rows)
@@ -289,6 +277,100 @@ fn scene_rows_unscaled(
             .or_else(|| shot.target.illuminant.clone()),
         depth_m: None,
         sample_aperture: camsim_core::scene::rendered_aperture(&shot.target.target, g),
+    })
+}
+
+/// Refuses a target nearer than the focal length (no real image).
+fn check_target_distance(set: &CaptureSet, shot: &crate::config::Shot) -> Result<(), CliError> {
+    let f_m = set.camera.optics.focal_length_m;
+    if let Some(d) = shot.target.world.distance_m {
+        if !(d > f_m) {
+            return Err(CliError::input(
+                &set.path,
+                format!(
+                    "shot {}: target.distance_m = {d} must exceed the focal length ({f_m} m) to \
+                     form a real image",
+                    shot.id
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A shot's scene rows projected onto planes ([`shot_scene_projected_rows`]): plane j is
+/// `Σ_k w_jk L_k(x)` of the scene's basis terms, on the scene's sampling.
+#[derive(Debug, Clone)]
+pub struct ProjectedScene {
+    /// One row-major `rows × cols` plane per row of weights.
+    pub planes: Vec<Vec<f32>>,
+    /// Grid rows rendered.
+    pub rows: usize,
+    /// Grid columns.
+    pub cols: usize,
+    /// Sample spacing in the image plane (m).
+    pub sample_pitch_m: f64,
+    /// Object distance (m; None = infinity), as the scene's.
+    pub object_distance_m: Option<f64>,
+    /// What each sample stands for, as the scene's.
+    pub sample_aperture: camsim_core::sample_aperture::SampleAperture,
+}
+
+/// The grid rows `rows` of [`shot_scene_rows`] (luminance factor `factor`) projected onto the
+/// weights `weights_of` gives for the target's basis ([`camsim_core::scene::target_basis`]):
+/// plane j = `Σ_k weights[j][k] · plane_k`, bit for bit [`camsim_core::SpectralImage::combine`]
+/// of each row of weights on those rows, without the scene's basis-term planes
+/// ([`camsim_core::scene_view::render_target_in_view_projected_rows`]: a 12 MP chart is 25
+/// dense planes of 48 M samples, its channel planes 3–4). Only for [`shot_scene_by_rows`]
+/// shots.
+pub fn shot_scene_projected_rows(
+    set: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+    rows: std::ops::Range<usize>,
+    factor: f64,
+    weights_of: impl FnOnce(&camsim_core::SpectralBasis) -> Vec<Vec<f64>>,
+) -> Result<ProjectedScene, CliError> {
+    refuse_unless_by_rows(set, shot_index)?;
+    let g = shot_sampling_grid(set, grid);
+    projected_rows_on(set, shot_index, &g, rows, factor, weights_of)
+}
+
+/// [`shot_scene_projected_rows`] on the sampling grid `g`.
+fn projected_rows_on(
+    set: &CaptureSet,
+    shot_index: usize,
+    g: &SamplingGrid,
+    rows: std::ops::Range<usize>,
+    factor: f64,
+    weights_of: impl FnOnce(&camsim_core::SpectralBasis) -> Vec<Vec<f64>>,
+) -> Result<ProjectedScene, CliError> {
+    let shot = &set.shots[shot_index];
+    let err =
+        |e: camsim_core::CoreError| CliError::input(&set.path, format!("shot {}: {e}", shot.id));
+    check_target_distance(set, shot)?;
+    let target = &shot.target.target;
+    let basis = camsim_core::scene::target_basis(target).map_err(err)?;
+    let proj = camsim_core::scene::PlaneProjection {
+        weights: weights_of(&basis),
+        term_scale: factor,
+    };
+    let n = rows.len();
+    let planes = camsim_core::scene_view::render_target_in_view_projected_rows(
+        target,
+        g,
+        target_extent_m(set, shot),
+        rows,
+        &proj,
+    )
+    .map_err(err)?;
+    Ok(ProjectedScene {
+        planes,
+        rows: n,
+        cols: g.cols,
+        sample_pitch_m: g.pitch_m,
+        object_distance_m: shot.target.world.distance_m,
+        sample_aperture: camsim_core::scene::rendered_aperture(target, g),
     })
 }
 
@@ -336,7 +418,8 @@ pub fn shot_scene_factor_key(set: &CaptureSet, shot_index: usize, g: &SamplingGr
 /// The factor [`shot_scene`] scales shot `shot_index`'s scene by (to its mean luminance; 1
 /// without one or for a black scene), computed from the scene rendered by row strips of about
 /// [`FACTOR_STRIP_SAMPLES`] samples each in the whole scene's summation order
-/// ([`camsim_core::scene::LuminanceSum`]): the same bits as the whole render's without the
+/// ([`camsim_core::scene::LuminanceSum`]), each strip rendered straight onto its luminance
+/// plane ([`shot_scene_projected_rows`]): the same bits as the whole render's without the
 /// whole scene in memory. Only for [`shot_scene_by_rows`] shots.
 pub fn shot_scene_luminance_factor(
     set: &CaptureSet,
@@ -355,12 +438,16 @@ pub fn shot_scene_luminance_factor(
     let inside =
         |r: usize| ((r as f64 + 0.5 - g.rows as f64 / 2.0) * g.pitch_m).abs() <= window.1 / 2.0;
     let mut sum = camsim_core::scene::LuminanceSum::default();
+    let lw = camsim_core::colorimetry::luminance_weight_for_photons(&SI);
     let mut r0 = 0;
     while r0 < g.rows {
         let r1 = (r0 + strip).min(g.rows);
         if (r0..r1).any(inside) {
-            let part = scene_rows_unscaled(set, shot, &g, r0..r1)?;
-            sum.add_rows(&part.radiance, r0, g.rows, g.pitch_m, Some(window), &SI);
+            // the strip's luminance plane, projected (not its basis-term planes)
+            let part = projected_rows_on(set, shot_index, &g, r0..r1, 1.0, |b| {
+                vec![b.term_integrals(&lw)]
+            })?;
+            sum.add_luminance_rows(&part.planes[0], g.cols, r0, g.rows, g.pitch_m, Some(window));
         }
         r0 = r1;
     }
@@ -368,8 +455,7 @@ pub fn shot_scene_luminance_factor(
     Ok(if now <= 0.0 { 1.0 } else { l / now })
 }
 
-/// Samples per row strip of [`shot_scene_luminance_factor`] (times the scene's basis terms ×
-/// 4 bytes: 100 MB for a 25-term chart).
+/// Samples per row strip of [`shot_scene_luminance_factor`] (one luminance plane: 4 MB).
 pub const FACTOR_STRIP_SAMPLES: usize = 1 << 20;
 
 /// The grid rows `rows` of [`shot_scene`] by themselves, bit for bit

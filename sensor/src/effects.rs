@@ -285,13 +285,23 @@ impl SensorModel {
 /// `∫ QE'_c(λ) B_k(λ) dλ` of every basis term of `img` for the effective QE of channel `c`
 /// (QE shift and IR leakage included; exact for piecewise-linear spectra).
 pub fn channel_term_integrals(sensor: &SensorModel, img: &SpectralImage, c: usize) -> Vec<f64> {
+    channel_basis_integrals(sensor, &img.basis, c)
+}
+
+/// [`channel_term_integrals`] of the terms of a basis (an image's, or a target's before it is
+/// rendered: [`camsim_core::scene::target_basis`]).
+pub fn channel_basis_integrals(
+    sensor: &SensorModel,
+    basis: &camsim_core::SpectralBasis,
+    c: usize,
+) -> Vec<f64> {
     if sensor.effects.qe_shift.is_none() && sensor.effects.ir_leakage.is_none() {
-        return img.term_integrals(&sensor.channel_qe[c]);
+        return basis.term_integrals(&sensor.channel_qe[c]);
     }
-    let mut sum = vec![0.0; img.terms()];
+    let mut sum = vec![0.0; basis.len()];
     for p in sensor.effective_qe_parts(c) {
         sum.iter_mut()
-            .zip(img.term_integrals(&p))
+            .zip(basis.term_integrals(&p))
             .for_each(|(s, v)| *s += v);
     }
     sum

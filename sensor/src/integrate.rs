@@ -235,14 +235,36 @@ pub struct ChannelPlanes {
 
 /// [`ChannelPlanes`] of `img` for `sensor`'s channels and effective QE.
 pub fn channel_planes(sensor: &SensorModel, img: &camsim_core::SpectralImage) -> ChannelPlanes {
+    let w = channel_weights(sensor, &img.basis);
+    let planes = w.weights.iter().map(|wc| img.combine(wc)).collect();
+    ChannelPlanes {
+        channels: w.channels,
+        planes,
+    }
+}
+
+/// The weights `w_ck` of [`ChannelPlanes`] for the terms of `basis`: the planes of an image
+/// on that basis are `Σ_k w_ck a_k` ([`channel_planes`]), or a target's render projected
+/// onto them ([`camsim_core::scene::render_target_projected_rows`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelWeights {
+    /// The channels the CFA uses, ascending.
+    pub channels: Vec<usize>,
+    /// One row per entry of `channels`, one weight per basis term.
+    pub weights: Vec<Vec<f64>>,
+}
+
+/// [`ChannelWeights`] of `basis` for `sensor`'s channels and effective QE
+/// ([`crate::effects::channel_basis_integrals`]).
+pub fn channel_weights(sensor: &SensorModel, basis: &camsim_core::SpectralBasis) -> ChannelWeights {
     let channels: Vec<usize> = (0..sensor.channel_qe.len())
         .filter(|&c| sensor.cfa.tile.iter().flatten().any(|&t| t == c))
         .collect();
-    let planes = channels
+    let weights = channels
         .iter()
-        .map(|&c| img.combine(&crate::effects::channel_term_integrals(sensor, img, c)))
+        .map(|&c| crate::effects::channel_basis_integrals(sensor, basis, c))
         .collect();
-    ChannelPlanes { channels, planes }
+    ChannelWeights { channels, weights }
 }
 
 /// Mean photo-electron rate of every pixel from its pixel-averaged channel planes

@@ -50,15 +50,16 @@ pub use dual_pixel::{
     DualPixelRates,
 };
 pub use effects::{
-    apply_crosstalk, channel_term_integrals, hot_pixel_count, hot_pixel_map, Crosstalk, HotPixel,
-    HotPixels, IrLeakage, Nonlinearity, QeShift, SensorEffects,
+    apply_crosstalk, channel_basis_integrals, channel_term_integrals, hot_pixel_count,
+    hot_pixel_map, Crosstalk, HotPixel, HotPixels, IrLeakage, Nonlinearity, QeShift, SensorEffects,
 };
 pub use hdr::{
     expose_hdr, ChargePacket, HdrFrame, HdrModel, HdrReadout, HdrReadoutModel, USABLE_FRACTION,
 };
 pub use integrate::{
-    box_weights, channel_planes, electron_rate, electron_rate_from_channel_planes,
-    electron_rate_from_term_planes, pixel_term_planes, ChannelPlanes, PixelTermPlanes,
+    box_weights, channel_planes, channel_weights, electron_rate, electron_rate_from_channel_planes,
+    electron_rate_from_term_planes, pixel_term_planes, ChannelPlanes, ChannelWeights,
+    PixelTermPlanes,
 };
 pub use line_noise::{
     dark_voltage_at, row_offsets_v, rtn_offsets_v, rtn_pixel_count, rtn_pixel_map, rtn_state,
