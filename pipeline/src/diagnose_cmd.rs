@@ -2412,13 +2412,15 @@ mod band_tests {
     /// within [`DECIMATED_GLARE_TOLERANCE`] of each plane's mean, and equal them exactly at
     /// the reference (the believed optics).
     /// Largest relative error of a plane's whole-field mean from the decimated field
-    /// ([`decimated_glare_sums_match_the_whole_field_sums`]).
-    /// ([`decimated_glare_sums_match_the_whole_field_sums`]): 1e-3, 5× the largest measured
-    /// (2.1e-4: fall-off, pincushion distortion, lateral colour and defocus at once). The
-    /// glare adds `f · mean` to every sample, so an error δ of the mean moves the rates by
-    /// `f · δ` of the mean signal: 3e-5 at f = 0.03, below 1 % of one pixel's shot noise in
-    /// one frame at any level below 10⁸ e⁻, and the same as a glare fraction off by f · δ.
-    const DECIMATED_GLARE_TOLERANCE: f64 = 1e-3;
+    /// ([`decimated_glare_sums_match_the_whole_field_sums`]): 5e-4, 2.3× the largest measured
+    /// (2.1e-4, fall-off, pincushion distortion, lateral colour and defocus at once; the
+    /// single blocks 1e-6 to 1e-4). The glare adds `f · mean` to every sample, so an error δ
+    /// of the mean moves the rates by `f · δ` of the mean signal, as a glare fraction off by
+    /// `f · δ` would: 1.5e-5 at f = 0.03, 0.4 σ of the 2 MP set's fitted glare (σ ≈
+    /// f / √(2 ΔlnL) = 0.03 / √(2 · 365 569) = 3.5e-5, its finding's ΔlnL) and 0.15 % of one
+    /// pixel's shot noise in one frame at 10⁴ e⁻ (the demo's full well). At the reference
+    /// optics the error is 0 (rounding), and the candidates a round-2 fit visits lie near it.
+    const DECIMATED_GLARE_TOLERANCE: f64 = 5e-4;
 
     #[test]
     fn decimated_glare_sums_match_the_whole_field_sums() {
