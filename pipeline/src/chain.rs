@@ -611,6 +611,87 @@ pub fn shot_glare_sums(
         .map_err(|e| CliError::input(&set.camera_path, format!("optics: {e}")))
 }
 
+/// Most samples on the short side of a [`decimated_glare_field`]'s sensor: a few hundred, so a
+/// chart's coarse run costs milliseconds (the 12 MP sensor's 3000 rows become 375).
+pub const GLARE_FIELD_MAX_SHORT_SIDE: usize = 400;
+/// Fewest samples on the short side of a [`decimated_glare_field`]'s sensor: a coarser field
+/// is not taken (the exact whole-field run instead).
+pub const GLARE_FIELD_MIN_SHORT_SIDE: usize = 200;
+
+/// The capture set whose camera sees the same field as `set`'s on a coarse grid: the same
+/// physical sensor (its size, hence every field coordinate, and its channels) and optics, but
+/// `rows/k × cols/k` pixels of pitch `k·p` and oversampling 1 (`simulation.oversample`), so
+/// its scene sampling grid ([`shot_sampling_grid`]) has `(k·os)²` times fewer samples than
+/// `set`'s. The whole-field means of the optical image of a target ([`shot_glare_sums`]) on
+/// it approximate the full grid's: the chart renders cell averages (each coarse sample is
+/// the mean of the radiance over its cell, so the coarse sum over the sensor is the same
+/// integral), and the optics' field maps (relative illumination, fall-off) and warps are
+/// smooth on the coarse pitch; what the coarse grid misses is what the blur moves across the
+/// sensor's edge below its pitch. `k` is the smallest divisor of both `rows` and `cols`
+/// (the size stays exact) that puts the short side at most at
+/// [`GLARE_FIELD_MAX_SHORT_SIDE`]; `None` when that leaves fewer than
+/// [`GLARE_FIELD_MIN_SHORT_SIDE`] pixels on the short side, when `k` would be 1 (the sensor is
+/// small already), or when the camera cannot run its rows as bands ([`band_refusal`]: the
+/// only caller is the bands' glare). Returns the set and `k`.
+pub fn decimated_glare_field(set: &CaptureSet) -> Option<(CaptureSet, usize)> {
+    let s = &set.camera.sensor;
+    if band_refusal(
+        set,
+        RowBand {
+            start: 0,
+            end: s.rows,
+        },
+    )
+    .is_some()
+    {
+        return None;
+    }
+    let short = s.rows.min(s.cols);
+    let k = (2..=short)
+        .find(|&k| s.rows % k == 0 && s.cols % k == 0 && short / k <= GLARE_FIELD_MAX_SHORT_SIDE)?;
+    if short / k < GLARE_FIELD_MIN_SHORT_SIDE {
+        return None;
+    }
+    let mut coarse = set.clone();
+    let c = &mut coarse.camera.sensor;
+    c.rows = s.rows / k;
+    c.cols = s.cols / k;
+    c.pixel_pitch_m = s.pixel_pitch_m * k as f64;
+    coarse.simulation.oversample = Some(1);
+    Some((coarse, k))
+}
+
+/// [`shot_glare_sums`] of shot `shot_index`'s target on a [`decimated_glare_field`] `coarse`
+/// (its camera carrying the optics whose sums are wanted): the chain's own steps on the coarse
+/// grid — [`shot_scene`], on the sensor channels' planes ([`channel_scene`]) when `channels`,
+/// then [`shot_glare_sums`] — the coarse scene being kept by the caller (`scene`, rendered when
+/// `None`). Returns the sums and the coarse scene.
+pub fn decimated_glare_sums(
+    coarse: &CaptureSet,
+    shot_index: usize,
+    grid: &WavelengthGrid,
+    channels: bool,
+    scene: Option<std::sync::Arc<SceneRadiance>>,
+) -> Result<(camsim_optics::GlareSums, std::sync::Arc<SceneRadiance>), CliError> {
+    let scene = match scene {
+        Some(s) => s,
+        None => std::sync::Arc::new(shot_scene(coarse, shot_index, grid)?),
+    };
+    let sums = if channels {
+        let (_, chs) = channel_scene(coarse, &scene)?;
+        shot_glare_sums(coarse, &chs, grid)?
+    } else {
+        shot_glare_sums(coarse, &scene, grid)?
+    };
+    let sums = sums.ok_or_else(|| {
+        CliError::input(
+            &coarse.camera_path,
+            "optics: decimated glare sums of a camera without veiling glare",
+        )
+    })?;
+    Ok((sums, scene))
+}
+
 /// The optics stage ([`shot_irradiance_of_scene`]) of `band` alone, on its
 /// [`band_core_rows`]: `scene_band` is the shot's scene on the grid rows [`band_scene_rows`]
 /// names ([`scene_rows`]), `glare` the whole
