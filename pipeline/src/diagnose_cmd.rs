@@ -653,7 +653,7 @@ impl SimForward {
         let (exact, ref_channel) = match (channel, exact_ch, exact_te) {
             (true, Some(e), _) | (false, Some(e), None) => (e, true),
             (_, _, Some(e)) => (e, false),
-            (true, None, None) | (false, None, None) => unreachable!("checked above"),
+            (_, None, None) => return Ok(None),
         };
         let rkey = format!("{key}{}", if ref_channel { " channels" } else { "" });
         let reference = match dec.reference.get(&rkey) {
@@ -1772,7 +1772,7 @@ fn subsampled_json(d: &Diagnosis, data: &DataSet, glare_k: usize) -> Value {
     if glare_k > 0 {
         v["candidate_glare_sums"] = json!({
             "decimation": glare_k,
-            "rule": format!("the veiling glare's whole-field means of candidate optics (during the fits with veiling glare in the model) came from the whole field on a {glare_k}x coarser pixel grid (oversampling 1), scaled per plane by the believed optics' full-resolution means over their coarse-grid means; the full-resolution confirmation forms the whole image and its own glare")
+            "rule": format!("the veiling glare's whole-field means of candidate optics (during the fits with veiling glare in the model) came from the whole field on a {glare_k}x coarser pixel grid (oversampling 1), scaled by the believed optics' full-resolution means over their coarse-grid means (per plane; by one common factor when the candidate's planes are basis terms and the believed run's the sensor channels'); the full-resolution confirmation forms the whole image and its own glare")
         });
     }
     v
