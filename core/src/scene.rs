@@ -981,52 +981,7 @@ pub(crate) mod tests {
             offset: v,
             slope_per_nm: 1e-3,
         };
-        let picture = SpectralImage::from_single_spectrum(
-            5,
-            7,
-            s(1.0),
-            (0..35).map(|i| (i % 11) as f32 * 0.3).collect(),
-        );
-        let targets = vec![
-            Target::Dark,
-            Target::Uniform { radiance: s(2.0) },
-            Target::Patches {
-                rows: 3,
-                cols: 4,
-                patch_fraction: 0.7,
-                background: s(0.2),
-                patches: (0..12).map(|i| s(i as f64)).collect(),
-            },
-            Target::SlantedEdge {
-                dark: s(0.1),
-                light: s(1.0),
-                angle_deg: 5.0,
-            },
-            Target::Image { radiance: picture },
-            Target::Ramp {
-                radiance: s(1.0),
-                min: 0.1,
-                max: 0.9,
-            },
-            Target::FrequencySweep {
-                radiance: s(1.0),
-                max_cycles_per_pixel: 0.4,
-                pixel_pitch_m: 1e-6,
-                contrast: 0.8,
-            },
-            Target::PointArray {
-                radiance: s(1.0),
-                background: s(0.1),
-                spacing_m: 5e-6,
-                point_size_m: 1.5e-6,
-            },
-            Target::GridLines {
-                radiance: s(1.0),
-                background: s(0.1),
-                spacing_m: 6e-6,
-                line_width_m: 1e-6,
-            },
-        ];
+        let targets = every_kind_of_target();
         let window = Some((14e-6, 9e-6));
         for ap in [SampleAperture::Cell, SampleAperture::CubicBSpline] {
             // 9 × 14 pixels, 2 px margin, 2× oversampling: 26 × 36 cells
