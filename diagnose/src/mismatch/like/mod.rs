@@ -38,7 +38,7 @@ mod rail;
 mod rates;
 mod temporal;
 
-use super::data::DataSet;
+use super::data::{DataSet, ShotData, TargetClass};
 use super::model::{Forward, ModelState, Pred, ShotConst};
 use super::num::log_add_exp;
 use column::{outlier_pixels, ColView};
@@ -105,19 +105,95 @@ pub(crate) const FIT_BAND_SPARSITY: usize = 8;
 pub(crate) const FIT_BANDS: usize = 5;
 
 /// About `n` fit rows of a `rows`-row sensor as [`FIT_BANDS`] contiguous bands of equal even
-/// length (at most `n` rows in all, at least 2 per band; CFA phases balanced), spread evenly over the field
-/// height from the top row to the bottom one (the corners' field heights included), each
-/// starting at an even row.
-pub(crate) fn fit_bands(rows: usize, n: usize) -> Vec<usize> {
+/// length (at most `n` rows in all, at least 2 per band; CFA phases balanced), spread over the
+/// field height from the top row to the bottom one (the corners' field heights included), each
+/// starting at an even row. The first and last bands are at the frame's edges; each band
+/// between them starts, within its share of the height (± half the even spacing less its own
+/// length around the evenly spaced start), where the band's rows hold the most scene structure
+/// (`structure`, per row, [`row_structure`]; ties: the start nearest the even one): evenly
+/// spaced rows can all fall where a scene has no content — on a colour chart of 4 patch rows
+/// the three inner ones land in the grey gaps between patch rows, and the fits could not see
+/// the patches' colours. Without structure (all 0, or no entry per row) the bands are evenly
+/// spaced.
+pub(crate) fn fit_bands(rows: usize, n: usize, structure: &[f64]) -> Vec<usize> {
     let len = (n / FIT_BANDS / 2 * 2).max(2).min(rows / FIT_BANDS / 2 * 2);
     let mut out = Vec::new();
+    if len == 0 {
+        return out;
+    }
+    let spacing = (rows - len) / (FIT_BANDS - 1);
+    let half = (spacing / 2).saturating_sub(len) / 2 * 2;
+    let use_structure = structure.len() == rows && structure.iter().any(|&x| x > 0.0);
+    // prefix sums: the structure of rows a..b is prefix[b] − prefix[a]
+    let mut prefix = vec![0.0; rows + 1];
+    if use_structure {
+        for (r, &x) in structure.iter().enumerate() {
+            prefix[r + 1] = prefix[r] + x.max(0.0);
+        }
+    }
     for k in 0..FIT_BANDS {
-        let start = (k * (rows - len) / (FIT_BANDS - 1)) / 2 * 2;
+        let even = (k * (rows - len) / (FIT_BANDS - 1)) / 2 * 2;
+        let start = if !use_structure || k == 0 || k == FIT_BANDS - 1 {
+            even
+        } else {
+            let lo = even.saturating_sub(half);
+            let hi = (even + half).min(rows - len);
+            (lo..=hi)
+                .step_by(2)
+                .map(|s| (prefix[s + len] - prefix[s], s))
+                .max_by(|a, b| {
+                    a.0.total_cmp(&b.0)
+                        .then_with(|| (b.1.abs_diff(even)).cmp(&a.1.abs_diff(even)))
+                        .then_with(|| b.1.cmp(&a.1))
+                })
+                .map_or(even, |x| x.1)
+        };
         out.extend(start..start + len);
     }
     out.sort_unstable();
     out.dedup();
     out
+}
+
+/// Scene structure of each sensor row, for [`fit_bands`]: over the structured shots (charts,
+/// edges, images: neither dark nor uniform), the sum of the variance of the row's per-pixel
+/// mean levels (DN) across its columns, per CFA channel. A row through a chart's patches
+/// scores high, one through the grey surround between patch rows about its noise; all 0
+/// without structured shots.
+pub(crate) fn row_structure(data: &DataSet) -> Vec<f64> {
+    let shots: Vec<&ShotData> = data
+        .shots
+        .iter()
+        .filter(|s| !matches!(s.target, TargetClass::Dark | TargetClass::Uniform))
+        .collect();
+    let nch = data.channels();
+    let cols = data.cols;
+    (0..data.rows)
+        .into_par_iter()
+        .map(|r| {
+            let mut total = 0.0;
+            for sh in &shots {
+                let mut sum = vec![0.0f64; nch];
+                let mut sum2 = vec![0.0f64; nch];
+                let mut count = vec![0.0f64; nch];
+                for c in 0..cols {
+                    let i = r * cols + c;
+                    let ch = data.channel[i] as usize;
+                    let v = sh.mean_dn[i] as f64;
+                    sum[ch] += v;
+                    sum2[ch] += v * v;
+                    count[ch] += 1.0;
+                }
+                for ch in 0..nch {
+                    if count[ch] > 1.0 {
+                        let m = sum[ch] / count[ch];
+                        total += (sum2[ch] / count[ch] - m * m).max(0.0);
+                    }
+                }
+            }
+            total
+        })
+        .collect()
 }
 
 /// Per-shot rate images.
@@ -302,7 +378,7 @@ impl<'a> Ctx<'a> {
             // Contiguous bands only where the forward model runs them by themselves
             // (`Forward::row_window`): elsewhere they would buy nothing and move the fits.
             let bands = (data.rows >= FIT_BAND_SPARSITY * 2 * keep.min(groups))
-                .then(|| fit_bands(data.rows, 2 * keep.min(groups)))
+                .then(|| fit_bands(data.rows, 2 * keep.min(groups), &row_structure(data)))
                 .filter(|b| !b.is_empty() && forward.row_window(&calc_rows_of(b)));
             bands.unwrap_or_else(|| {
                 // Whole 2-row groups (CFA phases balanced), evenly spread over the sensor.
@@ -993,7 +1069,7 @@ mod tests {
             (100, 2),
             (40, 4),
         ] {
-            let b = fit_bands(rows, n);
+            let b = fit_bands(rows, n, &[]);
             assert!(b.windows(2).all(|w| w[0] < w[1]), "{rows} {n}: not sorted");
             let mut runs: Vec<(usize, usize)> = Vec::new();
             for &r in &b {
@@ -1017,7 +1093,49 @@ mod tests {
             assert_eq!(runs[0].0, 0);
             assert!(runs[FIT_BANDS - 1].1 + 2 >= rows, "{rows} {n}: {runs:?}");
         }
-        assert!(fit_bands(9, 4).is_empty());
+        assert!(fit_bands(9, 4, &[]).is_empty());
+    }
+
+    /// With scene structure, the inner fit bands move into the structured rows of their share
+    /// of the height (a chart of 4 patch rows: evenly spaced bands all lie in the gaps), the
+    /// outer ones stay at the frame's edges, and without structure nothing moves.
+    #[test]
+    fn inner_fit_bands_move_onto_the_scene_structure() {
+        let rows = 3000;
+        // a 4-row chart: patches (structure 1) on 112..637 of each 750-row cell
+        let structure: Vec<f64> = (0..rows)
+            .map(|r| {
+                if (112..637).contains(&(r % 750)) {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let even = fit_bands(rows, 10, &[]);
+        assert_eq!(fit_bands(rows, 10, &vec![0.0; rows]), even);
+        let runs = |b: &[usize]| -> Vec<usize> {
+            b.iter()
+                .copied()
+                .filter(|&r| r == 0 || !b.contains(&(r - 1)))
+                .collect()
+        };
+        let (e, m) = (runs(&even), runs(&fit_bands(rows, 10, &structure)));
+        assert_eq!(e.len(), FIT_BANDS);
+        assert_eq!(m.len(), FIT_BANDS);
+        // the evenly spaced inner bands see no patch; the moved ones only patches
+        assert!(
+            e[1..FIT_BANDS - 1].iter().all(|&s| structure[s] == 0.0),
+            "{e:?}"
+        );
+        assert!(
+            m[1..FIT_BANDS - 1]
+                .iter()
+                .all(|&s| structure[s] == 1.0 && structure[s + 1] == 1.0),
+            "{m:?}"
+        );
+        assert_eq!((m[0], m[FIT_BANDS - 1]), (e[0], e[FIT_BANDS - 1]));
+        assert!(m.iter().all(|&s| s % 2 == 0) && m.windows(2).all(|w| w[0] + 2 <= w[1]));
     }
 
     /// A forward model that runs row windows and counts its whole-sensor runs per spec.
