@@ -8,7 +8,10 @@
 # A/B: BASE=/path/to/an/older/camsim runs the same set with that binary first (same run, same
 # machine load).
 # Env: ROWS (default 160), COLS (default 240), EFFECT (default veiling_glare=0.03),
-#      THREADS (default 2), OUT (default target/bench-diagnose-scene), BASE, CARGO_TARGET_DIR.
+#      THREADS (default 2), OUT (default target/bench-diagnose-scene), BASE, CARGO_TARGET_DIR,
+#      SET (an existing capture-set directory holding captures.json: used as it is, nothing is
+#      generated and ROWS/COLS/EFFECT are ignored), BIN (the camsim to measure; default: this
+#      checkout's release binary, built first).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROWS=${ROWS:-160}
@@ -16,23 +19,39 @@ COLS=${COLS:-240}
 EFFECT=${EFFECT:-veiling_glare=0.03}
 THREADS=${THREADS:-2}
 OUT=${OUT:-target/bench-diagnose-scene}
-cargo build --release -q --bin camsim
-BIN=${CARGO_TARGET_DIR:-target}/release/camsim
+if [ -z "${BIN:-}" ]; then
+  cargo build --release -q --bin camsim
+  BIN=${CARGO_TARGET_DIR:-target}/release/camsim
+fi
+if [ -n "${SET:-}" ]; then
+  # OUT is wiped below: it must not hold the set
+  case "$(realpath -m "$SET")/" in
+    "$(realpath -m "$OUT")"/*) echo "SET=$SET lies inside OUT=$OUT, which is wiped: choose another OUT" >&2; exit 2 ;;
+  esac
+fi
 rm -rf "$OUT"
 mkdir -p "$OUT"
-t0=$(date +%s.%N)
-"$BIN" demo diagnose --effect "$EFFECT" --conceal none \
-    --rows "$ROWS" --cols "$COLS" --seed 1 --out "$OUT/set" >/dev/null 2>&1
-t1=$(date +%s.%N)
-frames=$(find "$OUT/set/raw" -type f | wc -l)
-echo "sensor ${ROWS}x${COLS}, $frames frames, effect $EFFECT, $THREADS threads; generate: $(python3 -c "print(f'{$t1-$t0:.1f}')") s"
+if [ -n "${SET:-}" ]; then
+  # an existing set: never regenerated, never written to
+  [ -f "$SET/captures.json" ] || { echo "SET=$SET: no captures.json there" >&2; exit 2; }
+  SETDIR=$SET
+  echo "set $SET (as it is), $THREADS threads"
+else
+  SETDIR=$OUT/set
+  t0=$(date +%s.%N)
+  "$BIN" demo diagnose --effect "$EFFECT" --conceal none \
+      --rows "$ROWS" --cols "$COLS" --seed 1 --out "$SETDIR" >/dev/null 2>&1
+  t1=$(date +%s.%N)
+  frames=$(find "$SETDIR/raw" -type f | wc -l)
+  echo "sensor ${ROWS}x${COLS}, $frames frames, effect $EFFECT, $THREADS threads; generate: $(python3 -c "print(f'{$t1-$t0:.1f}')") s"
+fi
 one() {
   local bin=$1 name=$2
   local s e
   s=$(date +%s.%N)
   echo "load before $name: $(uptime | sed 's/.*load average: //')"
   CAMSIM_PROFILE=1 RAYON_NUM_THREADS=$THREADS /usr/bin/time -f "%U %S" -o "$OUT/time-$name.txt" \
-      "$bin" --threads "$THREADS" diagnose "$OUT/set/captures.json" \
+      "$bin" --threads "$THREADS" diagnose "$SETDIR/captures.json" \
       --out "$OUT/out-$name" 2>"$OUT/diagnose-$name.log" || { cat "$OUT/diagnose-$name.log"; exit 1; }
   e=$(date +%s.%N)
   python3 - "$OUT/out-$name" "$name" "$s" "$e" "$OUT/time-$name.txt" <<'PY'
