@@ -98,6 +98,20 @@ pub struct ShotMaps {
     pub z: Vec<f32>,
 }
 
+/// Each pixel's field-height bin of the radial profile: `⌊h · RADIAL_BINS⌋`, the last bin
+/// holding h = 1 ([`super::data::DataSet::field_height`]). Computed once per locate rather than
+/// per shot and pixel (two square roots each).
+fn radial_bins(d: &super::data::DataSet) -> Vec<u8> {
+    const _: () = assert!(RADIAL_BINS <= u8::MAX as usize);
+    (0..d.pixels())
+        .into_par_iter()
+        .map(|i| {
+            let h = d.field_height(i / d.cols, i % d.cols);
+            ((h * RADIAL_BINS as f64) as usize).min(RADIAL_BINS - 1) as u8
+        })
+        .collect()
+}
+
 impl Ctx<'_> {
     /// Model mean and normalised residual of every pixel of one shot.
     pub(crate) fn shot_maps(&self, state: &ModelState, rates: &Rates, s: usize) -> ShotMaps {
@@ -158,15 +172,30 @@ impl Ctx<'_> {
                 });
             }
         }
+        // Each shot's maps, profiles and edge MTF are its own serial sums, so the shots run in
+        // parallel with the same bits whatever the thread count; a thread's worth of shots at a
+        // time bounds the maps held at once (8 bytes a pixel each).
+        let bins = radial_bins(d);
         let mut profiles = Vec::new();
         let mut mtf = Vec::new();
-        for s in 0..d.shots.len() {
-            let maps = self.shot_maps(state, &rates, s);
-            profiles.push(self.profiles(state, s, &maps));
-            if let super::data::TargetClass::Edge { angle_deg } = d.shots[s].target {
-                if let Some(m) = self.edge_mtf(s, angle_deg, &maps) {
-                    mtf.push(m);
-                }
+        let shots: Vec<usize> = (0..d.shots.len()).collect();
+        for chunk in shots.chunks(rayon::current_num_threads().max(1)) {
+            let done: Vec<(ShotProfiles, Option<EdgeMtf>)> = chunk
+                .par_iter()
+                .map(|&s| {
+                    let maps = self.shot_maps(state, &rates, s);
+                    let mtf = match d.shots[s].target {
+                        super::data::TargetClass::Edge { angle_deg } => {
+                            self.edge_mtf(s, angle_deg, &maps)
+                        }
+                        _ => None,
+                    };
+                    (self.profiles(state, s, &maps, &bins), mtf)
+                })
+                .collect();
+            for (p, m) in done {
+                profiles.push(p);
+                mtf.extend(m);
             }
         }
         Ok((
@@ -182,7 +211,9 @@ impl Ctx<'_> {
         ))
     }
 
-    fn profiles(&self, state: &ModelState, s: usize, maps: &ShotMaps) -> ShotProfiles {
+    /// The residual profiles of shot `s`; `bins` holds each pixel's field-height bin
+    /// ([`radial_bins`]).
+    fn profiles(&self, state: &ModelState, s: usize, maps: &ShotMaps, bins: &[u8]) -> ShotProfiles {
         let d = self.data;
         let sh = &d.shots[s];
         let c = ShotConst::for_shot(&state.sensor, sh);
@@ -200,8 +231,7 @@ impl Ctx<'_> {
                 }
                 let m = sh.mean_dn[i] as f64;
                 let mu = maps.model_mean[i] as f64;
-                let h = d.field_height(r, j);
-                let b = ((h * RADIAL_BINS as f64) as usize).min(RADIAL_BINS - 1);
+                let b = bins[i] as usize;
                 rad[b].0 += m - c.base_dn;
                 rad[b].1 += mu - c.base_dn;
                 rad[b].2 += 1.0;
@@ -340,5 +370,72 @@ impl Ctx<'_> {
             model: model[..keep].to_vec(),
             esf,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Ctx, RADIAL_BINS};
+    use crate::mismatch::like::tests::demo;
+    use crate::mismatch::model::{ModelState, RateSpec};
+
+    /// `locate` runs its shots in parallel: the same bits with one thread or three, and each
+    /// shot's radial profile is the serial per-pixel sum binned by the field height itself
+    /// (so a wrong precomputed bin, e.g. from a transposed index, fails).
+    #[test]
+    fn locate_gives_the_serial_profiles_whatever_the_thread_count() {
+        let (data, fw) = demo();
+        let mut sensor = camsim_sensor::SensorModel::mono_test(data.rows, data.cols);
+        sensor.well_capacity_e = 9000.0;
+        let state = ModelState {
+            sensor,
+            exposure_factor: 1.0,
+            rates: RateSpec::default(),
+            frames_in_set: 13,
+        };
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| Ctx::new(&data, &fw, usize::MAX).locate(&state).unwrap().0)
+        };
+        let (one, three) = (run(1), run(3));
+        assert_eq!(one.profiles, three.profiles);
+        // (Debug text: a NaN temporal variance of a single-frame shot is not == itself)
+        assert_eq!(
+            format!("{:?}", one.shot_channels),
+            format!("{:?}", three.shot_channels)
+        );
+        assert_eq!(one.chi2_per_dof.to_bits(), three.chi2_per_dof.to_bits());
+        let ctx = Ctx::new(&data, &fw, usize::MAX);
+        let rates = ctx.rates(&state).unwrap();
+        for (s, got) in one.profiles.iter().enumerate() {
+            let sh = &data.shots[s];
+            let maps = ctx.shot_maps(&state, &rates, s);
+            let base = crate::mismatch::model::ShotConst::for_shot(&state.sensor, sh).base_dn;
+            let mut rad = vec![(0.0f64, 0.0f64, 0.0f64); RADIAL_BINS];
+            for r in 0..data.rows {
+                for j in 0..data.cols {
+                    let i = r * data.cols + j;
+                    if sh.censored[i] {
+                        continue;
+                    }
+                    let h = data.field_height(r, j);
+                    let b = ((h * RADIAL_BINS as f64) as usize).min(RADIAL_BINS - 1);
+                    rad[b].0 += sh.mean_dn[i] as f64 - base;
+                    rad[b].1 += maps.model_mean[i] as f64 - base;
+                    rad[b].2 += 1.0;
+                }
+            }
+            let want: Vec<(f64, f64, f64)> = rad
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| x.2 > 0.0 && x.1.abs() > 0.0)
+                .map(|(b, x)| ((b as f64 + 0.5) / RADIAL_BINS as f64, x.0 / x.1 - 1.0, x.2))
+                .collect();
+            assert!(!want.is_empty() || s < 2, "shot {s}: no signal bins");
+            assert_eq!(got.radial, want, "shot {s}");
+        }
     }
 }

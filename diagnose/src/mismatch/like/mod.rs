@@ -893,14 +893,14 @@ fn gather_pixel(d: &DataSet, i: usize, out: &mut [PixShot]) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::{fit_bands, Ctx, RowSel, FIT_BANDS};
     use crate::mismatch::data::{DataSet, ShotAccumulator, TargetClass};
     use crate::mismatch::model::{Forward, ModelState, RateSpec};
     use std::sync::Arc;
 
     /// Fixed rate images per shot.
-    struct FixedRates(Vec<Arc<Vec<f32>>>);
+    pub(crate) struct FixedRates(Vec<Arc<Vec<f32>>>);
     impl Forward for FixedRates {
         fn rates(&self, _: &RateSpec) -> Result<Vec<Arc<Vec<f32>>>, String> {
             Ok(self.0.clone())
@@ -910,7 +910,7 @@ mod tests {
     /// A 16 × 12 mono set: two darks (3 frames), three flats (2 frames; the last near a
     /// 7 000–9 000 e⁻ well), a structured single-frame shot clipped at both rails; frames
     /// from a fixed pseudo-random sequence around a slope in the rates.
-    fn demo() -> (DataSet, FixedRates) {
+    pub(crate) fn demo() -> (DataSet, FixedRates) {
         let (rows, cols) = (16usize, 12usize);
         let n = rows * cols;
         // (exposure s, rate scale e-/s, frames, target)
