@@ -700,12 +700,38 @@ impl RadialInverse {
     /// Scene radius for image radius `r_m` (linear interpolation in the table; linear
     /// extrapolation of the last segment beyond r_max).
     pub(crate) fn source_radius(&self, r_m: f64) -> f64 {
-        let t = r_m / self.r_max_m * (Self::N - 1) as f64;
+        self.source_radius_at(TablePosition::of(r_m, self.r_max_m))
+    }
+
+    /// [`RadialInverse::source_radius`] at a [`TablePosition`] of this table's `r_max`.
+    #[inline]
+    fn source_radius_at(&self, at: TablePosition) -> f64 {
+        let (i0, f) = (at.index, at.fraction);
+        self.table[i0] * (1.0 - f) + self.table[i0 + 1] * f
+    }
+}
+
+/// Where image radius `r` falls in a [`RadialInverse`] table of range `r_max` (every table of
+/// one range has the same positions: one per sample serves every wavelength's table).
+#[derive(Clone, Copy, Default)]
+struct TablePosition {
+    /// Entry below r.
+    index: usize,
+    /// Fraction of the way to the next entry (beyond r_max: > 1, linear extrapolation).
+    fraction: f64,
+}
+
+impl TablePosition {
+    #[inline]
+    fn of(r_m: f64, r_max_m: f64) -> Self {
+        let t = r_m / r_max_m * (RadialInverse::N - 1) as f64;
         // (a float-to-integer cast truncates toward 0 and saturates, NaN → 0: for every t
         // the same index as `t.floor().max(0.0) as usize`, without a call to floor)
-        let i0 = (t as usize).min(Self::N - 2);
-        let f = t - i0 as f64;
-        self.table[i0] * (1.0 - f) + self.table[i0 + 1] * f
+        let index = (t as usize).min(RadialInverse::N - 2);
+        TablePosition {
+            index,
+            fraction: t - index as f64,
+        }
     }
 }
 
@@ -875,7 +901,6 @@ fn warp_planes_within(
 ) -> Result<(), OpticsError> {
     let (rows, cols) = (img.rows, img.cols);
     let yc = window.centre_row();
-    let row0 = window.row0 as f64;
     let xc = (cols as f64 - 1.0) / 2.0;
     let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001 + 1e-12;
     let lams: Vec<Option<f64>> = match wavelengths_nm {
@@ -916,19 +941,8 @@ fn warp_planes_within(
             Some(v) => v[i * cols + j],
             None => radius_at(i, j),
         };
-        let g = if r > 0.0 {
-            map.source_radius(r) / r
-        } else {
-            map.ratio0
-        };
-        // (the whole field's source row, then the window's: an integer off a float ≥ it is
-        // exact, so a window's taps and weights are the whole image's)
-        Tap::new(
-            rows,
-            cols,
-            yc + (window.field_row(i) - yc) * g - row0,
-            xc + (j as f64 - xc) * g,
-        )
+        let g = source_ratio(map, r, map.source_radius(r));
+        warp_tap(rows, cols, window, (yc, xc), i, j, g)
     };
     if maps.len() == 1 && radius_bytes.saturating_add(tap_bytes) <= table_budget_bytes {
         let map = &maps[0];
@@ -964,6 +978,152 @@ fn warp_planes_within(
         },
     );
     Ok(())
+}
+
+/// `g = r_s / r` of the warp at image radius `r` (`r_s`: its source radius in `map`; the
+/// ratio as r → 0 at the centre).
+#[inline]
+fn source_ratio(map: &RadialInverse, r: f64, r_s: f64) -> f64 {
+    if r > 0.0 {
+        r_s / r
+    } else {
+        map.ratio0
+    }
+}
+
+/// The bilinear tap of output sample (i, j) of a `rows × cols` image whose rows lie in the
+/// field as `window` says, centre `(yc, xc)` (the whole field's), at source ratio `g`: the
+/// scene at `(yc + (y − yc)·g, xc + (x − xc)·g)`.
+#[inline]
+fn warp_tap(
+    rows: usize,
+    cols: usize,
+    window: RowWindow,
+    (yc, xc): (f64, f64),
+    i: usize,
+    j: usize,
+    g: f64,
+) -> Tap {
+    // (the whole field's source row, then the window's: an integer off a float ≥ it is
+    // exact, so a window's taps and weights are the whole image's)
+    Tap::new(
+        rows,
+        cols,
+        yc + (window.field_row(i) - yc) * g - window.row0 as f64,
+        xc + (j as f64 - xc) * g,
+    )
+}
+
+/// [`warp_planes`] followed by the projection of the warped planes onto `weights`, without
+/// the warped planes: output plane c is `Σ_k weights[c][k] · W_k`, `W_k` plane k warped at
+/// `wavelengths_nm[k]` and rounded to f32 as [`warp_planes`] stores it, summed over k
+/// ascending in f64 with the zero weights skipped — bit for bit
+/// [`SpectralImage::combine`] of [`warp_planes`]' image (test
+/// `projected_warp_is_the_warp_then_the_projection_bit_for_bit`). Each output row takes, per
+/// plane, the same taps as [`warp_planes`] (one table position per sample serves every
+/// wavelength's inverse table), so the planes are read once and nothing of their size is
+/// written: the optics after a lateral-colour warp that act alike at every wavelength then
+/// run on the few projected planes (a sensor's channels) instead of every wavelength band's
+/// ([`crate::form_image_rows_projected`]).
+pub(crate) fn warp_planes_projected(
+    fx: &OpticsEffects,
+    img: &SpectralImage,
+    dx: f64,
+    wavelengths_nm: Option<&[f64]>,
+    window: RowWindow,
+    weights: &[Vec<f64>],
+) -> Result<Vec<Vec<f32>>, OpticsError> {
+    let (rows, cols) = (img.rows, img.cols);
+    let n_planes = img.planes.len();
+    if let Some(w) = weights.iter().find(|w| w.len() != n_planes) {
+        return Err(OpticsError::Scene(format!(
+            "projection of {n_planes} warped planes: {} weights in a row",
+            w.len()
+        )));
+    }
+    if wavelengths_nm.is_some_and(|w| w.len() != n_planes) {
+        return Err(OpticsError::Scene(format!(
+            "warp of {n_planes} planes at {} wavelengths",
+            wavelengths_nm.map_or(0, <[f64]>::len)
+        )));
+    }
+    let yc = window.centre_row();
+    let xc = (cols as f64 - 1.0) / 2.0;
+    let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001 + 1e-12;
+    // one inverse table per plane's wavelength (one for all without lateral colour)
+    let maps: Vec<std::sync::Arc<RadialInverse>> = match wavelengths_nm {
+        Some(w) => w
+            .par_iter()
+            .map(|&l| RadialInverse::shared(fx, Some(l), r_max))
+            .collect::<Result<_, _>>()?,
+        None => vec![RadialInverse::shared(fx, None, r_max)?],
+    };
+    // (plane, weight) pairs of each output plane, zero weights skipped as `combine` does
+    let active: Vec<Vec<(usize, f64)>> = weights
+        .iter()
+        .map(|w| {
+            w.iter()
+                .copied()
+                .enumerate()
+                .filter(|(_, v)| *v != 0.0)
+                .collect()
+        })
+        .collect();
+    let k_out = weights.len();
+    let mut out_rows = vec![0f32; k_out * rows * cols];
+    out_rows
+        .par_chunks_mut((k_out * cols).max(1))
+        .enumerate()
+        .for_each_init(
+            || {
+                (
+                    vec![TablePosition::default(); cols],
+                    vec![0f64; cols],
+                    vec![0f32; cols],
+                    vec![0f64; k_out * cols],
+                )
+            },
+            |(pos, radius, warped, acc), (i, out)| {
+                let y = (window.field_row(i) - yc) * dx;
+                for j in 0..cols {
+                    let r = ((j as f64 - xc) * dx).hypot(y);
+                    radius[j] = r;
+                    pos[j] = TablePosition::of(r, r_max);
+                }
+                acc.iter_mut().for_each(|a| *a = 0.0);
+                for (k, plane) in img.planes.iter().enumerate() {
+                    if active.iter().all(|a| a.iter().all(|&(p, _)| p != k)) {
+                        continue;
+                    }
+                    let map = &maps[if maps.len() == 1 { 0 } else { k }];
+                    for j in 0..cols {
+                        let g = source_ratio(map, radius[j], map.source_radius_at(pos[j]));
+                        warped[j] =
+                            warp_tap(rows, cols, window, (yc, xc), i, j, g).sample(plane) as f32;
+                    }
+                    for (c, a) in active.iter().enumerate() {
+                        if let Some(&(_, w)) = a.iter().find(|&&(p, _)| p == k) {
+                            acc[c * cols..(c + 1) * cols]
+                                .iter_mut()
+                                .zip(warped.iter())
+                                .for_each(|(s, &v)| *s += w * v as f64);
+                        }
+                    }
+                }
+                out.iter_mut()
+                    .zip(acc.iter())
+                    .for_each(|(o, &a)| *o = a as f32);
+            },
+        );
+    // row-interleaved → one plane per output
+    let mut planes = vec![vec![0f32; rows * cols]; k_out];
+    for i in 0..rows {
+        for (c, p) in planes.iter_mut().enumerate() {
+            p[i * cols..(i + 1) * cols]
+                .copy_from_slice(&out_rows[(i * k_out + c) * cols..(i * k_out + c + 1) * cols]);
+        }
+    }
+    Ok(planes)
 }
 
 /// The defocus block's blur of every plane (edge continuation as `padding`).
@@ -1428,6 +1588,65 @@ pub(crate) mod warp_tests {
             vec![plane],
         )
         .unwrap()
+    }
+
+    /// The warp accumulated straight into projected planes ([`warp_planes_projected`]) is,
+    /// bit for bit, [`warp_planes`] then [`SpectralImage::combine`] of each weight row, for
+    /// lateral colour (one table per wavelength) with distortion, on a row window of the field
+    /// (rows 40..77 of 120) and on the whole image, with a zero weight (skipped, as `combine`
+    /// skips it) and a plane no output uses.
+    #[test]
+    fn projected_warp_is_the_warp_then_the_projection_bit_for_bit() {
+        let (rows, cols, dx) = (37, 53, 1.1e-6);
+        let planes: Vec<Vec<f32>> = (0..4)
+            .map(|k| {
+                (0..rows * cols)
+                    .map(|i| {
+                        let v = (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15 ^ (k + 3));
+                        (v >> 40) as f32 / (1u64 << 24) as f32
+                    })
+                    .collect()
+            })
+            .collect();
+        let basis = || SpectralBasis::Spectra((0..4).map(|_| Spectrum::constant(1.0)).collect());
+        let fx = OpticsEffects {
+            sensor_width_m: 50e-6,
+            sensor_height_m: 36e-6,
+            distortion: Some(Distortion::Polynomial {
+                k1: -0.05,
+                k2: 0.01,
+            }),
+            lateral_color: Some(LateralColor {
+                kind: LateralColorKind::Cauchy,
+                displacement_um: 4.1,
+            }),
+            ..Default::default()
+        };
+        let lams = [430.0, 510.0, 590.0, 680.0];
+        let weights = vec![
+            vec![0.3, 1.7, 0.0, 0.25],
+            vec![1.1, 0.0, 0.0, 2.5],
+            vec![0.0, 0.9, 0.0, 1e-3],
+        ];
+        for window in [
+            RowWindow::whole(rows),
+            RowWindow {
+                row0: 40,
+                full_rows: 120,
+            },
+        ] {
+            let mut img = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
+            let got = warp_planes_projected(&fx, &img, dx, Some(&lams), window, &weights).unwrap();
+            warp_planes(&fx, &mut img, dx, Some(&lams), window).unwrap();
+            for (c, w) in weights.iter().enumerate() {
+                let want: Vec<u32> = img.combine(w).iter().map(|v| v.to_bits()).collect();
+                let got: Vec<u32> = got[c].iter().map(|v| v.to_bits()).collect();
+                assert_eq!(got, want, "output {c}, {window:?}");
+            }
+            // (the warp moved something: the projection of the unwarped planes differs)
+            let unwarped = SpectralImage::new(rows, cols, basis(), planes.clone()).unwrap();
+            assert_ne!(got[0], unwarped.combine(&weights[0]), "{window:?}");
+        }
     }
 
     /// The warp with shared radii and taps is, bit for bit, the per-sample warp written out

@@ -286,6 +286,44 @@ pub fn form_image_rows(
     window: RowWindow,
     glare: Option<&GlareSums>,
 ) -> Result<SensorIrradiance, OpticsError> {
+    form_image_rows_with(optics, scene, bands, window, glare, None)
+}
+
+/// The weights of a spectral projection of an image's planes: given the planes' basis, one
+/// row per output plane, one weight per plane (a sensor's channels: `∫ QE_c(λ) B_k(λ) dλ`).
+pub type PlaneProjection<'a> = &'a (dyn Fn(&camsim_core::SpectralBasis) -> Vec<Vec<f64>> + Sync);
+
+/// [`form_image_rows`] projected onto `project`'s weights: plane c of the result is
+/// `Σ_k w_ck E_k` of [`form_image_rows`]' planes `E_k` (their basis `B_k`, `w = project(B)`),
+/// within f32 rounding (test `projected_rows_equal_the_rows_projected`). The projection is
+/// taken right after the last step that depends on wavelength (the lateral-colour warp of
+/// each wavelength band, which accumulates straight into the projected planes:
+/// `effects::warp_planes_projected`); every later step acts alike on every plane (the
+/// local blur, the diffuser, defocus; the glare adds `f ·` the projected whole-field sums), so
+/// it commutes with the weighted sum (Goodman, *Introduction to Fourier Optics*, 2005, §6.1:
+/// incoherent imaging is linear in intensity) and runs on the few projected planes instead of
+/// every band's. The result's basis is a placeholder (constant 1: its planes are spectral
+/// integrals already); `glare` holds the unprojected planes' sums, as for [`form_image_rows`].
+pub fn form_image_rows_projected(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+    window: RowWindow,
+    glare: Option<&GlareSums>,
+    project: PlaneProjection,
+) -> Result<SensorIrradiance, OpticsError> {
+    form_image_rows_with(optics, scene, bands, window, glare, Some(project))
+}
+
+/// [`form_image_rows`], projected when `project` is given ([`form_image_rows_projected`]).
+fn form_image_rows_with(
+    optics: &OpticsModel,
+    scene: &SceneRadiance,
+    bands: &WavelengthGrid,
+    window: RowWindow,
+    glare: Option<&GlareSums>,
+    project: Option<PlaneProjection>,
+) -> Result<SensorIrradiance, OpticsError> {
     if !matches!(
         optics.blur,
         Blur::None | Blur::Gaussian { .. } | Blur::Pillbox { .. }
@@ -319,6 +357,7 @@ pub fn form_image_rows(
     let field = Field {
         window,
         glare: Some(glare),
+        project,
     };
     form_image_with(optics, scene, bands, true, field).map(|u| u.irradiance)
 }
@@ -357,19 +396,23 @@ pub fn glare_sums_of_image(optics: &OpticsModel, irradiance: &SensorIrradiance) 
     )
 }
 
-/// Where [`form_image_with`]'s scene lies in the field, and the glare's whole-field sums
-/// (`None`: from the image itself, which is then the whole field).
-#[derive(Debug, Clone)]
-struct Field {
+/// Where [`form_image_with`]'s scene lies in the field, the glare's whole-field sums
+/// (`None`: from the image itself, which is then the whole field), and the spectral
+/// projection of the planes after the wavelength-dependent steps
+/// ([`form_image_rows_projected`]; only with a local blur).
+#[derive(Clone)]
+struct Field<'a> {
     window: RowWindow,
     glare: Option<GlareSums>,
+    project: Option<PlaneProjection<'a>>,
 }
 
-impl Field {
+impl Field<'_> {
     fn whole(scene: &SceneRadiance) -> Self {
         Field {
             window: RowWindow::whole(scene.radiance.rows),
             glare: None,
+            project: None,
         }
     }
 }
@@ -597,8 +640,34 @@ fn form_image_with(
         band_wl = Some(split.wavelength_nm);
     }
 
-    // Distortion and lateral colour blocks: geometric warp of every wavelength plane.
-    if optics.effects.has_warp() {
+    // Distortion and lateral colour blocks: geometric warp of every wavelength plane; with a
+    // projection (a local blur: the steps after it act alike at every wavelength), the warped
+    // planes accumulated straight into the projected ones, and the glare's sums projected.
+    let mut glare = field.glare;
+    if let Some(project) = field.project {
+        let weights = project(&img.basis);
+        let planes = if optics.effects.has_warp() {
+            let wl = band_wl
+                .as_deref()
+                .filter(|_| optics.effects.lateral_color.is_some());
+            effects::warp_planes_projected(&optics.effects, &img, dx, wl, window, &weights)?
+        } else {
+            weights.iter().map(|w| img.combine(w)).collect()
+        };
+        match &mut glare {
+            Some(g) if optics.effects.veiling_glare.is_some_and(|f| f > 0.0) => {
+                g.sums = project_sums(&g.sums, &weights)?
+            }
+            _ => {}
+        }
+        img = SpectralImage {
+            rows,
+            cols,
+            basis: camsim_core::SpectralBasis::Spectra(vec![Spectrum::constant(1.0); planes.len()]),
+            planes,
+        };
+        band_wl = None;
+    } else if optics.effects.has_warp() {
         let wl = band_wl
             .as_deref()
             .filter(|_| optics.effects.lateral_color.is_some());
@@ -712,7 +781,7 @@ fn form_image_with(
     apply_diffuser(optics, &mut img, dx);
 
     // 5. Defocus and veiling glare blocks.
-    apply_defocus_and_glare(optics, &mut img, dx, field.glare.as_ref())?;
+    apply_defocus_and_glare(optics, &mut img, dx, glare.as_ref())?;
 
     Ok(UncroppedIrradiance {
         irradiance: SensorIrradiance {
@@ -722,6 +791,24 @@ fn form_image_with(
         pad_rows,
         pad_cols,
     })
+}
+
+/// The glare sums of projected planes: `Σ_k w_ck · sums_k` per row `w_c` of `weights` (the
+/// glare adds `f · sum / count` to each plane, so it commutes with the projection).
+fn project_sums(sums: &[f64], weights: &[Vec<f64>]) -> Result<Vec<f64>, OpticsError> {
+    weights
+        .iter()
+        .map(|w| {
+            if w.len() != sums.len() {
+                return Err(OpticsError::Scene(format!(
+                    "veiling glare of a projected row window: {} plane sums for {} weights",
+                    sums.len(),
+                    w.len()
+                )));
+            }
+            Ok(w.iter().zip(sums).map(|(a, b)| a * b).sum())
+        })
+        .collect()
 }
 
 /// `scalar(h) · F(h)` at every sample (F: the fall-off block, h: field height; the image's

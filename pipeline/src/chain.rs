@@ -706,6 +706,56 @@ pub fn band_irradiance(
     widen: BandWidening,
     glare: Option<&camsim_optics::GlareSums>,
 ) -> Result<SensorIrradiance, CliError> {
+    band_irradiance_with(set, scene_band, grid, band, widen, glare, None)
+}
+
+/// [`band_irradiance`] on the sensor channels' planes when the optics depend on wavelength
+/// (lateral colour, a non-flat transmittance: [`optics_alike_at_every_wavelength`] is false,
+/// so the scene cannot be projected onto the channels before the optics as
+/// [`channel_scene`] does): the optics project each wavelength band's plane onto the
+/// channels' effective QE ([`camsim_sensor::channel_weights`] of the split image's basis)
+/// right after the lateral-colour warp ([`camsim_optics::form_image_rows_projected`]), and
+/// the blur, fall-off's successors and glare act on the channels' planes. Plane j is
+/// `∫ QE'_c(λ) E(x, λ) dλ` of channel `channels[j]`; the pixel integration of the result
+/// gives [`band_irradiance`]'s electron rates within f32 rounding (test
+/// `diagnose_cmd::band_tests::band_channel_irradiance_is_the_band_irradiance_projected`).
+pub fn band_channel_irradiance(
+    set: &CaptureSet,
+    scene_band: &SceneRadiance,
+    grid: &WavelengthGrid,
+    band: RowBand,
+    widen: BandWidening,
+    glare: Option<&camsim_optics::GlareSums>,
+) -> Result<ChannelIrradiance, CliError> {
+    let sensor = &set.camera.sensor;
+    let channels = std::sync::Mutex::new(Vec::new());
+    let project = |b: &camsim_core::image::SpectralBasis| {
+        let w = camsim_sensor::channel_weights(sensor, b);
+        if let Ok(mut c) = channels.lock() {
+            *c = w.channels;
+        }
+        w.weights
+    };
+    let irradiance =
+        band_irradiance_with(set, scene_band, grid, band, widen, glare, Some(&project))?;
+    let channels = channels.into_inner().unwrap_or_default();
+    Ok(ChannelIrradiance {
+        channels,
+        irradiance,
+    })
+}
+
+/// [`band_irradiance`], projected onto `project`'s weights when given
+/// ([`camsim_optics::form_image_rows_projected`]).
+fn band_irradiance_with(
+    set: &CaptureSet,
+    scene_band: &SceneRadiance,
+    grid: &WavelengthGrid,
+    band: RowBand,
+    widen: BandWidening,
+    glare: Option<&camsim_optics::GlareSums>,
+    project: Option<camsim_optics::PlaneProjection>,
+) -> Result<SensorIrradiance, CliError> {
     let err = |e: String| CliError::input(&set.camera_path, format!("optics: {e}"));
     if let Some(r) = band_refusal(set, band) {
         return Err(err(r));
@@ -726,8 +776,18 @@ pub fn band_irradiance(
         row0: r0,
         full_rows: (cam.sensor.rows + 2 * margin) * os,
     };
-    let mut irr = camsim_optics::form_image_rows(&cam.optics, scene_band, grid, window, glare)
-        .map_err(|e| err(e.to_string()))?;
+    let mut irr = match project {
+        None => camsim_optics::form_image_rows(&cam.optics, scene_band, grid, window, glare),
+        Some(p) => camsim_optics::form_image_rows_projected(
+            &cam.optics,
+            scene_band,
+            grid,
+            window,
+            glare,
+            p,
+        ),
+    }
+    .map_err(|e| err(e.to_string()))?;
     // the core rows, centred on the band's pixels as the pixel integration expects
     let (c0, c1) = band_core_rows(set, grid, band);
     if (c0, c1) != (r0, r1) {

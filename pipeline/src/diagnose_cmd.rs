@@ -856,10 +856,18 @@ impl Forward for SimForward {
         };
         // (on the channel planes the planes hold the believed QE: a key of their own)
         let (channel_capable, channels) = channel_path(&set, &self.believed);
+        // Optics that depend on wavelength with the believed QE: each band's wavelength planes
+        // projected onto the channels inside the optics, after the lateral-colour warp
+        // ([`crate::chain::band_channel_irradiance`]); their planes are the channels' too.
+        let projected = !channel_capable && believed_qe(&set, &self.believed);
         let okey = format!(
             "{} bands {bands:?}{}",
             Self::optics_key(&set, spec, &grid),
-            if channel_capable { " channels" } else { "" }
+            if channel_capable || projected {
+                " channels"
+            } else {
+                ""
+            }
         );
         let cached = self.planes.lock().map_err(lock_err)?.get(&okey);
         let mut by_band: HashMap<String, Arc<PixelTermPlanes>> = cached.clone().unwrap_or_default();
@@ -1019,19 +1027,41 @@ impl Forward for SimForward {
                 for (&bi, scene) in missing.iter().zip(&scenes) {
                     let band = bands[bi];
                     let t0 = std::time::Instant::now();
-                    let irr = crate::chain::band_irradiance(
-                        &set,
-                        scene,
-                        &grid,
-                        band,
-                        widen[bi],
-                        glare.as_deref(),
-                    )
-                    .map_err(|e| e.one_line())?;
+                    let (irr, on_channels) = if !channel && projected {
+                        let ch = crate::chain::band_channel_irradiance(
+                            &set,
+                            scene,
+                            &grid,
+                            band,
+                            widen[bi],
+                            glare.as_deref(),
+                        )
+                        .map_err(|e| e.one_line())?;
+                        if ch.channels != channels {
+                            return Err(format!(
+                                "{}: band optics projected onto channels {:?}, the CFA's are {:?}",
+                                self.camera_path.display(),
+                                ch.channels,
+                                channels
+                            ));
+                        }
+                        (ch.irradiance, true)
+                    } else {
+                        let irr = crate::chain::band_irradiance(
+                            &set,
+                            scene,
+                            &grid,
+                            band,
+                            widen[bi],
+                            glare.as_deref(),
+                        )
+                        .map_err(|e| e.one_line())?;
+                        (irr, channel)
+                    };
                     self.work.band_optics.add(t0);
                     let sensor = crate::chain::band_sensor(&set, band);
                     let p = Arc::new(camsim_sensor::pixel_term_planes(&sensor, &irr));
-                    by_band.insert(bkey(bi, channel), p);
+                    by_band.insert(bkey(bi, on_channels), p);
                 }
             }
             let mut rate = vec![0f32; rows_n * cols];
@@ -1214,8 +1244,7 @@ fn channel_rate(
 /// used by the CFA, in [`camsim_sensor::channel_planes`]' order.
 fn channel_path(set: &CaptureSet, believed: &crate::config::Camera) -> (bool, Vec<usize>) {
     let sensor = &set.camera.sensor;
-    let believed_qe = sensor.effects.qe_shift == believed.sensor.effects.qe_shift
-        && sensor.effects.ir_leakage == believed.sensor.effects.ir_leakage;
+    let believed_qe = believed_qe(set, believed);
     let channels = (0..sensor.channel_qe.len())
         .filter(|&c| sensor.cfa.tile.iter().flatten().any(|&t| t == c))
         .collect();
@@ -1223,6 +1252,15 @@ fn channel_path(set: &CaptureSet, believed: &crate::config::Camera) -> (bool, Ve
         believed_qe && optics_alike_at_every_wavelength(&set.camera),
         channels,
     )
+}
+
+/// Whether `set`'s camera has the believed camera's QE blocks (QE shift, IR leakage): then
+/// the channels' effective QE is the believed one, and planes projected onto it may be kept
+/// under the optics' key (a QE candidate reads the term planes of its optics instead).
+fn believed_qe(set: &CaptureSet, believed: &crate::config::Camera) -> bool {
+    let sensor = &set.camera.sensor;
+    sensor.effects.qe_shift == believed.sensor.effects.qe_shift
+        && sensor.effects.ir_leakage == believed.sensor.effects.ir_leakage
 }
 
 /// Sets the blocks of `spec` on a validated camera, in their fitted forms (the typed twin of
@@ -2177,6 +2215,104 @@ mod band_tests {
                 ..Default::default()
             },
         ]
+    }
+
+    /// A band through the optics projected onto the channels after the lateral-colour warp
+    /// ([`crate::chain::band_channel_irradiance`], what [`Forward::rates_rows`] runs for a
+    /// lateral-colour candidate with the believed QE) gives the electron rates of the band
+    /// through the optics on every wavelength band's plane ([`crate::chain::band_irradiance`],
+    /// the pixel integration per plane and the QE-weighted sum) within f32 rounding (1e-6 of
+    /// the largest rate), with the believed Gaussian blur and cos⁴, lateral colour alone and
+    /// with fall-off, defocus and veiling glare (the whole field's sums), on every band of fit
+    /// rows at the top, middle and bottom of a chart, a flat and a dark shot; and
+    /// [`Forward::rates_rows`] takes that path (its cached band planes are the channels').
+    #[test]
+    fn band_channel_irradiance_is_the_band_irradiance_projected() {
+        let (_dir, set) = demo_set(vec![], Concealment::Charts, 240, 320);
+        let fw = SimForward::new(&set, (0..set.shots.len()).collect());
+        let rows: Vec<usize> = (0..4).chain(118..122).chain(236..240).collect();
+        let specs = [
+            RateSpec {
+                lateral_color_um: Some(2.5),
+                ..Default::default()
+            },
+            RateSpec {
+                lateral_color_um: Some(-1.5),
+                glare_fraction: Some(0.03),
+                falloff: Some(vec![-0.2, 0.0, 0.0]),
+                defocus_sigma_um: Some(2.0),
+                ..Default::default()
+            },
+        ];
+        let shots: Vec<usize> = ["chart", "flat", "dark"]
+            .iter()
+            .map(|k| {
+                set.shots
+                    .iter()
+                    .position(|s| s.id.contains(k))
+                    .unwrap_or_else(|| panic!("no {k} shot"))
+            })
+            .collect();
+        for spec in &specs {
+            let mut s2 = set.clone();
+            s2.camera = fw.camera_for(spec).unwrap();
+            let grid = wavelength_grid(&s2);
+            let (bands, widen) = row_bands(&s2, &grid, &rows).expect("run as bands");
+            assert_eq!(bands.len(), 3);
+            let (capable, channels) = channel_path(&s2, &fw.believed);
+            assert!(!capable && believed_qe(&s2, &fw.believed));
+            for &si in &shots {
+                let scene = crate::chain::shot_scene(&s2, si, &grid).unwrap();
+                let glare = crate::chain::shot_glare_sums(&s2, &scene, &grid).unwrap();
+                for (band, w) in bands.iter().zip(&widen) {
+                    let (r0, r1) = crate::chain::band_scene_rows(&s2, &grid, *band, *w);
+                    let sb = crate::chain::scene_rows(&scene, r0, r1);
+                    let sensor = crate::chain::band_sensor(&s2, *band);
+                    let irr =
+                        crate::chain::band_irradiance(&s2, &sb, &grid, *band, *w, glare.as_ref())
+                            .unwrap();
+                    let want = camsim_sensor::electron_rate_from_term_planes(
+                        &sensor,
+                        &camsim_sensor::pixel_term_planes(&sensor, &irr),
+                    );
+                    let ch = crate::chain::band_channel_irradiance(
+                        &s2,
+                        &sb,
+                        &grid,
+                        *band,
+                        *w,
+                        glare.as_ref(),
+                    )
+                    .unwrap();
+                    assert_eq!(ch.channels, channels);
+                    assert_eq!(ch.irradiance.irradiance.planes.len(), channels.len());
+                    let got = camsim_sensor::electron_rate_from_channel_planes(
+                        &sensor,
+                        &ch.channels,
+                        &camsim_sensor::pixel_term_planes(&sensor, &ch.irradiance),
+                    );
+                    let (err, scale) = max_abs_diff(&want, &got);
+                    assert!(
+                        err <= 1e-6 * scale,
+                        "{spec:?} shot {} band {band:?}: max |Δ| {err} of {scale}",
+                        set.shots[si].id
+                    );
+                }
+            }
+            // the forward model's bands went through the projection (channel planes cached)
+            fw.rates_rows(spec, &rows).unwrap();
+            let okey = format!(
+                "{} bands {bands:?} channels",
+                SimForward::optics_key(&s2, spec, &grid)
+            );
+            let kept = fw
+                .planes
+                .lock()
+                .unwrap()
+                .get(&okey)
+                .expect("band planes kept");
+            assert!(kept.values().all(|p| p.planes.len() == channels.len()));
+        }
     }
 
     /// The forward model of fit-row bands ([`Forward::rates_rows`]: each band through the
