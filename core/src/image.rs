@@ -9,6 +9,10 @@ use crate::error::CoreError;
 use crate::spectrum::{Spectrum, WavelengthGrid};
 use rayon::prelude::*;
 
+/// Samples per parallel piece of [`SpectralImage::scale_spatially`] and
+/// [`SpectralImage::scale`].
+const SCALE_CHUNK: usize = 1 << 16;
+
 /// A single-channel f32 image, row-major.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Plane {
@@ -203,20 +207,25 @@ impl SpectralImage {
         }
     }
 
-    /// Multiply every plane by a spatial map (wavelength-independent factor).
+    /// Multiply every plane by a spatial map (wavelength-independent factor). Parallel over
+    /// pieces of [`SCALE_CHUNK`] samples of every plane (a whole-sensor image of one to four
+    /// planes keeps every thread busy); each sample's product is the same whatever the split.
     pub fn scale_spatially(&mut self, map: &[f32]) {
         assert_eq!(map.len(), self.rows * self.cols);
         self.planes.par_iter_mut().for_each(|p| {
-            p.iter_mut().zip(map).for_each(|(v, m)| *v *= *m);
+            p.par_chunks_mut(SCALE_CHUNK)
+                .zip(map.par_chunks(SCALE_CHUNK))
+                .for_each(|(p, m)| p.iter_mut().zip(m).for_each(|(v, m)| *v *= *m));
         });
     }
 
-    /// Multiply by a scalar.
+    /// Multiply by a scalar (parallel as [`SpectralImage::scale_spatially`]).
     pub fn scale(&mut self, k: f64) {
         let k = k as f32;
-        self.planes
-            .par_iter_mut()
-            .for_each(|p| p.iter_mut().for_each(|v| *v *= k));
+        self.planes.par_iter_mut().for_each(|p| {
+            p.par_chunks_mut(SCALE_CHUNK)
+                .for_each(|p| p.iter_mut().for_each(|v| *v *= k))
+        });
     }
 
     /// Expand to a band cube on `grid` (plane b = L(x, λ_b)). A band image on the same grid is

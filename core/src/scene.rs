@@ -809,19 +809,37 @@ impl LuminanceSum {
     ) {
         let p = pitch_m;
         let rows = if cols == 0 { 0 } else { lum.len() / cols };
+        // The window test per cell, |x| ≤ W/2 and |y| ≤ H/2 at the cell centre, evaluated once
+        // per column and once per row: the cells counted and their order (rows top to bottom,
+        // then columns) are those of the test at every cell, so the sum has the same bits.
+        let inside_col: Vec<bool> = (0..cols)
+            .map(|col| {
+                let x = (col as f64 + 0.5 - cols as f64 / 2.0) * p;
+                window_m.is_none_or(|(ww, _)| x.abs() <= ww / 2.0)
+            })
+            .collect();
+        // (the columns inside a window centred on the axis are one run)
+        let first = inside_col.iter().position(|&b| b).unwrap_or(cols);
+        let last = inside_col.iter().rposition(|&b| b).map_or(first, |l| l + 1);
+        let run_is_whole = inside_col[first..last].iter().all(|&b| b);
         let (mut s, mut n) = (self.sum_cd_m2, self.cells);
         for i in 0..rows {
             let r = row0 + i;
             let y = (r as f64 + 0.5 - full_rows as f64 / 2.0) * p;
-            for col in 0..cols {
-                let x = (col as f64 + 0.5 - cols as f64 / 2.0) * p;
-                if let Some((ww, hh)) = window_m {
-                    if x.abs() > ww / 2.0 || y.abs() > hh / 2.0 {
-                        continue;
-                    }
+            if window_m.is_some_and(|(_, hh)| y.abs() > hh / 2.0) {
+                continue;
+            }
+            let row = &lum[i * cols..(i + 1) * cols];
+            if run_is_whole {
+                for &v in &row[first..last] {
+                    s += v as f64;
                 }
-                s += lum[i * cols + col] as f64;
-                n += 1;
+                n += last - first;
+            } else {
+                for (&v, _) in row.iter().zip(&inside_col).filter(|(_, &b)| b) {
+                    s += v as f64;
+                    n += 1;
+                }
             }
         }
         self.sum_cd_m2 = s;
@@ -888,6 +906,53 @@ pub const PLANCK_C2: f64 = 1.438_776_877e-2;
 pub(crate) mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    /// [`LuminanceSum::add_luminance_rows`] counts the cells whose centres lie in the window
+    /// and adds them rows top to bottom, then columns, bit for bit as the test at every cell
+    /// does: strips of a scene, windows narrower and wider than it, one cell wide, none.
+    #[test]
+    fn luminance_sum_adds_the_window_cells_in_order() {
+        let (rows, cols, p) = (11usize, 13usize, 1e-6);
+        let lum: Vec<f32> = (0..rows * cols)
+            .map(|i| ((i as u32).wrapping_mul(2_654_435_761) % 10_007) as f32 * 0.013 + 0.1)
+            .collect();
+        let per_cell = |window: Option<(f64, f64)>| {
+            let (mut s, mut n) = (0.0f64, 0usize);
+            for r in 0..rows {
+                let y = (r as f64 + 0.5 - rows as f64 / 2.0) * p;
+                for c in 0..cols {
+                    let x = (c as f64 + 0.5 - cols as f64 / 2.0) * p;
+                    if let Some((ww, hh)) = window {
+                        if x.abs() > ww / 2.0 || y.abs() > hh / 2.0 {
+                            continue;
+                        }
+                    }
+                    s += lum[r * cols + c] as f64;
+                    n += 1;
+                }
+            }
+            (s, n)
+        };
+        for window in [
+            None,
+            Some((7e-6, 5e-6)),
+            Some((13e-6, 11e-6)),
+            Some((40e-6, 3e-6)),
+            Some((1e-6, 40e-6)),
+            Some((0.2e-6, 0.2e-6)),
+        ] {
+            let mut sum = LuminanceSum::default();
+            for (r0, r1) in [(0, 4), (4, 5), (5, 11)] {
+                sum.add_luminance_rows(&lum[r0 * cols..r1 * cols], cols, r0, rows, p, window);
+            }
+            let (s, n) = per_cell(window);
+            assert_eq!(
+                (sum.sum_cd_m2.to_bits(), sum.cells),
+                (s.to_bits(), n),
+                "{window:?}"
+            );
+        }
+    }
 
     #[test]
     fn half_plane_area_is_exact() {
