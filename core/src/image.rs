@@ -165,18 +165,26 @@ impl SpectralImage {
             .enumerate()
             .filter(|(_, w)| *w != 0.0)
             .collect();
-        out.par_chunks_mut(4096)
-            .enumerate()
-            .for_each(|(ci, chunk)| {
+        // (term by term over a chunk: every pixel's sum in the same order, k ascending from
+        // 0.0, so the same bits as a per-pixel loop, and the inner loop vectorises)
+        out.par_chunks_mut(4096).enumerate().for_each_init(
+            Vec::new,
+            |acc: &mut Vec<f64>, (ci, chunk)| {
                 let off = ci * 4096;
-                for (j, o) in chunk.iter_mut().enumerate() {
-                    let mut acc = 0.0f64;
-                    for &(k, w) in &active {
-                        acc += w * self.planes[k][off + j] as f64;
-                    }
-                    *o = acc as f32;
+                acc.clear();
+                acc.resize(chunk.len(), 0.0);
+                for &(k, w) in &active {
+                    let src = &self.planes[k][off..off + chunk.len()];
+                    acc.iter_mut()
+                        .zip(src)
+                        .for_each(|(a, &v)| *a += w * v as f64);
                 }
-            });
+                chunk
+                    .iter_mut()
+                    .zip(acc.iter())
+                    .for_each(|(o, &a)| *o = a as f32);
+            },
+        );
         out
     }
 
@@ -415,6 +423,47 @@ pub struct RawLayout {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    /// [`SpectralImage::combine`] (term by term over chunks) is, bit for bit, the per-pixel
+    /// sum `Σ_k w_k a_k` in f64 with k ascending from 0.0 and the zero weights skipped, on an
+    /// image larger than one chunk (4096 samples) whose size is not a multiple of it.
+    #[test]
+    fn combine_is_the_per_pixel_sum_bit_for_bit() {
+        let (rows, cols, terms) = (71, 97, 9);
+        let planes: Vec<Vec<f32>> = (0..terms)
+            .map(|k| {
+                (0..rows * cols)
+                    .map(|i| {
+                        let v = (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15 ^ (k as u64));
+                        (v >> 40) as f32 / (1u64 << 20) as f32 - 3.0
+                    })
+                    .collect()
+            })
+            .collect();
+        let img = SpectralImage::new(
+            rows,
+            cols,
+            SpectralBasis::Spectra(vec![Spectrum::constant(1.0); terms]),
+            planes.clone(),
+        )
+        .unwrap();
+        let w: Vec<f64> = (0..terms)
+            .map(|k| if k == 4 { 0.0 } else { 0.37 * k as f64 - 1.1 })
+            .collect();
+        let got: Vec<u32> = img.combine(&w).iter().map(|v| v.to_bits()).collect();
+        let want: Vec<u32> = (0..rows * cols)
+            .map(|i| {
+                let mut acc = 0.0f64;
+                for (k, &wk) in w.iter().enumerate() {
+                    if wk != 0.0 {
+                        acc += wk * planes[k][i] as f64;
+                    }
+                }
+                (acc as f32).to_bits()
+            })
+            .collect();
+        assert_eq!(got, want);
+    }
 
     #[test]
     fn linear_model_and_band_cube_integrate_alike() {
