@@ -7,9 +7,6 @@ use rayon::prelude::*;
 
 /// Radial bins of the field-height profile.
 pub const RADIAL_BINS: usize = 12;
-/// Rows per parallel piece of the profiles' sums (fixed, so they do not depend on the thread
-/// count).
-const PROFILE_ROWS: usize = 32;
 
 /// One (shot, channel) summary.
 #[derive(Debug, Clone, PartialEq)]
@@ -185,79 +182,40 @@ impl Ctx<'_> {
         ))
     }
 
-    /// The profiles of shot `s`: sums over pieces of [`PROFILE_ROWS`] rows, in parallel, added
-    /// piece by piece in row order (the same bits whatever the thread count; each row's own
-    /// sum, and every count, as a sum over the whole frame in row order).
     fn profiles(&self, state: &ModelState, s: usize, maps: &ShotMaps) -> ShotProfiles {
         let d = self.data;
         let sh = &d.shots[s];
         let c = ShotConst::for_shot(&state.sensor, sh);
         let (rows, cols) = (d.rows, d.cols);
-        /// The sums of one piece of rows.
-        struct Piece {
-            rad: [(f64, f64, f64); RADIAL_BINS],
-            col_sum: Vec<(f64, f64)>,
-            row_sum: Vec<(f64, f64)>,
-            var_sum: f64,
-            n_all: f64,
-        }
-        let pieces: Vec<Piece> = (0..rows.div_ceil(PROFILE_ROWS))
-            .into_par_iter()
-            .map(|k| {
-                let rs = k * PROFILE_ROWS..((k + 1) * PROFILE_ROWS).min(rows);
-                let mut p = Piece {
-                    rad: [(0.0, 0.0, 0.0); RADIAL_BINS],
-                    col_sum: vec![(0.0, 0.0); cols],
-                    row_sum: vec![(0.0, 0.0); rs.len()],
-                    var_sum: 0.0,
-                    n_all: 0.0,
-                };
-                for (ri, r) in rs.enumerate() {
-                    for j in 0..cols {
-                        let i = r * cols + j;
-                        if sh.censored[i] {
-                            continue;
-                        }
-                        let m = sh.mean_dn[i] as f64;
-                        let mu = maps.model_mean[i] as f64;
-                        let h = d.field_height(r, j);
-                        let b = ((h * RADIAL_BINS as f64) as usize).min(RADIAL_BINS - 1);
-                        p.rad[b].0 += m - c.base_dn;
-                        p.rad[b].1 += mu - c.base_dn;
-                        p.rad[b].2 += 1.0;
-                        let res = m - mu;
-                        p.col_sum[j].0 += res;
-                        p.col_sum[j].1 += 1.0;
-                        p.row_sum[ri].0 += res;
-                        p.row_sum[ri].1 += 1.0;
-                        let z = maps.z[i] as f64;
-                        if z != 0.0 && z.is_finite() {
-                            p.var_sum += (res / z).powi(2);
-                            p.n_all += 1.0;
-                        }
-                    }
-                }
-                p
-            })
-            .collect();
         let mut rad = vec![(0.0f64, 0.0f64, 0.0f64); RADIAL_BINS];
         let mut col_sum = vec![(0.0f64, 0.0f64); cols];
-        let mut row_sum = Vec::with_capacity(rows);
+        let mut row_sum = vec![(0.0f64, 0.0f64); rows];
         let mut var_sum = 0.0;
         let mut n_all = 0.0;
-        for p in &pieces {
-            for (t, x) in rad.iter_mut().zip(&p.rad) {
-                t.0 += x.0;
-                t.1 += x.1;
-                t.2 += x.2;
+        for r in 0..rows {
+            for j in 0..cols {
+                let i = r * cols + j;
+                if sh.censored[i] {
+                    continue;
+                }
+                let m = sh.mean_dn[i] as f64;
+                let mu = maps.model_mean[i] as f64;
+                let h = d.field_height(r, j);
+                let b = ((h * RADIAL_BINS as f64) as usize).min(RADIAL_BINS - 1);
+                rad[b].0 += m - c.base_dn;
+                rad[b].1 += mu - c.base_dn;
+                rad[b].2 += 1.0;
+                let res = m - mu;
+                col_sum[j].0 += res;
+                col_sum[j].1 += 1.0;
+                row_sum[r].0 += res;
+                row_sum[r].1 += 1.0;
+                let z = maps.z[i] as f64;
+                if z != 0.0 && z.is_finite() {
+                    var_sum += (res / z).powi(2);
+                    n_all += 1.0;
+                }
             }
-            for (t, x) in col_sum.iter_mut().zip(&p.col_sum) {
-                t.0 += x.0;
-                t.1 += x.1;
-            }
-            row_sum.extend_from_slice(&p.row_sum);
-            var_sum += p.var_sum;
-            n_all += p.n_all;
         }
         let var_pix = if n_all > 0.0 { var_sum / n_all } else { 0.0 };
         ShotProfiles {
