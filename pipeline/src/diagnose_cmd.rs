@@ -1778,9 +1778,13 @@ fn timing_json(
         "stages": stages,
         "note": "the first stages are sequential wall times; the counters (likelihood, forward model, identifiability, and the forward model's work by kind) are parts of them",
         "subsampled": {"fit_pixels": d.fit_pixels, "sensor_pixels": data.pixels(),
-                       "rule": "fits use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels (5 contiguous bands from top to bottom when the fit rows are at most 1/8 of the rows and the forward model runs bands of rows by themselves); the reported fit (fit_before/fit_after, locate) uses every pixel"},
+                       "rule": format!("{FIT_ROWS_RULE}; the reported fit (fit_before/fit_after, locate) uses every pixel")},
     })
 }
+
+/// Which rows the candidate fits read (`like::Ctx::new`, `like::fit_bands`,
+/// `like::row_structure`), for report.json's and timing.json's `subsampled.rule`.
+const FIT_ROWS_RULE: &str = "fits and selection use whole 2-row groups evenly spread over the sensor when it has more than fit_pixels pixels; when the fit rows are at most 1/8 of the rows and the forward model runs bands of rows by themselves, they are 5 contiguous bands of equal even length instead: the first at the top edge, the last at the bottom edge, and each inner band within half the even spacing, less its own length, of its evenly spaced start, on the rows with the most scene structure (the variance across columns of each row's per-pixel mean levels, per CFA channel, summed over the chart, edge and image shots; among equally structured starts the one farthest from the bands already placed), evenly spaced when no shot has structure";
 
 /// report.json `subsampled`: what the candidate fits read (the fit rows as runs of
 /// consecutive rows, their pixels and pixel-shots) and the full-resolution confirmation (the
@@ -1806,7 +1810,7 @@ fn subsampled_json(d: &Diagnosis, data: &DataSet, glare_k: usize) -> Value {
            "full_resolution": {"pixels": data.pixels(), "dof_believed": d.before.dof,
                                "chi2_per_dof_believed": r4(d.before.chi2_per_dof),
                                "chi2_per_dof_fitted": r4(d.after.chi2_per_dof)},
-           "rule": "candidate fits and selection use whole 2-row groups evenly spread over the sensor (fit_row_runs, inclusive) when it has more than fit_pixels pixels (5 contiguous bands from top to bottom when the fit rows are at most 1/8 of the rows and the forward model runs bands of rows by themselves); the reported fit (fit_before/fit_after, repeated in full_resolution), locate, figures and the final fit check use every pixel"});
+           "rule": format!("candidate {FIT_ROWS_RULE} (fit_row_runs, inclusive); the reported fit (fit_before/fit_after, repeated in full_resolution), locate, figures and the final fit check use every pixel")});
     if glare_k > 0 {
         v["candidate_glare_sums"] = json!({
             "decimation": glare_k,
