@@ -103,25 +103,18 @@ pub(crate) const MIN_COLUMN_ROWS: usize = 8;
 pub(crate) const FIT_BAND_SPARSITY: usize = 8;
 /// Bands of [`fit_bands`].
 pub(crate) const FIT_BANDS: usize = 5;
-/// [`fit_bands`]' equally structured starts: at least this fraction of the greatest structure
-/// in the band's share of the height.
-pub(crate) const STRUCTURE_TIE: f64 = 0.5;
 
 /// About `n` fit rows of a `rows`-row sensor as [`FIT_BANDS`] contiguous bands of equal even
 /// length (at most `n` rows in all, at least 2 per band; CFA phases balanced), spread over the
 /// field height from the top row to the bottom one (the corners' field heights included), each
 /// starting at an even row. The first and last bands are at the frame's edges; each band
 /// between them starts, within its share of the height (± half the even spacing less its own
-/// length around the evenly spaced start), where the band's rows hold scene structure
-/// (`structure`, per row, [`row_structure`]): evenly spaced rows can all fall where a scene
-/// has no content — on a colour chart of 4 patch rows the three inner ones land in the grey
-/// gaps between patch rows, and the fits could not see the patches' colours. The inner bands
-/// are placed top to bottom after the two edge bands; among the starts of a band's share whose
-/// structure is at least [`STRUCTURE_TIE`] of the share's greatest (equally structured: the
-/// patches of one chart differ by the lens's fall-off, which pulled every band towards the
-/// centre and put two of them into one patch row at 12 MP), the one farthest from the bands
-/// already placed (ties: nearest the even start, then the lower one). Without structure (all
-/// 0, or no entry per row) the bands are evenly spaced.
+/// length around the evenly spaced start), where the band's rows hold the most scene structure
+/// (`structure`, per row, [`row_structure`]; ties: the start nearest the even one): evenly
+/// spaced rows can all fall where a scene has no content — on a colour chart of 4 patch rows
+/// the three inner ones land in the grey gaps between patch rows, and the fits could not see
+/// the patches' colours. Without structure (all 0, or no entry per row) the bands are evenly
+/// spaced.
 pub(crate) fn fit_bands(rows: usize, n: usize, structure: &[f64]) -> Vec<usize> {
     let len = (n / FIT_BANDS / 2 * 2).max(2).min(rows / FIT_BANDS / 2 * 2);
     let mut out = Vec::new();
@@ -138,36 +131,23 @@ pub(crate) fn fit_bands(rows: usize, n: usize, structure: &[f64]) -> Vec<usize> 
             prefix[r + 1] = prefix[r] + x.max(0.0);
         }
     }
-    let even_of = |k: usize| (k * (rows - len) / (FIT_BANDS - 1)) / 2 * 2;
-    // the edge bands first, then the inner ones top to bottom
-    let mut starts = vec![even_of(0), even_of(FIT_BANDS - 1)];
-    for k in 1..FIT_BANDS - 1 {
-        let even = even_of(k);
-        let start = if !use_structure {
+    for k in 0..FIT_BANDS {
+        let even = (k * (rows - len) / (FIT_BANDS - 1)) / 2 * 2;
+        let start = if !use_structure || k == 0 || k == FIT_BANDS - 1 {
             even
         } else {
             let lo = even.saturating_sub(half);
             let hi = (even + half).min(rows - len);
-            let cand: Vec<(f64, usize)> = (lo..=hi)
+            (lo..=hi)
                 .step_by(2)
                 .map(|s| (prefix[s + len] - prefix[s], s))
-                .collect();
-            let most = cand.iter().map(|x| x.0).fold(0.0, f64::max);
-            // distance to the nearest band already placed
-            let gap = |s: usize| starts.iter().map(|&p| p.abs_diff(s)).min().unwrap_or(0);
-            cand.iter()
-                .filter(|x| x.0 >= STRUCTURE_TIE * most)
                 .max_by(|a, b| {
-                    gap(a.1)
-                        .cmp(&gap(b.1))
+                    a.0.total_cmp(&b.0)
                         .then_with(|| (b.1.abs_diff(even)).cmp(&a.1.abs_diff(even)))
                         .then_with(|| b.1.cmp(&a.1))
                 })
                 .map_or(even, |x| x.1)
         };
-        starts.push(start);
-    }
-    for start in starts {
         out.extend(start..start + len);
     }
     out.sort_unstable();
@@ -1156,48 +1136,6 @@ pub(crate) mod tests {
         );
         assert_eq!((m[0], m[FIT_BANDS - 1]), (e[0], e[FIT_BANDS - 1]));
         assert!(m.iter().all(|&s| s % 2 == 0) && m.windows(2).all(|w| w[0] + 2 <= w[1]));
-    }
-
-    /// On a chart whose patch rows are dimmed towards the frame's edges (the lens's fall-off:
-    /// the structure falls by 30 % from the centre to the top and bottom rows), the inner fit
-    /// bands lie in three different patch rows. (The rule that took the most structured start
-    /// of each share pulled every band towards the centre: patch rows 1, 2 and 2, as on the
-    /// 12 MP set.)
-    #[test]
-    fn inner_fit_bands_spread_over_the_patch_rows_under_fall_off() {
-        let rows = 3000;
-        let cell = 750;
-        let structure: Vec<f64> = (0..rows)
-            .map(|r| {
-                let h = (r as f64 - 1500.0) / 1500.0;
-                if (112..637).contains(&(r % cell)) {
-                    1.0 - 0.3 * h * h
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let b = fit_bands(rows, 10, &structure);
-        let starts: Vec<usize> = b
-            .iter()
-            .copied()
-            .filter(|&r| r == 0 || !b.contains(&(r - 1)))
-            .collect();
-        assert_eq!(starts.len(), FIT_BANDS, "{starts:?}");
-        let inner = &starts[1..FIT_BANDS - 1];
-        assert!(
-            inner
-                .iter()
-                .all(|&s| structure[s] > 0.0 && structure[s + 1] > 0.0),
-            "{starts:?}"
-        );
-        let mut patch_rows: Vec<usize> = inner.iter().map(|&s| s / cell).collect();
-        patch_rows.dedup();
-        assert_eq!(
-            patch_rows.len(),
-            FIT_BANDS - 2,
-            "{starts:?}: {patch_rows:?}"
-        );
     }
 
     /// A forward model that runs row windows and counts its whole-sensor runs per spec.
