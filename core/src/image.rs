@@ -216,7 +216,7 @@ impl SpectralImage {
     }
 
     /// Multiply every plane by a spatial map (wavelength-independent factor). Parallel over
-    /// pieces of [`SCALE_CHUNK`] samples of every plane (a whole-sensor image of one to four
+    /// pieces of `SCALE_CHUNK` (65 536) samples of every plane (a whole-sensor image of one to four
     /// planes keeps every thread busy); each sample's product is the same whatever the split.
     pub fn scale_spatially(&mut self, map: &[f32]) {
         assert_eq!(map.len(), self.rows * self.cols);
