@@ -900,21 +900,8 @@ fn warp_planes_within(
     window: RowWindow,
 ) -> Result<(), OpticsError> {
     let (rows, cols) = (img.rows, img.cols);
-    let yc = window.centre_row();
-    let xc = (cols as f64 - 1.0) / 2.0;
-    let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001 + 1e-12;
-    let lams: Vec<Option<f64>> = match wavelengths_nm {
-        Some(w) => w.iter().map(|&l| Some(l)).collect(),
-        None => vec![None; img.planes.len()],
-    };
-    // One inverse table per distinct wavelength (one for a linear model).
-    let maps: Vec<std::sync::Arc<RadialInverse>> = if wavelengths_nm.is_some() {
-        lams.par_iter()
-            .map(|&l| RadialInverse::shared(fx, l, r_max))
-            .collect::<Result<_, _>>()?
-    } else {
-        vec![RadialInverse::shared(fx, None, r_max)?]
-    };
+    let (yc, xc, r_max) = warp_frame(window, cols, dx);
+    let maps = inverse_tables(fx, wavelengths_nm, r_max)?;
     let radius_at = |i: usize, j: usize| -> f64 {
         let y = (window.field_row(i) - yc) * dx;
         let x = (j as f64 - xc) * dx;
@@ -978,6 +965,31 @@ fn warp_planes_within(
         },
     );
     Ok(())
+}
+
+/// The warp's frame for a `window` of `cols`-sample rows at pitch `dx`: the whole field's
+/// centre (row, column, in samples) and the largest image radius its inverse tables cover.
+fn warp_frame(window: RowWindow, cols: usize, dx: f64) -> (f64, f64, f64) {
+    let yc = window.centre_row();
+    let xc = (cols as f64 - 1.0) / 2.0;
+    let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001 + 1e-12;
+    (yc, xc, r_max)
+}
+
+/// The warp's inverse tables up to `r_max`: one per plane's wavelength, or one for every
+/// plane without wavelengths (a model that does not depend on wavelength).
+fn inverse_tables(
+    fx: &OpticsEffects,
+    wavelengths_nm: Option<&[f64]>,
+    r_max: f64,
+) -> Result<Vec<std::sync::Arc<RadialInverse>>, OpticsError> {
+    match wavelengths_nm {
+        Some(w) => w
+            .par_iter()
+            .map(|&l| RadialInverse::shared(fx, Some(l), r_max))
+            .collect(),
+        None => Ok(vec![RadialInverse::shared(fx, None, r_max)?]),
+    }
 }
 
 /// `g = r_s / r` of the warp at image radius `r` (`r_s`: its source radius in `map`; the
@@ -1047,17 +1059,8 @@ pub(crate) fn warp_planes_projected(
             wavelengths_nm.map_or(0, <[f64]>::len)
         )));
     }
-    let yc = window.centre_row();
-    let xc = (cols as f64 - 1.0) / 2.0;
-    let r_max = dx * (yc * yc + xc * xc).sqrt() * 1.001 + 1e-12;
-    // one inverse table per plane's wavelength (one for all without lateral colour)
-    let maps: Vec<std::sync::Arc<RadialInverse>> = match wavelengths_nm {
-        Some(w) => w
-            .par_iter()
-            .map(|&l| RadialInverse::shared(fx, Some(l), r_max))
-            .collect::<Result<_, _>>()?,
-        None => vec![RadialInverse::shared(fx, None, r_max)?],
-    };
+    let (yc, xc, r_max) = warp_frame(window, cols, dx);
+    let maps = inverse_tables(fx, wavelengths_nm, r_max)?;
     // (plane, weight) pairs of each output plane, zero weights skipped as `combine` does
     let active: Vec<Vec<(usize, f64)>> = weights
         .iter()
